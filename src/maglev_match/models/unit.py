@@ -1,0 +1,106 @@
+"""Model A: one levitation unit on the first beam mode (9 states, SPEC.md section 3).
+
+State x = [z1, z1', z2, z2', w, w', i - i0, y1, y2 - z1'] with z down-positive from the
+static equilibrium, w the equivalent beam deflection and y1, y2 the observer outputs.
+Gap c = x1 - x5 + c0. The equilibrium is x = 0.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from maglev_match.dynamics.system import System
+from maglev_match.models.limits import clamp_current, hold_current_rate
+from maglev_match.params import Params
+
+STATE_NAMES = ("z1", "z1_dot", "z2", "z2_dot", "w", "w_dot", "di", "y1", "v")
+STATE_SCALE = np.array([1e-3, 1e-2, 1e-3, 1e-2, 1e-3, 1e-2, 1.0, 1e-3, 1e-2])
+PARAM_NAMES = (
+    "m", "M", "g", "ks", "cs", "mu0", "N", "A", "c0",
+    "omega0", "xi0", "kP", "kD", "ke", "xi1", "omega1", "sigma",
+)
+_IDX = {n: k for k, n in enumerate(PARAM_NAMES)}
+
+
+def _unpack(p):
+    return {n: p[k] for n, k in _IDX.items()}
+
+
+def levitation_current(p):
+    """i0 = c0/N sqrt(2 (m+M) g / (mu0 A)) (A), from the parameter vector."""
+    q = _unpack(p)
+    return q["c0"] / q["N"] * jnp.sqrt(2.0 * (q["m"] + q["M"]) * q["g"] / (q["mu0"] * q["A"]))
+
+
+def _rhs(x, p, limited: bool):
+    q = _unpack(p)
+    m, M, g = q["m"], q["M"], q["g"]
+    K = q["mu0"] * q["N"] ** 2 * q["A"]
+    c0 = q["c0"]
+    i0 = levitation_current(p)
+    r0 = i0 / c0
+    x1, x2, x3, x4, x5, x6, x7, x8, x9 = x
+    c = x1 - x5 + c0
+    i = x7 + i0
+    r = (clamp_current(i) if limited else i) / c
+    # F2 - (m+M) g written without cancellation: K r0^2 / 2 = (m+M) g exactly.
+    dF = 0.5 * K * (r - r0) * (r + r0)
+    susp = q["cs"] * (x2 - x4) + q["ks"] * (x1 - x3)
+    w1, xi1, sig = q["omega1"], q["xi1"], q["sigma"]
+    gap_err = x1 - x5 - x8
+    di = r * (x2 - x6) + q["ke"] * c / K * (q["kP"] * x8 + q["kD"] * (x9 + x2) - x7)
+    if limited:
+        di = hold_current_rate(i, di)
+    return jnp.stack([
+        x2,
+        -dF / m - susp / m,
+        x4,
+        susp / M,
+        x6,
+        -(w1**2) * x5 - 2.0 * xi1 * w1 * x6 + sig * dF,
+        di,
+        x9 + x2 + 2.0 * q["xi0"] * q["omega0"] * gap_err,
+        q["omega0"] ** 2 * gap_err,
+    ])
+
+
+def unit_rhs(x, p):
+    """Model A vector field (smooth: no current clamp). SPEC.md section 3."""
+    return _rhs(x, p, limited=False)
+
+
+def unit_rhs_limited(x, p):
+    """Model A with the no-reversal rule for the coil current (SPEC.md section 5)."""
+    return _rhs(x, p, limited=True)
+
+
+def gap_deviation(x, p):
+    """c - c0 = x1 - x5 (m)."""
+    return x[0] - x[4]
+
+
+def coil_current(x, p):
+    """Coil current i = x7 + i0 (A)."""
+    return x[6] + levitation_current(p)
+
+
+def param_vector(params: Params) -> np.ndarray:
+    return np.array([float(getattr(params, n)) for n in PARAM_NAMES])
+
+
+def unit_system(params: Params, limited: bool = False) -> System:
+    """Model A as a :class:`System` for the given parameter set."""
+    return System(
+        rhs=unit_rhs_limited if limited else unit_rhs,
+        p=param_vector(params),
+        param_names=PARAM_NAMES,
+        state_names=STATE_NAMES,
+        state_scale=STATE_SCALE,
+        observables={
+            "gap_deviation": gap_deviation,
+            "current": coil_current,
+            "beam_deflection": lambda x, p: x[4],
+        },
+        name="unit",
+    )
