@@ -1,0 +1,42 @@
+"""Figures. One module per analysis (``rootlocus``, ``hopf``, ``cycles``, ``simulate``,
+``maps``); this module holds the shared style and the saving helper."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only; never needs a display
+import matplotlib.pyplot as plt  # noqa: E402
+
+STYLE = {
+    "figure.figsize": (7.0, 4.5),
+    "figure.dpi": 110,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "font.size": 10,
+    "savefig.bbox": "tight",
+}
+
+
+def new_figure(nrows: int = 1, ncols: int = 1, **kw):
+    """A figure in the package style: returns (fig, axes)."""
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(nrows, ncols, **kw)
+    return fig, ax
+
+
+def save_figure(fig, path: str | Path, formats: tuple[str, ...] = ("png", "svg")) -> list[Path]:
+    """Save ``fig`` as ``path`` with each suffix in ``formats`` (the suffix of ``path`` is
+    replaced); returns the written paths and closes the figure."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    written = []
+    with plt.rc_context(STYLE):
+        for fmt in formats:
+            target = path.with_suffix("." + fmt)
+            fig.savefig(target)
+            written.append(target)
+    plt.close(fig)
+    return written
