@@ -228,13 +228,15 @@ class Params:
 
     def as_dict(self) -> dict[str, float]:
         """Every value, derived ones resolved (for JSON and reports)."""
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "explicit"}
+        out = {n: getattr(self, n) for n in FIELD_NAMES}
         out["i0"] = self.i0
         out["w0"] = self.w0
         return out
 
 
-FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Params) if f.name != "explicit")
+FIELD_NAMES: tuple[str, ...] = tuple(
+    f.name for f in dataclasses.fields(Params) if f.name != "explicit"
+)
 
 
 def _unknown_rule() -> str:

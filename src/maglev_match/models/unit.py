@@ -35,7 +35,7 @@ def levitation_current(p):
 
 def _rhs(x, p, limited: bool):
     q = _unpack(p)
-    m, M, g = q["m"], q["M"], q["g"]
+    m, M = q["m"], q["M"]
     K = q["mu0"] * q["N"] ** 2 * q["A"]
     c0 = q["c0"]
     i0 = levitation_current(p)

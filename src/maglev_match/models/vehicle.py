@@ -17,7 +17,7 @@ from the body centre; the vehicle centre is at mid-span.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import jax.numpy as jnp
 import numpy as np
@@ -106,8 +106,7 @@ def _rhs(x, p, n_modes: int, limited: bool):
     r = (clamp_current(i) if limited else i) / c
     f = K * (r - r0) * (r + r0)  # net upward force per point, without cancellation (N)
 
-    z, th = body[0:6:2], body[1:6:2]
-    zd, thd = body_dot[0:6:2], body_dot[1:6:2]
+    z, zd = body[0:6:2], body_dot[0:6:2]
     z0, th0, z0d, th0d = body[6], body[7], body_dot[6], body_dot[7]
     d = z - z0 - b * th0
     dd = zd - z0d - b * th0d
@@ -135,7 +134,7 @@ def _rhs(x, p, n_modes: int, limited: bool):
     return jnp.concatenate([body_dot, body_acc, qd, q_acc, di, dy1, dv])
 
 
-@lru_cache(maxsize=None)
+@cache
 def vehicle_rhs(n_modes: int = 3, limited: bool = False):
     """Model B vector field for ``n_modes`` beam modes (cached, so compiled code is reused)."""
 

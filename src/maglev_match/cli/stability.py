@@ -1,0 +1,183 @@
+"""`maglev-match stability`, `root-locus` and `presets`."""
+
+from __future__ import annotations
+
+import csv
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from maglev_match.cli import app
+from maglev_match.cli.common import (
+    DEFAULT_PRESET_NAME,
+    ConfigOpt,
+    JsonOpt,
+    ModelOpt,
+    OutOpt,
+    PresetOpt,
+    SetOpt,
+    UserError,
+    check_model,
+    console,
+    console_err,
+    emit_json,
+    output_path,
+    params_from_options,
+)
+from maglev_match.dynamics.equilibria import root_locus, stability
+from maglev_match.models import build_system
+from maglev_match.params import PARAMETER_DOCS, ParameterError, available_presets, load_preset
+
+
+@app.command("stability")
+def stability_command(
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    model: ModelOpt = "unit",
+    json_out: JsonOpt = False,
+) -> None:
+    """Equilibrium, eigenvalues and the stability verdict with its margin."""
+    check_model(model)
+    params = params_from_options(preset, config, set_)
+    system = build_system(params, model)
+    res = stability(system)
+    if json_out:
+        out = {
+            "model": model,
+            "stable": res.stable,
+            "max_real_part": res.max_real_part,
+            "margin": res.margin,
+            "eigenvalues": [[float(z.real), float(z.imag)] for z in res.eigenvalues],
+            "omega1": float(params.omega1),
+            "sigma": float(params.sigma),
+            "equilibrium_converged": res.equilibrium.converged,
+            "equilibrium_scaled_residual": res.equilibrium.scaled_residual,
+            "warnings": list(res.warnings),
+        }
+        if model == "vehicle":
+            out["equilibrium"] = res.equilibrium.x.tolist()
+            out["state_names"] = list(system.state_names)
+        emit_json(out)
+        return
+    verdict = "[bold green]STABLE[/]" if res.stable else "[bold red]UNSTABLE[/]"
+    console.print(
+        f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
+        f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg"
+    )
+    console.print(f"Equilibrium: {verdict}  max Re(lambda) = {res.max_real_part:.6g} 1/s "
+                  f"(margin {res.margin:.6g} 1/s)")
+    table = Table("#", "Re (1/s)", "Im (rad/s)", "f (Hz)", "damping ratio")
+    for k, z in enumerate(res.eigenvalues):
+        if z.imag < -1e-12:
+            continue
+        zeta = -z.real / abs(z) if abs(z) > 0 else float("nan")
+        table.add_row(str(k + 1), f"{z.real:.6g}", f"{z.imag:.6g}",
+                      f"{abs(z.imag) / (2 * np.pi):.4g}", f"{zeta:.4g}")
+    console.print(table)
+    console.print("(one row per conjugate pair; the rows with Im < 0 are omitted)")
+    for w in res.warnings:
+        console_err.print(f"[yellow]warning:[/] {w}")
+
+
+@app.command("root-locus")
+def root_locus_command(
+    param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
+    start: Annotated[float, typer.Option("--from", help="First value.")] = 40.0,
+    stop: Annotated[float, typer.Option("--to", help="Last value.")] = 190.0,
+    steps: Annotated[int, typer.Option("--steps", help="Number of values.")] = 151,
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    model: ModelOpt = "unit",
+    out: OutOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Eigenvalues along one parameter: writes CSV and a PNG/SVG figure."""
+    check_model(model)
+    if steps < 2:
+        raise ParameterError("--steps", steps, "must be at least 2")
+    if not start < stop:
+        raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
+    params = params_from_options(preset, config, set_)
+    system = build_system(params, model)
+    if param not in system.param_names:
+        raise ParameterError(
+            "--param", param,
+            f"model '{model}' has no such parameter; choose one of {', '.join(system.param_names)}",
+        )
+    # validate the end points as parameter values (e.g. omega1 must stay positive)
+    for v in (start, stop):
+        if param in PARAMETER_DOCS:
+            params.replace(**{param: v})
+    values = np.linspace(start, stop, steps)
+    res = root_locus(system, param, values)
+    base = output_path(out, f"root-locus-{model}-{param}")
+    folder = base if base.suffix == "" else base.parent
+    stem = f"root_locus_{model}_{param}"
+    csv_path = folder / f"{stem}.csv"
+    with csv_path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([param, "index", "re", "im", "max_real_part", "equilibrium_converged"])
+        for v, eig, mr, ok in zip(values, res.eigenvalues, res.max_real_part, res.converged,
+                                  strict=True):
+            for k, z in enumerate(eig):
+                w.writerow([f"{v:.10g}", k, f"{z.real:.12g}", f"{z.imag:.12g}", f"{mr:.12g}",
+                            bool(ok)])
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.rootlocus import root_locus_figure
+
+    unit = PARAMETER_DOCS.get(param, ("", ""))[0]
+    figs = save_figure(root_locus_figure(values, res.eigenvalues, param, f"({unit})"),
+                       folder / stem)
+    crossings = []
+    mr = res.max_real_part
+    for k in range(len(values) - 1):
+        if np.sign(mr[k]) != np.sign(mr[k + 1]):
+            t = mr[k] / (mr[k] - mr[k + 1])
+            crossings.append(float(values[k] + t * (values[k + 1] - values[k])))
+    summary = {
+        "param": param,
+        "model": model,
+        "values": values.tolist(),
+        "max_real_part": mr.tolist(),
+        "stability_changes": crossings,
+        "csv": str(csv_path),
+        "figures": [str(f) for f in figs],
+        "warnings": list(res.warnings),
+    }
+    if json_out:
+        emit_json(summary)
+        return
+    console.print(
+        f"Root locus along {param} in [{start:g}, {stop:g}] ({steps} values), model {model}"
+    )
+    if crossings:
+        console.print("max Re(lambda) changes sign near " + ", ".join(f"{c:.5g}" for c in crossings)
+                      + f" {unit} (linear interpolation; `maglev-match hopf` refines)")
+    else:
+        state = "stable" if mr[0] < 0 else "unstable"
+        console.print(f"no change of stability: {state} throughout")
+    console.print(f"wrote {csv_path} and {', '.join(str(f) for f in figs)}")
+    for w in res.warnings:
+        console_err.print(f"[yellow]warning:[/] {w}")
+
+
+@app.command("presets")
+def presets_command(json_out: JsonOpt = False) -> None:
+    """List the shipped parameter presets with their beam values."""
+    rows = []
+    for name in available_presets():
+        p = load_preset(name)
+        rows.append({"name": name, "omega1": p.omega1, "sigma": p.sigma, "w0": p.w0,
+                     "EI": p.EI, "L": p.L, "mbar": p.mbar})
+    if json_out:
+        emit_json({"presets": rows})
+        return
+    table = Table("preset", "omega1 (rad/s)", "sigma (1/kg)", "w0 (mm)", "L (m)", "EI (N m^2)")
+    for r in rows:
+        table.add_row(r["name"], f"{r['omega1']:.5g}", f"{r['sigma']:.4g}",
+                      f"{r['w0'] * 1e3:.4g}", f"{r['L']:g}", f"{r['EI']:.4g}")
+    console.print(table)
