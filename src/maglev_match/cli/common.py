@@ -12,7 +12,7 @@ import numpy as np
 import typer
 from rich.console import Console
 
-from maglev_match.params import DEFAULT_PRESET, Params, ParameterError, load_params
+from maglev_match.params import DEFAULT_PRESET, ParameterError, Params, load_params
 
 console = Console()
 console_err = Console(stderr=True)

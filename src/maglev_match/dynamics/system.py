@@ -22,7 +22,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cache
 from typing import Any
 
 import jax
@@ -50,7 +50,7 @@ class CompiledDerivatives:
     C: Callable[..., Array]
 
 
-@lru_cache(maxsize=None)
+@cache
 def compiled(rhs: RHS) -> CompiledDerivatives:
     """Compile f, its Jacobians and the multilinear forms B and C for ``rhs`` (cached)."""
 
