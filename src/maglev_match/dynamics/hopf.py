@@ -1,0 +1,611 @@
+"""Hopf bifurcations of equilibria of x' = f(x, p): detection along one parameter, the
+two-parameter Hopf curve, first and second Lyapunov coefficients, codimension-two points.
+
+Model-agnostic: works on any :class:`~maglev_match.dynamics.system.System` (SPEC.md 6.2, 6.3).
+
+Defining system (real form) of a Hopf point, unknowns (x, v1, v2, omega, free parameters):
+
+    f(x, alpha) = 0,   J v1 + omega v2 = 0,   J v2 - omega v1 = 0,   <c, v1> = 1,   <c, v2> = 0
+
+so that q = v1 + i v2 satisfies J q = i omega q. With one free parameter the system is
+square and Newton's method refines a Hopf point to full precision; with two free parameters
+it defines the Hopf curve, followed by pseudo-arclength continuation.
+
+Normal-form coefficients (Kuznetsov, Elements of Applied Bifurcation Theory, 3rd ed., and
+Kuznetsov 1999 SIAM J. Numer. Anal. 36:1104), with J q = i omega q, J^T p = -i omega p,
+<q, q> = 1, <p, q> = 1 and <a, b> = sum conj(a) b:
+
+    h20 = (2 i omega - J)^-1 B(q, q),   h11 = -J^-1 B(q, qbar)
+    G21 = <p, C(q, q, qbar) + B(qbar, h20) + 2 B(q, h11)>
+    l1  = Re G21 / (2 omega)                                   (paper eq. 24)
+    l2  = Re G32 / (12 omega)                                  (at l1 = 0)
+
+With this normalisation a planar block z' = (mu + i) z + b z |z|^2 + s z |z|^4 written in
+x1 + i x2 = z gives l1 = 2 Re b and, at Re b = 0, l2 = 4 Re s (since <q, q> = 1 means
+z = sqrt(2) w in the normal-form coordinate w); the signs are those of Re b and Re s.
+Derivatives of orders 2 to 5 are exact (nested forward-mode autodiff), never finite
+differences.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cache
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+
+from maglev_match.dynamics.equilibria import find_equilibrium, root_locus
+from maglev_match.dynamics.system import System
+
+__all__ = [
+    "HopfPoint",
+    "HopfScan",
+    "HopfCurvePoint",
+    "CodimTwoPoint",
+    "HopfCurve",
+    "locate_hopf_points",
+    "refine_hopf_point",
+    "first_lyapunov_coefficient",
+    "second_lyapunov_coefficient",
+    "hopf_eigenvectors",
+]
+
+
+# ----------------------------------------------------------------------------------------
+# results
+# ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class HopfPoint:
+    """A Hopf point of the equilibrium along one parameter, refined on the defining system."""
+
+    param: str  # the continuation parameter name
+    value: float  # its value at the Hopf point (SI unit of that parameter)
+    x: np.ndarray  # equilibrium state there
+    p: np.ndarray  # full parameter vector there
+    frequency: float  # omega (rad/s), eigenvalues +-i omega
+    q: np.ndarray  # complex right eigenvector, J q = i omega q, <q,q> = 1
+    p_adj: np.ndarray  # complex adjoint eigenvector, J^T p = -i omega p, <p,q> = 1
+    crossing_speed: float  # d Re(lambda)/d param (1/s per unit of param)
+    l1: float  # first Lyapunov coefficient (paper eq. 24), 1/s with <q,q> = 1
+    others_stable: bool  # all other eigenvalues in the open left half-plane
+    converged: bool
+    residual: float  # max |defining system| at the solution (scaled)
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def kind(self) -> str:
+        """'subcritical' (l1 > 0), 'supercritical' (l1 < 0) or 'degenerate' (l1 = 0)."""
+        return _criticality(self.l1)
+
+
+@dataclass(frozen=True)
+class HopfScan:
+    """Hopf points found along one parameter interval."""
+
+    param: str
+    start: float
+    stop: float
+    points: list[HopfPoint]
+    scan_values: np.ndarray  # the coarse grid used to bracket the crossings
+    max_real_part: np.ndarray  # max Re(lambda) on that grid (1/s)
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class HopfCurvePoint:
+    """One point of a two-parameter Hopf curve."""
+
+    values: tuple[float, float]  # the two parameter values
+    x: np.ndarray
+    frequency: float  # omega (rad/s)
+    l1: float  # first Lyapunov coefficient (1/s, <q,q> = 1)
+    others_stable: bool  # every other eigenvalue has Re < 0
+    n_unstable_others: int  # number of other eigenvalues with Re > 0
+
+
+@dataclass(frozen=True)
+class CodimTwoPoint:
+    """A codimension-two point on the Hopf curve.
+
+    type: 'GH' (generalised Hopf / Bautin, l1 = 0), 'BT' (Bogdanov-Takens, omega -> 0),
+    'ZH' (zero-Hopf, a real eigenvalue at 0), 'HH' (double Hopf, a second imaginary pair).
+    """
+
+    type: str
+    values: tuple[float, float]
+    frequency: float
+    l2: float | None = None  # second Lyapunov coefficient (GH only)
+    other_frequency: float | None = None  # the second frequency (HH only)
+    converged: bool = True
+    residual: float = 0.0
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class HopfCurve:
+    """A branch of the Hopf curve in the plane of two parameters."""
+
+    params: tuple[str, str]
+    points: list[HopfCurvePoint]
+    special_points: list[CodimTwoPoint]
+    converged: bool
+    message: str
+    steps: int
+    closed: bool = False  # the branch came back to its start
+    warnings: tuple[str, ...] = ()
+
+    def values(self) -> np.ndarray:
+        """(n, 2) array of the two parameter values along the branch."""
+        return np.array([pt.values for pt in self.points]).reshape(-1, 2)
+
+    def l1(self) -> np.ndarray:
+        return np.array([pt.l1 for pt in self.points])
+
+    def frequency(self) -> np.ndarray:
+        return np.array([pt.frequency for pt in self.points])
+
+
+def _criticality(l1: float) -> str:
+    if not math.isfinite(l1):
+        return "unknown"
+    if l1 > 0:
+        return "subcritical"
+    if l1 < 0:
+        return "supercritical"
+    return "degenerate"
+
+
+# ----------------------------------------------------------------------------------------
+# compiled kernels (cached per right-hand side, so nothing recompiles per call)
+# ----------------------------------------------------------------------------------------
+def _real_form(rhs, order: int):
+    """The real symmetric k-linear form d^k f / dx^k [u1, ..., uk] by nested jvp."""
+
+    def form(x, p, *us):
+        def g(y, k):
+            if k == 0:
+                return rhs(y, p)
+            return jax.jvp(lambda z: g(z, k - 1), (y,), (us[k - 1],))[1]
+
+        return g(x, order)
+
+    return form
+
+
+def _complex_form(real_form, order: int):
+    """Extend a real k-linear form to complex directions (expanding real/imag parts)."""
+
+    def form(x, p, *us):
+        parts = [(jnp.real(u), jnp.imag(u)) for u in us]
+        total = 0.0 + 0.0j
+        for mask in range(2**order):
+            args = [parts[j][(mask >> j) & 1] for j in range(order)]
+            n_imag = bin(mask).count("1")
+            total = total + (1j**n_imag) * real_form(x, p, *args)
+        return total
+
+    return form
+
+
+@cache
+def _forms(rhs) -> dict[int, Callable]:
+    """Jitted complex multilinear forms of orders 2..5 for ``rhs``."""
+    return {k: jax.jit(_complex_form(_real_form(rhs, k), k)) for k in (2, 3, 4, 5)}
+
+
+def _l1_kernel_fn(rhs):
+    B = _complex_form(_real_form(rhs, 2), 2)
+    C = _complex_form(_real_form(rhs, 3), 3)
+    jac = jax.jacfwd(rhs, argnums=0)
+
+    def l1(x, p, omega, q, padj):
+        J = jac(x, p).astype(jnp.complex128)
+        n = J.shape[0]
+        eye = jnp.eye(n, dtype=jnp.complex128)
+        qb = jnp.conj(q)
+        h11 = -jnp.linalg.solve(J, B(x, p, q, qb))
+        h20 = jnp.linalg.solve(2j * omega * eye - J, B(x, p, q, q))
+        g21 = jnp.vdot(padj, C(x, p, q, q, qb) + 2.0 * B(x, p, q, h11) + B(x, p, qb, h20))
+        return jnp.real(g21) / (2.0 * omega)
+
+    return l1
+
+
+@cache
+def _l1_kernels(rhs):
+    fn = _l1_kernel_fn(rhs)
+    return jax.jit(fn), jax.jit(jax.vmap(fn))
+
+
+@cache
+def _defining_kernels(rhs, idx: tuple[int, ...]):
+    """Hopf defining system G(z, p, c) and its Jacobian, with z = (x, v1, v2, omega,
+    alpha[idx]); G has 3n + 2 components and z has 3n + 1 + len(idx)."""
+
+    def G(z, p, c):
+        n = c.shape[0]
+        x, v1, v2 = z[:n], z[n : 2 * n], z[2 * n : 3 * n]
+        om = z[3 * n]
+        pp = p.at[jnp.array(idx)].set(z[3 * n + 1 :])
+
+        def fp(y):
+            return rhs(y, pp)
+
+        fx, jv1 = jax.jvp(fp, (x,), (v1,))
+        jv2 = jax.jvp(fp, (x,), (v2,))[1]
+        return jnp.concatenate([
+            fx, jv1 + om * v2, jv2 - om * v1, jnp.stack([c @ v1 - 1.0, c @ v2])
+        ])
+
+    return jax.jit(G), jax.jit(jax.jacfwd(G, argnums=0))
+
+
+@cache
+def _crossing_kernel(rhs):
+    """d/ds [J(x + s dx, p + s dp) v] at s = 0 (real v)."""
+
+    def dJv(x, p, v, dx, dp):
+        def Jv(y, pp):
+            return jax.jvp(lambda z: rhs(z, pp), (y,), (v,))[1]
+
+        return jax.jvp(Jv, (x, p), (dx, dp))[1]
+
+    return jax.jit(dJv)
+
+
+# ----------------------------------------------------------------------------------------
+# eigenvectors and Lyapunov coefficients
+# ----------------------------------------------------------------------------------------
+def _null_vector(M: np.ndarray) -> np.ndarray:
+    """Unit vector spanning the (numerical) null space of a square matrix."""
+    _, _, vh = scipy.linalg.svd(M)
+    return np.conj(vh[-1])
+
+
+def hopf_eigenvectors(J: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray]:
+    """Right and adjoint eigenvectors at a Hopf point.
+
+    Returns (q, p) with J q = i omega q, J^T p = -i omega p, <q, q> = 1, <p, q> = 1
+    (<a, b> = sum conj(a) b). The phase of q is fixed so that its largest component is real
+    and positive.
+    """
+    n = J.shape[0]
+    eye = np.eye(n)
+    q = _null_vector(J - 1j * omega * eye)
+    k = int(np.argmax(np.abs(q)))
+    q = q * np.exp(-1j * np.angle(q[k]))
+    q = q / np.linalg.norm(q)
+    p = _null_vector(J.T + 1j * omega * eye)
+    s = np.vdot(p, q)
+    p = p / np.conj(s)
+    return q, p
+
+
+def first_lyapunov_coefficient(
+    system: System,
+    x: np.ndarray,
+    p: np.ndarray | None,
+    omega: float,
+    q: np.ndarray | None = None,
+    p_adj: np.ndarray | None = None,
+) -> float:
+    """First Lyapunov coefficient l1 at a Hopf point (paper eq. 24, Kuznetsov's projection).
+
+    l1 = 1/(2 omega) Re[<p, C(q,q,qbar)> - 2 <p, B(q, J^-1 B(q,qbar))>
+                        + <p, B(qbar, (2 i omega I - J)^-1 B(q,q))>]
+    with <q, q> = 1 and <p, q> = 1; B and C exact by autodiff.
+
+    Parameters
+    ----------
+    system : the ODE system.
+    x : equilibrium state at the Hopf point.
+    p : parameter vector (None: the system's).
+    omega : the Hopf frequency (rad/s), eigenvalues +-i omega of J.
+    q, p_adj : eigenvectors (computed when not given; they are renormalised here).
+
+    Returns
+    -------
+    l1 (1/s with the normalisation above): > 0 subcritical, < 0 supercritical.
+    """
+    pv = system.p if p is None else np.asarray(p, float)
+    J = system.jacobian(x, pv)
+    if q is None or p_adj is None:
+        q, p_adj = hopf_eigenvectors(J, omega)
+    else:
+        q = np.asarray(q, complex) / np.linalg.norm(q)
+        p_adj = np.asarray(p_adj, complex)
+        p_adj = p_adj / np.conj(np.vdot(p_adj, q))
+    single, _ = _l1_kernels(system.rhs)
+    return float(single(jnp.asarray(x, jnp.float64), jnp.asarray(pv, jnp.float64),
+                        float(omega), jnp.asarray(q), jnp.asarray(p_adj)))
+
+
+def _l1_batch(system: System, xs, ps, omegas, qs, pads) -> np.ndarray:
+    _, batch = _l1_kernels(system.rhs)
+    return np.asarray(batch(jnp.asarray(xs), jnp.asarray(ps), jnp.asarray(omegas),
+                            jnp.asarray(qs), jnp.asarray(pads)))
+
+
+def second_lyapunov_coefficient(
+    system: System,
+    x: np.ndarray,
+    p: np.ndarray | None,
+    omega: float,
+    q: np.ndarray | None = None,
+    p_adj: np.ndarray | None = None,
+) -> tuple[float, float]:
+    """Second Lyapunov coefficient l2 = Re G32 / (12 omega) at a generalised Hopf point.
+
+    Kuznetsov 1999 (Numerical normalization techniques, eq. for the Bautin point), with
+    derivatives of orders 2..5 exact by nested autodiff and the normalisation
+    <q, q> = 1, <p, q> = 1. Only meaningful where l1 = 0.
+
+    Returns (l1, l2) (both 1/s in the normalisation above).
+    """
+    pv = system.p if p is None else np.asarray(p, float)
+    x = np.asarray(x, float)
+    J = system.jacobian(x, pv)
+    if q is None or p_adj is None:
+        q, p_adj = hopf_eigenvectors(J, omega)
+    F = _forms(system.rhs)
+    xj, pj = jnp.asarray(x), jnp.asarray(pv)
+
+    def form(k, *us):
+        return np.asarray(F[k](xj, pj, *[jnp.asarray(np.asarray(u, complex)) for u in us]))
+
+    def B(a, b):
+        return form(2, a, b)
+
+    def C(a, b, c):
+        return form(3, a, b, c)
+
+    def D(a, b, c, d):
+        return form(4, a, b, c, d)
+
+    def E(a, b, c, d, e):
+        return form(5, a, b, c, d, e)
+
+    n = J.shape[0]
+    eye = np.eye(n)
+    iw = 1j * omega
+    qb = np.conj(q)
+    h20 = np.linalg.solve(2 * iw * eye - J, B(q, q))
+    h11 = -np.linalg.solve(J, B(q, qb))
+    r21 = C(q, q, qb) + B(qb, h20) + 2 * B(q, h11)
+    g21 = np.vdot(p_adj, r21)
+    h30 = np.linalg.solve(3 * iw * eye - J, C(q, q, q) + 3 * B(q, h20))
+    # h21: (i omega - J) h21 = r21 - G21 q, <p, h21> = 0 (bordered system)
+    bord = np.zeros((n + 1, n + 1), complex)
+    bord[:n, :n] = iw * eye - J
+    bord[:n, n] = q
+    bord[n, :n] = np.conj(p_adj)
+    sol = np.linalg.solve(bord, np.concatenate([r21 - g21 * q, [0.0]]))
+    h21 = sol[:n]
+    h02, h12 = np.conj(h20), np.conj(h21)
+    h31 = np.linalg.solve(
+        2 * iw * eye - J,
+        D(q, q, q, qb) + 3 * C(q, q, h11) + 3 * C(q, qb, h20) + 3 * B(h20, h11)
+        + B(qb, h30) + 3 * B(q, h21) - 3 * g21 * h20,
+    )
+    h22 = -np.linalg.solve(
+        J,
+        D(q, q, qb, qb) + 4 * C(q, qb, h11) + C(qb, qb, h20) + C(q, q, h02)
+        + 2 * B(h11, h11) + 2 * B(q, h12) + 2 * B(qb, h21) + B(h20, h02)
+        - 2 * (g21 + np.conj(g21)) * h11,
+    )
+    r32 = (
+        E(q, q, q, qb, qb) + D(q, q, q, h02) + 3 * D(q, qb, qb, h20) + 6 * D(q, q, qb, h11)
+        + C(qb, qb, h30) + 3 * C(q, q, h12) + 6 * C(q, qb, h21) + 3 * C(q, h02, h20)
+        + 6 * C(q, h11, h11) + 6 * C(qb, h20, h11) + 2 * B(qb, h31) + 3 * B(q, h22)
+        + B(h02, h30) + 3 * B(h12, h20) + 6 * B(h11, h21)
+    )
+    g32 = np.vdot(p_adj, r32)
+    return float(g21.real / (2 * omega)), float(g32.real / (12 * omega))
+
+
+# ----------------------------------------------------------------------------------------
+# Hopf points along one parameter
+# ----------------------------------------------------------------------------------------
+def _pack(x, v1, v2, omega, alphas) -> np.ndarray:
+    return np.concatenate([x, v1, v2, [omega], np.atleast_1d(alphas)])
+
+
+def _unpack(z: np.ndarray, n: int):
+    return z[:n], z[n : 2 * n], z[2 * n : 3 * n], float(z[3 * n]), z[3 * n + 1 :]
+
+
+def _normalise_pair(v1: np.ndarray, v2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotate q = v1 + i v2 by a phase so that v1 is orthogonal to v2, scale |v1| = 1."""
+    q = v1 + 1j * v2
+    # phase theta maximising |Re(e^{i theta} q)|: principal axis of the ellipse
+    theta = -0.5 * np.angle(np.sum(q * q))
+    q = q * np.exp(1j * theta)
+    scale = np.linalg.norm(q.real)
+    if scale == 0:
+        scale = 1.0
+    q = q / scale
+    return q.real.copy(), q.imag.copy()
+
+
+def _other_eigenvalues(w: np.ndarray, omega: float) -> np.ndarray:
+    """The eigenvalues other than the pair closest to +-i omega."""
+    if w.size < 2:
+        return w[:0]
+    k1 = int(np.argmin(np.abs(w - 1j * omega)))
+    rest = np.delete(w, k1)
+    k2 = int(np.argmin(np.abs(rest + 1j * omega)))
+    return np.delete(rest, k2)
+
+
+def refine_hopf_point(
+    system: System,
+    param: str,
+    value: float,
+    x: np.ndarray,
+    omega: float,
+    q: np.ndarray | None = None,
+    p: np.ndarray | None = None,
+    tol: float = 1e-11,
+    max_iter: int = 30,
+) -> HopfPoint:
+    """Refine an approximate Hopf point by Newton's method on the defining system
+    (x, v1, v2, omega, param), then compute eigenvectors, crossing speed and l1.
+
+    Parameters
+    ----------
+    value, x, omega : initial guesses (parameter value, equilibrium state, frequency rad/s).
+    q : guess of the complex eigenvector (computed from J when not given).
+    """
+    base = system.p if p is None else np.asarray(p, float)
+    k = system.param_index(param)
+    n = system.dim
+    pk = system.params_with(base, **{param: value})
+    warnings: list[str] = []
+    if q is None:
+        w, V = np.linalg.eig(system.jacobian(x, pk))
+        j = int(np.argmin(np.abs(w - 1j * omega)))
+        q = V[:, j]
+    v1, v2 = _normalise_pair(np.real(q), np.imag(q))
+    c = v1.copy()
+    z = _pack(np.asarray(x, float), v1, v2, omega, [value])
+    G, DG = _defining_kernels(system.rhs, (k,))
+    pj = jnp.asarray(base)
+    cj = jnp.asarray(c)
+    scale = _z_scale(system, omega, [abs(value) or 1.0])
+    converged = False
+    res = np.inf
+    n_iter = 0
+    for n_iter in range(1, max_iter + 1):  # noqa: B007 (n_iter reported below)
+        g = np.asarray(G(jnp.asarray(z), pj, cj))
+        A = np.asarray(DG(jnp.asarray(z), pj, cj))
+        try:
+            dz = -np.linalg.solve(A, g)
+        except np.linalg.LinAlgError:
+            warnings.append("singular Hopf defining system (degenerate Hopf point?)")
+            break
+        if not np.all(np.isfinite(dz)):
+            warnings.append("non-finite Newton step")
+            break
+        z = z + dz
+        step = float(np.max(np.abs(dz) / scale))
+        if step < tol:
+            converged = True
+            break
+    g = np.asarray(G(jnp.asarray(z), pj, cj))
+    res = float(np.max(np.abs(g[:n]) / (np.abs(np.asarray(system.jacobian(z[:n],
+                system.params_with(base, **{param: float(z[-1])}))))
+                @ system.state_scale + 1e-300)))
+    res = max(res, float(np.max(np.abs(g[n:]) / (abs(z[3 * n]) + 1.0))))
+    if not converged:
+        warnings.append(f"Newton on the Hopf defining system did not converge in {n_iter} steps")
+    xs, v1, v2, om, al = _unpack(z, n)
+    if om < 0:
+        om, v2 = -om, -v2
+    val = float(al[0])
+    pv = system.params_with(base, **{param: val})
+    return _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings)
+
+
+def _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings) -> HopfPoint:
+    J = system.jacobian(xs, pv)
+    q, padj = hopf_eigenvectors(J, om)
+    # crossing speed: d lambda / d alpha = <p, (dJ/dalpha along the equilibrium branch) q>
+    fa = system.param_derivative(xs, pv, param)
+    try:
+        dx = -np.linalg.solve(J, fa)
+    except np.linalg.LinAlgError:
+        dx = np.zeros_like(xs)
+        warnings.append("singular Jacobian: crossing speed ignores the equilibrium's drift")
+    dp = np.zeros_like(pv)
+    dp[system.param_index(param)] = 1.0
+    kern = _crossing_kernel(system.rhs)
+    args = (jnp.asarray(xs), jnp.asarray(pv))
+    dJq = (np.asarray(kern(*args, jnp.asarray(q.real), jnp.asarray(dx), jnp.asarray(dp)))
+           + 1j * np.asarray(kern(*args, jnp.asarray(q.imag), jnp.asarray(dx),
+                                  jnp.asarray(dp))))
+    speed = float(np.real(np.vdot(padj, dJq)))
+    l1 = first_lyapunov_coefficient(system, xs, pv, om, q, padj)
+    w = np.linalg.eigvals(J)
+    others = _other_eigenvalues(w, om)
+    others_stable = bool(np.all(others.real < 0))
+    if abs(speed) < 1e-12 * max(1.0, om):
+        warnings.append("crossing speed is zero: the transversality condition fails")
+    return HopfPoint(
+        param=param, value=val, x=np.asarray(xs), p=np.asarray(pv), frequency=float(om),
+        q=q, p_adj=padj, crossing_speed=speed, l1=float(l1), others_stable=others_stable,
+        converged=bool(converged), residual=float(res), warnings=tuple(warnings),
+    )
+
+
+def _z_scale(system: System, omega: float, alpha_scales) -> np.ndarray:
+    n = system.dim
+    return np.concatenate([
+        system.state_scale, np.ones(2 * n), [max(abs(omega), 1.0)], np.asarray(alpha_scales)
+    ])
+
+
+def locate_hopf_points(
+    system: System,
+    param: str,
+    start: float,
+    stop: float,
+    p: np.ndarray | None = None,
+    n_scan: int = 200,
+    progress: Callable[[int, int], None] | None = None,
+) -> HopfScan:
+    """Hopf points of the equilibrium as ``param`` runs from ``start`` to ``stop``.
+
+    A coarse root locus (``n_scan`` values) brackets every value where a complex pair of
+    eigenvalues crosses the imaginary axis; each bracket is refined to full precision by
+    Newton's method on the Hopf defining system (x, v1, v2, omega, param) (SPEC.md 6.2).
+    """
+    base = system.p if p is None else np.asarray(p, float)
+    values = np.linspace(start, stop, int(n_scan))
+    rl = root_locus(system, param, values, base, progress=progress)
+    warnings = list(rl.warnings)
+    points: list[HopfPoint] = []
+    eig = rl.eigenvalues
+    for j in range(len(values) - 1):
+        wa, wb = eig[j], eig[j + 1]
+        if not (rl.converged[j] and rl.converged[j + 1]):
+            continue
+        # complex eigenvalues with Im > 0 at the left end, matched to the right end
+        for lam_a in wa[wa.imag > 1e-9]:
+            kb = int(np.argmin(np.abs(wb - lam_a)))
+            lam_b = wb[kb]
+            if lam_b.imag <= 1e-9:
+                continue
+            if np.sign(lam_a.real) == np.sign(lam_b.real) or lam_a.real == 0:
+                continue
+            t = lam_a.real / (lam_a.real - lam_b.real)
+            v0 = values[j] + t * (values[j + 1] - values[j])
+            om0 = float(lam_a.imag + t * (lam_b.imag - lam_a.imag))
+            x0 = rl.equilibria[j] + t * (rl.equilibria[j + 1] - rl.equilibria[j])
+            pk = system.params_with(base, **{param: v0})
+            eq = find_equilibrium(system, pk, x0)
+            hp = refine_hopf_point(system, param, v0, eq.x, om0, p=base)
+            lo, hi = sorted((values[j], values[j + 1]))
+            span = hi - lo
+            if not (lo - span <= hp.value <= hi + span):
+                hp = _with_warning(hp, "refined Hopf point left its bracket "
+                                   f"[{lo:g}, {hi:g}]")
+            if any(abs(hp.value - o.value) <= 1e-9 * max(1.0, abs(o.value))
+                   and abs(hp.frequency - o.frequency) <= 1e-6 * o.frequency for o in points):
+                continue
+            points.append(hp)
+    points.sort(key=lambda h: h.value)
+    return HopfScan(param=param, start=float(start), stop=float(stop), points=points,
+                    scan_values=values, max_real_part=rl.max_real_part,
+                    warnings=tuple(warnings))
+
+
+def _with_warning(hp: HopfPoint, msg: str) -> HopfPoint:
+    import dataclasses
+
+    return dataclasses.replace(hp, warnings=hp.warnings + (msg,))
