@@ -1,0 +1,533 @@
+"""Time integration of an autonomous :class:`System` with terminal limit events.
+
+Model-agnostic: nothing here knows about maglev. A run integrates ``x' = rhs(x, p)`` with
+an explicit Runge-Kutta method of diffrax (Dopri8 by default) and an adaptive PID step-size
+controller, in a hand-written step loop so that every accepted step can be inspected
+through the solver's dense interpolant:
+
+* **Limit events.** An event function ``g(x, p) -> array`` (m entries) describes limits;
+  a negative entry means "this limit has been left" and ends the run. Inside every
+  accepted step ``[t_a, t_b]`` the interpolant is sampled at ``samples + 1`` equally spaced
+  times; if no sample is negative, the sampled minimum of each entry is refined by a
+  golden-section search on its two neighbouring sub-intervals, so an entry that dips below
+  zero and comes back *within one step* (grazing) is still caught. The first crossing is
+  then located by bisection of ``g(interpolant(t))`` to about 1e-15 of the step length.
+* **Convergence.** With a reference state ``x_ref`` (an equilibrium), the scaled distance
+  ``d(t) = max_i |x_i - x_ref_i| / scale_i`` is checked at the end of every accepted step.
+  The run counts as *converged* once ``d <= converge_tol`` has held without interruption
+  for ``hold_time`` seconds; ``converged_time`` is when that last uninterrupted stretch
+  began. With ``stop_on_converged`` the run stops there (for basin bisection).
+* **Outcomes.** ``collision`` (an event fired: time, entry index, state), ``converged``,
+  ``running`` (neither by the horizon), ``failed`` (non-finite state or ``max_steps``
+  exhausted; never silently reported as one of the others).
+
+The solver works in scaled coordinates ``z = x / state_scale`` so one absolute tolerance
+``atol`` means "atol times the typical size" of every state; ``rtol`` is relative.
+
+Batches: :func:`simulate_batch` maps the same compiled kernel over many initial states
+and/or parameter vectors with ``jax.vmap``. Compiled kernels are cached per
+(right-hand side, event function, solver, options), so repeated calls do not recompile.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any
+
+import diffrax
+import equinox.internal as eqxi
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from maglev_match import jax_setup  # noqa: F401  (float64 on)
+from maglev_match.dynamics.system import System
+
+Array = Any
+EventFn = Callable[[Array, Array], Array]
+
+__all__ = [
+    "OUTCOMES",
+    "SimulationOptions",
+    "SimulationResult",
+    "BatchSimulation",
+    "simulate",
+    "simulate_batch",
+]
+
+# outcome codes used inside the kernel
+RUNNING, COLLISION, CONVERGED, FAILED = 0, 1, 2, 3
+OUTCOMES = ("running", "collision", "converged", "failed")
+
+_SOLVERS = {
+    "dopri8": diffrax.Dopri8,
+    "dopri5": diffrax.Dopri5,
+    "tsit5": diffrax.Tsit5,
+}
+_GOLDEN = 0.5 * (np.sqrt(5.0) - 1.0)
+
+
+@dataclass(frozen=True)
+class SimulationOptions:
+    """Integrator settings.
+
+    rtol, atol : relative tolerance and absolute tolerance in units of ``state_scale``.
+    solver : 'dopri8' (default), 'dopri5' or 'tsit5'.
+    samples : interpolant samples per step for the event search (>= 2).
+    converge_tol : scaled distance to ``x_ref`` that counts as "at the reference state".
+    hold_time : how long (s) the distance must stay below ``converge_tol``.
+    stop_on_converged : end a run as soon as it has converged.
+    max_steps : bound on attempted steps per run (reported as 'failed' when hit).
+    dt0 : initial step (s); None lets diffrax choose.
+    """
+
+    rtol: float = 1e-8
+    atol: float = 1e-8
+    solver: str = "dopri8"
+    samples: int = 8
+    converge_tol: float = 0.05
+    hold_time: float = 1.0
+    stop_on_converged: bool = False
+    max_steps: int = 200_000
+    dt0: float | None = None
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """One run.
+
+    t : saved times (s), shape (n_save,); x : saved states, shape (n_save, dim); rows at
+        times after the run ended (collision, early stop) are NaN.
+    outcome : 'collision' | 'converged' | 'running' | 'failed'.
+    event_time : collision time (s) or None; event_index : entry of g that went negative
+        or None; event_state : state at the collision or None.
+    final_time, final_state : where the run ended (the collision point for a collision).
+    converged_time : start (s) of the final uninterrupted stretch within ``converge_tol``
+        of the reference state, or None.
+    min_event_value : smallest value of each entry of g seen over the run (sampled inside
+        steps), shape (m,).
+    steps, accepted, rejected : step counts. warnings : messages.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    outcome: str
+    event_time: float | None
+    event_index: int | None
+    event_state: np.ndarray | None
+    final_time: float
+    final_state: np.ndarray
+    converged_time: float | None
+    min_event_value: np.ndarray
+    steps: int
+    accepted: int
+    rejected: int
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def collided(self) -> bool:
+        return self.outcome == "collision"
+
+
+@dataclass(frozen=True)
+class BatchSimulation:
+    """Many runs of one system (arrays have the batch size as leading axis).
+
+    outcome : array of strings; outcome_code : 0 running, 1 collision, 2 converged, 3 failed.
+    event_time : NaN where no collision; event_index : -1 where no collision.
+    t, x : saved times (n_save,) and histories (batch, n_save, dim) (x is None when no
+        history was requested).
+    """
+
+    outcome: np.ndarray
+    outcome_code: np.ndarray
+    event_time: np.ndarray
+    event_index: np.ndarray
+    final_time: np.ndarray
+    final_state: np.ndarray
+    converged_time: np.ndarray
+    min_event_value: np.ndarray
+    steps: np.ndarray
+    t: np.ndarray
+    x: np.ndarray | None
+
+    def __len__(self) -> int:
+        return len(self.outcome)
+
+    def run(self, k: int) -> SimulationResult:
+        """Run ``k`` as a :class:`SimulationResult`."""
+        code = int(self.outcome_code[k])
+        hit = code == COLLISION
+        return SimulationResult(
+            t=self.t,
+            x=self.x[k] if self.x is not None else np.empty((0, self.final_state.shape[1])),
+            outcome=OUTCOMES[code],
+            event_time=float(self.event_time[k]) if hit else None,
+            event_index=int(self.event_index[k]) if hit else None,
+            event_state=self.final_state[k] if hit else None,
+            final_time=float(self.final_time[k]),
+            final_state=self.final_state[k],
+            converged_time=(None if not np.isfinite(self.converged_time[k])
+                            else float(self.converged_time[k])),
+            min_event_value=self.min_event_value[k],
+            steps=int(self.steps[k]),
+            accepted=-1,
+            rejected=-1,
+        )
+
+
+def _no_events(x, p):
+    return jnp.zeros((0,), dtype=x.dtype)
+
+
+# ---------------------------------------------------------------------------------------
+# the compiled kernel
+# ---------------------------------------------------------------------------------------
+def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
+                 stop_on_converged: bool):
+    """Build the (unjitted) single-run kernel. All array inputs are traced."""
+    solver = _SOLVERS[solver_name]()
+    interp_cls = solver.interpolation_cls
+    eps = float(np.finfo(float).eps)
+
+    def kernel(x0, p, scale, x_ref, t_end, ts_save, rtol, atol, converge_tol, hold_time,
+               max_steps, dt0):
+        term = diffrax.ODETerm(lambda t, z, args: rhs(z * scale, args) / scale)
+        controller = diffrax.PIDController(rtol=rtol, atol=atol)
+        order = solver.error_order(term)
+        z0 = x0 / scale
+        zref = x_ref / scale
+        t0 = jnp.asarray(0.0)
+
+        def g_of_z(z):
+            return event_fn(z * scale, p)
+
+        m = int(jax.eval_shape(g_of_z, z0).shape[0])
+        sstate = solver.init(term, t0, t_end, z0, p)
+        tnext, cstate = controller.init(term, t0, t_end, z0, None, p, solver.func, order)
+        tnext = jnp.where(dt0 > 0, t0 + dt0, tnext)
+        tnext = jnp.minimum(tnext, t_end)
+        dim = z0.shape[0]
+
+        carry = dict(
+            t=t0, tnext=tnext, z=z0, sstate=sstate, cstate=cstate,
+            made_jump=jnp.asarray(False),
+            status=jnp.asarray(RUNNING), t_event=jnp.asarray(jnp.nan),
+            i_event=jnp.asarray(-1), z_event=jnp.full((dim,), jnp.nan),
+            conv_since=jnp.where(jnp.max(jnp.abs(z0 - zref)) <= converge_tol, t0, jnp.inf),
+            ys=jnp.full((n_save, dim), jnp.nan), save_idx=jnp.asarray(0),
+            steps=jnp.asarray(0), accepted=jnp.asarray(0), rejected=jnp.asarray(0),
+            gmin=g_of_z(z0) if m else jnp.zeros((0,)),
+        )
+        # a start outside the limits is a collision at t = 0
+        if m:
+            g0 = g_of_z(z0)
+            bad0 = jnp.any(g0 < 0)
+            carry["status"] = jnp.where(bad0, COLLISION, RUNNING)
+            carry["t_event"] = jnp.where(bad0, t0, jnp.nan)
+            carry["i_event"] = jnp.where(bad0, jnp.argmin(g0), -1)
+            carry["z_event"] = jnp.where(bad0, z0, jnp.nan)
+
+        def cond(c):
+            conv_done = (c["t"] - c["conv_since"]) >= hold_time
+            go = (c["status"] == RUNNING) & (c["t"] < t_end) & (c["steps"] < max_steps)
+            if stop_on_converged:
+                go = go & ~conv_done
+            return go
+
+        def locate_event(interp, ta, tb):
+            """First time in [ta, tb] at which some entry of g is negative (inf if none),
+            the entry, and the smallest value of each entry seen in the step."""
+            s = ta + (tb - ta) * jnp.linspace(0.0, 1.0, samples + 1)
+            G = jax.vmap(lambda tt: g_of_z(interp.evaluate(tt)))(s)  # (samples+1, m)
+            neg = G < 0
+            any_neg = jnp.any(neg, axis=0)
+            first = jnp.argmax(neg, axis=0)  # first negative sample per entry
+            kmin = jnp.argmin(G, axis=0)
+            g_lo = jnp.min(G, axis=0)
+            spread = jnp.max(G, axis=0) - g_lo
+            idx = jnp.arange(m)
+
+            def gj(j, tt):
+                return g_of_z(interp.evaluate(tt))[j]
+
+            def refine_min(j):
+                # golden-section search for the minimum of entry j around sample kmin[j]
+                k = kmin[j]
+                lo = s[jnp.maximum(k - 1, 0)]
+                hi = s[jnp.minimum(k + 1, samples)]
+
+                def body(_, ab):
+                    a, b = ab
+                    c1 = b - _GOLDEN * (b - a)
+                    c2 = a + _GOLDEN * (b - a)
+                    left = gj(j, c1) < gj(j, c2)
+                    return (jnp.where(left, a, c1), jnp.where(left, c2, b))
+
+                a, b = jax.lax.fori_loop(0, 24, body, (lo, hi))
+                tm = 0.5 * (a + b)
+                return tm, jnp.minimum(gj(j, tm), g_lo[j])
+
+            # A dip below zero between samples is only possible when the margin is
+            # smaller than its variation within the step; refine only then. unvmap_any
+            # keeps this a real branch under vmap (taken if any run of a batch needs it).
+            near = jnp.any(g_lo <= spread)
+            t_min, g_min = jax.lax.cond(
+                eqxi.unvmap_any(near), lambda: jax.vmap(refine_min)(idx),
+                lambda: (s[kmin], g_lo))
+            graze = ~any_neg & (g_min < 0)
+            hit = any_neg | graze
+            # bracket [a, b] with g_j(a) >= 0 > g_j(b)
+            a = jnp.where(any_neg, s[jnp.maximum(first - 1, 0)], s[jnp.maximum(kmin - 1, 0)])
+            b = jnp.where(any_neg, s[first], t_min)
+
+            def bisect(j, a, b):
+                def body(_, ab):
+                    lo, hi = ab
+                    mid = 0.5 * (lo + hi)
+                    up = gj(j, mid) < 0
+                    return (jnp.where(up, lo, mid), jnp.where(up, mid, hi))
+
+                lo, hi = jax.lax.fori_loop(0, 52, body, (a, b))
+                return hi  # first time found outside the limit
+
+            t_cross = jax.lax.cond(
+                eqxi.unvmap_any(jnp.any(hit)), lambda: jax.vmap(bisect)(idx, a, b),
+                lambda: jnp.full((m,), jnp.inf))
+            t_cross = jnp.where(hit, t_cross, jnp.inf)
+            j_hit = jnp.argmin(t_cross)
+            return t_cross[j_hit], j_hit, g_min
+
+        def save_until(c, interp, t_stop):
+            def scond(sc):
+                k, ys = sc
+                return (k < n_save) & (ts_save[jnp.minimum(k, n_save - 1)] <= t_stop)
+
+            def sbody(sc):
+                k, ys = sc
+                zz = interp.evaluate(ts_save[k])
+                return k + 1, ys.at[k].set(zz * scale)
+
+            k, ys = jax.lax.while_loop(scond, sbody, (c["save_idx"], c["ys"]))
+            return k, ys
+
+        def body(c):
+            t, tn = c["t"], c["tnext"]
+            z1, zerr, dense, sstate1, _ = solver.step(
+                term, t, tn, c["z"], p, c["sstate"], c["made_jump"])
+            zerr = jnp.where(jnp.isnan(zerr), jnp.inf, zerr)
+            keep, tprev2, tnext2, made_jump2, cstate2, _ = controller.adapt_step_size(
+                t, tn, c["z"], z1, p, zerr, order, c["cstate"])
+            finite = jnp.all(jnp.isfinite(z1))
+            keep = keep & finite
+            tnext2 = jnp.where(tnext2 > t_end - 100 * eps * jnp.abs(t_end), t_end, tnext2)
+            tnext2 = jnp.where(finite, tnext2, t + 0.25 * (tn - t))
+            tprev2 = jnp.where(keep, tprev2, t)
+            interp = interp_cls(t0=t, t1=tn, **dense)
+
+            if m:
+                t_hit, j_hit, gmin_step = locate_event(interp, t, tn)
+                collide = keep & jnp.isfinite(t_hit)
+                gmin = jnp.where(keep, jnp.minimum(c["gmin"], gmin_step), c["gmin"])
+            else:
+                t_hit, j_hit, collide, gmin = jnp.inf, -1, jnp.asarray(False), c["gmin"]
+
+            t_stop = jnp.where(collide, t_hit, tn)
+            if n_save:
+                k_new, ys_new = save_until(c, interp, t_stop)
+                save_idx = jnp.where(keep, k_new, c["save_idx"])
+                ys = jnp.where(keep, ys_new, c["ys"])
+            else:
+                save_idx, ys = c["save_idx"], c["ys"]
+
+            z_new = jnp.where(keep, z1, c["z"])
+            z_hit = interp.evaluate(jnp.where(collide, t_hit, tn))
+            d = jnp.max(jnp.abs(z_new - zref))
+            conv_since = jnp.where(
+                keep, jnp.where(d <= converge_tol, jnp.minimum(c["conv_since"], tn), jnp.inf),
+                c["conv_since"])
+            status = jnp.where(collide, COLLISION, c["status"])
+            steps = c["steps"] + 1
+            return dict(
+                t=jnp.where(collide, t_hit, tprev2),
+                tnext=tnext2,
+                z=jnp.where(collide, z_hit, z_new),
+                sstate=jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b),
+                                              sstate1, c["sstate"]),
+                cstate=cstate2,
+                made_jump=jnp.where(keep, made_jump2, c["made_jump"]),
+                status=status,
+                t_event=jnp.where(collide, t_hit, c["t_event"]),
+                i_event=jnp.where(collide, j_hit, c["i_event"]),
+                z_event=jnp.where(collide, z_hit, c["z_event"]),
+                conv_since=conv_since,
+                ys=ys, save_idx=save_idx, steps=steps,
+                accepted=c["accepted"] + keep.astype(int),
+                rejected=c["rejected"] + (~keep).astype(int),
+                gmin=gmin,
+            )
+
+        c = jax.lax.while_loop(cond, body, carry)
+        conv_done = (c["t"] - c["conv_since"]) >= hold_time
+        finite = jnp.all(jnp.isfinite(c["z"]))
+        incomplete = (c["status"] == RUNNING) & (c["t"] < t_end) & ~conv_done
+        status = jnp.where(c["status"] == COLLISION, COLLISION,
+                           jnp.where(~finite | incomplete, FAILED,
+                                     jnp.where(conv_done, CONVERGED, RUNNING)))
+        return dict(
+            status=status, t_event=c["t_event"], i_event=c["i_event"],
+            t_final=c["t"], x_final=c["z"] * scale,
+            conv_since=jnp.where(conv_done, c["conv_since"], jnp.inf),
+            ys=c["ys"], gmin=c["gmin"], steps=c["steps"], accepted=c["accepted"],
+            rejected=c["rejected"],
+        )
+
+    return kernel
+
+
+@lru_cache(maxsize=64)
+def _compiled_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
+                     stop_on_converged: bool, batch_x: bool, batch_p: bool):
+    kernel = _make_kernel(rhs, event_fn, solver_name, samples, n_save, stop_on_converged)
+    if batch_x or batch_p:
+        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 10
+        kernel = jax.vmap(kernel, in_axes=axes)
+    return jax.jit(kernel)
+
+
+def _save_times(t_end: float, n_save: int, t_save: Array | None) -> np.ndarray:
+    if t_save is not None:
+        ts = np.asarray(t_save, dtype=float).ravel()
+        if ts.size and (np.any(np.diff(ts) < 0) or ts[0] < 0 or ts[-1] > t_end):
+            raise ValueError("t_save must be increasing and inside [0, t_end]")
+        return ts
+    return np.linspace(0.0, t_end, n_save) if n_save > 0 else np.zeros(0)
+
+
+def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_save,
+         batch_x, batch_p):
+    opts = options or SimulationOptions()
+    if opts.solver not in _SOLVERS:
+        raise ValueError(f"unknown solver '{opts.solver}'; choose from {', '.join(_SOLVERS)}")
+    if not t_end > 0:
+        raise ValueError(f"t_end must be > 0, got {t_end}")
+    ts = _save_times(float(t_end), n_save, t_save)
+    ev = event_fn if event_fn is not None else _no_events
+    fn = _compiled_kernel(system.rhs, ev, opts.solver, int(max(opts.samples, 2)), ts.size,
+                          bool(opts.stop_on_converged), batch_x, batch_p)
+    xr = system.x_guess if x_ref is None else np.asarray(x_ref, float)
+    out = fn(
+        jnp.asarray(x0, jnp.float64), jnp.asarray(p, jnp.float64),
+        jnp.asarray(system.state_scale, jnp.float64), jnp.asarray(xr, jnp.float64),
+        jnp.asarray(float(t_end)), jnp.asarray(ts), jnp.asarray(opts.rtol),
+        jnp.asarray(opts.atol), jnp.asarray(opts.converge_tol), jnp.asarray(opts.hold_time),
+        jnp.asarray(opts.max_steps), jnp.asarray(opts.dt0 or 0.0),
+    )
+    return ts, {k: np.asarray(v) for k, v in out.items()}
+
+
+def simulate(
+    system: System,
+    x0: Array,
+    t_end: float,
+    *,
+    p: Array | None = None,
+    event_fn: EventFn | None = None,
+    x_ref: Array | None = None,
+    options: SimulationOptions | None = None,
+    n_save: int = 1001,
+    t_save: Array | None = None,
+) -> SimulationResult:
+    """Integrate ``system`` from ``x0`` over [0, t_end] (s) with terminal limit events.
+
+    Parameters
+    ----------
+    system : the ODE (its ``rhs`` must be a stable function object so compiled code is
+        reused, e.g. a module-level function).
+    x0 : initial state (units of the system's states).
+    t_end : horizon (s).
+    p : parameter vector (defaults to ``system.p``).
+    event_fn : ``g(x, p) -> array``; a negative entry ends the run as a collision. Use a
+        stable function object (cached) for the same reason as ``rhs``.
+    x_ref : reference state for the convergence test (defaults to ``system.x_guess``).
+    options : :class:`SimulationOptions`.
+    n_save : number of equally spaced saved times in [0, t_end] (ignored if ``t_save``).
+    t_save : explicit increasing saved times (s).
+
+    Returns
+    -------
+    :class:`SimulationResult`.
+    """
+    pp = system.p if p is None else np.asarray(p, float)
+    ts, o = _run(system, x0, pp, t_end, event_fn=event_fn, x_ref=x_ref, options=options,
+                 n_save=n_save, t_save=t_save, batch_x=False, batch_p=False)
+    code = int(o["status"])
+    hit = code == COLLISION
+    warnings: list[str] = []
+    if code == FAILED:
+        if not np.all(np.isfinite(o["x_final"])):
+            warnings.append("the state became non-finite")
+        else:
+            warnings.append(f"stopped after max_steps = {int(o['steps'])} steps at "
+                            f"t = {float(o['t_final']):.6g} s before the horizon")
+    return SimulationResult(
+        t=ts,
+        x=o["ys"],
+        outcome=OUTCOMES[code],
+        event_time=float(o["t_event"]) if hit else None,
+        event_index=int(o["i_event"]) if hit else None,
+        event_state=o["x_final"] if hit else None,
+        final_time=float(o["t_final"]),
+        final_state=o["x_final"],
+        converged_time=float(o["conv_since"]) if np.isfinite(o["conv_since"]) else None,
+        min_event_value=o["gmin"],
+        steps=int(o["steps"]),
+        accepted=int(o["accepted"]),
+        rejected=int(o["rejected"]),
+        warnings=tuple(warnings),
+    )
+
+
+def simulate_batch(
+    system: System,
+    x0: Array,
+    t_end: float,
+    *,
+    p: Array | None = None,
+    event_fn: EventFn | None = None,
+    x_ref: Array | None = None,
+    options: SimulationOptions | None = None,
+    n_save: int = 0,
+    t_save: Array | None = None,
+) -> BatchSimulation:
+    """Many runs in one vmapped call: ``x0`` of shape (batch, dim) and/or ``p`` of shape
+    (batch, n_params) (a 1-D ``x0`` or ``p`` is shared by every run). Same meaning of the
+    arguments as :func:`simulate`; by default no histories are kept (``n_save = 0``).
+
+    Returns a :class:`BatchSimulation`.
+    """
+    x0 = np.asarray(x0, float)
+    pp = system.p if p is None else np.asarray(p, float)
+    batch_x, batch_p = x0.ndim == 2, pp.ndim == 2
+    if not (batch_x or batch_p):
+        raise ValueError("simulate_batch needs x0 (batch, dim) and/or p (batch, n_params)")
+    if batch_x and batch_p and x0.shape[0] != pp.shape[0]:
+        raise ValueError(f"batch sizes differ: x0 {x0.shape[0]}, p {pp.shape[0]}")
+    ts, o = _run(system, x0, pp, t_end, event_fn=event_fn, x_ref=x_ref, options=options,
+                 n_save=n_save, t_save=t_save, batch_x=batch_x, batch_p=batch_p)
+    codes = o["status"].astype(int)
+    return BatchSimulation(
+        outcome=np.array([OUTCOMES[c] for c in codes]),
+        outcome_code=codes,
+        event_time=np.where(codes == COLLISION, o["t_event"], np.nan),
+        event_index=np.where(codes == COLLISION, o["i_event"], -1),
+        final_time=o["t_final"],
+        final_state=o["x_final"],
+        converged_time=o["conv_since"],
+        min_event_value=o["gmin"],
+        steps=o["steps"],
+        t=ts,
+        x=o["ys"] if ts.size else None,
+    )
