@@ -1,0 +1,358 @@
+"""Maps of stability, h, w0 and chi over two-parameter design grids (SPEC.md section 6.7).
+
+A grid is two swept parameters of a :class:`~maglev_match.params.Params`: model-A
+parameters (omega1, sigma, kP, kD, ke, ...) or engineering quantities (L, EI, mbar, l, k)
+from which omega1 and sigma derive. Every grid point is validated before any work starts.
+
+Work is split into tiles of whole rows (fixed y, x varying). Within a row the cycles are
+*continued along the row*: the row is a path through parameter space
+(:func:`~maglev_match.dynamics.paths.path_system`), its Hopf points are located on that
+path, and from each one the cycle branch is followed across the adjacent stable stretch;
+h at every grid point of the stretch is read off that one branch. Tiles run on a Dask
+cluster (a local one by default, or an existing scheduler), are written to a checkpoint
+folder as they finish, and a resumed map skips the tiles already there. Tile results do not
+depend on which worker ran them, so a resumed map equals a map computed in one go bit for bit.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from maglev_match.params import FIELD_NAMES, ParameterError, Params, make_params
+
+__all__ = ["Axis", "MapSpec", "parse_axis", "compute_row", "run_map", "map_dataset",
+           "MAP_VARIABLES"]
+
+CASE_CODES = {"unstable_equilibrium": 0, "unstable_cycle": 1, "no_cycle_within_limits": 2}
+MAP_VARIABLES = ("chi", "h", "w0", "stable", "max_real_part", "hopf_distance", "case",
+                 "omega1_point", "sigma_point", "current_reverses", "resolved")
+# Largest grid accepted (points); beyond it the result arrays alone would not fit.
+MAX_POINTS = 4_000_000
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One swept parameter: ``count`` values from ``start`` to ``stop`` inclusive."""
+
+    name: str
+    start: float
+    stop: float
+    count: int
+
+    @property
+    def values(self) -> np.ndarray:
+        return np.linspace(self.start, self.stop, self.count)
+
+
+def parse_axis(text: str, option: str) -> Axis:
+    """'NAME=START:STOP:COUNT' -> Axis, with errors that name the option, value and rule."""
+    if "=" not in text:
+        raise ParameterError(option, text, "expected NAME=START:STOP:COUNT, e.g. omega1=40:190:100")
+    name, rng = (s.strip() for s in text.split("=", 1))
+    if name not in FIELD_NAMES or name in ("n_modes",):
+        raise ParameterError(option, text, f"unknown parameter '{name}'; sweepable names are: "
+                             + ", ".join(n for n in FIELD_NAMES if n != "n_modes"))
+    parts = rng.split(":")
+    if len(parts) != 3:
+        raise ParameterError(option, text, "expected NAME=START:STOP:COUNT with three numbers")
+    try:
+        start, stop = float(parts[0]), float(parts[1])
+        count = int(parts[2])
+    except ValueError:
+        raise ParameterError(option, text, "START and STOP must be numbers, COUNT a whole number")\
+            from None
+    if not (math.isfinite(start) and math.isfinite(stop)):
+        raise ParameterError(option, text, "START and STOP must be finite")
+    if count < 2:
+        raise ParameterError(option, text, "COUNT must be at least 2")
+    if not start < stop:
+        raise ParameterError(option, text, "the range is empty or reversed: START must be < STOP")
+    return Axis(name, start, stop, count)
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """What to map: base parameters, the two axes and the numerical settings."""
+
+    base: dict[str, Any]  # Params.as_input_dict() of the base point
+    x: Axis
+    y: Axis
+    rows_per_tile: int = 4
+    ntst: int = 30
+    ncol: int = 4
+    max_steps: int = 300
+
+    def key(self) -> str:
+        """A fingerprint of the spec, stored with checkpoints so a resume can't mix maps."""
+        d = {"base": {k: self.base[k] for k in sorted(self.base)}, "x": self.x.__dict__,
+             "y": self.y.__dict__, "rows_per_tile": self.rows_per_tile, "ntst": self.ntst,
+             "ncol": self.ncol, "max_steps": self.max_steps}
+        return json.dumps(d, sort_keys=True, default=float)
+
+    def point(self, xv: float, yv: float) -> Params:
+        values = dict(self.base)
+        values[self.x.name] = float(xv)
+        values[self.y.name] = float(yv)
+        return make_params(values)
+
+    def validate(self) -> None:
+        """Every grid point must be a valid parameter set; the grid must fit in memory."""
+        n = self.x.count * self.y.count
+        if n > MAX_POINTS:
+            raise ParameterError("grid", f"{self.x.count} x {self.y.count}",
+                                 f"at most {MAX_POINTS} points fit in memory here")
+        if self.x.name == self.y.name:
+            raise ParameterError("--y", self.y.name, "must differ from the --x parameter")
+        for xv in (self.x.start, self.x.stop):
+            for yv in (self.y.start, self.y.stop):
+                self.point(xv, yv)  # raises ParameterError naming the field
+        for yv in self.y.values:
+            for xv in self.x.values:
+                self.point(xv, yv)
+
+    @property
+    def tiles(self) -> list[tuple[int, int]]:
+        r = self.rows_per_tile
+        return [(a, min(a + r, self.y.count)) for a in range(0, self.y.count, r)]
+
+
+def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
+    """All map variables along row ``row`` (y fixed, x varying), continuing cycles along it."""
+    from maglev_match import jax_setup  # noqa: F401  (workers: float64 before anything)
+    from maglev_match.dynamics.cycles import cycle_branch
+    from maglev_match.dynamics.equilibria import eigenvalue_analysis
+    from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.dynamics.paths import PATH_PARAM, path_system
+    from maglev_match.models.limits import orbit_limit_margins
+    from maglev_match.models.unit import param_vector, unit_system
+
+    yv = spec.y.values[row]
+    xs = spec.x.values
+    nx = xs.size
+    pts = [spec.point(xv, yv) for xv in xs]
+    system = unit_system(pts[0])
+    P = np.array([param_vector(p) for p in pts])
+    w0 = np.array([p.w0 for p in pts])
+    h_max = np.array([p.gap_max - p.c0 for p in pts])
+    J = np.asarray(system.derivatives.jacobian_batch(np.zeros((nx, system.dim)), P))
+    max_re = np.array([eigenvalue_analysis(Jk)[0].real.max() for Jk in J])
+    stable = max_re < 0
+    h = np.where(stable, h_max, 0.0)
+    case = np.where(stable, CASE_CODES["no_cycle_within_limits"],
+                    CASE_CODES["unstable_equilibrium"])
+    resolved = np.ones(nx, dtype=bool)
+    reverses = np.zeros(nx, dtype=bool)
+    hopf_t: list[float] = []
+
+    path = path_system(system, P)
+    limits = orbit_limit_margins(pts[0].gap_min - pts[0].c0, pts[0].gap_max - pts[0].c0)
+    scan = locate_hopf_points(path, PATH_PARAM, 0.0, nx - 1.0, n_scan=nx)
+    for hp in scan.points:
+        if not hp.converged:
+            continue
+        hopf_t.append(hp.value)
+        # the stable stretch next to this Hopf point
+        j_lo, j_hi = math.floor(hp.value), math.ceil(hp.value)
+        side = j_hi if j_hi < nx and stable[j_hi] else (j_lo if stable[j_lo] else None)
+        if side is None:
+            continue
+        step = 1 if side == j_hi else -1
+        end = side
+        while 0 <= end + step < nx and stable[end + step]:
+            end += step
+        stretch = np.arange(min(side, end), max(side, end) + 1)
+        br = cycle_branch(path, hp, PATH_PARAM, stop_at=float(end), ntst=spec.ntst,
+                          ncol=spec.ncol, max_steps=spec.max_steps, limits=limits,
+                          param_bounds=(0.0, nx - 1.0), lam_scale=1.0)
+        t = br.values
+        if t.size == 0:
+            resolved[stretch] = False
+            continue
+        gmax = br.observable_max("gap_deviation")
+        imin = br.observable_min("current")
+        unstable = br.n_unstable >= 1
+        reached = -np.inf if step > 0 else np.inf
+        for k in range(t.size - 1):
+            lo, hi = sorted((t[k], t[k + 1]))
+            for j in stretch:
+                if lo <= j <= hi and unstable[k] and unstable[k + 1] and hi > lo:
+                    s = (j - t[k]) / (t[k + 1] - t[k])
+                    g = gmax[k] + s * (gmax[k + 1] - gmax[k])
+                    if g < h[j] or case[j] != CASE_CODES["unstable_cycle"]:
+                        h[j] = g
+                        case[j] = CASE_CODES["unstable_cycle"]
+                        reverses[j] = (imin[k] + s * (imin[k + 1] - imin[k])) < 0
+        reached = t.max() if step > 0 else t.min()
+        heading_in = (t[min(3, t.size - 1)] - hp.value) * step > 0
+        if br.stopped_reason in ("newton failed", "step too small", "max_steps") and heading_in:
+            # the branch was entering the stretch but stopped: what lies beyond is unknown
+            beyond = stretch[(stretch - reached) * step > 0]
+            beyond = beyond[case[beyond] != CASE_CODES["unstable_cycle"]]
+            resolved[beyond] = False
+    hopf_t_arr = np.array(hopf_t)
+    if hopf_t_arr.size:
+        # distance to the nearest Hopf point along the row, in units of the x parameter
+        dx = (xs[-1] - xs[0]) / (nx - 1)
+        dist = np.min(np.abs(np.arange(nx)[:, None] - hopf_t_arr[None, :]), axis=1) * dx
+    else:
+        dist = np.full(nx, np.inf)
+    h = np.where(resolved, h, np.nan)
+    chi = h / w0
+    return {
+        "chi": chi, "h": h, "w0": w0, "stable": stable, "max_real_part": max_re,
+        "hopf_distance": dist, "case": case.astype(np.int8),
+        "omega1_point": P[:, system.param_index("omega1")],
+        "sigma_point": P[:, system.param_index("sigma")],
+        "current_reverses": reverses, "resolved": resolved,
+    }
+
+
+def compute_tile(spec: MapSpec, rows: tuple[int, int]) -> dict[str, np.ndarray]:
+    """Rows [a, b) of the map stacked: arrays of shape (b - a, nx)."""
+    out = [compute_row(spec, r) for r in range(*rows)]
+    return {k: np.stack([o[k] for o in out]) for k in out[0]}
+
+
+def _tile_path(folder: Path, rows: tuple[int, int]) -> Path:
+    return folder / f"tile_{rows[0]:05d}_{rows[1]:05d}.npz"
+
+
+def _save_tile(folder: Path, rows: tuple[int, int], data: dict[str, np.ndarray]) -> None:
+    target = _tile_path(folder, rows)
+    tmp = target.with_suffix(".tmp.npz")
+    np.savez(tmp, **data)
+    os.replace(tmp, target)  # atomic: a tile file is either complete or absent
+
+
+def run_map(
+    spec: MapSpec,
+    checkpoint: Path,
+    *,
+    resume: bool = False,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    max_tiles: int | None = None,
+) -> dict[str, np.ndarray]:
+    """Compute the map tile by tile on Dask, checkpointing every finished tile.
+
+    Parameters
+    ----------
+    checkpoint : folder for the tiles (created); with ``resume`` its tiles are reused.
+    scheduler : address of an existing Dask scheduler (tcp://host:port); default a local
+        cluster with ``workers`` processes (default: all cores), or no cluster at all when
+        ``workers == 0`` (compute in this process).
+    max_tiles : compute at most this many new tiles, then stop (for tests of resuming).
+    Returns the assembled arrays, shape (ny, nx); raises RuntimeError when tiles are missing.
+    """
+    spec.validate()
+    checkpoint = Path(checkpoint)
+    checkpoint.mkdir(parents=True, exist_ok=True)
+    keyfile = checkpoint / "spec.json"
+    if keyfile.exists():
+        if keyfile.read_text() != spec.key():
+            if not resume:
+                for f in checkpoint.glob("tile_*.npz"):
+                    f.unlink()
+            else:
+                raise ParameterError("--resume", str(checkpoint),
+                                     "the checkpoint belongs to a different map; remove it or "
+                                     "drop --resume")
+        elif not resume:
+            for f in checkpoint.glob("tile_*.npz"):
+                f.unlink()
+    keyfile.write_text(spec.key())
+    todo = [t for t in spec.tiles if not _tile_path(checkpoint, t).exists()]
+    if max_tiles is not None:
+        todo = todo[:max_tiles]
+    done = len(spec.tiles) - len([t for t in spec.tiles if not _tile_path(checkpoint, t).exists()])
+    total = len(spec.tiles)
+    if progress:
+        progress(done, total)
+    if todo:
+        if workers == 0 and scheduler is None:
+            for t in todo:
+                _save_tile(checkpoint, t, compute_tile(spec, t))
+                done += 1
+                if progress:
+                    progress(done, total)
+        else:
+            _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, total)
+    return assemble(spec, checkpoint)
+
+
+def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, total) -> None:
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler is None:
+        n = workers or os.cpu_count() or 1
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        futures = {client.submit(compute_tile, spec, t, pure=False, retries=2): t for t in todo}
+        for fut in as_completed(futures):
+            t = futures[fut]
+            _save_tile(checkpoint, t, fut.result())
+            done += 1
+            if progress:
+                progress(done, total)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def assemble(spec: MapSpec, checkpoint: Path) -> dict[str, np.ndarray]:
+    """Stack the checkpointed tiles into (ny, nx) arrays."""
+    missing = [t for t in spec.tiles if not _tile_path(checkpoint, t).exists()]
+    if missing:
+        raise RuntimeError(f"{len(missing)} of {len(spec.tiles)} tiles not computed yet "
+                           f"(checkpoint {checkpoint}); run again with --resume")
+    parts = []
+    for t in spec.tiles:
+        with np.load(_tile_path(checkpoint, t)) as z:
+            parts.append({k: z[k] for k in z.files})
+    return {k: np.concatenate([p[k] for p in parts], axis=0) for k in parts[0]}
+
+
+def map_dataset(spec: MapSpec, data: dict[str, np.ndarray]):
+    """The map as an xarray Dataset over coordinates named after the swept parameters."""
+    import xarray as xr
+
+    from maglev_match.params import PARAMETER_DOCS
+
+    dims = (spec.y.name, spec.x.name)
+    units = {"chi": "1", "h": "m", "w0": "m", "stable": "bool", "max_real_part": "1/s",
+             "hopf_distance": PARAMETER_DOCS.get(spec.x.name, ("",))[0], "case": "code",
+             "omega1_point": "rad/s", "sigma_point": "1/kg", "current_reverses": "bool",
+             "resolved": "bool"}
+    ds = xr.Dataset(
+        {k: (dims, data[k], {"units": units.get(k, "")}) for k in MAP_VARIABLES},
+        coords={
+            spec.x.name: (spec.x.name, spec.x.values,
+                          {"units": PARAMETER_DOCS.get(spec.x.name, ("",))[0]}),
+            spec.y.name: (spec.y.name, spec.y.values,
+                          {"units": PARAMETER_DOCS.get(spec.y.name, ("",))[0]}),
+        },
+        attrs={
+            "title": "maglev-match design map",
+            "case_codes": json.dumps(CASE_CODES),
+            "spec": spec.key(),
+        },
+    )
+    ds["stable"] = ds["stable"].astype(np.int8)
+    ds["current_reverses"] = ds["current_reverses"].astype(np.int8)
+    ds["resolved"] = ds["resolved"].astype(np.int8)
+    return ds
