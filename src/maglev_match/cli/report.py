@@ -1,0 +1,123 @@
+"""`maglev-match report` (self-contained HTML study report) and `maglev-match reproduce`
+(the paper's figures and claims table recomputed with the printed defaults)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from maglev_match.cli import app
+from maglev_match.cli.common import (
+    DEFAULT_PRESET_NAME,
+    ConfigOpt,
+    JsonOpt,
+    PresetOpt,
+    SetOpt,
+    UserError,
+    console,
+    console_err,
+    emit_json,
+    params_from_options,
+)
+
+QuickOpt = Annotated[
+    bool, typer.Option("--quick", help="Coarse, fast settings (previews and tests).")
+]
+
+
+def _progress(t0: float):
+    def show(title: str) -> None:
+        console_err.print(f"[dim]{time.perf_counter() - t0:6.1f} s[/]  {title} ...")
+
+    return show
+
+
+@app.command("report")
+def report_command(
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    out: Annotated[Path, typer.Option("--out", help="The HTML file to write.")] = Path(
+        "report.html"),
+    quick: QuickOpt = False,
+    model_b: Annotated[bool, typer.Option(
+        "--vehicle/--no-vehicle", help="Also analyse model B (full vehicle).")] = True,
+    t_end: Annotated[float, typer.Option("--t-end", help="Simulation horizon (s).")] = 3.0,
+    json_out: JsonOpt = False,
+) -> None:
+    """Self-contained HTML study report of one vehicle-beam pair (figures embedded; the
+    PNG/SVG files are written to <out stem>_figures/ beside it)."""
+    from maglev_match.report import ReportSettings, study_report
+
+    if out.suffix.lower() not in (".html", ".htm"):
+        raise UserError(f"--out {out}: the report is an HTML file; give a name ending in .html")
+    if not t_end > 0:
+        raise UserError(f"--t-end {t_end:g}: must be > 0")
+    params = params_from_options(preset, config, set_)
+    base = ReportSettings.quick_settings() if quick else ReportSettings()
+    settings = ReportSettings(**{**base.as_dict(), "include_vehicle": model_b, "t_end": t_end})
+    label = preset + (f" + {config}" if config else "") + (
+        " + " + ", ".join(set_) if set_ else "")
+    t0 = time.perf_counter()
+    res = study_report(params, out, settings, label=label, progress=_progress(t0))
+    summary = {
+        "report": str(res.path),
+        "figures": [str(f) for f in res.figures],
+        "seconds": res.seconds,
+        "sections": {s.key: {"available": s.available, "reason": s.reason,
+                             "seconds": s.seconds} for s in res.sections},
+    }
+    if json_out:
+        emit_json(summary)
+        return
+    console.print(f"wrote {res.path} ({len(res.figures)} figure files) in {res.seconds:.1f} s")
+    for key, reason in res.unavailable:
+        console_err.print(f"[yellow]section '{key}' not available:[/] {reason}")
+
+
+@app.command("reproduce")
+def reproduce_command(
+    out: Annotated[Path, typer.Option("--out", help="Output folder.")] = Path("reproduce"),
+    quick: QuickOpt = False,
+    only: Annotated[list[str] | None, typer.Option(
+        "--only", help="Figure sections to include (repeatable): fig4, fig5, fig6-8, "
+        "fig11-13, fig12, variants. Default: all.")] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Recompute the paper's figures (Figs. 4-8, 11-13) and its claims with the printed
+    defaults; writes reproduce.html, claims.csv, claims.json and figures/ into --out."""
+    from maglev_match.report import ReportSettings
+    from maglev_match.reproduce import SECTIONS, reproduce
+
+    keys = [k for k, _, _ in SECTIONS]
+    for k in only or []:
+        if k not in keys:
+            raise UserError(f"--only {k}: no such section; choose from {', '.join(keys)}")
+    if out.suffix:
+        raise UserError(f"--out {out}: give a folder (reproduce writes several files)")
+    settings = ReportSettings.quick_settings() if quick else ReportSettings()
+    t0 = time.perf_counter()
+    report, claims = reproduce(out, settings, only=only or None, progress=_progress(t0))
+    if json_out:
+        from dataclasses import asdict
+
+        emit_json({"report": str(report.path), "seconds": report.seconds,
+                   "claims": [asdict(c) for c in claims],
+                   "figures": [str(f) for f in report.figures],
+                   "unavailable": dict(report.unavailable)})
+        return
+    from rich.table import Table
+
+    table = Table("claim", "paper", "ours", "verdict", "difference", show_lines=False)
+    colour = {"agree": "green", "close": "yellow", "differ": "red"}
+    for c in claims:
+        table.add_row(c.claim, c.paper, c.ours,
+                      f"[{colour.get(c.verdict, 'magenta')}]{c.verdict}[/]", c.difference)
+    console.print(table)
+    console.print(f"wrote {report.path}, {out / 'claims.csv'} and {len(report.figures)} "
+                  f"figure files in {report.seconds:.1f} s")
+    for key, reason in report.unavailable:
+        console_err.print(f"[yellow]section '{key}' not available:[/] {reason}")
