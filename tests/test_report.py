@@ -260,3 +260,26 @@ def test_report_renders_in_headless_chromium(reproduce_report, tmp_path):
         assert len(row) == 7
         assert all(cell for cell in row[:6]), row  # claim, paper, ours, verdict, difference
         assert row[4] in ("agree", "close", "differ", "not computed")
+
+
+@pytest.mark.parametrize("param", ["kD", "ke", "omega0"])
+def test_variant_presets_reconcile_the_papers_stability_statements(param):
+    """Each shipped paper-variant preset changes one value of turnout-soft, and with it
+    the paper's qualitative statements hold for model A: alpha1 = [100, 4e-4] stable,
+    alpha2 = [105, 5e-4] unstable, alpha3 = [85, 3.7e-4] stable, the stiff turnout beam
+    unstable and the soft one stable."""
+    from maglev_match.dynamics.equilibria import stability
+    from maglev_match.models import build_system
+
+    variant, soft = load_preset(f"paper-variant-{param}"), load_preset("turnout-soft")
+    changed = {k for k, v in variant.as_dict().items() if v != soft.as_dict()[k]}
+    assert changed == {param}
+
+    def stable(p):
+        return stability(build_system(p, "unit")).stable
+
+    assert stable(variant.replace(omega1=100.0, sigma=4e-4))
+    assert not stable(variant.replace(omega1=105.0, sigma=5e-4))
+    assert stable(variant.replace(omega1=85.0, sigma=3.7e-4))
+    assert not stable(variant.replace(EI=2.26e10))
+    assert stable(variant)
