@@ -180,65 +180,55 @@ def _real_form(rhs, order: int):
     return form
 
 
-def _complex_form(real_form, order: int):
-    """Extend a real k-linear form to complex directions (expanding real/imag parts)."""
-
-    def form(x, p, *us):
-        parts = [(jnp.real(u), jnp.imag(u)) for u in us]
-        total = 0.0 + 0.0j
-        for mask in range(2**order):
-            args = [parts[j][(mask >> j) & 1] for j in range(order)]
-            n_imag = bin(mask).count("1")
-            total = total + (1j**n_imag) * real_form(x, p, *args)
-        return total
-
-    return form
-
-
 @cache
 def _real_forms(rhs) -> dict[int, Callable]:
-    """Jitted real multilinear forms of orders 2..5 for ``rhs`` (one trace each; the
-    complex expansion is done outside, which keeps the compile time of order 5 small)."""
-    return {k: jax.jit(_real_form(rhs, k)) for k in (2, 3, 4, 5)}
+    """Jitted real multilinear forms of orders 2..5 for ``rhs``, vmapped over batches of
+    directions (one trace each; complex directions are expanded outside, which keeps the
+    compile time small even at order 5)."""
+    out = {}
+    for k in (2, 3, 4, 5):
+        axes = (None, None) + (0,) * k
+        out[k] = jax.jit(jax.vmap(_real_form(rhs, k), in_axes=axes))
+    return out
 
 
 def _complex_form_eval(real_form, x, p, us) -> np.ndarray:
-    """Evaluate a real k-linear form at complex directions by expanding real/imag parts."""
+    """A real k-linear form at complex directions: all 2^k real/imag combinations in one
+    batched call."""
     parts = [(np.real(u), np.imag(u)) for u in us]
     order = len(us)
-    total = 0.0 + 0.0j
-    for mask in range(2**order):
-        args = [parts[j][(mask >> j) & 1] for j in range(order)]
-        if not all(a.any() for a in args):
-            continue
-        n_imag = bin(mask).count("1")
-        val = np.asarray(real_form(x, p, *[jnp.asarray(a) for a in args]))
-        total = total + (1j**n_imag) * val
-    return np.asarray(total) * np.ones(1)
+    masks = [m for m in range(2**order)
+             if all(parts[j][(m >> j) & 1].any() for j in range(order))]
+    if not masks:
+        return np.zeros(np.shape(us[0]), complex)
+    args = [jnp.asarray(np.stack([parts[j][(m >> j) & 1] for m in masks]))
+            for j in range(order)]
+    vals = np.asarray(real_form(x, p, *args))
+    coef = np.array([1j ** bin(m).count("1") for m in masks])
+    return coef @ vals
 
 
-def _l1_kernel_fn(rhs):
-    B = _complex_form(_real_form(rhs, 2), 2)
-    C = _complex_form(_real_form(rhs, 3), 3)
-    jac = jax.jacfwd(rhs, argnums=0)
-
-    def l1(x, p, omega, q, padj):
-        J = jac(x, p).astype(jnp.complex128)
-        n = J.shape[0]
-        eye = jnp.eye(n, dtype=jnp.complex128)
-        qb = jnp.conj(q)
-        h11 = -jnp.linalg.solve(J, B(x, p, q, qb))
-        h20 = jnp.linalg.solve(2j * omega * eye - J, B(x, p, q, q))
-        g21 = jnp.vdot(padj, C(x, p, q, q, qb) + 2.0 * B(x, p, q, h11) + B(x, p, qb, h20))
-        return jnp.real(g21) / (2.0 * omega)
-
-    return l1
-
-
-@cache
-def _l1_kernels(rhs):
-    fn = _l1_kernel_fn(rhs)
-    return jax.jit(fn), jax.jit(jax.vmap(fn))
+def _l1_from_forms(rhs, x, p, J, omega, q, padj) -> float:
+    """Kuznetsov's l1 (paper eq. 24) from batched real forms B and C (4 calls)."""
+    F = _real_forms(rhs)
+    xj, pj = jnp.asarray(x, jnp.float64), jnp.asarray(p, jnp.float64)
+    a, b = np.real(q), np.imag(q)
+    Baa, Bbb, Bab = np.asarray(F[2](xj, pj, jnp.asarray(np.stack([a, b, a])),
+                                    jnp.asarray(np.stack([a, b, b]))))
+    Caaa, Cabb, Caab, Cbbb = np.asarray(F[3](
+        xj, pj, jnp.asarray(np.stack([a, a, a, b])), jnp.asarray(np.stack([a, b, a, b])),
+        jnp.asarray(np.stack([a, b, b, b]))))
+    n = len(a)
+    h11 = -np.linalg.solve(J, Baa + Bbb)  # real
+    h20 = np.linalg.solve(2j * omega * np.eye(n) - J, Baa - Bbb + 2j * Bab)
+    hr, hi = h20.real, h20.imag
+    Bs = np.asarray(F[2](xj, pj, jnp.asarray(np.stack([a, b, a, b, a, b])),
+                         jnp.asarray(np.stack([h11, h11, hr, hi, hi, hr]))))
+    Bq_h11 = Bs[0] + 1j * Bs[1]
+    Bqb_h20 = Bs[2] + Bs[3] + 1j * (Bs[4] - Bs[5])
+    Cqqqb = Caaa + Cabb + 1j * (Caab + Cbbb)
+    g21 = np.vdot(padj, Cqqqb + 2.0 * Bq_h11 + Bqb_h20)
+    return float(g21.real / (2.0 * omega))
 
 
 @cache
@@ -339,15 +329,7 @@ def first_lyapunov_coefficient(
         q = np.asarray(q, complex) / np.linalg.norm(q)
         p_adj = np.asarray(p_adj, complex)
         p_adj = p_adj / np.conj(np.vdot(p_adj, q))
-    single, _ = _l1_kernels(system.rhs)
-    return float(single(jnp.asarray(x, jnp.float64), jnp.asarray(pv, jnp.float64),
-                        float(omega), jnp.asarray(q), jnp.asarray(p_adj)))
-
-
-def _l1_batch(system: System, xs, ps, omegas, qs, pads) -> np.ndarray:
-    _, batch = _l1_kernels(system.rhs)
-    return np.asarray(batch(jnp.asarray(xs), jnp.asarray(ps), jnp.asarray(omegas),
-                            jnp.asarray(qs), jnp.asarray(pads)))
+    return _l1_from_forms(system.rhs, np.asarray(x, float), pv, J, float(omega), q, p_adj)
 
 
 def second_lyapunov_coefficient(
@@ -375,8 +357,7 @@ def second_lyapunov_coefficient(
     xj, pj = jnp.asarray(x), jnp.asarray(pv)
 
     def form(k, *us):
-        out = _complex_form_eval(F[k], xj, pj, [np.asarray(u, complex) for u in us])
-        return np.broadcast_to(out, (x.size,)) if out.size == 1 else out
+        return _complex_form_eval(F[k], xj, pj, [np.asarray(u, complex) for u in us])
 
     def B(a, b):
         return form(2, a, b)
@@ -472,6 +453,7 @@ def refine_hopf_point(
     p: np.ndarray | None = None,
     tol: float = 1e-11,
     max_iter: int = 30,
+    value_scale: float | None = None,
 ) -> HopfPoint:
     """Refine an approximate Hopf point by Newton's method on the defining system
     (x, v1, v2, omega, param), then compute eigenvectors, crossing speed and l1.
@@ -480,6 +462,7 @@ def refine_hopf_point(
     ----------
     value, x, omega : initial guesses (parameter value, equilibrium state, frequency rad/s).
     q : guess of the complex eigenvector (computed from J when not given).
+    value_scale : typical size of ``param`` for the convergence test (default |value|).
     """
     base = system.p if p is None else np.asarray(p, float)
     k = system.param_index(param)
@@ -496,7 +479,7 @@ def refine_hopf_point(
     G, DG = _defining_kernels(system.rhs, (k,))
     pj = jnp.asarray(base)
     cj = jnp.asarray(c)
-    scale = _z_scale(system, omega, [abs(value) or 1.0])
+    scale = _z_scale(system, omega, [value_scale or abs(value) or 1.0])
     converged = False
     res = np.inf
     n_iter = 0
@@ -513,9 +496,18 @@ def refine_hopf_point(
             break
         z = z + dz
         step = float(np.max(np.abs(dz) / scale))
+        # converged on a small step, or on a residual at round-off level after a small step
+        # (the step may stall slightly above tol when the unknowns are far from unit scale)
         if step < tol:
             converged = True
             break
+        if step < 1e-6:
+            g_new = np.asarray(G(jnp.asarray(z), pj, cj))
+            if np.max(np.abs(g_new[n:])) < 1e-13 * max(1.0, abs(omega)) and np.max(
+                    np.abs(g_new[:n]) / (np.abs(A[:n, :n]) @ system.state_scale + 1e-300)
+            ) < 1e-13:
+                converged = True
+                break
     g = np.asarray(G(jnp.asarray(z), pj, cj))
     res = float(np.max(np.abs(g[:n]) / (np.abs(np.asarray(system.jacobian(z[:n],
                 system.params_with(base, **{param: float(z[-1])}))))
@@ -608,7 +600,8 @@ def locate_hopf_points(
             x0 = rl.equilibria[j] + t * (rl.equilibria[j + 1] - rl.equilibria[j])
             pk = system.params_with(base, **{param: v0})
             eq = find_equilibrium(system, pk, x0)
-            hp = refine_hopf_point(system, param, v0, eq.x, om0, p=base)
+            hp = refine_hopf_point(system, param, v0, eq.x, om0, p=base,
+                                  value_scale=max(abs(v0), abs(stop - start)))
             lo, hi = sorted((values[j], values[j + 1]))
             span = hi - lo
             if not (lo - span <= hp.value <= hi + span):
@@ -674,7 +667,6 @@ class _HopfCurveSolver:
         self.G, self.DG = _defining_kernels(system.rhs, self.idx)
         self.pj = jnp.asarray(base)
         self.tol = tol
-        self.l1_single, _ = _l1_kernels(system.rhs)
 
     # --- basic pieces ---
     def residual_and_jac(self, u: np.ndarray, c: np.ndarray):
@@ -733,8 +725,7 @@ class _HopfCurveSolver:
         others = others[np.lexsort((-np.abs(others.imag), -others.real))]
         if om > 0:
             q, padj = hopf_eigenvectors(J, om)
-            l1 = float(self.l1_single(jnp.asarray(x), jnp.asarray(pv), om, jnp.asarray(q),
-                                      jnp.asarray(padj)))
+            l1 = _l1_from_forms(self.system.rhs, x, pv, J, om, q, padj)
         else:
             l1 = float("nan")
         imag_tol = 1e-7 * max(1.0, abs(om))

@@ -1,0 +1,267 @@
+"""Hopf points, Hopf curve, Lyapunov coefficients (SPEC.md 6.2-6.3).
+
+Known answers: the Hopf and Bautin normal forms embedded in a larger stable system,
+rotated by a random orthogonal matrix and deformed by a nonlinear change of coordinates;
+on model A, the Hopf curve against an independent eigenvalue scan and l1 by autodiff against
+l1 by finite differences.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.optimize
+
+from maglev_match.dynamics.hopf import (
+    first_lyapunov_coefficient,
+    hopf_curve,
+    hopf_eigenvectors,
+    locate_hopf_points,
+    second_lyapunov_coefficient,
+    stability_grid,
+)
+from maglev_match.dynamics.system import System
+
+OMEGA = 1.7
+GAMMA = 0.8  # Im of the cubic coefficient (frequency shift), must not change l1 or l2
+DELTA = -0.3  # Im of the quintic coefficient
+DIM = 6
+
+
+def _orthogonal(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    q, r = np.linalg.qr(rng.standard_normal((n, n)))
+    return q * np.sign(np.diag(r))
+
+
+def bautin_system(deform: bool = True, seed: int = 3) -> System:
+    """z' = (beta1 + i OMEGA) z + (beta2 + i GAMMA) z|z|^2 + (s + i DELTA) z|z|^4 in
+    (y1, y2) = (Re z, Im z), four stable coordinates driven by the centre coordinates,
+    then deformed by an explicit, invertible change of coordinates w = phi(y) with
+    quadratic and cubic terms, and rotated: x = R w. Parameters (beta1, beta2, s).
+
+    With <q, q> = 1 the expected coefficients are l1 = 2 beta2 / OMEGA and, at beta2 = 0,
+    l2 = 4 s / OMEGA (the centre coordinate is z = sqrt(2) w in the normal-form variable w).
+    """
+    import jax
+
+    R = jnp.asarray(_orthogonal(DIM, seed))
+    A_s = jnp.array([[-1.0, 2.0, 0.0, 0.0], [-2.0, -1.0, 0.5, 0.0],
+                     [0.0, 0.0, -3.0, 1.0], [0.0, 0.0, 0.0, -0.5]])
+    k = 0.4 if deform else 0.0
+
+    def g(y, p):
+        b1, b2, s = p[0], p[1], p[2]
+        y1, y2 = y[0], y[1]
+        r2 = y1**2 + y2**2
+        re = b1 * y1 - OMEGA * y2 + (b2 * y1 - GAMMA * y2) * r2 + (s * y1 - DELTA * y2) * r2**2
+        im = b1 * y2 + OMEGA * y1 + (b2 * y2 + GAMMA * y1) * r2 + (s * y2 + DELTA * y1) * r2**2
+        ys = y[2:]
+        drive = jnp.array([y1**2, y1 * y2, y2**3, y1 * y2**2])
+        return jnp.concatenate([jnp.stack([re, im]), A_s @ ys + drive])
+
+    def hs(y0, y1):
+        return jnp.stack([y0 * y1, y1**2 - y0**3, y0**2 * y1, y0 * y1**2])
+
+    def phi(y):  # w1 depends on y0 only and w_s on (y0, y1) only: explicitly invertible
+        w1 = y[1] + k * (y[0] ** 2 - 0.5 * y[0] ** 3)
+        return jnp.concatenate([y[:1], jnp.stack([w1]), y[2:] + k * hs(y[0], y[1])])
+
+    def phi_inv(w):
+        y1 = w[1] - k * (w[0] ** 2 - 0.5 * w[0] ** 3)
+        return jnp.concatenate([w[:1], jnp.stack([y1]), w[2:] - k * hs(w[0], y1)])
+
+    def rhs(x, p):
+        y = phi_inv(R.T @ x)
+        return R @ jax.jvp(phi, (y,), (g(y, p),))[1]
+
+    return System(rhs=rhs, p=np.array([0.0, 0.0, 0.45]), param_names=("beta1", "beta2", "s"),
+                  state_names=tuple(f"x{j}" for j in range(DIM)), name="bautin")
+
+
+@pytest.fixture(scope="module")
+def bautin_pos():
+    return bautin_system()
+
+
+def test_hopf_point_of_rotated_normal_form_is_exact(bautin_pos):
+    beta2 = -0.3
+    p = bautin_pos.params_with(beta2=beta2)
+    scan = locate_hopf_points(bautin_pos, "beta1", -0.7, 0.9, p, n_scan=23)
+    assert len(scan.points) == 1
+    hp = scan.points[0]
+    assert hp.converged
+    assert abs(hp.value) < 1e-10
+    assert hp.frequency == pytest.approx(OMEGA, rel=1e-10)
+    assert hp.l1 == pytest.approx(2 * beta2 / OMEGA, rel=1e-8)
+    assert hp.crossing_speed == pytest.approx(1.0, rel=1e-8)
+    assert hp.others_stable
+    assert hp.kind == "supercritical"
+    J = bautin_pos.jacobian(hp.x, hp.p)
+    np.testing.assert_allclose(J @ hp.q, 1j * OMEGA * hp.q, atol=1e-10)
+    np.testing.assert_allclose(J.T @ hp.p_adj, -1j * OMEGA * hp.p_adj, atol=1e-10)
+    assert np.vdot(hp.q, hp.q) == pytest.approx(1.0)
+    assert np.vdot(hp.p_adj, hp.q) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("beta2", [0.25, -0.6])
+def test_first_lyapunov_coefficient_sign_and_value(bautin_pos, beta2):
+    p = bautin_pos.params_with(beta2=beta2)
+    l1 = first_lyapunov_coefficient(bautin_pos, np.zeros(DIM), p, OMEGA)
+    assert l1 == pytest.approx(2 * beta2 / OMEGA, rel=1e-8)
+
+
+@pytest.mark.parametrize("s", [0.45, -0.7])
+def test_second_lyapunov_coefficient_at_bautin_point(bautin_pos, s):
+    p = np.array([0.0, 0.0, s])
+    l1, l2 = second_lyapunov_coefficient(bautin_pos, np.zeros(DIM), p, OMEGA)
+    assert abs(l1) < 1e-12
+    assert l2 == pytest.approx(4 * s / OMEGA, rel=1e-8)
+
+
+def test_hopf_curve_finds_bautin_point(bautin_pos):
+    start = locate_hopf_points(bautin_pos, "beta1", -0.7, 0.9,
+                               bautin_pos.params_with(beta2=-0.5), n_scan=12).points[0]
+    curve = hopf_curve(bautin_pos, ("beta1", "beta2"), start,
+                       {"beta1": (-1.0, 1.0), "beta2": (-1.0, 0.8)}, max_step=0.05)
+    assert curve.converged, curve.message
+    vals = curve.values()
+    assert np.max(np.abs(vals[:, 0])) < 1e-9  # the Hopf curve is beta1 = 0
+    assert vals[:, 1].min() == pytest.approx(-1.0) and vals[:, 1].max() == pytest.approx(0.8)
+    gh = [sp for sp in curve.special_points if sp.type == "GH"]
+    assert len(gh) == 1 and len(curve.special_points) == 1
+    assert abs(gh[0].values[1]) < 1e-10
+    assert gh[0].l2 == pytest.approx(4 * 0.45 / OMEGA, rel=1e-7)
+    l1 = curve.l1()
+    np.testing.assert_allclose(l1, 2 * vals[:, 1] / OMEGA, rtol=1e-7, atol=1e-12)
+
+
+def test_hopf_curve_passes_turning_point():
+    """A circle of Hopf points: mu = a^2 + b^2 - 1 turns in both parameters."""
+
+    def rhs(x, p):
+        a, b = p[0], p[1]
+        mu = 1.0 - a**2 - b**2
+        r2 = x[0] ** 2 + x[1] ** 2
+        return jnp.stack([mu * x[0] - 2.0 * x[1] - x[0] * r2,
+                          2.0 * x[0] + mu * x[1] - x[1] * r2,
+                          -x[2] + x[0] ** 2])
+
+    system = System(rhs=rhs, p=np.array([0.0, 0.0]), param_names=("a", "b"),
+                    state_names=("x", "y", "z"))
+    start = locate_hopf_points(system, "a", 0.1, 1.6, n_scan=8).points[0]
+    assert start.value == pytest.approx(1.0, rel=1e-10)
+    curve = hopf_curve(system, ("a", "b"), start, {"a": (-2, 2), "b": (-2, 2)},
+                       max_step=0.02)
+    assert curve.converged and curve.closed, curve.message
+    vals = curve.values()
+    np.testing.assert_allclose(np.hypot(vals[:, 0], vals[:, 1]), 1.0, rtol=1e-9)
+    assert vals[:, 0].min() < -0.99 and vals[:, 1].min() < -0.99 and vals[:, 1].max() > 0.99
+
+
+# ----- model A ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def unit():
+    from maglev_match.models import build_system
+    from maglev_match.params import load_preset
+
+    return build_system(load_preset("turnout-soft"), "unit")
+
+
+@pytest.fixture(scope="module")
+def unit_scan(unit):
+    return locate_hopf_points(unit, "omega1", 30.0, 400.0, unit.params_with(sigma=4e-4),
+                              n_scan=60)
+
+
+def _max_real_part(system, p):
+    return float(np.max(np.linalg.eigvals(system.jacobian(np.zeros(system.dim), p)).real))
+
+
+def test_model_a_hopf_points_match_eigenvalue_bisection(unit, unit_scan):
+    assert len(unit_scan.points) >= 1
+    for hp in unit_scan.points:
+        assert hp.converged
+        root = scipy.optimize.brentq(
+            lambda w, hp=hp: _max_real_part(unit, unit.params_with(hp.p, omega1=w)),
+            hp.value - 2.0, hp.value + 2.0, xtol=1e-12)
+        assert hp.value == pytest.approx(root, rel=1e-8)
+        d = 1e-4 * hp.value
+        # crossing speed against a central difference of the crossing eigenvalue
+
+        def re_lambda(w, hp=hp):
+            ev = np.linalg.eigvals(unit.jacobian(hp.x, unit.params_with(hp.p, omega1=w)))
+            return ev[np.argmin(np.abs(ev - 1j * hp.frequency))].real
+
+        fd = (re_lambda(hp.value + d) - re_lambda(hp.value - d)) / (2 * d)
+        assert hp.crossing_speed == pytest.approx(fd, rel=1e-5)
+
+
+def test_model_a_hopf_curve_agrees_with_grid_scan(unit, unit_scan):
+    hp = unit_scan.points[0]
+    bounds = {"omega1": (30.0, 400.0), "sigma": (2e-4, 6e-4)}
+    curve = hopf_curve(unit, ("omega1", "sigma"), hp, bounds)
+    assert curve.converged, curve.message
+    vals = curve.values()
+    # every point on the curve: the largest real part vanishes there (independent eig)
+    for w1, sg in vals[:: max(1, len(vals) // 8)]:
+        p = unit.params_with(omega1=w1, sigma=sg)
+        assert abs(_max_real_part(unit, p)) < 1e-8 * w1
+    # and the sign changes of max Re(lambda) on a coarse grid bracket the curve
+    w_grid = np.linspace(30.0, 400.0, 75)
+    s_grid = np.array([2.5e-4, 3.5e-4, 4.5e-4, 5.5e-4])
+    mr, ok = stability_grid(unit, ("omega1", "sigma"), w_grid, s_grid)
+    assert ok.all()
+    for row, sg in zip(mr, s_grid, strict=True):
+        k = np.where(np.diff(np.sign(vals[:, 1] - sg)) != 0)[0]
+        assert len(k) == 1  # this branch crosses each sigma once
+        j = k[0]
+        w_curve = vals[j, 0] + (sg - vals[j, 1]) * (vals[j + 1, 0] - vals[j, 0]) / (
+            vals[j + 1, 1] - vals[j, 1])
+        i = np.searchsorted(w_grid, w_curve)
+        assert np.sign(row[i - 1]) != np.sign(row[i])
+
+
+def _fd_l1(system, x, p, omega, h=1e-2):
+    """l1 with B and C from central finite differences (real polarisation) of f.
+
+    The unit eigenvector is dominated by the current component (A), so h = 1e-2 is a small
+    perturbation; the differences are then accurate to about 1e-7 relative."""
+    J = system.jacobian(x, p)
+    q, pa = hopf_eigenvectors(J, omega)
+
+    def f(y):
+        return system.f(y, p)
+
+    def B_real(u, v):
+        return (f(x + h * u + h * v) - f(x + h * u - h * v) - f(x - h * u + h * v)
+                + f(x - h * u - h * v)) / (4 * h * h)
+
+    def C_real(u, v, w):
+        tot = 0.0
+        for a in (1, -1):
+            for b in (1, -1):
+                for c in (1, -1):
+                    tot = tot + a * b * c * f(x + h * (a * u + b * v + c * w))
+        return tot / (8 * h**3)
+
+    def cplx(form, *us):
+        parts = [(np.real(u), np.imag(u)) for u in us]
+        out = 0j
+        for mask in range(2 ** len(us)):
+            args = [parts[j][(mask >> j) & 1] for j in range(len(us))]
+            out = out + 1j ** bin(mask).count("1") * form(*args)
+        return out
+
+    qb = np.conj(q)
+    h11 = -np.linalg.solve(J, cplx(B_real, q, qb))
+    h20 = np.linalg.solve(2j * omega * np.eye(len(x)) - J, cplx(B_real, q, q))
+    g = np.vdot(pa, cplx(C_real, q, q, qb) + 2 * cplx(B_real, q, h11) + cplx(B_real, qb, h20))
+    return g.real / (2 * omega)
+
+
+def test_model_a_l1_autodiff_matches_finite_differences(unit, unit_scan):
+    for hp in unit_scan.points:
+        l1_fd = _fd_l1(unit, hp.x, hp.p, hp.frequency)
+        assert hp.l1 == pytest.approx(l1_fd, rel=1e-5)
