@@ -671,10 +671,9 @@ def _fig12(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
     p = st.preset("turnout-soft")
     system = build_system(p, "unit")
     gap = np.asarray(system.observe("gap_deviation", orbit.states, orbit.p))
-    rate = np.array([float(np.dot(np.array([1, 0, 0, 0, -1, 0, 0, 0, 0.0]),
-                                  system.f(x, orbit.p))) for x in orbit.states])
-    t = np.asarray(orbit.times) * mi.cycle.period if np.max(orbit.times) <= 1.0 + 1e-9 \
-        else np.asarray(orbit.times)
+    # d(c - c0)/dt = x2 - x6 (model A: gap deviation x1 - x5)
+    rate = np.asarray(orbit.states)[:, 1] - np.asarray(orbit.states)[:, 5]
+    t = np.asarray(orbit.times)  # s
     fig, (ax1, ax2) = new_figure(1, 2, figsize=(11, 4.2))
     ax1.plot(t, gap * 1e3)
     ax1.axhline(mi.h * 1e3, color="C3", ls="--", label=f"h = {mi.h * 1e3:.3g} mm")
@@ -698,8 +697,13 @@ def _variants(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
     rows = []
     for v in results:
         checks = ", ".join(f"{k}: {'yes' if ok else 'no'}" for k, ok in v.checks.items())
-        rows.append((v.param, v.default, v.value, None if v.window is None else
-                     f"{v.window[0]:.5g} .. {v.window[1]:.5g}", v.a1, checks or v.message))
+        if v.window is None:
+            window = None
+        elif v.window[1] - v.window[0] <= 1e-6 * abs(v.window[1]):
+            window = "none: this boundary does not move with omega1 (not the Hopf point A1)"
+        else:
+            window = f"{v.window[0]:.5g} .. {v.window[1]:.5g}"
+        rows.append((v.param, v.default, v.value, window, v.a1, checks or v.message))
     table = table_html(["parameter", "printed value", f"value for A1 = {VARIANT_TARGET}",
                         "values with A1 in (100, 105)", "A1 with it (rad/s)",
                         "paper statements that then hold (model A)"], rows, "variants")
@@ -724,8 +728,7 @@ def _variants(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
                              for v in full)
                  + ". They are offered as the presets <code>paper-variant-&lt;parameter&gt;"
                  "</code> (shipped with the package and written to this folder); they are "
-                 "variants, not the paper's printed values. Their runs from the paper's initial "
-                 "values:</p>")
+                 "variants, not the paper's printed values.</p>")
         t_end = 3.0 if st.settings.quick else 5.0
         for v in full:
             shipped = _shipped_variant_value(v.param)
@@ -741,10 +744,12 @@ def _variants(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
                         name, f"{x5 * 1e3:g} mm", outcome_text(sim)))
     else:
         text += "<p>No single parameter change reconciles all of the stability statements.</p>"
-    sim_table = table_html(["variant", "point", "x5(0)", "outcome"], sim_rows) if sim_rows else ""
-    text += note_html("A moved A1 also changes h, chi and the collision times; the claims "
-                      "table above is computed with the printed defaults only.")
-    return text + table + sim_table, written, [asdict(v) for v in results]
+    sim_table = ("<p>The reconciling variants' runs of model A (limits on) from the paper's "
+                 "initial values:</p>" + table_html(["variant", "point", "x5(0)", "outcome"],
+                                                    sim_rows)) if sim_rows else ""
+    note = note_html("A moved A1 also changes h, chi and the collision times; the claims "
+                     "table above is computed with the printed defaults only.")
+    return text + table + sim_table + note, written, [asdict(v) for v in results]
 
 
 def _shipped_variant_value(param: str) -> float | None:
