@@ -1,0 +1,224 @@
+"""Periodic orbits: collocation, continuation from Hopf points, Floquet multipliers, folds
+of cycles, limit contacts; model A cross-checked against shooting and long simulation."""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.integrate
+
+from maglev_match.dynamics.cycles import (
+    _adapt_mesh,
+    correct_cycle,
+    cycle_branch,
+    floquet_multipliers,
+    hopf_start,
+)
+from maglev_match.dynamics.system import System
+
+OMEGA = 2.0
+LINEAR_PART = np.array([[-1.0, 0.0, 0.0], [0.0, -2.0, 1.0], [0.0, -1.0, -3.0]])
+_Q, _ = np.linalg.qr(np.random.default_rng(7).normal(size=(5, 5)))
+_QJ = jnp.asarray(_Q)
+
+
+def _embedded(radial):
+    """Planar system r' = r g(mu, r^2), theta' = omega, plus a stable linear 3-block,
+    rotated by a fixed orthogonal matrix (so no coordinate is special)."""
+
+    def rhs(x, p):
+        mu, om, l1 = p[0], p[1], p[2]
+        z = _QJ.T @ x
+        a, b = z[0], z[1]
+        g = radial(mu, l1, a * a + b * b)
+        w = jnp.asarray(LINEAR_PART) @ z[2:]
+        dz = jnp.concatenate([jnp.stack([g * a - om * b, om * a + g * b]), w])
+        return _QJ @ dz
+
+    return System(
+        rhs=rhs, p=np.array([0.0, OMEGA, -1.0]), param_names=("mu", "omega", "l1"),
+        state_names=tuple(f"x{i}" for i in range(5)),
+        observables={
+            "radius": lambda x, p: jnp.sqrt(jnp.sum((_QJ.T @ x)[:2] ** 2)),
+            "x0": lambda x, p: x[0],
+        },
+    )
+
+
+HOPF_NF = _embedded(lambda mu, l1, r2: mu + l1 * r2)
+FOLD_NF = _embedded(lambda mu, l1, r2: mu + 2.0 * r2 - r2 * r2)
+Q_CRIT = _Q @ np.array([1.0, -1.0j, 0, 0, 0]) / math.sqrt(2.0)
+
+
+def _start(system, l1):
+    p = system.params_with(mu=0.0, l1=l1)
+    return hopf_start(system, np.zeros(5), p, "mu", OMEGA, Q_CRIT, l1)
+
+
+@pytest.mark.parametrize("l1", [-1.0, 1.0])
+def test_hopf_normal_form_amplitude_period_multipliers(l1):
+    stop = -0.5 * l1  # the side where cycles exist: mu / l1 < 0
+    br = cycle_branch(HOPF_NF, _start(HOPF_NF, l1), "mu", stop_at=stop, ntst=20, ncol=4,
+                      max_steps=200)
+    assert br.stopped_reason == "reached stop_at"
+    assert br.points[-1].kind == "stop_at"
+    assert br.points[-1].value == pytest.approx(stop, abs=1e-12)
+    lin = np.linalg.eigvals(LINEAR_PART)
+    for c in br.points:
+        radius = math.sqrt(-c.value / l1)
+        assert c.max("radius") == pytest.approx(radius, rel=1e-6)
+        assert c.min("radius") == pytest.approx(radius, rel=1e-6)
+        assert c.period == pytest.approx(2 * math.pi / OMEGA, rel=1e-6)
+        expected = np.concatenate([[math.exp(-2 * c.value * c.period)],
+                                   np.exp(lin * c.period)])
+        got = np.array(c.multipliers)
+        for mu in expected:  # each expected multiplier is matched by one computed
+            assert np.min(np.abs(got - mu)) < 1e-7 * max(1.0, abs(mu))
+        assert abs(c.trivial_multiplier - 1.0) < 1e-8
+        if abs(c.value) > 1e-3:
+            assert c.stable == (l1 < 0)
+            assert c.n_unstable == (0 if l1 < 0 else 1)
+    assert len(br.points) > 5
+
+
+def test_fold_of_cycles_located():
+    # r' = r (mu + 2 r^2 - r^4): unstable cycles from mu = 0 fold at mu = -1, r = 1
+    def limits(system, orbit):  # stop on the outer branch at radius 1.3
+        r = np.sqrt(np.sum((orbit.states @ _Q)[:, :2] ** 2, axis=1))
+        return {"radius 1.3": 1.3 - float(np.max(r))}
+
+    br = cycle_branch(FOLD_NF, _start(FOLD_NF, 2.0), "mu", ntst=20, ncol=4,
+                      max_steps=300, ds_max=0.5, limits=limits)
+    lpc = [s for s in br.special_points if s.type == "LPC"]
+    assert len(lpc) == 1
+    assert lpc[0].value == pytest.approx(-1.0, abs=1e-7)
+    assert lpc[0].extrema["radius"][0] == pytest.approx(1.0, abs=1e-4)
+    assert lpc[0].located == "solved"
+    # before the fold one unstable multiplier, after it none (the outer, stable cycle)
+    before = [c for c in br.points if c.max("radius") < 0.9]
+    after = [c for c in br.points if c.max("radius") > 1.1]
+    assert before and after
+    assert all(c.n_unstable == 1 for c in before)
+    assert all(c.stable for c in after)
+    # the outer cycle reaches radius 1.3 where mu = r^4 - 2 r^2
+    assert br.stopped_reason == "limit"
+    assert br.points[-1].value == pytest.approx(1.3**4 - 2 * 1.3**2, rel=1e-7)
+
+
+def test_branch_stops_at_first_limit_contact():
+    def limits(system, orbit):
+        r = np.sqrt(np.sum((orbit.states @ _Q)[:, :2] ** 2, axis=1))
+        return {"radius 0.5": 0.5 - float(np.max(r))}
+
+    br = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", ntst=20, ncol=4,
+                      max_steps=200, limits=limits)
+    assert br.stopped_reason == "limit"
+    lim = [s for s in br.special_points if s.type == "LIMIT"]
+    assert len(lim) == 1 and lim[0].detail == "radius 0.5"
+    assert lim[0].value == pytest.approx(0.25, rel=1e-7)
+    assert br.points[-1].kind == "limit"
+    assert all(c.value <= 0.25 + 1e-9 for c in br.points)  # never stepped past it
+
+
+def test_failed_branch_keeps_its_points():
+    br = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", ntst=10, ncol=3, max_steps=4)
+    assert br.stopped_reason == "max_steps"
+    assert len(br.points) == 4 and all(br.converged)
+
+
+def test_mesh_adaptation_concentrates_points_at_a_sharp_pulse():
+    m, ntst = 4, 40
+    mesh = np.linspace(0, 1, ntst + 1)
+    t = np.linspace(0, 1, ntst * m + 1)
+    U = np.exp(-(((t - 0.5) / 0.03) ** 2))[:, None]
+    new = _adapt_mesh(mesh, m, U, np.ones(1))
+    h = np.diff(new)
+    assert new[0] == 0 and new[-1] == 1 and np.all(h > 0)
+    centre = h[np.searchsorted(new, 0.5) - 1]
+    assert centre < 0.5 * np.max(h)
+
+
+def test_correct_cycle_and_floquet_recomputation():
+    br = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", stop_at=0.3, ntst=16, ncol=5,
+                      max_steps=100)
+    orbit = br.points[-1].orbit
+    res = correct_cycle(HOPF_NF, orbit, "mu", 0.32)
+    assert res.converged
+    assert res.point.max("radius") == pytest.approx(math.sqrt(0.32), rel=1e-6)
+    mult = floquet_multipliers(HOPF_NF, res.point.orbit)
+    assert np.min(np.abs(mult - math.exp(-2 * 0.32 * math.pi))) < 1e-7
+
+
+# --------------------------------------------------------------------------- model A
+@pytest.fixture(scope="module")
+def model_a():
+    from maglev_match.models import build_system
+    from maglev_match.params import load_preset
+
+    return build_system(load_preset("alpha1").replace(sigma=4e-4), "unit")
+
+
+def _hopf_by_eigenvalues(system, param, a, b):
+    """Hopf point from a sign change of the largest real part (an independent route to
+    the start data, not using dynamics.hopf)."""
+    import scipy.optimize
+
+    def mrp(v):
+        return np.max(np.linalg.eigvals(system.jacobian(np.zeros(system.dim),
+                                                        system.params_with(**{param: v}))).real)
+
+    v = scipy.optimize.brentq(mrp, a, b, xtol=1e-12)
+    p = system.params_with(**{param: v})
+    w, V = np.linalg.eig(system.jacobian(np.zeros(system.dim), p))
+    k = int(np.argmax(np.where(w.imag > 0, -np.abs(w.real), -np.inf)))
+    q = V[:, k] / np.linalg.norm(V[:, k])
+    return hopf_start(system, np.zeros(system.dim), p, param, float(w[k].imag), q)
+
+
+@pytest.mark.slow
+def test_model_a_unstable_cycle_matches_shooting(model_a):
+    from maglev_match.dynamics.shooting import shoot_periodic_orbit, trajectory_extrema
+
+    hs = _hopf_by_eigenvalues(model_a, "omega1", 110.0, 140.0)
+    br = cycle_branch(model_a, hs, "omega1", stop_at=127.0, ntst=80, ncol=4, max_steps=200)
+    c = br.points[-1]
+    assert br.stopped_reason == "reached stop_at" and c.value == pytest.approx(127.0)
+    assert c.value < hs.value and not c.stable  # subcritical: unstable cycle below Hopf
+    x0 = c.orbit.states[0]
+    guess = x0 + 1e-3 * (x0 - np.zeros(9))
+    sh = shoot_periodic_orbit(model_a, guess, c.period * (1 + 1e-4), c.orbit.p)
+    assert sh.converged, sh.message
+    assert sh.period == pytest.approx(c.period, rel=1e-6)
+    ext = trajectory_extrema(model_a, sh.x0, sh.period, sh.p, ["gap_deviation"])
+    assert ext["gap_deviation"][0] == pytest.approx(c.max("gap_deviation"), rel=1e-6)
+    assert ext["gap_deviation"][1] == pytest.approx(c.min("gap_deviation"), rel=1e-6)
+    # the number of unstable multipliers agrees
+    mult = sh.multipliers[np.argsort(np.abs(sh.multipliers - 1))[1:]]
+    assert int(np.sum(np.abs(mult) > 1 + 1e-6)) == c.n_unstable
+
+
+@pytest.mark.slow
+def test_model_a_stable_cycle_matches_long_simulation(model_a):
+    hs = _hopf_by_eigenvalues(model_a, "omega1", 250.0, 320.0)
+    br = cycle_branch(model_a, hs, "omega1", stop_at=290.0, ntst=60, ncol=4, max_steps=200)
+    c = br.points[-1]
+    assert br.stopped_reason == "reached stop_at" and c.stable
+    # start ON the cycle and integrate 200 periods: the state must come back to the start
+    # (period and orbit right) and the last period must have the collocation amplitude
+    x0 = c.orbit.states[0]
+    f = model_a.derivatives.f
+    pj = jnp.asarray(c.orbit.p)
+    t_end = 200 * c.period
+    sol = scipy.integrate.solve_ivp(
+        lambda t, y: np.asarray(f(y, pj)), (0.0, t_end), x0, method="DOP853", rtol=1e-11,
+        atol=model_a.state_scale * 1e-13, dense_output=True)
+    assert sol.success
+    t = np.linspace(t_end - c.period, t_end, 20001)
+    gap = model_a.observe("gap_deviation", sol.sol(t).T, c.orbit.p)
+    assert np.max(gap) == pytest.approx(c.max("gap_deviation"), rel=1e-6)
+    assert np.min(gap) == pytest.approx(c.min("gap_deviation"), rel=1e-6)
+    back = (sol.sol(t_end) - x0) / model_a.state_scale
+    assert np.max(np.abs(back)) < 1e-5 * np.max(np.abs(x0 / model_a.state_scale))
