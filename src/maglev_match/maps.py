@@ -152,41 +152,56 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     reverses = np.zeros(nx, dtype=bool)
     hopf_t: list[float] = []
 
-    path = path_system(system, P)
+    # The row's path, extended beyond both ends so that Hopf points just outside the grid
+    # (whose cycles reach into it) are found too; grid point j sits at t = j + off.
+    ext_lo, ext_hi = _extension(spec, xs, yv)
+    nodes = [param_vector(ext_lo)] if ext_lo is not None else []
+    off = len(nodes)
+    nodes += list(P)
+    if ext_hi is not None:
+        nodes.append(param_vector(ext_hi))
+    t_end = len(nodes) - 1.0
+    path = path_system(system, np.array(nodes))
     limits = orbit_limit_margins(pts[0].gap_min - pts[0].c0, pts[0].gap_max - pts[0].c0)
-    scan = locate_hopf_points(path, PATH_PARAM, 0.0, nx - 1.0, n_scan=nx)
+    scan = locate_hopf_points(path, PATH_PARAM, 0.0, t_end, n_scan=3 * len(nodes))
+    grid_t = np.arange(nx) + off
+    stable_t = {int(t): bool(st) for t, st in zip(grid_t, stable, strict=True)}
     for hp in scan.points:
         if not hp.converged:
             continue
-        hopf_t.append(hp.value)
-        # the stable stretch next to this Hopf point
+        hopf_t.append(hp.value - off)
+        # the grid points of the stable stretch next to this Hopf point
         j_lo, j_hi = math.floor(hp.value), math.ceil(hp.value)
-        side = j_hi if j_hi < nx and stable[j_hi] else (j_lo if stable[j_lo] else None)
-        if side is None:
+        if stable_t.get(j_hi, False):
+            side, step = j_hi, 1
+        elif stable_t.get(j_lo, False):
+            side, step = j_lo, -1
+        else:
             continue
-        step = 1 if side == j_hi else -1
         end = side
-        while 0 <= end + step < nx and stable[end + step]:
+        while stable_t.get(end + step, False):
             end += step
-        stretch = np.arange(min(side, end), max(side, end) + 1)
+        stretch = np.arange(min(side, end), max(side, end) + 1)  # in t units
         br = cycle_branch(path, hp, PATH_PARAM, stop_at=float(end), ntst=spec.ntst,
                           ncol=spec.ncol, max_steps=spec.max_steps, limits=limits,
-                          param_bounds=(0.0, nx - 1.0), lam_scale=1.0)
+                          param_bounds=(0.0, t_end), lam_scale=1.0)
         t = br.values
         if t.size == 0:
-            resolved[stretch] = False
+            resolved[stretch - off] = False
             continue
         gmax = br.observable_max("gap_deviation")
         imin = br.observable_min("current")
         unstable = br.n_unstable >= 1
-        reached = -np.inf if step > 0 else np.inf
         for k in range(t.size - 1):
             lo, hi = sorted((t[k], t[k + 1]))
-            for j in stretch:
-                if lo <= j <= hi and unstable[k] and unstable[k + 1] and hi > lo:
-                    s = (j - t[k]) / (t[k + 1] - t[k])
+            if not (hi > lo and unstable[k] and unstable[k + 1]):
+                continue
+            for tj in stretch:
+                if lo <= tj <= hi:
+                    j = tj - off
+                    s = (tj - t[k]) / (t[k + 1] - t[k])
                     g = gmax[k] + s * (gmax[k + 1] - gmax[k])
-                    if g < h[j] or case[j] != CASE_CODES["unstable_cycle"]:
+                    if case[j] != CASE_CODES["unstable_cycle"] or g < h[j]:
                         h[j] = g
                         case[j] = CASE_CODES["unstable_cycle"]
                         reverses[j] = (imin[k] + s * (imin[k + 1] - imin[k])) < 0
@@ -194,7 +209,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         heading_in = (t[min(3, t.size - 1)] - hp.value) * step > 0
         if br.stopped_reason in ("newton failed", "step too small", "max_steps") and heading_in:
             # the branch was entering the stretch but stopped: what lies beyond is unknown
-            beyond = stretch[(stretch - reached) * step > 0]
+            beyond = stretch[(stretch - reached) * step > 0] - off
             beyond = beyond[case[beyond] != CASE_CODES["unstable_cycle"]]
             resolved[beyond] = False
     hopf_t_arr = np.array(hopf_t)
@@ -213,6 +228,23 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         "sigma_point": P[:, system.param_index("sigma")],
         "current_reverses": reverses, "resolved": resolved,
     }
+
+
+def _extension(spec: MapSpec, xs: np.ndarray, yv: float) -> tuple[Params | None, Params | None]:
+    """Parameter sets beyond both ends of a row (one span further out), or None where no
+    valid parameter set lies there (tried at 1, 1/2, 1/4 and 1/8 of a span)."""
+    span = xs[-1] - xs[0]
+    out: list[Params | None] = []
+    for end, sign in ((xs[0], -1.0), (xs[-1], 1.0)):
+        found = None
+        for frac in (1.0, 0.5, 0.25, 0.125):
+            try:
+                found = spec.point(end + sign * frac * span, yv)
+                break
+            except ParameterError:
+                continue
+        out.append(found)
+    return out[0], out[1]
 
 
 def compute_tile(spec: MapSpec, rows: tuple[int, int]) -> dict[str, np.ndarray]:

@@ -35,11 +35,13 @@ import numpy as np
 from maglev_match.dynamics.basin import bounding_cycle
 from maglev_match.dynamics.cycles import CyclePoint
 from maglev_match.dynamics.equilibria import StabilityResult, stability
+from maglev_match.dynamics.system import System
 from maglev_match.models.limits import orbit_limit_margins
 from maglev_match.models.unit import unit_system
 from maglev_match.params import Params
 
-__all__ = ["MatchingIndex", "matching_index", "reading", "search_ranges", "CASES",
+__all__ = ["MatchingIndex", "matching_index", "index_of_system", "reading", "search_ranges",
+           "CASES",
            "cycle_settings"]
 
 CASES = ("unstable_equilibrium", "unstable_cycle", "no_cycle_within_limits")
@@ -140,22 +142,44 @@ def matching_index(
     simulation_kwargs : passed to :func:`maglev_match.simulation.critical_disturbance`.
     """
     system = unit_system(params)
-    stab = stability_result or stability(system)
-    w0 = params.w0
+    res = index_of_system(
+        system, system.p, w0=params.w0, h_max=params.gap_max - params.c0,
+        search=search_ranges(params),
+        limits=orbit_limit_margins(params.gap_min - params.c0, params.gap_max - params.c0),
+        stability_result=stability_result,
+        omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
+    )
+    return _with_simulation(res, params, simulate, simulation_kwargs)
+
+
+def index_of_system(
+    system: System,
+    p: np.ndarray,
+    *,
+    w0: float,
+    h_max: float,
+    search: dict[str, tuple[float, float]],
+    limits: Any = None,
+    stability_result: StabilityResult | None = None,
+    omega1: float = float("nan"),
+    sigma: float = float("nan"),
+) -> MatchingIndex:
+    """The index for any System with observables "gap_deviation" and "current": h from the
+    stability of the equilibrium and the bounding cycle (SPEC.md 6.6), chi = h / w0.
+
+    ``h_max`` is h when no unstable cycle bounds the basin within the limits (m);
+    ``search`` gives the parameter ranges in which Hopf points are looked for.
+    """
+    stab = stability_result or stability(system, p)
     base = dict(w0=w0, stable=stab.stable, max_real_part=stab.max_real_part,
-                omega1=float(params.omega1), sigma=float(params.sigma))  # type: ignore[arg-type]
+                omega1=omega1, sigma=sigma)
     warnings = list(stab.warnings)
     if not stab.stable:
-        res = MatchingIndex(chi=0.0, h=0.0, case="unstable_equilibrium",
-                            reading=reading(0.0, "unstable_equilibrium"),
-                            warnings=tuple(warnings), **base)
-        return _with_simulation(res, params, simulate, simulation_kwargs)
-
-    bound = bounding_cycle(
-        system, system.p, search_ranges(params),
-        limits=orbit_limit_margins(params.gap_min - params.c0, params.gap_max - params.c0),
-        ntst=cycle_settings.ntst, ncol=cycle_settings.ncol, max_steps=cycle_settings.max_steps,
-    )
+        return MatchingIndex(chi=0.0, h=0.0, case="unstable_equilibrium",
+                             reading=reading(0.0, "unstable_equilibrium"),
+                             warnings=tuple(warnings), **base)
+    bound = bounding_cycle(system, p, search, limits=limits, ntst=cycle_settings.ntst,
+                           ncol=cycle_settings.ncol, max_steps=cycle_settings.max_steps)
     warnings.extend(bound.warnings)
     hp = bound.hopf
     hopf = dict(hopf_param=hp.param if hp else None, hopf_value=hp.value if hp else None,
@@ -167,27 +191,24 @@ def matching_index(
         i_lo = cyc.extrema["current"][1]
         h = float(g_hi)
         case = "unstable_cycle"
-        res = MatchingIndex(
+        return MatchingIndex(
             chi=h / w0, h=h, case=case, reading=reading(h / w0, case),
             cycle_period=cyc.period, cycle_gap_max=float(g_hi), cycle_gap_min=float(g_lo),
             cycle_current_min=float(i_lo), cycle_unstable_multipliers=cyc.n_unstable,
             current_reverses=bool(i_lo < 0), warnings=tuple(warnings), cycle=cyc,
             **hopf, **base,
         )
-    elif not bound.converged:
-        res = MatchingIndex(
+    if not bound.converged:
+        return MatchingIndex(
             chi=float("nan"), h=float("nan"), case="no_cycle_within_limits",
             reading=reading(float("nan"), ""), converged=False, message=bound.message,
             warnings=tuple(warnings), **hopf, **base,
         )
-    else:
-        case = "no_cycle_within_limits"
-        h_max = params.gap_max - params.c0
-        res = MatchingIndex(
-            chi=h_max / w0, h=h_max, case=case, reading=reading(h_max / w0, case),
-            message=bound.message, warnings=tuple(warnings), **hopf, **base,
-        )
-    return _with_simulation(res, params, simulate, simulation_kwargs)
+    case = "no_cycle_within_limits"
+    return MatchingIndex(
+        chi=h_max / w0, h=h_max, case=case, reading=reading(h_max / w0, case),
+        message=bound.message, warnings=tuple(warnings), **hopf, **base,
+    )
 
 
 def _with_simulation(res: MatchingIndex, params: Params, simulate: bool,

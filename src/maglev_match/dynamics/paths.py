@@ -21,17 +21,29 @@ __all__ = ["path_system", "PATH_PARAM"]
 PATH_PARAM = "t"
 
 
+def _interpolate(q, n_nodes: int, n_params: int):
+    """The parameter vector at path position t = q[0] (piecewise linear through the nodes)."""
+    t = q[0]
+    P = q[1:].reshape(n_nodes, n_params)
+    k = jnp.clip(jnp.floor(t), 0, n_nodes - 2).astype(jnp.int32)
+    s = t - k
+    return (1.0 - s) * P[k] + s * P[k + 1]
+
+
 @cache
 def _path_rhs(rhs: RHS, n_nodes: int, n_params: int):
     def path_rhs(x, q):
-        t = q[0]
-        P = q[1:].reshape(n_nodes, n_params)
-        k = jnp.clip(jnp.floor(t), 0, n_nodes - 2).astype(jnp.int32)
-        s = t - k
-        p = (1.0 - s) * P[k] + s * P[k + 1]
-        return rhs(x, p)
+        return rhs(x, _interpolate(q, n_nodes, n_params))
 
     return path_rhs
+
+
+@cache
+def _path_observable(g, n_nodes: int, n_params: int):
+    def g_path(x, q):
+        return g(x, _interpolate(q, n_nodes, n_params))
+
+    return g_path
 
 
 def path_system(system: System, nodes: np.ndarray, t0: float = 0.0) -> System:
@@ -48,16 +60,6 @@ def path_system(system: System, nodes: np.ndarray, t0: float = 0.0) -> System:
     )
     p = np.concatenate([[t0], nodes.ravel()])
 
-    def lift(g):
-        def g_path(x, q):
-            t = q[0]
-            P = q[1:].reshape(n, m)
-            k = jnp.clip(jnp.floor(t), 0, n - 2).astype(jnp.int32)
-            s = t - k
-            return g(x, (1.0 - s) * P[k] + s * P[k + 1])
-
-        return g_path
-
     return System(
         rhs=_path_rhs(system.rhs, n, m),
         p=p,
@@ -65,6 +67,6 @@ def path_system(system: System, nodes: np.ndarray, t0: float = 0.0) -> System:
         state_names=system.state_names,
         x_guess=system.x_guess,
         state_scale=system.state_scale,
-        observables={k: lift(g) for k, g in system.observables.items()},
+        observables={k: _path_observable(g, n, m) for k, g in system.observables.items()},
         name=f"{system.name} along a path of {n} points",
     )

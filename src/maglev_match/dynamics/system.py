@@ -75,6 +75,16 @@ def compiled(rhs: RHS) -> CompiledDerivatives:
     )
 
 
+@cache
+def _observable_single(g: Callable) -> Callable:
+    return jax.jit(g)
+
+
+@cache
+def _observable_batch(g: Callable) -> Callable:
+    return jax.jit(jax.vmap(g, in_axes=(0, None)))
+
+
 def _split(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     z = np.asarray(z)
     return np.real(z).astype(float), np.imag(z).astype(float)
@@ -213,8 +223,8 @@ class System:
         x = jnp.asarray(x, jnp.float64)
         pj = self._p(p)
         if x.ndim == 1:
-            return np.asarray(g(x, pj))
-        return np.asarray(jax.vmap(lambda y: g(y, pj))(x))
+            return np.asarray(_observable_single(g)(x, pj))
+        return np.asarray(_observable_batch(g)(x, pj))
 
     def scaled_residual(self, x: Array, p: np.ndarray | None = None) -> float:
         """max_i |f_i(x)| / sum_j |J_ij| scale_j: a dimensionless size of the residual."""

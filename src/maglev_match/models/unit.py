@@ -85,6 +85,11 @@ def coil_current(x, p):
     return x[6] + levitation_current(p)
 
 
+def beam_deflection(x, p):
+    """Equivalent beam deflection w = x5 (m)."""
+    return x[4]
+
+
 def param_vector(params: Params) -> np.ndarray:
     return np.array([float(getattr(params, n)) for n in PARAM_NAMES])
 
@@ -100,7 +105,7 @@ def unit_system(params: Params, limited: bool = False) -> System:
         observables={
             "gap_deviation": gap_deviation,
             "current": coil_current,
-            "beam_deflection": lambda x, p: x[4],
+            "beam_deflection": beam_deflection,
         },
         name="unit",
     )

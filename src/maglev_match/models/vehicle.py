@@ -170,6 +170,25 @@ def pressed_initial_state(params: Params) -> np.ndarray:
     return x
 
 
+@cache
+def _observables(n_modes: int) -> dict:
+    """Named read-outs (module-level per n_modes, so compiled code is reused): gap deviation
+    c_j - c0 (m) and current i_j (A) at the six points, modal coordinates q_n (m)."""
+    L = layout(n_modes)
+
+    def gap_deviation(x, p):
+        return point_kinematics(x, p, n_modes)[2] - p[_IDX["c0"]]
+
+    def current(x, p):
+        return x[L["i"]]
+
+    def beam_deflection(x, p):
+        return x[L["q"]]
+
+    return {"gap_deviation": gap_deviation, "current": current,
+            "beam_deflection": beam_deflection}
+
+
 def vehicle_system(params: Params, limited: bool = False) -> System:
     """Model B as a :class:`System` for the given parameter set."""
     n = params.n_modes
@@ -189,10 +208,6 @@ def vehicle_system(params: Params, limited: bool = False) -> System:
         state_names=state_names(n),
         x_guess=equilibrium_guess(params),
         state_scale=scale,
-        observables={
-            "gap_deviation": lambda x, p: point_kinematics(x, p, n)[2] - p[_IDX["c0"]],
-            "current": lambda x, p: x[L["i"]],
-            "beam_deflection": lambda x, p: x[L["q"]],
-        },
+        observables=_observables(n),
         name=f"vehicle ({n} modes)",
     )
