@@ -521,7 +521,7 @@ def _claims_turnout(st: Study) -> list[Claim]:
     mi = st.matching("turnout-soft")
     out.append(_numeric("h-soft", "Sec. 5, Fig. 12", "turnout-soft: h (max gap deviation on the "
                         "unstable cycle)", PAPER["h_soft"], mi.h, "mm", scale=1e3, digits=3,
-                        note=f"case {mi.case}"))
+                        note=_matching_note(mi)))
     out.append(_numeric("chi-soft", "Sec. 5", "turnout-soft: chi = h / w0", PAPER["chi_soft"],
                         mi.chi, "", digits=3, note=mi.reading))
     if st.settings.include_vehicle:
@@ -541,6 +541,17 @@ def _claims_turnout(st: Study) -> list[Claim]:
             "the text says small initial values converge and large ones diverge, without "
             "saying which of (a), (b) is which"))
     return out
+
+
+def _matching_note(mi: Any) -> str:
+    parts = [f"case {mi.case}"]
+    if mi.hopf_param is not None and mi.hopf_value is not None:
+        parts.append(f"cycle from the Hopf point {mi.hopf_param} = {mi.hopf_value:.5g}")
+    if mi.h_simulation is not None:
+        parts.append(f"simulation cross-check (critical x5(0)): {mi.h_simulation * 1e3:.3g} mm")
+    if mi.current_reverses:
+        parts.append("the coil current would reverse on the cycle (smooth model)")
+    return "; ".join(parts)
 
 
 CLAIM_GROUPS: tuple[tuple[str, Callable[[Study], list[Claim]]], ...] = (
