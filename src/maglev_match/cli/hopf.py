@@ -1,0 +1,323 @@
+"""`maglev-match hopf` (Hopf points along one parameter) and `hopf-curve` (the Hopf curve in
+two parameters with l1 and codimension-two points, paper Fig. 4)."""
+
+from __future__ import annotations
+
+import csv
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from maglev_match.cli import app
+from maglev_match.cli.common import (
+    DEFAULT_PRESET_NAME,
+    ConfigOpt,
+    JsonOpt,
+    ModelOpt,
+    OutOpt,
+    PresetOpt,
+    SetOpt,
+    UserError,
+    check_model,
+    console,
+    console_err,
+    emit_json,
+    output_path,
+    params_from_options,
+    parse_range,
+)
+from maglev_match.dynamics.hopf import (
+    HopfCurve,
+    HopfPoint,
+    hopf_curve,
+    locate_hopf_points,
+    stability_grid,
+)
+from maglev_match.models import build_system
+from maglev_match.params import PARAMETER_DOCS, ParameterError
+
+# The plane of the paper's Fig. 4 for model A; model B has no sigma (that is model A's force
+# gain), so its default plane is the beam frequency against the velocity gain.
+DEFAULT_PLANE = {"unit": ("omega1", "sigma"), "vehicle": ("omega1", "kD")}
+DEFAULT_RANGES = {"omega1": (30.0, 400.0), "sigma": (1e-4, 8e-4)}
+
+
+def _check_param(system, model: str, name: str, option: str) -> None:
+    if name not in system.param_names:
+        raise ParameterError(
+            option, name,
+            f"model '{model}' has no such parameter; choose one of {', '.join(system.param_names)}",
+        )
+
+
+def _validate_value(params, name: str, value: float) -> None:
+    """A parameter value outside its rule (e.g. omega1 <= 0) is a user error."""
+    if name in PARAMETER_DOCS:
+        params.replace(**{name: value})
+
+
+def _unit(name: str) -> str:
+    return PARAMETER_DOCS.get(name, ("", ""))[0]
+
+
+def _point_record(hp: HopfPoint, system, names: tuple[str, ...]) -> dict:
+    rec = {n: system.param(n, hp.p) for n in names}
+    rec.update({
+        "frequency": hp.frequency,
+        "crossing_speed": hp.crossing_speed,
+        "l1": hp.l1,
+        "kind": hp.kind,
+        "others_stable": hp.others_stable,
+        "converged": hp.converged,
+        "residual": hp.residual,
+        "warnings": list(hp.warnings),
+    })
+    return rec
+
+
+@app.command("hopf")
+def hopf_command(
+    param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
+    start: Annotated[float, typer.Option("--from", help="First value.")] = 30.0,
+    stop: Annotated[float, typer.Option("--to", help="Last value.")] = 300.0,
+    steps: Annotated[int, typer.Option("--steps", help="Values of the bracketing scan.")] = 200,
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    model: ModelOpt = "unit",
+    json_out: JsonOpt = False,
+) -> None:
+    """Hopf points of the equilibrium along one parameter: value, frequency, crossing speed
+    d Re(lambda)/d param and the first Lyapunov coefficient l1 (> 0 subcritical)."""
+    check_model(model)
+    if steps < 2:
+        raise ParameterError("--steps", steps, "must be at least 2")
+    if not start < stop:
+        raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
+    params = params_from_options(preset, config, set_)
+    system = build_system(params, model)
+    _check_param(system, model, param, "--param")
+    for v in (start, stop):
+        _validate_value(params, param, v)
+    scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
+    names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE[model]))
+    records = [_point_record(hp, system, names) for hp in scan.points]
+    if json_out:
+        emit_json({"param": param, "model": model, "from": start, "to": stop,
+                   "points": records, "warnings": list(scan.warnings)})
+        return
+    console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {_unit(param)}, "
+                  f"model {model}: {len(records)} found")
+    if records:
+        table = Table(*names, "omega (rad/s)", "dRe/dp", "l1", "type", "others stable",
+                      "converged")
+        for hp, r in zip(scan.points, records, strict=True):
+            table.add_row(*[f"{r[n]:.8g}" for n in names], f"{hp.frequency:.6g}",
+                          f"{hp.crossing_speed:.4g}", f"{hp.l1:.4g}", hp.kind,
+                          str(hp.others_stable), str(hp.converged))
+        console.print(table)
+        console.print("l1 with <q,q> = 1, <p,q> = 1 (paper eq. 24): > 0 subcritical "
+                      "(unstable cycle), < 0 supercritical (stable cycle)")
+    for w in list(scan.warnings) + [w for hp in scan.points for w in hp.warnings]:
+        console_err.print(f"[yellow]warning:[/] {w}")
+
+
+def _parse_ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
+    out: dict[str, tuple[float, float]] = {}
+    for item in items or []:
+        if "=" not in item:
+            raise UserError(f"--range '{item}': expected NAME=FROM:TO, e.g. sigma=1e-4:8e-4")
+        name, text = item.split("=", 1)
+        a, b = parse_range(text, f"--range {name}")
+        if not a < b:
+            raise UserError(f"--range {item}: the range must be increasing")
+        out[name.strip()] = (a, b)
+    return out
+
+
+def _on_curve(hp: HopfPoint, curves: list[HopfCurve], names, system, bounds) -> bool:
+    """Whether a Hopf point lies on one of the branches already computed."""
+    w = np.array([system.param(n, hp.p) for n in names])
+    span = np.array([bounds[n][1] - bounds[n][0] for n in names])
+    for c in curves:
+        v = c.values()
+        if len(v) == 0:
+            continue
+        freq = c.frequency()
+        d = np.min(np.hypot(*((v - w) / span).T) + np.abs(freq - hp.frequency) / hp.frequency)
+        if d < 2e-2:
+            return True
+    return False
+
+
+def compute_hopf_curves(system, names: tuple[str, str], bounds, scan_values: list[float],
+                        n_scan: int = 100, max_step: float = 1e-2,
+                        progress=None) -> tuple[list[HopfCurve], list[str]]:
+    """Every branch of the Hopf curve met by scans of names[0] at the given values of
+    names[1]; each branch continued inside ``bounds``."""
+    curves: list[HopfCurve] = []
+    warnings: list[str] = []
+    lo, hi = bounds[names[0]]
+    for v2 in scan_values:
+        p = system.params_with(**{names[1]: v2})
+        scan = locate_hopf_points(system, names[0], lo, hi, p, n_scan=n_scan)
+        warnings.extend(scan.warnings)
+        for hp in scan.points:
+            if not hp.converged or _on_curve(hp, curves, names, system, bounds):
+                continue
+            if progress is not None:
+                progress(f"continuing the branch through {names[0]} = {hp.value:.6g}, "
+                         f"{names[1]} = {v2:.6g}")
+            curves.append(hopf_curve(system, names, hp, bounds, max_step=max_step))
+    return curves, warnings
+
+
+@app.command("hopf-curve")
+def hopf_curve_command(
+    params_opt: Annotated[
+        str | None,
+        typer.Option("--params", help="Two parameters P1,P2 (default omega1,sigma for "
+                     "model unit, omega1,kD for model vehicle)."),
+    ] = None,
+    ranges: Annotated[
+        list[str] | None,
+        typer.Option("--range", help="NAME=FROM:TO bounds of a parameter (repeatable); "
+                     "defaults omega1=30:400, sigma=1e-4:8e-4, others 0.5x..2x the value."),
+    ] = None,
+    scan_steps: Annotated[int, typer.Option("--scan-steps",
+                                            help="Values of each bracketing scan.")] = 100,
+    grid: Annotated[int, typer.Option("--grid", help="Stability grid points per axis for "
+                                      "shading S/U (0: no grid).")] = 60,
+    max_step: Annotated[float, typer.Option("--max-step", help="Largest continuation step, "
+                                            "as a fraction of the ranges.")] = 1e-2,
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    model: ModelOpt = "unit",
+    out: OutOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """The Hopf curve in two parameters by continuation, with l1 along it and the
+    codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
+    check_model(model)
+    params = params_from_options(preset, config, set_)
+    system = build_system(params, model)
+    if params_opt is None:
+        names = DEFAULT_PLANE[model]
+    else:
+        parts = [t.strip() for t in params_opt.split(",") if t.strip()]
+        if len(parts) != 2 or parts[0] == parts[1]:
+            raise UserError(f"--params '{params_opt}': expected two different names P1,P2")
+        names = (parts[0], parts[1])
+    for n in names:
+        _check_param(system, model, n, "--params")
+    given = _parse_ranges(ranges)
+    for n in given:
+        if n not in names:
+            raise UserError(f"--range {n}: not one of --params {','.join(names)}")
+    bounds = {}
+    for n in names:
+        if n in given:
+            bounds[n] = given[n]
+        elif n in DEFAULT_RANGES:
+            bounds[n] = DEFAULT_RANGES[n]
+        else:
+            v = system.param(n)
+            bounds[n] = (0.5 * v, 2.0 * v) if v > 0 else (v - 1.0, v + 1.0)
+        for v in bounds[n]:
+            _validate_value(params, n, v)
+    a, b = bounds[names[1]]
+    scan_values = [a + f * (b - a) for f in (0.5, 0.1, 0.9)]
+
+    def progress(msg: str) -> None:
+        if not json_out:
+            console_err.print(msg)
+
+    curves, warnings = compute_hopf_curves(system, names, bounds, scan_values,
+                                           n_scan=scan_steps, max_step=max_step,
+                                           progress=progress)
+    grid_data = None
+    if grid > 0:
+        g1 = np.linspace(*bounds[names[0]], grid)
+        g2 = np.linspace(*bounds[names[1]], grid)
+        mr, ok = stability_grid(system, names, g1, g2)
+        if not ok.all():
+            warnings.append(f"equilibrium not found at {int((~ok).sum())} grid points")
+        grid_data = (g1, g2, mr)
+    folder = output_path(out, f"hopf-curve-{model}-{names[0]}-{names[1]}")
+    folder = folder if folder.suffix == "" else folder.parent
+    stem = f"hopf_curve_{model}_{names[0]}_{names[1]}"
+    csv_path = folder / f"{stem}.csv"
+    points, special = [], []
+    for k, c in enumerate(curves):
+        for pt in c.points:
+            points.append({names[0]: pt.values[0], names[1]: pt.values[1],
+                           "frequency": pt.frequency, "l1": pt.l1, "branch": k,
+                           "others_stable": pt.others_stable})
+        for sp in c.special_points:
+            rec = {"type": sp.type, names[0]: sp.values[0], names[1]: sp.values[1],
+                   "frequency": sp.frequency, "branch": k, "converged": sp.converged}
+            if sp.type == "GH":
+                rec["l2"] = sp.l2
+            if sp.type == "HH":
+                rec["other_frequency"] = sp.other_frequency
+            special.append(rec)
+    with csv_path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["branch", names[0], names[1], "frequency", "l1", "others_stable"])
+        for r in points:
+            w.writerow([r["branch"], f"{r[names[0]]:.12g}", f"{r[names[1]]:.12g}",
+                        f"{r['frequency']:.12g}", f"{r['l1']:.8g}", r["others_stable"]])
+    sp_path = folder / f"{stem}_special.csv"
+    with sp_path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["type", names[0], names[1], "frequency", "l2", "branch"])
+        for r in special:
+            w.writerow([r["type"], f"{r[names[0]]:.12g}", f"{r[names[1]]:.12g}",
+                        f"{r['frequency']:.10g}", "" if r.get("l2") is None else
+                        f"{r['l2']:.8g}", r["branch"]])
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.hopf import hopf_curve_figure
+
+    title = f"Hopf curve, model {'A' if model == 'unit' else 'B'} ({preset})"
+    fig = hopf_curve_figure(curves, names, (_unit(names[0]), _unit(names[1])), grid_data,
+                            title=title)
+    figs = save_figure(fig, folder / stem)
+    branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
+                 "closed": c.closed, "warnings": list(c.warnings)} for c in curves]
+    if json_out:
+        emit_json({"params": list(names), "model": model,
+                   "bounds": {n: list(bounds[n]) for n in names}, "points": points,
+                   "special_points": special, "branches": branches, "csv": str(csv_path),
+                   "special_csv": str(sp_path), "figures": [str(f) for f in figs],
+                   "warnings": warnings})
+        return
+    console.print(f"Hopf curve in ({names[0]}, {names[1]}), model {model}: "
+                  f"{len(curves)} branch(es), {len(points)} points")
+    for k, c in enumerate(curves):
+        l1 = c.l1()
+        signs = "".join("+" if s > 0 else "-" for s in _runs(np.sign(l1)))
+        console.print(f"  branch {k}: {len(c.points)} points, l1 sign pattern along it: "
+                      f"{signs}; {c.message}")
+    if special:
+        table = Table("type", names[0], names[1], "omega (rad/s)", "l2")
+        for r in special:
+            table.add_row(r["type"], f"{r[names[0]]:.8g}", f"{r[names[1]]:.8g}",
+                          f"{r['frequency']:.6g}",
+                          "" if r.get("l2") is None else f"{r['l2']:.4g}")
+        console.print(table)
+    else:
+        console.print("  no codimension-two points inside the bounds")
+    console.print(f"wrote {csv_path}, {sp_path} and {', '.join(str(f) for f in figs)}")
+    for w in warnings + [w for c in curves for w in c.warnings]:
+        console_err.print(f"[yellow]warning:[/] {w}")
+
+
+def _runs(signs: np.ndarray) -> list[float]:
+    out: list[float] = []
+    for s in signs:
+        if not out or s != out[-1]:
+            out.append(float(s))
+    return out
