@@ -10,6 +10,7 @@ import re
 import shutil
 import subprocess
 from html.parser import HTMLParser
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -283,3 +284,24 @@ def test_variant_presets_reconcile_the_papers_stability_statements(param):
     assert stable(variant.replace(omega1=85.0, sigma=3.7e-4))
     assert not stable(variant.replace(EI=2.26e10))
     assert stable(variant)
+
+
+@pytest.mark.slow
+def test_report_command_renders_every_section(tmp_path, capsys):
+    """`maglev-match report --quick`: every section computed (none 'not available'), the
+    figure files written, the HTML self-contained."""
+    import json
+
+    from maglev_match.cli import main
+
+    out = tmp_path / "alpha1.html"
+    assert main(["report", "--preset", "alpha1", "--quick", "--no-vehicle", "--out", str(out),
+                 "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert {k: v["reason"] for k, v in summary["sections"].items() if not v["available"]} == {}
+    assert {"parameters", "stability", "root-locus", "hopf-curve", "cycles", "time-history",
+            "matching"} <= set(summary["sections"])
+    for f in summary["figures"]:
+        assert Path(f).stat().st_size > 0
+    dom = _assert_self_contained(out.read_text())
+    assert len(dom.img_src) == len([f for f in summary["figures"] if f.endswith(".png")]) >= 5
