@@ -330,6 +330,8 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             if m:
                 t_hit, j_hit, gmin_step = locate_event(interp, t, tn)
                 collide = keep & jnp.isfinite(t_hit)
+                # values past a collision inside the step are not part of the run
+                gmin_step = jnp.where(collide, jnp.maximum(gmin_step, 0.0), gmin_step)
                 gmin = jnp.where(keep, jnp.minimum(c["gmin"], gmin_step), c["gmin"])
             else:
                 t_hit, j_hit, collide, gmin = jnp.inf, -1, jnp.asarray(False), c["gmin"]

@@ -1,0 +1,306 @@
+"""Tests of the time simulation with limit events (dynamics/simulate.py, simulation.py)."""
+
+from __future__ import annotations
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.optimize
+
+from maglev_match import load_preset
+from maglev_match.dynamics.simulate import SimulationOptions, simulate, simulate_batch
+from maglev_match.dynamics.system import System
+from maglev_match.models import build_system
+from maglev_match.models import vehicle as vehicle_model
+from maglev_match.simulation import (
+    critical_disturbance,
+    describe_event,
+    gap_limit_events,
+    history_dataset,
+    initial_state,
+    save_history,
+    simulate_maglev,
+)
+
+
+# ---------------------------------------------------------------------------------------
+# small conservative systems of our own (module level: stable objects, compiled once)
+# ---------------------------------------------------------------------------------------
+def pendulum_rhs(x, p):
+    return jnp.stack([x[1], -p[0] * jnp.sin(x[0])])
+
+
+def oscillator_rhs(x, p):
+    return jnp.stack([x[1], -x[0]])
+
+
+def oscillator_events(x, p):
+    # limits at x1 = -p[0] and x1 = +p[1]
+    return jnp.stack([x[0] + p[0], p[1] - x[0]])
+
+
+PENDULUM = System(rhs=pendulum_rhs, p=np.array([1.0]), param_names=("g_over_l",),
+                  state_names=("theta", "omega"), name="pendulum")
+OSCILLATOR = System(rhs=oscillator_rhs, p=np.array([1.0, 10.0]),
+                    param_names=("lower", "upper"), state_names=("x", "v"), name="oscillator")
+
+
+def test_pendulum_conserves_energy():
+    """A large-amplitude pendulum (conservative): H = v^2/2 - cos(theta) stays constant."""
+    x0 = np.array([2.5, 0.0])
+    res = simulate(PENDULUM, x0, 40.0, options=SimulationOptions(rtol=1e-10, atol=1e-10),
+                   n_save=801)
+    H = 0.5 * res.x[:, 1] ** 2 - np.cos(res.x[:, 0])
+    assert res.outcome in ("running", "converged") and res.outcome == "running"
+    assert np.max(np.abs(H - H[0])) < 1e-7 * abs(H[0])
+    # and it really swings (not a trivial solution)
+    assert res.x[:, 0].min() < -2.4
+
+
+def test_unit_beam_subsystem_conserves_energy():
+    """Model A with sigma = 0 and xi1 = 0: the beam mode is an undamped oscillator driven by
+    nothing, so w'^2/2 + omega1^2 w^2/2 is conserved while the levitation unit moves."""
+    P = load_preset("alpha1").replace(sigma=0.0, xi1=0.0)
+    x0 = np.zeros(9)
+    x0[4] = -1e-3
+    x0[0] = 5e-4  # also disturb the magnet so the rest of the model is busy
+    sim = simulate_maglev(P, "unit", x0, 3.0, options=SimulationOptions(rtol=1e-11, atol=1e-11))
+    assert sim.outcome != "collision"
+    x = sim.result.x
+    w1 = P.omega1
+    E = 0.5 * x[:, 5] ** 2 + 0.5 * w1**2 * x[:, 4] ** 2
+    assert np.max(np.abs(E - E[0])) < 1e-7 * E[0]
+    assert np.ptp(x[:, 0]) > 1e-4  # the magnet moved
+
+
+@pytest.mark.parametrize("model", ["unit", "vehicle"])
+def test_small_amplitude_matches_matrix_exponential(model):
+    """Limits off, tiny disturbance: x(t) - x* = expm(J t) (x0 - x*) up to O(amplitude)."""
+    P = load_preset("alpha1")
+    sys_ = build_system(P, model, limited=False)
+    xe = initial_state(P, model)
+    dx = np.zeros(sys_.dim)
+    if model == "unit":
+        dx[4] = -1e-8
+        dx[0] = 3e-9
+    else:
+        L = vehicle_model.layout(P.n_modes)
+        dx[L["q"].start] = 1e-8
+        dx[0] = 2e-9  # frame 1 heave: breaks the symmetry too
+    sim = simulate_maglev(P, model, xe + dx, 2.0, limited=False,
+                          options=SimulationOptions(rtol=1e-10, atol=1e-12))
+    ts = sim.result.t[::50]
+    J = sys_.jacobian(xe)
+    lin = np.array([scipy.linalg.expm(J * t) @ dx for t in ts])
+    got = sim.result.x[::50] - xe
+    scale = sys_.state_scale
+    err = np.max(np.abs(got - lin) / scale)
+    size = np.max(np.abs(lin) / scale)
+    assert size > 1e-6
+    assert err < 1e-4 * size
+
+
+def test_collision_time_matches_dense_root_find():
+    """The event time equals a root of the gap found independently (diffrax dense output at
+    much tighter tolerance + Brent's method) to 1e-9 s; limit and point are reported. (An
+    upper-limit collision: the vector field stays smooth past it, unlike at c = 0.)"""
+    P = load_preset("alpha1")
+    x0 = initial_state(P, "unit", x5=-2e-3)
+    x0[5] = -1.5  # beam moving up at 1.5 m/s: the gap opens fast
+    sim = simulate_maglev(P, "unit", x0, 1.0)
+    assert sim.outcome == "collision"
+    assert sim.point == 1 and sim.limit == "upper"
+    T = sim.collision_time + 0.002
+    sys_ = build_system(P, "unit", limited=True)
+    scale = jnp.asarray(sys_.state_scale)
+    pj = jnp.asarray(sys_.p)
+    term = diffrax.ODETerm(lambda t, z, a: sys_.rhs(z * scale, pj) / scale)
+    sol = diffrax.diffeqsolve(
+        term, diffrax.Dopri8(), 0.0, T, None, jnp.asarray(x0) / scale,
+        stepsize_controller=diffrax.PIDController(rtol=1e-11, atol=1e-11),
+        saveat=diffrax.SaveAt(dense=True), max_steps=100_000,
+    )
+    evaluate = jax.jit(jax.vmap(sol.evaluate))
+
+    def margin(t):
+        z = np.asarray(evaluate(jnp.atleast_1d(jnp.asarray(t, float))))[0] * sys_.state_scale
+        return P.gap_max - (P.c0 + z[0] - z[4])
+
+    grid = np.linspace(0.0, T, 401)
+    z = np.asarray(evaluate(jnp.asarray(grid))) * sys_.state_scale
+    vals = P.gap_max - (P.c0 + z[:, 0] - z[:, 4])
+    k = int(np.argmax(vals < 0))
+    assert k > 0
+    t_root = scipy.optimize.brentq(margin, grid[k - 1], grid[k], xtol=1e-14, rtol=1e-15)
+    assert abs(sim.collision_time - t_root) < 1e-9
+    # the saved history ends at the limit and never goes past it
+    ds = history_dataset(sim)
+    assert ds.gap.values.max() <= P.gap_max + 1e-12
+    assert ds.time.values[-1] == pytest.approx(sim.collision_time)
+
+
+def test_grazing_inside_one_step_is_a_collision():
+    """x = cos t dips to -1 at t = pi; with the lower limit at -(1 - 1e-6) the excursion
+    lasts ~2.8e-3 s, far shorter than a step, and must still be found; with the limit at
+    -(1 + 1e-6) there is no collision."""
+    x0 = np.array([1.0, 0.0])
+    opts = SimulationOptions(rtol=1e-10, atol=1e-10)
+    depth = 1e-6
+    hit = simulate(OSCILLATOR, x0, 5.0, p=np.array([1.0 - depth, 10.0]),
+                   event_fn=oscillator_events, options=opts, n_save=0)
+    miss = simulate(OSCILLATOR, x0, 5.0, p=np.array([1.0 + depth, 10.0]),
+                    event_fn=oscillator_events, options=opts, n_save=0)
+    exact = np.arccos(-(1.0 - depth))
+    assert hit.outcome == "collision" and hit.event_index == 0
+    # located to integration accuracy: x(t_event) is on the limit (|x'| ~ 1.4e-3 there)
+    assert abs(np.cos(hit.event_time) + (1.0 - depth)) < 1e-8
+    assert abs(hit.event_time - exact) < 1e-5
+    assert miss.outcome == "running"
+    assert 0 < miss.min_event_value[0] < 2 * depth
+    # the dip is much shorter than the average accepted step, so step-end signs miss it
+    assert 5.0 / hit.accepted > 10 * 2 * np.sqrt(2 * depth)
+
+
+def test_current_clamp_keeps_current_nonnegative():
+    """A large disturbance drives the smooth model's current far negative; with the limits
+    on the current state never drops below zero by more than the integration tolerance."""
+    P = load_preset("alpha3")
+    x0 = initial_state(P, "unit", x5=-6e-3)
+    smooth = simulate_maglev(P, "unit", x0, 1.0, limited=False)
+    i_smooth = smooth.result.x[:, 6] + P.i0
+    assert np.nanmin(i_smooth) < -1.0
+    lim = simulate_maglev(P, "unit", x0, 1.0, limited=True)
+    i_lim = lim.result.x[:, 6] + P.i0
+    i_lim = i_lim[np.isfinite(i_lim)]
+    assert i_lim.min() >= -1e-6
+    assert np.any(i_lim < 1e-3)  # the clamp was active
+
+
+def _mirror_matrix(n_modes: int) -> np.ndarray:
+    """Reflection about mid-span: frame 1 <-> 3, pitch angles change sign, point j <-> 7-j,
+    mode n -> (-1)^(n+1) mode n."""
+    names = vehicle_model.state_names(n_modes)
+    idx = {n: k for k, n in enumerate(names)}
+    n = len(names)
+    M = np.zeros((n, n))
+
+    def put(a, b, s):
+        M[idx[a], idx[b]] = s
+
+    frame = {"1": "3", "2": "2", "3": "1", "0": "0"}
+    for suffix in ("", "_dot"):
+        for k, kk in frame.items():
+            put(f"z{k}{suffix}", f"z{kk}{suffix}", 1.0)
+            put(f"th{k}{suffix}", f"th{kk}{suffix}", -1.0)
+        for m in range(1, n_modes + 1):
+            put(f"q{m}{suffix}", f"q{m}{suffix}", (-1.0) ** (m + 1))
+    for j in range(1, 7):
+        for b in ("i", "y1_", "v"):
+            put(f"{b}{j}", f"{b}{7 - j}", 1.0)
+    assert np.allclose(M @ M, np.eye(n))
+    return M
+
+
+def test_vehicle_symmetric_disturbance_stays_symmetric():
+    """Model B on the symmetric setup: a symmetric start (pressed, q1 = 3 mm) stays
+    mirror-symmetric, and an asymmetric start x0 and its mirror image evolve as mirror
+    images (one batched call)."""
+    P = load_preset("turnout-soft")
+    sys_ = build_system(P, "vehicle", limited=True)
+    M = _mirror_matrix(P.n_modes)
+    sym = initial_state(P, "vehicle", initial="pressed", q1=3e-3)
+    assert np.allclose(M @ sym, sym)
+    rng = np.random.default_rng(1)
+    asym = sym + (rng.standard_normal(sys_.dim) * sys_.state_scale * 0.2)
+    batch = np.stack([sym, asym, M @ asym])
+    events = gap_limit_events("vehicle", P.n_modes, P.gap_min, P.gap_max)
+    b = simulate_batch(sys_, batch, 1.0, event_fn=events, n_save=101)
+    assert not np.any(b.outcome == "collision")
+    x = b.x / sys_.state_scale
+    assert np.max(np.abs(x[0] - x[0] @ M.T)) < 1e-6
+    assert np.max(np.abs(x[2] - x[1] @ M.T)) < 1e-6
+    assert np.max(np.abs(x[1] - x[1] @ M.T)) > 1e-2  # the asymmetric run is asymmetric
+
+
+def test_batch_equals_single_runs():
+    """A batched call gives the same outcomes and collision times as single runs."""
+    P = load_preset("alpha3")
+    sys_ = build_system(P, "unit", limited=True)
+    events = gap_limit_events("unit", 0, P.gap_min, P.gap_max)
+    sizes = np.array([-2e-3, -8e-3, 3e-3, -9e-3])
+    x0 = np.zeros((4, 9))
+    x0[:, 4] = sizes
+    b = simulate_batch(sys_, x0, 2.0, event_fn=events,
+                       options=SimulationOptions(stop_on_converged=True))
+    for k in range(4):
+        s = simulate_maglev(P, "unit", x0[k], 2.0)
+        assert b.outcome[k] == s.outcome
+        if s.outcome == "collision":
+            assert abs(b.event_time[k] - s.collision_time) < 1e-12
+            assert describe_event(int(b.event_index[k])) == (s.point, s.limit)
+
+
+def test_critical_disturbance_bracket_is_consistent():
+    """The bracket's ends behave as claimed when re-run on their own, and the bracket is
+    as narrow as asked."""
+    P = load_preset("alpha1")
+    tol = 2e-4
+    c = critical_disturbance(P, tol=tol, t_max=20.0, batch=8)
+    assert c.status == "bracketed"
+    assert c.smallest_collision - c.largest_return <= tol * 1.0001
+    assert 0 < c.largest_return < c.smallest_collision < c.gap_range
+    assert c.unresolved == 0 and c.runs >= 16
+    sys_ = build_system(P, "unit", limited=True)
+    events = gap_limit_events("unit", 0, P.gap_min, P.gap_max)
+    x0 = np.zeros((2, 9))
+    x0[:, 4] = [-c.largest_return, -c.smallest_collision]
+    b = simulate_batch(sys_, x0, 80.0, event_fn=events,
+                       options=SimulationOptions(stop_on_converged=True))
+    assert list(b.outcome) == ["converged", "collision"]
+    assert b.event_time[1] == pytest.approx(c.collision_time, abs=1e-9)
+
+
+def test_start_outside_limits_is_collision_at_zero():
+    P = load_preset("alpha1")
+    sim = simulate_maglev(P, "unit", initial_state(P, "unit", x5=-0.011), 1.0)
+    assert sim.outcome == "collision" and sim.collision_time == 0.0 and sim.limit == "upper"
+
+
+def test_history_files(tmp_path):
+    """CSV and netCDF histories hold the gap, current and beam deflection."""
+    import xarray as xr
+
+    P = load_preset("alpha1")
+    sim = simulate_maglev(P, "unit", initial_state(P, "unit", x5=-1.5e-3), 0.5)
+    nc = save_history(sim, tmp_path / "h.nc")
+    csv = save_history(sim, tmp_path / "h.csv")
+    ds = xr.open_dataset(nc, engine="h5netcdf")
+    assert ds.sizes["time"] == 2001
+    assert np.allclose(ds.gap_deviation.values[:, 0], ds.z1.values - ds.w.values)
+    assert ds.beam_deflection.values[0] == pytest.approx(-1.5e-3)
+    table = np.genfromtxt(csv, delimiter=",", names=True)
+    assert "gap_deviation_1" in table.dtype.names
+    assert np.allclose(table["current_1"], ds.current.values[:, 0])
+    # model A: the gap rate is x2 - x6
+    assert np.allclose(ds.gap_rate.values[:, 0], ds.z1_dot.values - ds.w_dot.values,
+                       rtol=0, atol=1e-12)
+
+
+def test_initial_condition_names():
+    P = load_preset("turnout-soft")
+    pressed = initial_state(P, "vehicle", initial="pressed")
+    eq = initial_state(P, "vehicle")
+    L = vehicle_model.layout(P.n_modes)
+    assert np.all(pressed[L["q"]] == 0) and eq[L["q"]][0] > 0
+    assert np.array_equal(np.delete(pressed, np.r_[L["q"]]), np.delete(eq, np.r_[L["q"]]))
+    q = initial_state(P, "vehicle", initial="pressed", q1=3e-3)
+    assert q[L["q"].start] == 3e-3
+    from maglev_match.params import ParameterError
+
+    with pytest.raises(ParameterError):
+        initial_state(P, "unit", initial="pressed")
+    with pytest.raises(ParameterError):
+        initial_state(P, "vehicle", x5=-1e-3)
