@@ -778,13 +778,35 @@ def _on_curve(curve: Any, system: Any, hp: Any) -> bool:
     return bool(np.min(np.max(np.abs(v - pt) / span, axis=1)) < 0.01)
 
 
+def stability_region(params: Params, settings: ReportSettings
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """max Re(lambda) of model A on a grid of (omega1, sigma) (batched Newton and
+    eigenvalues): an independent picture of the regions the Hopf curve separates.
+    Returns (omega1 values, sigma values, max real part shaped (n_sigma, n_omega1))."""
+    from maglev_match.dynamics.hopf import stability_grid
+    from maglev_match.models import build_system
+
+    n1, n2 = (50, 40) if settings.quick else (120, 90)
+    w = np.linspace(*settings.hopf_omega1_range, n1)
+    s = np.linspace(max(settings.hopf_sigma_range[0], 1e-7), settings.hopf_sigma_range[1], n2)
+    mr, _ = stability_grid(build_system(params, "unit"), ("omega1", "sigma"), w, s)
+    return w, s, mr
+
+
 def hopf_curve_figure(curves: Sequence[Any], marks: Sequence[tuple[str, float, float]],
-                      settings: ReportSettings, title: str = ""):
+                      settings: ReportSettings, title: str = "",
+                      region: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
     """The Hopf curve(s) in (omega1, sigma): subcritical (l1 > 0) red, supercritical blue,
-    codimension-two points labelled, and the marked parameter points."""
+    codimension-two points labelled, and the marked parameter points. With ``region``
+    (from :func:`stability_region`) the unstable region U is shaded, S left white."""
     from maglev_match.plots import new_figure
 
     fig, ax = new_figure(figsize=(7.5, 5.0))
+    if region is not None:
+        w, s, mr = region
+        unstable = np.where(np.isfinite(mr), (mr > 0).astype(float), np.nan)
+        ax.contourf(w, s * 1e4, unstable, levels=[0.5, 1.5], colors=["#fde2e2"])
+        ax.fill_between([], [], color="#fde2e2", label="U: unstable (eigenvalue grid)")
     for c in curves:
         v = c.values()
         if len(v) == 0:
@@ -831,9 +853,11 @@ def section_hopf_curve(params: Params, ctx: ReportContext) -> tuple[str, list[Pa
     marks = [(f"design point ({params.omega1:.4g}, {params.sigma:.3g})", float(params.omega1),
               float(params.sigma))]
     frag, files = save_and_embed(
-        hopf_curve_figure(curves, marks, ctx.settings), ctx, "hopf_curve",
+        hopf_curve_figure(curves, marks, ctx.settings,
+                          region=stability_region(params, ctx.settings)), ctx, "hopf_curve",
         "Hopf curve of model A in the (omega1, sigma) plane, continued from the Hopf points "
-        "through the design point; squares are codimension-two points.")
+        "through the design point; squares are codimension-two points; shaded: unstable "
+        "equilibrium on an eigenvalue grid (an independent check of the curve).")
     info = []
     for c in curves:
         info.append(f"branch of {len(c.points)} points, {c.steps} steps: {c.message}"

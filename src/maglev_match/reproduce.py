@@ -58,6 +58,7 @@ from maglev_match.report import (
     run_section,
     run_time_history,
     save_and_embed,
+    stability_region,
     stability_summary,
     table_html,
     time_history_figure,
@@ -593,11 +594,12 @@ def _fig4(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
     curves = st.curves()
     frag, files = save_and_embed(
         hopf_curve_figure(curves, _mark_alphas(), st.settings,
-                          "Fig. 4: Hopf curve of model A (printed defaults)"),
+                          "Fig. 4: Hopf curve of model A (printed defaults)",
+                          region=stability_region(st.preset("alpha1"), st.settings)),
         ctx, "fig4_hopf_curve",
         "Fig. 4 recomputed: the Hopf curve in (omega1, sigma), subcritical red, supercritical "
-        "blue, generalised Hopf points as squares; the paper's parameter points marked. "
-        "Below/left of the curve the equilibrium is stable.")
+        "blue, generalised Hopf points as squares; the paper's parameter points marked; "
+        "shaded: the equilibrium is unstable (eigenvalues on a grid, an independent check).")
     return frag + hopf_curve_table(curves), files, None
 
 
