@@ -1,4 +1,7 @@
 import os
+import tempfile
 
-# Tests use their own persistent-cache-free JAX set-up so a stale cache can't mask anything.
-os.environ.setdefault("MAGLEV_MATCH_CACHE", "")
+# A fresh persistent JAX compilation cache per test session (shared by the subprocesses and
+# Dask workers the tests start), so compiled code is reused within the run but a stale cache
+# from an earlier run can never mask anything. CI sets its own fresh folder.
+os.environ.setdefault("MAGLEV_MATCH_CACHE", tempfile.mkdtemp(prefix="maglev-match-jax-"))

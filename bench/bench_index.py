@@ -1,0 +1,69 @@
+"""Benchmark: the matching index at one point, and map throughput.
+
+Prints medians and ratios against baselines run in the same process:
+
+* chi by cycle continuation (``matching_index(..., simulate=False)``) against chi by
+  simulation bisection (``critical_disturbance``) at the same parameter points;
+* map throughput (points/s) of a (omega1, sigma) map of model A with 1 and 2 local workers.
+
+Usage: python bench/bench_index.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from maglev_match.maps import Axis, MapSpec, run_map
+from maglev_match.matching import matching_index
+from maglev_match.params import load_preset
+from maglev_match.simulation import critical_disturbance
+
+
+def timed(fn, repeat: int) -> tuple[float, object]:
+    times, out = [], None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times), out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="small settings (CI)")
+    args = ap.parse_args()
+    print(f"machine: {platform.machine()}, {platform.processor() or 'cpu'}, "
+          f"python {platform.python_version()}")
+    points = ["turnout-soft", "turnout-stiff", "alpha1"]
+    repeat = 1 if args.quick else 3
+    for name in points:
+        p = load_preset(name)
+        t0 = time.perf_counter()
+        matching_index(p, simulate=False)
+        first = time.perf_counter() - t0
+        t_cyc, res = timed(lambda p=p: matching_index(p, simulate=False), repeat)
+        critical_disturbance(p)  # compile
+        t_sim, cd = timed(lambda p=p: critical_disturbance(p), repeat)
+        print(f"{name:14s} chi = {res.chi:.4g} ({res.case}); first call {first:.2f} s; "
+              f"median chi by continuation {t_cyc:.3f} s, by simulation bisection "
+              f"{t_sim:.3f} s ({cd.runs} runs): ratio {t_sim / t_cyc:.2f}x")
+    n = 10 if args.quick else 30
+    base = load_preset("turnout-soft")
+    spec = MapSpec(base=base.as_input_dict(), x=Axis("omega1", 40, 190, n),
+                   y=Axis("sigma", 2e-4, 6e-4, n), rows_per_tile=2)
+    for workers in (1, 2):
+        with tempfile.TemporaryDirectory() as d:
+            t = time.perf_counter()
+            run_map(spec, Path(d) / "tiles", workers=workers)
+            dt = time.perf_counter() - t
+        print(f"map {n}x{n} with {workers} worker(s): {dt:.1f} s, {n * n / dt:.2f} points/s "
+              "(includes cluster start and per-worker compilation)")
+
+
+if __name__ == "__main__":
+    main()
