@@ -465,9 +465,8 @@ def _newton(
             return Y, False, it, rnorm, None, blocks
         Y = Y + dY
         if np.max(np.abs(dY)) < tol:
-            r, A, blocks = prob.evaluate(Y, phase, Uref, last_row, last_rhs)
-            rnorm = float(np.max(np.abs(r)))
-            lu = _factorize(A)
+            # the Jacobian of this last iteration (at most tol away from the solution) serves
+            # for the tangent and the Floquet multipliers; the residual is bounded by it too
             return Y, True, it, rnorm, lu, blocks
         if np.max(np.abs(dY)) > 1e3:
             break
@@ -647,7 +646,7 @@ def cycle_branch(
     observables: Sequence[str] | None = None,
     ds: float = 0.05,
     ds_min: float = 1e-6,
-    ds_max: float = 2.0,
+    ds_max: float = 4.0,
     param_bounds: tuple[float, float] | None = None,
     tol: float = 1e-10,
     max_newton: int = 8,
@@ -734,12 +733,12 @@ def cycle_branch(
     step = 0
     prev_tlam = None
 
-    def corrector(Ybase, tbase, s):
+    def corrector(Ybase, tbase, s, iters=max_newton):
         Ypred = Ybase + s * tbase
         Uref, _, _ = prob.unpack(Ypred)
         row = W * tbase
         rhs_val = float(row @ Ybase) + s
-        return _newton(prob, Ypred, Uref, row, rhs_val, tol, max_newton)
+        return _newton(prob, Ypred, Uref, row, rhs_val, tol, iters)
 
     def tangent_from(lu, t_old):
         t = lu.solve(np.concatenate([np.zeros(prob.size - 1), [1.0]]))
@@ -764,7 +763,7 @@ def cycle_branch(
             s = (a * fb - b * fa) / (fb - fa) if fb != fa else 0.5 * (a + b)
             if not (min(a, b) < s < max(a, b)):
                 s = 0.5 * (a + b)
-            Y, ok, its, res, lu, blocks = corrector(Ybase, tbase, s)
+            Y, ok, its, res, lu, blocks = corrector(Ybase, tbase, s, 3 * max_newton)
             if not ok:
                 return best
             fs = fun(Y, lu)
@@ -842,12 +841,19 @@ def cycle_branch(
             else:
                 lim_pt = dataclass_replace_kind(pt, "limit")
                 warnings.append("limit contact not located accurately (first point past it)")
+            located = "interpolated"
+            if found is not None:  # name the limit closest at the contact point
+                mg_c, lname_c = _margin(limits, system, lim_pt.orbit)
+                lname = lname_c or lname
+                located = "solved" if abs(mg_c) <= 1e-6 else f"bracketed (margin {mg_c:.2e})"
+                if located != "solved":
+                    warnings.append(f"limit contact '{lname}' bracketed, not solved: the "
+                                    f"corrector failed closer to it (margin {mg_c:.2e})")
             points.append(lim_pt)
             specials.append(SpecialPoint(type="LIMIT", value=lim_pt.value,
                                          period=lim_pt.period, extrema=lim_pt.extrema,
                                          step=len(points) - 2,
-                                         located="solved" if found else "interpolated",
-                                         detail=lname))
+                                         located=located, detail=lname))
             stopped = "limit"
             _notify(progress, step, lim_pt)
             break

@@ -109,6 +109,8 @@ def shoot_periodic_orbit(
         except np.linalg.LinAlgError:
             message = "singular shooting matrix"
             break
+        if np.max(np.abs(d)) > 0.5:  # damp large steps (|dT/T| or a state > 0.5 scale)
+            d *= 0.5 / np.max(np.abs(d))
         x = x + d[:n] * sc
         T = T * (1.0 + d[n])
         if np.max(np.abs(d)) < tol:

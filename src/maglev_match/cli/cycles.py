@@ -1,0 +1,262 @@
+"""`maglev-match cycles`: periodic orbits born at Hopf points, continued in one parameter
+(paper Fig. 5): max/min gap deviation, period, Floquet stability, folds and limit contacts."""
+
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from rich import box
+from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from maglev_match.cli import app
+from maglev_match.cli.common import (
+    DEFAULT_PRESET_NAME,
+    ConfigOpt,
+    JsonOpt,
+    ModelOpt,
+    OutOpt,
+    PresetOpt,
+    SetOpt,
+    UserError,
+    check_model,
+    console,
+    console_err,
+    emit_json,
+    output_path,
+)
+from maglev_match.cli.common import params_from_options as _params
+from maglev_match.dynamics.cycles import CycleBranch, cycle_branch
+from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
+from maglev_match.limits_check import cycle_limit_margins
+from maglev_match.models import build_system
+from maglev_match.params import ParameterError, Params
+
+AtOpt = Annotated[
+    list[str] | None,
+    typer.Option("--at", help="Fix another parameter, NAME=VALUE (repeatable), e.g. "
+                 "--at sigma=4e-4. Applied after --preset/--config/--set."),
+]
+
+
+def apply_at(params: Params, at: list[str] | None) -> Params:
+    """Apply NAME=VALUE settings to a parameter set (validated)."""
+    values: dict[str, float] = {}
+    for item in at or []:
+        if "=" not in item:
+            raise UserError(f"--at '{item}': expected NAME=VALUE, e.g. sigma=4e-4")
+        name, text = item.split("=", 1)
+        try:
+            values[name.strip()] = float(text)
+        except ValueError:
+            raise ParameterError(name.strip(), text, "must be a number") from None
+    try:
+        return params.replace(**values) if values else params
+    except TypeError as exc:
+        raise UserError(f"--at: unknown parameter ({exc})") from None
+
+
+def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
+    rows = []
+    for c in br.points:
+        gmax, gmin = c.extrema["gap_deviation"]
+        imax, imin = c.extrema["current"]
+        rows.append({
+            param: c.value, "period": c.period, "gap_max": gmax, "gap_min": gmin,
+            "current_min": imin, "current_max": imax, "stable": c.stable,
+            "unstable_multipliers": c.n_unstable,
+            "max_abs_multiplier": float(np.max(np.abs(c.multipliers))),
+            "kind": c.kind,
+        })
+    return rows
+
+
+def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
+    rows = []
+    for s in br.special_points:
+        gmax, gmin = s.extrema["gap_deviation"]
+        rows.append({"type": s.type, param: s.value, "period": s.period, "gap_max": gmax,
+                     "gap_min": gmin, "current_min": s.extrema["current"][1],
+                     "limit": s.detail if s.type == "LIMIT" else "",
+                     "detail": s.detail, "located": s.located})
+    return rows
+
+
+def _hopf_json(h: HopfPoint, param: str) -> dict[str, Any]:
+    return {param: h.value, "l1": h.l1, "kind": h.kind, "frequency": h.frequency,
+            "period": 2 * np.pi / h.frequency, "crossing_speed": h.crossing_speed,
+            "others_stable": h.others_stable, "converged": h.converged}
+
+
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    if not rows:
+        path.write_text("")
+        return
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+@app.command("cycles")
+def cycles_command(
+    param: Annotated[str, typer.Option("--param", help="Continuation parameter.")] = "omega1",
+    at: AtOpt = None,
+    start: Annotated[float | None, typer.Option(
+        "--from", help="Search Hopf points from this value (default: design value / 4).")] = None,
+    stop: Annotated[float | None, typer.Option(
+        "--to", help="... up to this value (default: design value x 4).")] = None,
+    all_hopf: Annotated[bool, typer.Option(
+        "--all", help="Continue from every Hopf point in the range (default: the one "
+        "nearest the design value).")] = False,
+    ntst: Annotated[int, typer.Option("--ntst", help="Mesh intervals.")] = 80,
+    ncol: Annotated[int, typer.Option("--ncol", help="Collocation points (2-7).")] = 4,
+    max_steps: Annotated[int, typer.Option("--max-steps", help="Continuation steps.")] = 300,
+    ignore_current: Annotated[bool, typer.Option(
+        "--ignore-current", help="Do not stop where the coil current reaches 0 (only the "
+        "gap limits stop the branch).")] = False,
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    model: ModelOpt = "unit",
+    json_out: JsonOpt = False,
+    out: OutOpt = None,
+) -> None:
+    """Cycles born at Hopf points, continued in --param until a physical limit (Fig. 5)."""
+    check_model(model)
+    if not 2 <= ncol <= 7:
+        raise ParameterError("--ncol", ncol, "must be between 2 and 7")
+    if ntst < 4:
+        raise ParameterError("--ntst", ntst, "must be at least 4")
+    params = apply_at(_params(preset, config, set_), at)
+    system = build_system(params, model)
+    try:
+        design = system.param(param)
+    except KeyError as exc:
+        raise UserError(str(exc).strip("'\"")) from None
+    a = design / 4 if start is None else start
+    b = design * 4 if stop is None else stop
+    if not (np.isfinite(a) and np.isfinite(b)) or a == b:
+        raise UserError(f"--from/--to: empty search range [{a}, {b}]")
+    t0 = time.perf_counter()
+    console_err.print(f"searching Hopf points along {param} in [{a:.6g}, {b:.6g}] ...")
+    scan = locate_hopf_points(system, param, min(a, b), max(a, b))
+    hopfs = [h for h in scan.points if h.converged]
+    if not hopfs:
+        raise UserError(f"no Hopf point of the equilibrium along {param} in "
+                        f"[{a:.6g}, {b:.6g}]; widen --from/--to")
+    hopfs.sort(key=lambda h: abs(h.value - design))
+    chosen = hopfs if all_hopf else hopfs[:1]
+    limits = cycle_limit_margins(params, include_current=not ignore_current)
+    branches: list[CycleBranch] = []
+    for h in chosen:
+        with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
+                      console=console_err, transient=True) as prog:
+            task = prog.add_task(f"cycles from Hopf at {param} = {h.value:.6g}", total=None)
+
+            def report(step, pt, task=task, prog=prog, h=h):
+                prog.update(task, description=(
+                    f"cycles from Hopf at {param} = {h.value:.6g}: step {step}, "
+                    f"{param} = {pt.value:.6g}, max gap dev "
+                    f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm"))
+
+            br = cycle_branch(system, h, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
+                              limits=limits, progress=report)
+        branches.append(br)
+        console_err.print(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
+                          f"stopped: {br.stopped_reason}")
+    elapsed = time.perf_counter() - t0
+
+    main_branch, h0 = branches[0], chosen[0]
+    result: dict[str, Any] = {
+        "model": model,
+        "param": param,
+        "at": {k.split("=")[0]: float(k.split("=")[1]) for k in (at or [])},
+        "hopf": _hopf_json(h0, param),
+        "branch": _branch_rows(main_branch, param),
+        "special_points": _special_rows(main_branch, param),
+        "stopped_reason": main_branch.stopped_reason,
+        "steps": main_branch.steps,
+        "warnings": list(main_branch.warnings) + list(scan.warnings),
+        "hopf_points": [_hopf_json(h, param) for h in hopfs],
+        "mesh": {"ntst": ntst, "ncol": ncol},
+        "elapsed_s": elapsed,
+    }
+    if all_hopf and len(branches) > 1:
+        result["other_branches"] = [
+            {"hopf": _hopf_json(h, param), "branch": _branch_rows(br, param),
+             "special_points": _special_rows(br, param), "stopped_reason": br.stopped_reason,
+             "warnings": list(br.warnings)}
+            for h, br in zip(chosen[1:], branches[1:], strict=True)
+        ]
+    files: list[Path] = []
+    if out is not None or not json_out:
+        files = _write_outputs(out, param, model, scan, branches, params, at)
+        result["files"] = [str(f) for f in files]
+    if json_out:
+        emit_json(result)
+        return
+    _print_summary(result, branches, chosen, param, files)
+
+
+def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.cycles import cycle_diagram
+
+    base = output_path(out, f"cycles-{model}-{param}")
+    folder = base if base.suffix == "" else base.parent
+    stem = f"cycles_{model}_{param}"
+    files = []
+    rows, specials = [], []
+    for k, br in enumerate(branches):
+        for r in _branch_rows(br, param):
+            rows.append({"branch": k, "hopf": br.hopf.value, **r})
+        for r in _special_rows(br, param):
+            specials.append({"branch": k, **r})
+    _write_csv(folder / f"{stem}.csv", rows)
+    _write_csv(folder / f"{stem}_special_points.csv", specials)
+    files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
+    lo = min([scan.scan_values[0]] + [float(np.min(b.values)) for b in branches if b.points])
+    hi = max([scan.scan_values[-1]] + [float(np.max(b.values)) for b in branches if b.points])
+    sel = (scan.scan_values >= lo) & (scan.scan_values <= hi)
+    at_text = ", ".join(at or [])
+    fig, _ = cycle_diagram(
+        branches, param, scan.scan_values[sel], scan.max_real_part[sel] < 0,
+        title=f"Cycles along {param}" + (f" ({at_text})" if at_text else ""),
+        limits=(params.gap_min - params.c0, params.gap_max - params.c0),
+    )
+    files += save_figure(fig, folder / f"{stem}.png")
+    return files
+
+
+def _print_summary(result, branches, chosen, param, files) -> None:
+    for h, br in zip(chosen, branches, strict=True):
+        console.print(f"Hopf point {param} = {h.value:.8g}, frequency {h.frequency:.6g} rad/s, "
+                      f"l1 = {h.l1:.4g} ({h.kind}); branch stopped: {br.stopped_reason} "
+                      f"after {br.steps} steps")
+        table = Table(param, "T (s)", "gap max (mm)", "gap min (mm)", "i min (A)",
+                      "stable", "n unst", box=box.SIMPLE)
+        pts = br.points
+        idx = sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1]))
+        for k in idx:
+            c = pts[k]
+            table.add_row(f"{c.value:.7g}", f"{c.period:.5f}",
+                          f"{c.extrema['gap_deviation'][0] * 1e3:.4f}",
+                          f"{c.extrema['gap_deviation'][1] * 1e3:.4f}",
+                          f"{c.extrema['current'][1]:.3f}", "yes" if c.stable else "no",
+                          str(c.n_unstable))
+        console.print(table)
+        for s in br.special_points:
+            console.print(f"  {s.type} at {param} = {s.value:.8g} ({s.located})"
+                          f"{': ' + s.detail if s.detail else ''}, gap max "
+                          f"{s.extrema['gap_deviation'][0] * 1e3:.4f} mm, min "
+                          f"{s.extrema['gap_deviation'][1] * 1e3:.4f} mm")
+        for w in br.warnings:
+            console.print(f"  [yellow]warning:[/] {w}")
+    for f in files:
+        console.print(f"wrote {f}")
