@@ -304,3 +304,21 @@ def test_initial_condition_names():
         initial_state(P, "unit", initial="pressed")
     with pytest.raises(ParameterError):
         initial_state(P, "vehicle", x5=-1e-3)
+
+
+def test_cli_json_shape(capsys, tmp_path):
+    """`simulate --json` prints exactly the issue's object; --out writes the history."""
+    import json
+
+    from maglev_match.cli import main
+
+    out = tmp_path / "h.csv"
+    rc = main(["simulate", "--model", "unit", "--preset", "alpha3", "--x5", "-8e-3",
+               "--t", "1", "--n-save", "2001", "--json", "--out", str(out)])
+    assert rc == 0
+    data = json.loads(capsys.readouterr().out)
+    assert set(data) == {"outcome", "collision_time", "limit", "point", "final_gap_deviation"}
+    assert data["outcome"] == "collision" and data["limit"] == "lower" and data["point"] == 1
+    assert data["final_gap_deviation"] == pytest.approx(-8e-3)
+    assert out.is_file()
+    assert main(["simulate", "--model", "unit", "--initial", "pressed"]) == 2

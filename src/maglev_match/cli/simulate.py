@@ -1,0 +1,139 @@
+"""`maglev-match simulate`: a time simulation with the physical limits (SPEC.md 5, 6.5)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from maglev_match.cli import app
+from maglev_match.cli.common import (
+    DEFAULT_PRESET_NAME,
+    ConfigOpt,
+    JsonOpt,
+    ModelOpt,
+    OutOpt,
+    PresetOpt,
+    SetOpt,
+    UserError,
+    check_model,
+    console,
+    console_err,
+    emit_json,
+    output_path,
+    params_from_options,
+)
+from maglev_match.dynamics.simulate import SimulationOptions
+
+
+def _read_state(text: str) -> np.ndarray:
+    """An explicit state: a file (whitespace/comma separated numbers, or a JSON list) or
+    the numbers themselves separated by commas."""
+    path = Path(text)
+    if path.is_file():
+        raw = path.read_text().strip()
+        if raw.startswith("["):
+            try:
+                return np.asarray(json.loads(raw), dtype=float).ravel()
+            except (ValueError, TypeError):
+                raise UserError(f"--x0 {text}: not a JSON list of numbers") from None
+        try:
+            return np.asarray(raw.replace(",", " ").split(), dtype=float)
+        except ValueError:
+            raise UserError(f"--x0 {text}: expected numbers separated by spaces or commas") \
+                from None
+    try:
+        return np.asarray([float(v) for v in text.split(",") if v.strip()], dtype=float)
+    except ValueError:
+        raise UserError(f"--x0 '{text}': neither a file nor comma-separated numbers") from None
+
+
+@app.command("simulate")
+def simulate_command(
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    model: ModelOpt = "unit",
+    t: Annotated[float, typer.Option("--t", help="Horizon (s).")] = 5.0,
+    x5: Annotated[float | None, typer.Option(
+        "--x5", help="Model A: initial beam deflection x5(0) (m); negative opens the gap.")
+    ] = None,
+    initial: Annotated[str, typer.Option(
+        "--initial", help="'equilibrium' or 'pressed' (model B: vehicle pressed onto the "
+        "free beam, beam undeflected).")] = "equilibrium",
+    q1: Annotated[float | None, typer.Option(
+        "--q1", help="Model B: absolute first modal coordinate q1(0) (m), set on top of "
+        "--initial (undeflected beam = 0).")] = None,
+    x0: Annotated[str | None, typer.Option(
+        "--x0", help="Explicit initial state: a file of numbers (or JSON list) or "
+        "comma-separated values; overrides --initial/--x5/--q1.")] = None,
+    limits: Annotated[bool, typer.Option(
+        "--limits/--no-limits", help="Physical limits (current clamp, gap collision).")
+    ] = True,
+    rtol: Annotated[float, typer.Option("--rtol", help="Relative tolerance.")] = 1e-8,
+    atol: Annotated[float, typer.Option(
+        "--atol", help="Absolute tolerance, in units of each state's typical size.")] = 1e-8,
+    n_save: Annotated[int, typer.Option("--n-save", help="Saved time points.")] = 5001,
+    out: OutOpt = None,
+    plot: Annotated[Path | None, typer.Option(
+        "--plot", help="Figure file (PNG; an SVG is written beside it).")] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Simulate model A or B from a named or explicit initial state; report collision
+    (time, limit, levitation point), convergence or neither by the horizon."""
+    from maglev_match.simulation import initial_state, save_history, simulate_maglev
+
+    check_model(model)
+    if not t > 0:
+        raise UserError(f"--t {t}: the horizon must be > 0 s")
+    if n_save < 2:
+        raise UserError(f"--n-save {n_save}: need at least 2 saved points")
+    if not (rtol > 0 and atol > 0):
+        raise UserError("--rtol and --atol must be > 0")
+    if out is not None and out.suffix not in (".csv", ".nc"):
+        raise UserError(f"--out {out}: the history file must end in .csv or .nc")
+    params = params_from_options(preset, config, set_)
+    state = _read_state(x0) if x0 is not None else None
+    x_init = initial_state(params, model, initial=initial, x5=x5, q1=q1, state=state)
+    console_err.print(f"simulating model {'A' if model == 'unit' else 'B'} for {t:g} s ...",
+                      highlight=False)
+    sim = simulate_maglev(params, model, x_init, t, limited=limits, n_save=n_save,
+                          options=SimulationOptions(rtol=rtol, atol=atol))
+    written: list[str] = []
+    if out is not None:
+        written.append(str(save_history(sim, output_path(out, str(out)))))
+    if plot is not None:
+        from maglev_match.plots.simulate import plot_simulation
+
+        written += [str(p) for p in plot_simulation(sim, output_path(plot, str(plot)))]
+    summary = sim.summary()
+    if json_out:
+        emit_json(summary)
+        for w in written:
+            console_err.print(f"wrote {w}", highlight=False)
+        for w in sim.warnings:
+            console_err.print(f"warning: {w}", highlight=False)
+        return
+    res = sim.result
+    console.print(f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
+                  f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg, "
+                  f"limits {'on' if limits else 'off'}", highlight=False)
+    if sim.outcome == "collision":
+        console.print(f"[bold red]collision[/] at t = {sim.collision_time:.6f} s: "
+                      f"{sim.limit} gap limit at levitation point {sim.point}")
+    elif sim.outcome == "converged":
+        console.print(f"[bold green]converged[/]: within tolerance of the equilibrium from "
+                      f"t = {res.converged_time:.3f} s on")
+    elif sim.outcome == "running":
+        console.print(f"[bold yellow]running[/]: neither collided nor settled by {t:g} s")
+    else:
+        console.print(f"[bold red]failed[/]: {'; '.join(sim.warnings)}")
+    gd = np.atleast_1d(sim.final_gap_deviation)
+    console.print("final gap deviation (mm): " + ", ".join(f"{v * 1e3:.4g}" for v in gd),
+                  highlight=False)
+    console.print(f"steps: {res.accepted} accepted, {res.rejected} rejected", highlight=False)
+    for w in written:
+        console.print(f"wrote {w}", highlight=False)
