@@ -201,7 +201,7 @@ def _complex_form_eval(real_form, x, p, us) -> np.ndarray:
              if all(parts[j][(m >> j) & 1].any() for j in range(order))]
     if not masks:
         return np.zeros(np.shape(us[0]), complex)
-    args = [jnp.asarray(np.stack([parts[j][(m >> j) & 1] for m in masks]))
+    args = [np.asarray(np.stack([parts[j][(m >> j) & 1] for m in masks]))
             for j in range(order)]
     vals = np.asarray(real_form(x, p, *args))
     coef = np.array([1j ** bin(m).count("1") for m in masks])
@@ -211,19 +211,19 @@ def _complex_form_eval(real_form, x, p, us) -> np.ndarray:
 def _l1_from_forms(rhs, x, p, J, omega, q, padj) -> float:
     """Kuznetsov's l1 (paper eq. 24) from batched real forms B and C (4 calls)."""
     F = _real_forms(rhs)
-    xj, pj = jnp.asarray(x, jnp.float64), jnp.asarray(p, jnp.float64)
+    xj, pj = np.asarray(x, np.float64), np.asarray(p, np.float64)
     a, b = np.real(q), np.imag(q)
-    Baa, Bbb, Bab = np.asarray(F[2](xj, pj, jnp.asarray(np.stack([a, b, a])),
-                                    jnp.asarray(np.stack([a, b, b]))))
+    Baa, Bbb, Bab = np.asarray(F[2](xj, pj, np.asarray(np.stack([a, b, a])),
+                                    np.asarray(np.stack([a, b, b]))))
     Caaa, Cabb, Caab, Cbbb = np.asarray(F[3](
-        xj, pj, jnp.asarray(np.stack([a, a, a, b])), jnp.asarray(np.stack([a, b, a, b])),
-        jnp.asarray(np.stack([a, b, b, b]))))
+        xj, pj, np.asarray(np.stack([a, a, a, b])), np.asarray(np.stack([a, b, a, b])),
+        np.asarray(np.stack([a, b, b, b]))))
     n = len(a)
     h11 = -np.linalg.solve(J, Baa + Bbb)  # real
     h20 = np.linalg.solve(2j * omega * np.eye(n) - J, Baa - Bbb + 2j * Bab)
     hr, hi = h20.real, h20.imag
-    Bs = np.asarray(F[2](xj, pj, jnp.asarray(np.stack([a, b, a, b, a, b])),
-                         jnp.asarray(np.stack([h11, h11, hr, hi, hi, hr]))))
+    Bs = np.asarray(F[2](xj, pj, np.asarray(np.stack([a, b, a, b, a, b])),
+                         np.asarray(np.stack([h11, h11, hr, hi, hi, hr]))))
     Bq_h11 = Bs[0] + 1j * Bs[1]
     Bqb_h20 = Bs[2] + Bs[3] + 1j * (Bs[4] - Bs[5])
     Cqqqb = Caaa + Cabb + 1j * (Caab + Cbbb)
@@ -251,7 +251,8 @@ def _defining_kernels(rhs, idx: tuple[int, ...]):
             fx, jv1 + om * v2, jv2 - om * v1, jnp.stack([c @ v1 - 1.0, c @ v2])
         ])
 
-    return jax.jit(G), jax.jit(jax.jacfwd(G, argnums=0))
+    DG = jax.jacfwd(G, argnums=0)
+    return jax.jit(G), jax.jit(DG), jax.jit(lambda z, p, c: (G(z, p, c), DG(z, p, c)))
 
 
 @cache
@@ -322,14 +323,15 @@ def first_lyapunov_coefficient(
     l1 (1/s with the normalisation above): > 0 subcritical, < 0 supercritical.
     """
     pv = system.p if p is None else np.asarray(p, float)
-    J = system.jacobian(x, pv)
+    x = np.asarray(x, float)
+    J = np.asarray(system.derivatives.jacobian(x, pv))
     if q is None or p_adj is None:
         q, p_adj = hopf_eigenvectors(J, omega)
     else:
         q = np.asarray(q, complex) / np.linalg.norm(q)
         p_adj = np.asarray(p_adj, complex)
         p_adj = p_adj / np.conj(np.vdot(p_adj, q))
-    return _l1_from_forms(system.rhs, np.asarray(x, float), pv, J, float(omega), q, p_adj)
+    return _l1_from_forms(system.rhs, x, pv, J, float(omega), q, p_adj)
 
 
 def second_lyapunov_coefficient(
@@ -354,7 +356,7 @@ def second_lyapunov_coefficient(
     if q is None or p_adj is None:
         q, p_adj = hopf_eigenvectors(J, omega)
     F = _real_forms(system.rhs)
-    xj, pj = jnp.asarray(x), jnp.asarray(pv)
+    xj, pj = np.asarray(x), np.asarray(pv)
 
     def form(k, *us):
         return _complex_form_eval(F[k], xj, pj, [np.asarray(u, complex) for u in us])
@@ -476,16 +478,16 @@ def refine_hopf_point(
     v1, v2 = _normalise_pair(np.real(q), np.imag(q))
     c = v1.copy()
     z = _pack(np.asarray(x, float), v1, v2, omega, [value])
-    G, DG = _defining_kernels(system.rhs, (k,))
-    pj = jnp.asarray(base)
-    cj = jnp.asarray(c)
+    G, DG, _ = _defining_kernels(system.rhs, (k,))
+    pj = np.asarray(base)
+    cj = np.asarray(c)
     scale = _z_scale(system, omega, [value_scale or abs(value) or 1.0])
     converged = False
     res = np.inf
     n_iter = 0
     for n_iter in range(1, max_iter + 1):  # noqa: B007 (n_iter reported below)
-        g = np.asarray(G(jnp.asarray(z), pj, cj))
-        A = np.asarray(DG(jnp.asarray(z), pj, cj))
+        g = np.asarray(G(np.asarray(z), pj, cj))
+        A = np.asarray(DG(np.asarray(z), pj, cj))
         try:
             dz = -np.linalg.solve(A, g)
         except np.linalg.LinAlgError:
@@ -502,13 +504,13 @@ def refine_hopf_point(
             converged = True
             break
         if step < 1e-6:
-            g_new = np.asarray(G(jnp.asarray(z), pj, cj))
+            g_new = np.asarray(G(np.asarray(z), pj, cj))
             if np.max(np.abs(g_new[n:])) < 1e-13 * max(1.0, abs(omega)) and np.max(
                     np.abs(g_new[:n]) / (np.abs(A[:n, :n]) @ system.state_scale + 1e-300)
             ) < 1e-13:
                 converged = True
                 break
-    g = np.asarray(G(jnp.asarray(z), pj, cj))
+    g = np.asarray(G(np.asarray(z), pj, cj))
     res = float(np.max(np.abs(g[:n]) / (np.abs(np.asarray(system.jacobian(z[:n],
                 system.params_with(base, **{param: float(z[-1])}))))
                 @ system.state_scale + 1e-300)))
@@ -536,10 +538,10 @@ def _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings) -> 
     dp = np.zeros_like(pv)
     dp[system.param_index(param)] = 1.0
     kern = _crossing_kernel(system.rhs)
-    args = (jnp.asarray(xs), jnp.asarray(pv))
-    dJq = (np.asarray(kern(*args, jnp.asarray(q.real), jnp.asarray(dx), jnp.asarray(dp)))
-           + 1j * np.asarray(kern(*args, jnp.asarray(q.imag), jnp.asarray(dx),
-                                  jnp.asarray(dp))))
+    args = (np.asarray(xs), np.asarray(pv))
+    dJq = (np.asarray(kern(*args, np.asarray(q.real), np.asarray(dx), np.asarray(dp)))
+           + 1j * np.asarray(kern(*args, np.asarray(q.imag), np.asarray(dx),
+                                  np.asarray(dp))))
     speed = float(np.real(np.vdot(padj, dJq)))
     l1 = first_lyapunov_coefficient(system, xs, pv, om, q, padj)
     w = np.linalg.eigvals(J)
@@ -664,20 +666,23 @@ class _HopfCurveSolver:
         self.bounds = [tuple(map(float, bounds[k])) for k in params]
         ranges = [abs(b - a) for a, b in self.bounds]
         self.S = _z_scale(system, omega0, ranges)
-        self.G, self.DG = _defining_kernels(system.rhs, self.idx)
-        self.pj = jnp.asarray(base)
+        self.G, self.DG, self.GDG = _defining_kernels(system.rhs, self.idx)
+        self.pj = np.asarray(base)
+        self.jac = system.derivatives.jacobian
         self.tol = tol
 
     # --- basic pieces ---
     def residual_and_jac(self, u: np.ndarray, c: np.ndarray):
         z = u * self.S
-        cj = jnp.asarray(c)
-        g = np.asarray(self.G(jnp.asarray(z), self.pj, cj))
-        A = np.asarray(self.DG(jnp.asarray(z), self.pj, cj)) * self.S[None, :]
-        return g, A
+        g, A = self.GDG(z, self.pj, np.asarray(c))
+        return np.asarray(g), np.asarray(A) * self.S[None, :]
 
-    def tangent(self, u: np.ndarray, c: np.ndarray, orient: np.ndarray | None) -> np.ndarray:
-        _, A = self.residual_and_jac(u, c)
+    def tangent(self, u: np.ndarray, c: np.ndarray, orient: np.ndarray | None,
+                A: np.ndarray | None = None) -> np.ndarray:
+        """Unit tangent of the curve in scaled variables (oriented along ``orient``);
+        ``A`` is the scaled Jacobian of the defining system if already known."""
+        if A is None:
+            _, A = self.residual_and_jac(u, c)
         if orient is None:
             _, _, vh = np.linalg.svd(A)
             t = vh[-1]
@@ -700,6 +705,7 @@ class _HopfCurveSolver:
         u = u_pred.copy()
         for k in range(1, max_iter + 1):
             g, A = self.residual_and_jac(u, c)
+            self.last_jacobian = A
             H = np.concatenate([g, [row @ u - target]])
             M = np.vstack([A, row[None, :]])
             try:
@@ -719,12 +725,15 @@ class _HopfCurveSolver:
         n = self.n
         x, _, _, om, al = _unpack(z, n)
         pv = self.full_p(al)
-        J = self.system.jacobian(x, pv)
+        J = np.asarray(self.jac(x, pv))
         w = np.linalg.eigvals(J)
         others = _other_eigenvalues(w, abs(om))
         others = others[np.lexsort((-np.abs(others.imag), -others.real))]
         if om > 0:
-            q, padj = hopf_eigenvectors(J, om)
+            q = z[n : 2 * n] + 1j * z[2 * n : 3 * n]
+            q = q / np.linalg.norm(q)
+            padj = _null_vector(J.T + 1j * om * np.eye(n))
+            padj = padj / np.conj(np.vdot(padj, q))
             l1 = _l1_from_forms(self.system.rhs, x, pv, J, om, q, padj)
         else:
             l1 = float("nan")
@@ -786,10 +795,13 @@ class _HopfCurveSolver:
                 br.message = "frequency fell to zero (Bogdanov-Takens or neutral saddle)"
                 self.accept(br, z_new, c)
                 break
+            A_last = self.last_jacobian
             c_new = self.accept(br, z_new, c)
             u_prev, u = u, br.zs[-1] / self.S
+            # the corrector's last Jacobian serves for the tangent unless the eigenvector
+            # normalisation was renewed
+            t = self.tangent(u, c_new, t * inv, None if c_new is not c else A_last)
             c = c_new
-            t = self.tangent(u, c, t * inv)
             if its <= 3:
                 h = min(h * 1.5, h_max)
             elif its >= 6:
@@ -808,11 +820,15 @@ class _HopfCurveSolver:
         return br
 
     def accept(self, br: _Branch, z: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """Store a point; renew the normalisation <c, v1> = 1, <c, v2> = 0 when the
+        eigenvector has drifted far from c (returns the c in force, ``c`` itself if kept)."""
         n = self.n
         x, v1, v2, om, al = _unpack(z, n)
-        v1n, v2n = _normalise_pair(v1, v2)
-        c_new = v1n.copy()
-        br.zs.append(_pack(x, v1n, v2n, om, al))
+        c_new = c
+        if max(np.linalg.norm(v1), np.linalg.norm(v2)) > 2.0 / np.linalg.norm(c):
+            v1, v2 = _normalise_pair(v1, v2)
+            c_new = v1.copy()
+        br.zs.append(_pack(x, v1, v2, om, al))
         br.cs.append(c_new)
         br.info.append(self.point_info(br.zs[-1])[:4])
         return c_new
