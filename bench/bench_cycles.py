@@ -37,20 +37,23 @@ def main() -> None:
     hopf = locate_hopf_points(system, "omega1", 110.0, 150.0, n_scan=40).points[0]
     limits = cycle_limit_margins(params)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"Python {platform.python_version()}")
+          f"Python {platform.python_version()}, load average {os.getloadavg()[0]:.1f}")
     print(f"Hopf point omega1 = {hopf.value:.8g} rad/s, l1 = {hopf.l1:.4g}")
 
     t = time.perf_counter()
     br = cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits)
     first = time.perf_counter() - t
-    times = []
+    times, cpu = [], []
     for _ in range(repeats):
-        t = time.perf_counter()
+        t, c0 = time.perf_counter(), time.process_time()
         br = cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits)
         times.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c0)
     coll = statistics.median(times)
     print(f"collocation branch: first call (with compile) {first:.2f} s, median "
-          f"{coll:.3f} s over {repeats}; {br.steps} steps ({br.rejected_steps} rejected), "
+          f"{coll:.3f} s wall, {statistics.median(cpu):.3f} s CPU (all threads) over "
+          f"{repeats}; min {min(times):.3f} s wall; {br.steps} steps "
+          f"({br.rejected_steps} rejected), "
           f"{len(br.points)} cycles, stopped: {br.stopped_reason}")
     for s in br.special_points:
         print(f"  {s.type} at omega1 = {s.value:.8g} ({s.detail}, {s.located})")
@@ -64,7 +67,7 @@ def main() -> None:
 
     # shooting baseline over the same parameter values
     pts = br.points[1:] if not args.quick else br.points[1::4]
-    t = time.perf_counter()
+    t, c0 = time.perf_counter(), time.process_time()
     # natural continuation with a secant predictor from the last two shooting solutions
     sols = [(pts[0].value, pts[0].orbit.states[0], pts[0].period)]
     worst = 0.0
@@ -83,11 +86,13 @@ def main() -> None:
         sols.append((c.value, sh.x0, sh.period))
         worst = max(worst, abs(sh.period - c.period) / c.period)
     shoot = time.perf_counter() - t
+    shoot_cpu = time.process_time() - c0
     c = pts[len(pts) // 2]
     sh = shoot_periodic_orbit(system, c.orbit.states[0], c.period, c.orbit.p)
     ext = trajectory_extrema(system, sh.x0, sh.period, sh.p, ["gap_deviation"])
     amp = abs(ext["gap_deviation"][0] - c.max("gap_deviation")) / c.max("gap_deviation")
-    print(f"shooting baseline: {shoot:.2f} s for {len(pts)} cycles ({n_ok} converged), "
+    print(f"shooting baseline: {shoot:.2f} s wall, {shoot_cpu:.2f} s CPU for {len(pts)} "
+          f"cycles ({n_ok} converged), "
           f"max period difference {worst:.1e}; amplitude difference at omega1 = "
           f"{c.value:.5g}: {amp:.1e}")
     per_cycle_coll = coll / max(len(br.points), 1)

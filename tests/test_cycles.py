@@ -222,3 +222,49 @@ def test_model_a_stable_cycle_matches_long_simulation(model_a):
     assert np.min(gap) == pytest.approx(c.min("gap_deviation"), rel=1e-6)
     back = (sol.sol(t_end) - x0) / model_a.state_scale
     assert np.max(np.abs(back)) < 1e-5 * np.max(np.abs(x0 / model_a.state_scale))
+
+
+# --------------------------------------------------------------------------- CLI
+def _run(capsys, *args):
+    from maglev_match.cli import main
+
+    code = main(list(args))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.slow
+def test_cli_cycles_json_shape(capsys, tmp_path):
+    import json
+
+    code, out, _ = _run(capsys, "cycles", "--param", "sigma", "--at", "omega1=100",
+                        "--preset", "alpha1", "--from", "5e-4", "--to", "2e-3",
+                        "--scan", "15", "--ntst", "30", "--json", "--out", str(tmp_path))
+    assert code == 0
+    doc = json.loads(out)
+    assert set(doc["hopf"]) >= {"sigma", "l1"}
+    assert 5e-4 < doc["hopf"]["sigma"] < 2e-3
+    assert doc["branch"]
+    for row in doc["branch"]:
+        assert set(row) >= {"sigma", "period", "gap_max", "gap_min", "current_min", "stable",
+                            "unstable_multipliers"}
+        assert row["gap_max"] >= row["gap_min"]
+        assert row["stable"] == (row["unstable_multipliers"] == 0)
+    types = {s["type"] for s in doc["special_points"]}
+    assert types <= {"LPC", "PD", "NS", "LIMIT"}
+    if doc["stopped_reason"] == "limit":
+        lim = [s for s in doc["special_points"] if s["type"] == "LIMIT"][0]
+        last = doc["branch"][-1]
+        assert lim["sigma"] == pytest.approx(last["sigma"])
+        # at the contact some limit is reached: gap 0, 18 mm or current 0
+        assert min(last["gap_min"] + 0.008, 0.010 - last["gap_max"],
+                   last["current_min"] / 26.68) == pytest.approx(0.0, abs=1e-6)
+    assert (tmp_path / "cycles_unit_sigma.png").exists()
+    assert (tmp_path / "cycles_unit_sigma.csv").read_text().startswith("branch,hopf,sigma")
+
+
+def test_cli_cycles_user_errors(capsys):
+    code, _, err = _run(capsys, "cycles", "--ncol", "9")
+    assert code == 2 and "ncol" in err
+    code, _, err = _run(capsys, "cycles", "--at", "sigma")
+    assert code == 2 and "NAME=VALUE" in err

@@ -114,6 +114,8 @@ def cycles_command(
     all_hopf: Annotated[bool, typer.Option(
         "--all", help="Continue from every Hopf point in the range (default: the one "
         "nearest the design value).")] = False,
+    n_scan: Annotated[int, typer.Option(
+        "--scan", help="Grid points of the eigenvalue scan that brackets Hopf points.")] = 100,
     ntst: Annotated[int, typer.Option("--ntst", help="Mesh intervals.")] = 80,
     ncol: Annotated[int, typer.Option("--ncol", help="Collocation points (2-7).")] = 4,
     max_steps: Annotated[int, typer.Option("--max-steps", help="Continuation steps.")] = 300,
@@ -145,7 +147,9 @@ def cycles_command(
         raise UserError(f"--from/--to: empty search range [{a}, {b}]")
     t0 = time.perf_counter()
     console_err.print(f"searching Hopf points along {param} in [{a:.6g}, {b:.6g}] ...")
-    scan = locate_hopf_points(system, param, min(a, b), max(a, b))
+    if n_scan < 3:
+        raise ParameterError("--scan", n_scan, "must be at least 3")
+    scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
     hopfs = [h for h in scan.points if h.converged]
     if not hopfs:
         raise UserError(f"no Hopf point of the equilibrium along {param} in "

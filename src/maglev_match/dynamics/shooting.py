@@ -73,11 +73,13 @@ def shoot_periodic_orbit(
     p: np.ndarray | None = None,
     tol: float = 1e-11,
     max_iter: int = 20,
+    res_tol: float = 1e-11,
     rtol: float = 1e-12,
 ) -> ShootingResult:
     """Solve for a periodic orbit through (near) ``x0`` with period near ``period`` (s).
 
-    Converged when the scaled Newton update is below ``tol``. Failure is reported in the
+    Converged when the scaled Newton update is below ``tol`` or the scaled periodicity
+    residual max |phi_T(x0) - x0| / state_scale is below ``res_tol``. Failure is reported in the
     result, never raised.
     """
     p = system.p if p is None else np.asarray(p, float)
@@ -97,6 +99,8 @@ def shoot_periodic_orbit(
                                   "integration failed")
         G = (xT - x) / sc
         res = float(np.max(np.abs(G)))
+        if it > 1 and res < res_tol:  # near a Hopf point the update may stall above tol
+            return ShootingResult(x, T, p, np.linalg.eigvals(M), True, it - 1, res)
         fT = system.f(xT, p)
         A = np.zeros((n + 1, n + 1))
         A[:n, :n] = (M - np.eye(n)) * sc[None, :] / sc[:, None]
