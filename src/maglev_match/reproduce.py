@@ -430,7 +430,9 @@ def _claims_hopf(st: Study) -> list[Claim]:
             "; ".join(f"{sp.type} at ({sp.values[0]:.4g}, {sp.values[1]:.3g})"
                       for c in curves for sp in c.special_points) or "none",
             "agree" if len(gh) == 3 else "differ",
-            f"{len(gh)} generalised Hopf points found vs 3 junctions"))
+            f"{len(gh)} generalised Hopf points found vs 3 junctions",
+            "searched within omega1 {:g}-{:g} rad/s, sigma {:g}-{:g} 1/kg".format(
+                *st.settings.hopf_omega1_range, *st.settings.hopf_sigma_range)))
     except Exception as exc:  # the Hopf curve is optional for the other claims
         out.append(Claim("engineering-range", "Sec. 4", "subcritical in the engineering range",
                          "subcritical", "-", "not computed", f"{type(exc).__name__}: {exc}"))
