@@ -265,3 +265,54 @@ def test_model_a_l1_autodiff_matches_finite_differences(unit, unit_scan):
     for hp in unit_scan.points:
         l1_fd = _fd_l1(unit, hp.x, hp.p, hp.frequency)
         assert hp.l1 == pytest.approx(l1_fd, rel=1e-5)
+
+
+# ----- command line ----------------------------------------------------------------------
+def _run(capsys, *args):
+    from maglev_match.cli import main
+
+    code = main(list(args))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_cli_hopf_json(capsys, unit_scan):
+    import json
+
+    code, out, _ = _run(capsys, "hopf", "--param", "omega1", "--from", "100", "--to", "160",
+                        "--steps", "25", "--set", "sigma=4e-4", "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert len(doc["points"]) == 1
+    rec = doc["points"][0]
+    for key in ("omega1", "sigma", "frequency", "crossing_speed", "l1"):
+        assert key in rec
+    assert rec["sigma"] == pytest.approx(4e-4)
+    ref = unit_scan.points[0]  # same Hopf point found from a different scan
+    assert rec["omega1"] == pytest.approx(ref.value, rel=1e-9)
+    assert rec["l1"] == pytest.approx(ref.l1, rel=1e-6)
+
+
+def test_cli_hopf_curve_json_and_figure(capsys, tmp_path):
+    import json
+
+    code, out, _ = _run(capsys, "hopf-curve", "--params", "omega1,sigma", "--range",
+                        "sigma=3e-4:5e-4", "--range", "omega1=100:160", "--grid", "12",
+                        "--scan-steps", "20", "--out", str(tmp_path), "--json")
+    assert code == 0
+    doc = json.loads(out)
+    pts = doc["points"]
+    assert len(pts) > 5
+    for key in ("omega1", "sigma", "frequency", "l1"):
+        assert key in pts[0]
+    s = np.array([p["sigma"] for p in pts])
+    assert s.min() == pytest.approx(3e-4) and s.max() == pytest.approx(5e-4)
+    assert doc["special_points"] == []
+    for f in doc["figures"]:
+        assert (tmp_path / f.split("/")[-1]).exists()
+
+
+def test_cli_hopf_curve_rejects_unknown_parameter(capsys):
+    code, _, err = _run(capsys, "hopf-curve", "--params", "omega1,nonsense")
+    assert code == 2
+    assert "nonsense" in err

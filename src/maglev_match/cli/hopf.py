@@ -251,12 +251,18 @@ def hopf_curve_command(
     stem = f"hopf_curve_{model}_{names[0]}_{names[1]}"
     csv_path = folder / f"{stem}.csv"
     points, special = [], []
+    span0 = bounds[names[0]][1] - bounds[names[0]][0]
+    span1 = bounds[names[1]][1] - bounds[names[1]][0]
     for k, c in enumerate(curves):
         for pt in c.points:
             points.append({names[0]: pt.values[0], names[1]: pt.values[1],
                            "frequency": pt.frequency, "l1": pt.l1, "branch": k,
                            "others_stable": pt.others_stable})
         for sp in c.special_points:
+            if sp.type == "HH" and any(
+                    r["type"] == "HH" and abs(r[names[0]] - sp.values[0]) <= 1e-6 * span0
+                    and abs(r[names[1]] - sp.values[1]) <= 1e-6 * span1 for r in special):
+                continue  # the same double-Hopf point seen from the crossing branch
             rec = {"type": sp.type, names[0]: sp.values[0], names[1]: sp.values[1],
                    "frequency": sp.frequency, "branch": k, "converged": sp.converged}
             if sp.type == "GH":

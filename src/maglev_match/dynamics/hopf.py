@@ -40,7 +40,7 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from maglev_match.dynamics.equilibria import find_equilibrium, root_locus
+from maglev_match.dynamics.equilibria import find_equilibrium
 from maglev_match.dynamics.system import System
 
 __all__ = [
@@ -580,13 +580,12 @@ def locate_hopf_points(
     """
     base = system.p if p is None else np.asarray(p, float)
     values = np.linspace(start, stop, int(n_scan))
-    rl = root_locus(system, param, values, base, progress=progress)
-    warnings = list(rl.warnings)
+    eqs, eig, conv, warnings = _scan_equilibria(system, param, values, base, progress)
+    max_real = eig.real.max(axis=1)
     points: list[HopfPoint] = []
-    eig = rl.eigenvalues
     for j in range(len(values) - 1):
         wa, wb = eig[j], eig[j + 1]
-        if not (rl.converged[j] and rl.converged[j + 1]):
+        if not (conv[j] and conv[j + 1]):
             continue
         # complex eigenvalues with Im > 0 at the left end, matched to the right end
         for lam_a in wa[wa.imag > 1e-9]:
@@ -599,7 +598,7 @@ def locate_hopf_points(
             t = lam_a.real / (lam_a.real - lam_b.real)
             v0 = values[j] + t * (values[j + 1] - values[j])
             om0 = float(lam_a.imag + t * (lam_b.imag - lam_a.imag))
-            x0 = rl.equilibria[j] + t * (rl.equilibria[j + 1] - rl.equilibria[j])
+            x0 = eqs[j] + t * (eqs[j + 1] - eqs[j])
             pk = system.params_with(base, **{param: v0})
             eq = find_equilibrium(system, pk, x0)
             hp = refine_hopf_point(system, param, v0, eq.x, om0, p=base,
@@ -615,8 +614,36 @@ def locate_hopf_points(
             points.append(hp)
     points.sort(key=lambda h: h.value)
     return HopfScan(param=param, start=float(start), stop=float(stop), points=points,
-                    scan_values=values, max_real_part=rl.max_real_part,
+                    scan_values=values, max_real_part=max_real,
                     warnings=tuple(warnings))
+
+
+def _scan_equilibria(system: System, param: str, values: np.ndarray, base: np.ndarray,
+                     progress=None):
+    """Equilibria and sorted eigenvalues along ``param`` (natural continuation, falling back
+    to the system's guess; an equilibrium whose Newton stalls at round-off level, scaled
+    residual < 1e-9, is accepted for bracketing since every Hopf point is refined after)."""
+    eqs, eigs, conv, warnings = [], [], [], []
+    x = system.x_guess
+    for k, v in enumerate(values):
+        pk = system.params_with(base, **{param: float(v)})
+        eq = find_equilibrium(system, pk, x)
+        if not eq.converged:
+            eq2 = find_equilibrium(system, pk, system.x_guess)
+            if eq2.scaled_residual < eq.scaled_residual:
+                eq = eq2
+        ok = eq.converged or eq.scaled_residual < 1e-9
+        if ok:
+            x = eq.x
+        else:
+            warnings.append(f"{param} = {v:g}: equilibrium not found ({eq.message})")
+        w = np.linalg.eigvals(np.asarray(system.derivatives.jacobian(eq.x, pk)))
+        eigs.append(w[np.lexsort((-np.abs(w.imag), -w.real))])
+        eqs.append(eq.x)
+        conv.append(ok)
+        if progress is not None:
+            progress(k + 1, len(values))
+    return np.array(eqs), np.array(eigs), np.array(conv), warnings
 
 
 def _with_warning(hp: HopfPoint, msg: str) -> HopfPoint:

@@ -94,8 +94,18 @@ def hopf_curve_figure(
             ax.plot(seg[:, 0], seg[:, 1], _LINESTYLE[kind],
                     color=_COLOR[kind] if others_ok else "0.55", lw=2.0, label=label)
     counts: dict[str, int] = {}
+    seen: list[tuple[str, np.ndarray]] = []
+    span = None
+    if grid is not None:
+        span = np.array([np.ptp(grid[0]), np.ptp(grid[1])])
     for curve in curves:
         for sp in curve.special_points:
+            # a double-Hopf point lies on two branches: mark it once
+            v = np.asarray(sp.values, float)
+            scale = span if span is not None else np.maximum(np.abs(v), 1e-300)
+            if any(t == sp.type and np.all(np.abs(v - w) <= 1e-6 * scale) for t, w in seen):
+                continue
+            seen.append((sp.type, v))
             counts[sp.type] = counts.get(sp.type, 0) + 1
             name = f"{sp.type}{counts[sp.type]}"
             text = name
