@@ -50,7 +50,7 @@ CASES = ("unstable_equilibrium", "unstable_cycle", "no_cycle_within_limits")
 class CycleSettings:
     """Collocation and continuation settings used for the index."""
 
-    ntst: int = 60
+    ntst: int = 40
     ncol: int = 4
     max_steps: int = 400
 

@@ -60,7 +60,7 @@ def bounding_cycle(
     search: Mapping[str, tuple[float, float]],
     *,
     limits: Callable | None = None,
-    n_scan: int = 160,
+    n_scan: int = 60,
     ntst: int = 60,
     ncol: int = 4,
     max_steps: int = 400,

@@ -86,11 +86,10 @@ def find_equilibrium(
     x = np.array(system.x_guess if x0 is None else x0, dtype=float)
     message = ""
     it = 0
-    res = system.scaled_residual(x, p)
+    fx, J = system.f_and_jacobian(x, p)
+    res = float(np.max(np.abs(fx) / system.residual_scale(J)))
     while res > tol and it < max_iter:
         it += 1
-        J = system.jacobian(x, p)
-        fx = system.f(x, p)
         try:
             dx = np.linalg.solve(J, -fx)
         except np.linalg.LinAlgError:
@@ -100,14 +99,15 @@ def find_equilibrium(
         lam = 1.0
         for _ in range(30):
             trial = x + lam * dx
-            r_trial = system.scaled_residual(trial, p)
+            f_t, J_t = system.f_and_jacobian(trial, p)
+            r_trial = float(np.max(np.abs(f_t) / system.residual_scale(J_t)))
             if np.isfinite(r_trial) and r_trial < res:
                 break
             lam *= 0.5
         else:
             message = "line search failed: the residual does not decrease"
             break
-        x, res = trial, r_trial
+        x, res, fx, J = trial, r_trial, f_t, J_t
     converged = bool(res <= tol)
     if not converged and not message:
         message = f"no convergence in {max_iter} iterations (scaled residual {res:.3e})"
@@ -116,7 +116,7 @@ def find_equilibrium(
         p=np.array(p),
         converged=converged,
         iterations=it,
-        residual=float(np.max(np.abs(system.f(x, p)))),
+        residual=float(np.max(np.abs(fx))),
         scaled_residual=float(res),
         message=message,
     )

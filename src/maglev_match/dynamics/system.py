@@ -20,7 +20,7 @@ formulas need. Compiled functions are cached per right-hand side, so building ma
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
@@ -46,6 +46,7 @@ class CompiledDerivatives:
     jacobian_batch: Callable[[Array, Array], Array]
     f_batch: Callable[[Array, Array], Array]
     param_jacobian: Callable[[Array, Array], Array]
+    f_and_jacobian: Callable[[Array, Array], tuple[Array, Array]]
     B: Callable[..., Array]
     C: Callable[..., Array]
 
@@ -70,6 +71,7 @@ def compiled(rhs: RHS) -> CompiledDerivatives:
         jacobian_batch=jax.jit(jax.vmap(jac)),
         f_batch=jax.jit(jax.vmap(rhs)),
         param_jacobian=jax.jit(jax.jacfwd(rhs, argnums=1)),
+        f_and_jacobian=jax.jit(lambda x, p: (rhs(x, p), jac(x, p))),
         B=jax.jit(second),
         C=jax.jit(third),
     )
@@ -226,18 +228,19 @@ class System:
             return np.asarray(_observable_single(g)(x, pj))
         return np.asarray(_observable_batch(g)(x, pj))
 
+    def f_and_jacobian(self, x: Array, p: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """f(x, p) and d f / d x in one compiled call."""
+        fx, J = self.derivatives.f_and_jacobian(np.asarray(x, float),
+                                                np.asarray(self.p if p is None else p, float))
+        return np.asarray(fx), np.asarray(J)
+
+    def residual_scale(self, J: np.ndarray) -> np.ndarray:
+        """Per-equation scale sum_j |J_ij| scale_j used by :meth:`scaled_residual`."""
+        denom = np.abs(J) @ self.state_scale
+        return np.where(denom > 0, denom, 1.0)
+
     def scaled_residual(self, x: Array, p: np.ndarray | None = None) -> float:
         """max_i |f_i(x)| / sum_j |J_ij| scale_j: a dimensionless size of the residual."""
-        fx = self.f(x, p)
-        J = self.jacobian(x, p)
-        denom = np.abs(J) @ self.state_scale
-        denom = np.where(denom > 0, denom, 1.0)
-        return float(np.max(np.abs(fx) / denom))
-
-
-def state_index(names: Sequence[str], name: str) -> int:
-    """Position of a state by name, with a clear error."""
-    try:
-        return list(names).index(name)
-    except ValueError:
-        raise KeyError(f"no state '{name}'; states are: " + ", ".join(names)) from None
+        fx, J = self.f_and_jacobian(x, p)
+        return float(np.max(np.abs(fx) / self.residual_scale(J)))
