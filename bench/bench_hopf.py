@@ -14,6 +14,7 @@ Usage: .venv/bin/python bench/bench_hopf.py [--quick]
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import statistics
 import time
@@ -30,13 +31,19 @@ from maglev_match.dynamics.hopf import (
 from maglev_match.models import build_system
 from maglev_match.params import load_preset
 
+CPU: dict[str, float] = {}
 
-def timed(fn, repeat: int) -> tuple[float, object]:
-    times, out = [], None
+
+def timed(fn, repeat: int, label: str = "") -> tuple[float, object]:
+    """Median wall time; the median CPU time of this process is kept in CPU[label] (a
+    fairer figure when other jobs share the machine)."""
+    times, cpu, out = [], [], None
     for _ in range(repeat):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         out = fn()
         times.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    CPU[label] = statistics.median(cpu)
     return statistics.median(times), out
 
 
@@ -69,7 +76,7 @@ def main() -> None:
     t0 = time.perf_counter()
     full_curve()  # compile
     t_compile = time.perf_counter() - t0
-    t_curve, curves = timed(full_curve, repeat)
+    t_curve, curves = timed(full_curve, repeat, "curve")
     n_pts = sum(len(c.points) for c in curves)
 
     # l1 at 200 points along the curve
@@ -80,23 +87,29 @@ def main() -> None:
     first_lyapunov_coefficient(system, *args_l1[0])
     l1_with_system_forms(system, *args_l1[0])
     t_l1, ours = timed(lambda: [first_lyapunov_coefficient(system, *a) for a in args_l1],
-                       repeat)
-    t_ref, ref = timed(lambda: [l1_with_system_forms(system, *a) for a in args_l1], repeat)
+                       repeat, "l1")
+    t_ref, ref = timed(lambda: [l1_with_system_forms(system, *a) for a in args_l1], repeat,
+                       "ref")
     err = float(np.max(np.abs(np.array(ours) - np.array(ref)) / np.abs(np.array(ref))))
 
     # baseline: gridding max Re(lambda)
     g1, g2 = np.linspace(30, 400, 400), np.linspace(1e-4, 8e-4, 200)
     stability_grid(system, ("omega1", "sigma"), g1[:4], g2[:4])
-    t_grid, _ = timed(lambda: stability_grid(system, ("omega1", "sigma"), g1, g2), repeat)
+    t_grid, _ = timed(lambda: stability_grid(system, ("omega1", "sigma"), g1, g2), repeat,
+                      "grid")
 
-    print(f"machine: {platform.processor() or platform.machine()}, "
-          f"python {platform.python_version()}")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+          f"python {platform.python_version()}, load average {load:.1f}")
     print(f"first run (compilation included): {t_compile:.2f} s")
     print(f"Hopf curve, both branches, sigma in [1e-4, 8e-4]: {n_pts} points with l1, "
-          f"median {t_curve:.3f} s ({1e3 * t_curve / n_pts:.2f} ms/point)")
-    print(f"l1 at 200 points: ours {t_l1:.3f} s, System.B/C reference {t_ref:.3f} s, "
+          f"median {t_curve:.3f} s wall, {CPU['curve']:.3f} s CPU "
+          f"({1e3 * t_curve / n_pts:.2f} ms/point)")
+    print(f"l1 at 200 points: ours {t_l1:.3f} s ({CPU['l1']:.3f} s CPU), System.B/C "
+          f"reference {t_ref:.3f} s ({CPU['ref']:.3f} s CPU), "
           f"ratio {t_ref / t_l1:.1f}x, max rel. difference {err:.1e}")
     print(f"baseline grid 400 x 200 of max Re(lambda): {t_grid:.3f} s "
+          f"({CPU['grid']:.3f} s CPU) "
           f"(resolution {g1[1] - g1[0]:.2f} rad/s, {g2[1] - g2[0]:.2e} 1/kg); "
           f"continuation/grid time ratio {t_curve / t_grid:.2f}")
 
