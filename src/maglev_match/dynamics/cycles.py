@@ -753,10 +753,12 @@ def cycle_branch(
         Uref, _, _ = prob.unpack(Yguess)
         return _newton(prob, Yguess, Uref, row, value / prob.lam_scale, tol, max_newton + 4)
 
-    def secant_locate(Ybase, tbase, s1, fun, f0, f1):
-        """Find s in (0, s1) with fun(solution at step s) = 0 (Illinois regula falsi)."""
+    def secant_locate(Ybase, tbase, s1, fun, f0, f1, inside=False):
+        """Find s in (0, s1) with fun(solution at step s) = 0 (Illinois regula falsi).
+        Returns the evaluated point with the smallest |fun| (with ``inside``: among those
+        with fun >= 0, if any)."""
         a, fa, b, fb = 0.0, f0, s1, f1
-        best = None
+        cands = []
         side = 0
         s_last = None
         for _ in range(30):
@@ -765,9 +767,9 @@ def cycle_branch(
                 s = 0.5 * (a + b)
             Y, ok, its, res, lu, blocks = corrector(Ybase, tbase, s, 3 * max_newton)
             if not ok:
-                return best
+                break
             fs = fun(Y, lu)
-            best = (Y, its, res, lu, blocks, s)
+            cands.append((fs, (Y, its, res, lu, blocks, s)))
             if fs == 0 or (s_last is not None and abs(s - s_last) < 1e-10 * abs(s1)):
                 break
             s_last = s
@@ -781,7 +783,10 @@ def cycle_branch(
                 if side == 1:
                     fb *= 0.5
                 side = 1
-        return best
+        if not cands:
+            return None
+        pool = [c for c in cands if c[0] >= 0] if inside else []
+        return min(pool or cands, key=lambda c: abs(c[0]))[1]
 
     while step < max_steps:
         Y, ok, its, resid, lu, blocks = corrector(Yprev, tY, h_step)
@@ -834,7 +839,8 @@ def cycle_branch(
                     orb = PeriodicOrbit(prob.mesh.copy(), m, U, T, prob.params(lam))
                     return _margin(limits, system, orb)[0]
 
-                found = secant_locate(Yprev, tY, h_step, fmargin, mg_old, mg_new)
+                found = secant_locate(Yprev, tY, h_step, fmargin, mg_old, mg_new,
+                                      inside=True)
             if found is not None:
                 Yl, itl, resl, _, blkl, _ = found
                 lim_pt = make_point(Yl, blkl, itl, resl, kind="limit")
