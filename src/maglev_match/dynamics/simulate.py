@@ -11,7 +11,8 @@ through the solver's dense interpolant:
   times; if no sample is negative, the sampled minimum of each entry is refined by a
   golden-section search on its two neighbouring sub-intervals, so an entry that dips below
   zero and comes back *within one step* (grazing) is still caught. The first crossing is
-  then located by bisection of ``g(interpolant(t))`` to about 1e-15 of the step length.
+  then located by repeated 16-section of ``g(interpolant(t))`` (keeping the first negative
+  point each round) to about 1e-15 of the step length.
 * **Convergence.** With a reference state ``x_ref`` (an equilibrium), the scaled distance
   ``d(t) = max_i |x_i - x_ref_i| / scale_i`` is checked at the end of every accepted step.
   The run counts as *converged* once ``d <= converge_tol`` has held without interruption
@@ -237,8 +238,8 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                 go = go & ~conv_done
             return go
 
-        def locate_event(interp, ta, tb):
-            """First time in [ta, tb] at which some entry of g is negative (inf if none),
+        def locate_event(interp, ta, tb, active):
+            """First time in [ta, tb] at which an entry of g is negative (inf if none),
             the entry, and the smallest value of each entry seen in the step."""
             s = ta + (tb - ta) * jnp.linspace(0.0, 1.0, samples + 1)
             G = jax.vmap(lambda tt: g_of_z(interp.evaluate(tt)))(s)  # (samples+1, m)
@@ -248,57 +249,75 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             kmin = jnp.argmin(G, axis=0)
             g_lo = jnp.min(G, axis=0)
             spread = jnp.max(G, axis=0) - g_lo
-            idx = jnp.arange(m)
 
             def gj(j, tt):
                 return g_of_z(interp.evaluate(tt))[j]
 
-            def refine_min(j):
-                # golden-section search for the minimum of entry j around sample kmin[j]
-                k = kmin[j]
+            # Grazing: an entry can dip below zero between samples only if its sampled
+            # minimum is smaller than its variation within the step. The entry most at
+            # risk (smallest ratio) gets its minimum refined by golden-section search on
+            # the two sub-intervals around its smallest sample. unvmap_any keeps this a
+            # real branch under vmap (taken if any run of a batch needs it).
+            risk = g_lo / jnp.maximum(spread, 1e-300)
+            near = (g_lo <= spread) & ~any_neg & active
+            j_r = jnp.argmin(jnp.where(near, risk, jnp.inf))
+
+            def refine_min():
+                # zoom: sample 8 sub-intervals at once, keep the two around the smallest
+                # value (bracket shrinks 4x per round, 4^6 ~ 4e3 in all)
+                k = kmin[j_r]
                 lo = s[jnp.maximum(k - 1, 0)]
                 hi = s[jnp.minimum(k + 1, samples)]
 
-                def body(_, ab):
-                    a, b = ab
-                    c1 = b - _GOLDEN * (b - a)
-                    c2 = a + _GOLDEN * (b - a)
-                    left = gj(j, c1) < gj(j, c2)
-                    return (jnp.where(left, a, c1), jnp.where(left, c2, b))
+                def body(_, carry):
+                    lo, hi, best_t, best_g = carry
+                    tt = jnp.linspace(lo, hi, 9)
+                    vals = jax.vmap(lambda u: gj(j_r, u))(tt)
+                    kk = jnp.argmin(vals)
+                    better = vals[kk] < best_g
+                    return (tt[jnp.maximum(kk - 1, 0)], tt[jnp.minimum(kk + 1, 8)],
+                            jnp.where(better, tt[kk], best_t),
+                            jnp.where(better, vals[kk], best_g))
 
-                a, b = jax.lax.fori_loop(0, 24, body, (lo, hi))
-                tm = 0.5 * (a + b)
-                return tm, jnp.minimum(gj(j, tm), g_lo[j])
+                _, _, tm, gm = jax.lax.fori_loop(
+                    0, 6, body, (lo, hi, s[k], g_lo[j_r]))
+                return tm, gm
 
-            # A dip below zero between samples is only possible when the margin is
-            # smaller than its variation within the step; refine only then. unvmap_any
-            # keeps this a real branch under vmap (taken if any run of a batch needs it).
-            near = jnp.any(g_lo <= spread)
             t_min, g_min = jax.lax.cond(
-                eqxi.unvmap_any(near), lambda: jax.vmap(refine_min)(idx),
-                lambda: (s[kmin], g_lo))
-            graze = ~any_neg & (g_min < 0)
-            hit = any_neg | graze
-            # bracket [a, b] with g_j(a) >= 0 > g_j(b)
-            a = jnp.where(any_neg, s[jnp.maximum(first - 1, 0)], s[jnp.maximum(kmin - 1, 0)])
-            b = jnp.where(any_neg, s[first], t_min)
+                eqxi.unvmap_any(jnp.any(near)), refine_min,
+                lambda: (s[kmin[j_r]], g_lo[j_r]))
+            graze = jnp.any(near) & (g_min < 0)
+            # candidate brackets [a_j, b_j] with g_j(a_j) >= 0 > g_j(b_j)
+            a_j = s[jnp.maximum(first - 1, 0)]
+            b_j = jnp.where(any_neg, s[first], jnp.inf)
+            a_j = a_j.at[j_r].set(jnp.where(graze, s[jnp.maximum(kmin[j_r] - 1, 0)], a_j[j_r]))
+            b_j = b_j.at[j_r].set(jnp.where(graze, t_min, b_j[j_r]))
+            hit = any_neg | (graze & (jnp.arange(m) == j_r))
+            # the earliest bracket holds the first crossing (entries that cross inside the
+            # same sub-interval are told apart by their order in g only)
+            j_hit = jnp.argmin(b_j)
 
-            def bisect(j, a, b):
+            def bisect():
+                # 16-section: evaluate 15 interior points at once and keep the sub-interval
+                # of the first negative one (16^13 ~ 5e15 in all); taking the *first*
+                # negative point never skips over an earlier dip
                 def body(_, ab):
                     lo, hi = ab
-                    mid = 0.5 * (lo + hi)
-                    up = gj(j, mid) < 0
-                    return (jnp.where(up, lo, mid), jnp.where(up, mid, hi))
+                    tt = jnp.linspace(lo, hi, 17)
+                    neg = jax.vmap(lambda u: gj(j_hit, u))(tt) < 0
+                    neg = neg.at[16].set(True)
+                    kk = jnp.maximum(jnp.argmax(neg), 1)
+                    return tt[kk - 1], tt[kk]
 
-                lo, hi = jax.lax.fori_loop(0, 52, body, (a, b))
+                lo, hi = jax.lax.fori_loop(0, 13, body, (a_j[j_hit], b_j[j_hit]))
                 return hi  # first time found outside the limit
 
-            t_cross = jax.lax.cond(
-                eqxi.unvmap_any(jnp.any(hit)), lambda: jax.vmap(bisect)(idx, a, b),
-                lambda: jnp.full((m,), jnp.inf))
-            t_cross = jnp.where(hit, t_cross, jnp.inf)
-            j_hit = jnp.argmin(t_cross)
-            return t_cross[j_hit], j_hit, g_min
+            # under vmap, finished runs keep being stepped (and masked): exclude them
+            any_hit = jnp.any(hit) & active
+            t_cross = jax.lax.cond(eqxi.unvmap_any(any_hit), bisect, lambda: jnp.inf)
+            t_cross = jnp.where(any_hit, t_cross, jnp.inf)
+            g_seen = g_lo.at[j_r].set(jnp.minimum(g_lo[j_r], g_min))
+            return t_cross, j_hit, g_seen
 
         def save_until(c, interp, t_stop):
             def scond(sc):
@@ -328,7 +347,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             interp = interp_cls(t0=t, t1=tn, **dense)
 
             if m:
-                t_hit, j_hit, gmin_step = locate_event(interp, t, tn)
+                t_hit, j_hit, gmin_step = locate_event(interp, t, tn, cond(c) & keep)
                 collide = keep & jnp.isfinite(t_hit)
                 # values past a collision inside the step are not part of the run
                 gmin_step = jnp.where(collide, jnp.maximum(gmin_step, 0.0), gmin_step)
