@@ -19,6 +19,7 @@ j = 1..6 (points 2k-1, 2k on frame k).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -446,7 +447,7 @@ def critical_disturbance(
     if not tol > 0:
         raise ParameterError("tol", tol, "must be > 0")
     opts = options or SimulationOptions()
-    opts = SimulationOptions(**{**opts.__dict__, "stop_on_converged": True})
+    opts = dataclasses.replace(opts, stop_on_converged=True)
     system = _system(params, "unit", True)
     events = _events_for(params, "unit")
     # x5 = -d opens the gap (c = c0 + d): upper limit at d = gap_max - c0

@@ -8,9 +8,11 @@ through the solver's dense interpolant:
 * **Limit events.** An event function ``g(x, p) -> array`` (m entries) describes limits;
   a negative entry means "this limit has been left" and ends the run. Inside every
   accepted step ``[t_a, t_b]`` the interpolant is sampled at ``samples + 1`` equally spaced
-  times; if no sample is negative, the sampled minimum of each entry is refined by a
-  golden-section search on its two neighbouring sub-intervals, so an entry that dips below
-  zero and comes back *within one step* (grazing) is still caught. The first crossing is
+  times; if no sample is negative, the entry closest to its limit (sampled minimum
+  relative to its variation over the step, and only if that minimum is below the
+  variation) has its minimum refined by zooming in on the two sub-intervals around its
+  smallest sample (6 rounds of 8-section), so an entry that dips below zero and comes back
+  *within one step* (grazing) is still caught. The first crossing is
   then located by repeated 16-section of ``g(interpolant(t))`` (keeping the first negative
   point each round) to about 1e-15 of the step length.
 * **Convergence.** With a reference state ``x_ref`` (an equilibrium), the scaled distance
@@ -67,7 +69,6 @@ _SOLVERS = {
     "dopri5": diffrax.Dopri5,
     "tsit5": diffrax.Tsit5,
 }
-_GOLDEN = 0.5 * (np.sqrt(5.0) - 1.0)
 
 
 @dataclass(frozen=True)
@@ -153,6 +154,8 @@ class BatchSimulation:
     steps: np.ndarray
     t: np.ndarray
     x: np.ndarray | None
+    accepted: np.ndarray | None = None
+    rejected: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.outcome)
@@ -174,8 +177,8 @@ class BatchSimulation:
                             else float(self.converged_time[k])),
             min_event_value=self.min_event_value[k],
             steps=int(self.steps[k]),
-            accepted=-1,
-            rejected=-1,
+            accepted=int(self.accepted[k]) if self.accepted is not None else -1,
+            rejected=int(self.rejected[k]) if self.rejected is not None else -1,
         )
 
 
@@ -255,7 +258,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
 
             # Grazing: an entry can dip below zero between samples only if its sampled
             # minimum is smaller than its variation within the step. The entry most at
-            # risk (smallest ratio) gets its minimum refined by golden-section search on
+            # risk (smallest ratio) gets its minimum refined by zooming in on
             # the two sub-intervals around its smallest sample. unvmap_any keeps this a
             # real branch under vmap (taken if any run of a batch needs it).
             risk = g_lo / jnp.maximum(spread, 1e-300)
@@ -551,4 +554,6 @@ def simulate_batch(
         steps=o["steps"],
         t=ts,
         x=o["ys"] if ts.size else None,
+        accepted=o["accepted"],
+        rejected=o["rejected"],
     )
