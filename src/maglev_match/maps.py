@@ -131,7 +131,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     from maglev_match.dynamics.equilibria import eigenvalue_analysis
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.dynamics.paths import PATH_PARAM, path_system
-    from maglev_match.models.limits import orbit_limit_margins
+    from maglev_match.limits_check import cycle_limit_margins
     from maglev_match.models.unit import param_vector, unit_system
 
     yv = spec.y.values[row]
@@ -162,7 +162,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         nodes.append(param_vector(ext_hi))
     t_end = len(nodes) - 1.0
     path = path_system(system, np.array(nodes))
-    limits = orbit_limit_margins(pts[0].gap_min - pts[0].c0, pts[0].gap_max - pts[0].c0)
+    limits = cycle_limit_margins(pts[0], include_current=False)
     scan = locate_hopf_points(path, PATH_PARAM, 0.0, t_end, n_scan=3 * len(nodes))
     grid_t = np.arange(nx) + off
     stable_t = {int(t): bool(st) for t, st in zip(grid_t, stable, strict=True)}

@@ -36,7 +36,7 @@ from maglev_match.dynamics.basin import bounding_cycle
 from maglev_match.dynamics.cycles import CyclePoint
 from maglev_match.dynamics.equilibria import StabilityResult, stability
 from maglev_match.dynamics.system import System
-from maglev_match.models.limits import orbit_limit_margins
+from maglev_match.limits_check import cycle_limit_margins
 from maglev_match.models.unit import unit_system
 from maglev_match.params import Params
 
@@ -145,7 +145,7 @@ def matching_index(
     res = index_of_system(
         system, system.p, w0=params.w0, h_max=params.gap_max - params.c0,
         search=search_ranges(params),
-        limits=orbit_limit_margins(params.gap_min - params.c0, params.gap_max - params.c0),
+        limits=cycle_limit_margins(params, include_current=False),
         stability_result=stability_result,
         omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
     )
