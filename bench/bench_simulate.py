@@ -18,7 +18,6 @@ import time
 
 os.environ.setdefault("MAGLEV_MATCH_CACHE", "")  # measure real compile times
 
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
@@ -37,7 +36,7 @@ RTOL, ATOL = 1e-8, 1e-8  # ATOL in units of each state's typical size (both side
 
 # ----------------------------------------------------------------------------- NumPy RHS
 def unit_rhs_numpy(P):
-    m, M, g = P.m, P.M, P.g
+    m, M = P.m, P.M
     K, c0, i0 = P.K, P.c0, P.i0
     r0 = i0 / c0
     w1, xi1, sig = P.omega1, P.xi1, P.sigma
@@ -93,7 +92,7 @@ def vehicle_rhs_numpy(P):
         i, y1, v = x[L["i"]], x[L["y1"]], x[L["v"]]
         r = np.maximum(i, 0.0) / c
         F = K * (r - r0) * (r + r0)
-        z, th, zd, thd = body[0:6:2], body[1:6:2], bd[0:6:2], bd[1:6:2]
+        z, zd = body[0:6:2], bd[0:6:2]
         d = z - body[6] - b * body[7]
         dd = zd - bd[6] - b * bd[7]
         susp = P.k2 * d + P.c2 * dd
@@ -203,7 +202,8 @@ def main(quick: bool) -> None:
     t0 = time.perf_counter()
     sp_out = [scipy_run(fA, gA, PA, x0[k], 5.0, SA.state_scale) for k in idx]
     sp_b = (time.perf_counter() - t0) * nb / n_sp
-    agree = sum((s.status == 1) == (bb.outcome[k] == "collision") for s, k in zip(sp_out, idx))
+    agree = sum((s.status == 1) == (bb.outcome[k] == "collision")
+                for s, k in zip(sp_out, idx, strict=True))
     print(f"batch of {nb} model-A runs (5 s): ours {ours_b:.3f} s, SciPy "
           f"{'(32 runs scaled) ' if quick else ''}{sp_b:.2f} s, ratio {sp_b / ours_b:.1f}x; "
           f"first call (compile) {compile_batch:.2f} s; outcomes: "
