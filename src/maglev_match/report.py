@@ -464,14 +464,14 @@ def cycle_diagram(params: Params, param: str, lo: float, hi: float,
     a physical gap limit or leaves [lo, hi]."""
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.limits_check import cycle_limit_margins
     from maglev_match.models import build_system
-    from maglev_match.models.limits import orbit_limit_margins
 
     system = build_system(params, "unit")
     n = n_scan or (60 if settings.quick else 160)
     scan = locate_hopf_points(system, param, lo, hi, n_scan=n)
     limits = (params.gap_min - params.c0, params.gap_max - params.c0)
-    margins = orbit_limit_margins(*limits)
+    margins = cycle_limit_margins(params, include_current=False)
     branches = []
     for hp in scan.points:
         if not hp.converged:

@@ -27,21 +27,3 @@ def gap_margins(gap, gap_min, gap_max):
     Returns an array [..., 2] with (gap - gap_min, gap_max - gap)."""
     return jnp.stack([gap - gap_min, gap_max - gap], axis=-1)
 
-
-def orbit_limit_margins(gap_min_dev: float, gap_max_dev: float, include_current: bool = False):
-    """A limit check for periodic orbits of a maglev System: returns a function
-    ``(system, orbit) -> {limit name: margin}`` with margins in metres (amperes for the
-    current), positive inside the physical range. ``gap_min_dev``/``gap_max_dev`` are the
-    allowed gap deviations c - c0 (m), i.e. gap_min - c0 and gap_max - c0."""
-
-    def margins(system, orbit) -> dict[str, float]:
-        import numpy as np
-
-        g = np.asarray(system.observe("gap_deviation", orbit.states, orbit.p))
-        out = {"gap_lower": float(g.min() - gap_min_dev), "gap_upper": float(gap_max_dev - g.max())}
-        if include_current:
-            i = np.asarray(system.observe("current", orbit.states, orbit.p))
-            out["current_zero"] = float(i.min())
-        return out
-
-    return margins
