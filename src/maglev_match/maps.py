@@ -34,6 +34,14 @@ __all__ = ["Axis", "MapSpec", "parse_axis", "compute_row", "run_map", "map_datas
 CASE_CODES = {"unstable_equilibrium": 0, "unstable_cycle": 1, "no_cycle_within_limits": 2}
 MAP_VARIABLES = ("chi", "h", "w0", "stable", "max_real_part", "hopf_distance", "case",
                  "omega1_point", "sigma_point", "current_reverses", "resolved")
+# One worker process per core, each single-threaded: on 2 cores a row of 100 points runs in
+# 1.6 s single-threaded against 2.3 s with XLA's and BLAS's own thread pools (measured).
+SINGLE_THREADED_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
+}
 # Largest grid accepted (points); beyond it the result arrays alone would not fit.
 MAX_POINTS = 4_000_000
 
@@ -328,7 +336,7 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
     if scheduler is None:
         n = workers or os.cpu_count() or 1
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=None, env=SINGLE_THREADED_ENV)
         client = Client(cluster)
     else:
         client = Client(scheduler)
