@@ -12,7 +12,13 @@ import numpy as np
 import typer
 from rich.console import Console
 
-from maglev_match.params import DEFAULT_PRESET, ParameterError, Params, load_params
+from maglev_match.params import (
+    DEFAULT_PRESET,
+    PARAMETER_DOCS,
+    ParameterError,
+    Params,
+    load_params,
+)
 
 console = Console()
 console_err = Console(stderr=True)
@@ -50,6 +56,26 @@ def check_model(model: str) -> str:
     if model not in ("unit", "vehicle"):
         raise ParameterError("--model", model, "must be 'unit' or 'vehicle'")
     return model
+
+
+def check_param(system, model: str, name: str, option: str) -> None:
+    """``name`` must be a parameter of the chosen model."""
+    if name not in system.param_names:
+        raise ParameterError(
+            option, name,
+            f"model '{model}' has no such parameter; choose one of {', '.join(system.param_names)}",
+        )
+
+
+def validate_value(params: Params, name: str, value: float) -> None:
+    """A parameter value outside its rule (e.g. omega1 <= 0) is a user error."""
+    if name in PARAMETER_DOCS:
+        params.replace(**{name: value})
+
+
+def unit_of(name: str) -> str:
+    """The SI unit of a parameter, '' if unknown."""
+    return PARAMETER_DOCS.get(name, ("", ""))[0]
 
 
 def to_jsonable(obj: Any) -> Any:

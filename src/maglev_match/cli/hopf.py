@@ -21,12 +21,15 @@ from maglev_match.cli.common import (
     SetOpt,
     UserError,
     check_model,
+    check_param,
     console,
     console_err,
     emit_json,
     output_path,
     params_from_options,
     parse_range,
+    unit_of,
+    validate_value,
 )
 from maglev_match.dynamics.hopf import (
     HopfCurve,
@@ -36,30 +39,12 @@ from maglev_match.dynamics.hopf import (
     stability_grid,
 )
 from maglev_match.models import build_system
-from maglev_match.params import PARAMETER_DOCS, ParameterError
+from maglev_match.params import ParameterError
 
 # The plane of the paper's Fig. 4 for model A; model B has no sigma (that is model A's force
 # gain), so its default plane is the beam frequency against the velocity gain.
 DEFAULT_PLANE = {"unit": ("omega1", "sigma"), "vehicle": ("omega1", "kD")}
 DEFAULT_RANGES = {"omega1": (30.0, 400.0), "sigma": (1e-4, 8e-4)}
-
-
-def _check_param(system, model: str, name: str, option: str) -> None:
-    if name not in system.param_names:
-        raise ParameterError(
-            option, name,
-            f"model '{model}' has no such parameter; choose one of {', '.join(system.param_names)}",
-        )
-
-
-def _validate_value(params, name: str, value: float) -> None:
-    """A parameter value outside its rule (e.g. omega1 <= 0) is a user error."""
-    if name in PARAMETER_DOCS:
-        params.replace(**{name: value})
-
-
-def _unit(name: str) -> str:
-    return PARAMETER_DOCS.get(name, ("", ""))[0]
 
 
 def _point_record(hp: HopfPoint, system, names: tuple[str, ...]) -> dict:
@@ -98,9 +83,9 @@ def hopf_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     params = params_from_options(preset, config, set_)
     system = build_system(params, model)
-    _check_param(system, model, param, "--param")
+    check_param(system, model, param, "--param")
     for v in (start, stop):
-        _validate_value(params, param, v)
+        validate_value(params, param, v)
     scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
     names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE[model]))
     records = [_point_record(hp, system, names) for hp in scan.points]
@@ -108,7 +93,7 @@ def hopf_command(
         emit_json({"param": param, "model": model, "from": start, "to": stop,
                    "points": records, "warnings": list(scan.warnings)})
         return
-    console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {_unit(param)}, "
+    console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit_of(param)}, "
                   f"model {model}: {len(records)} found")
     if records:
         table = Table(*names, "omega (rad/s)", "dRe/dp", "l1", "type", "others stable",
@@ -212,7 +197,7 @@ def hopf_curve_command(
             raise UserError(f"--params '{params_opt}': expected two different names P1,P2")
         names = (parts[0], parts[1])
     for n in names:
-        _check_param(system, model, n, "--params")
+        check_param(system, model, n, "--params")
     given = _parse_ranges(ranges)
     for n in given:
         if n not in names:
@@ -227,7 +212,7 @@ def hopf_curve_command(
             v = system.param(n)
             bounds[n] = (0.5 * v, 2.0 * v) if v > 0 else (v - 1.0, v + 1.0)
         for v in bounds[n]:
-            _validate_value(params, n, v)
+            validate_value(params, n, v)
     a, b = bounds[names[1]]
     scan_values = [a + f * (b - a) for f in (0.5, 0.1, 0.9)]
 
@@ -288,7 +273,7 @@ def hopf_curve_command(
     from maglev_match.plots.hopf import hopf_curve_figure
 
     title = f"Hopf curve, model {'A' if model == 'unit' else 'B'} ({preset})"
-    fig = hopf_curve_figure(curves, names, (_unit(names[0]), _unit(names[1])), grid_data,
+    fig = hopf_curve_figure(curves, names, (unit_of(names[0]), unit_of(names[1])), grid_data,
                             title=title)
     figs = save_figure(fig, folder / stem)
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),

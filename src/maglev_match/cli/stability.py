@@ -20,15 +20,18 @@ from maglev_match.cli.common import (
     SetOpt,
     UserError,
     check_model,
+    check_param,
     console,
     console_err,
     emit_json,
     output_path,
     params_from_options,
+    unit_of,
+    validate_value,
 )
 from maglev_match.dynamics.equilibria import root_locus, stability
 from maglev_match.models import build_system
-from maglev_match.params import PARAMETER_DOCS, ParameterError, available_presets, load_preset
+from maglev_match.params import ParameterError, available_presets, load_preset
 
 
 @app.command("stability")
@@ -103,15 +106,9 @@ def root_locus_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     params = params_from_options(preset, config, set_)
     system = build_system(params, model)
-    if param not in system.param_names:
-        raise ParameterError(
-            "--param", param,
-            f"model '{model}' has no such parameter; choose one of {', '.join(system.param_names)}",
-        )
-    # validate the end points as parameter values (e.g. omega1 must stay positive)
+    check_param(system, model, param, "--param")
     for v in (start, stop):
-        if param in PARAMETER_DOCS:
-            params.replace(**{param: v})
+        validate_value(params, param, v)
     values = np.linspace(start, stop, steps)
     res = root_locus(system, param, values)
     base = output_path(out, f"root-locus-{model}-{param}")
@@ -129,7 +126,7 @@ def root_locus_command(
     from maglev_match.plots import save_figure
     from maglev_match.plots.rootlocus import root_locus_figure
 
-    unit = PARAMETER_DOCS.get(param, ("", ""))[0]
+    unit = unit_of(param)
     figs = save_figure(root_locus_figure(values, res.eigenvalues, param, f"({unit})"),
                        folder / stem)
     crossings = []
