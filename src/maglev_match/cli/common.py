@@ -58,6 +58,12 @@ def check_model(model: str) -> str:
     return model
 
 
+def print_warnings(warnings) -> None:
+    """Warnings of a computation on stderr, one line each (stdout stays clean for --json)."""
+    for w in warnings:
+        console_err.print(f"[yellow]warning:[/] {w}", highlight=False)
+
+
 def check_param(system, model: str, name: str, option: str) -> None:
     """``name`` must be a parameter of the chosen model."""
     if name not in system.param_names:

@@ -28,6 +28,7 @@ from maglev_match.cli.common import (
     output_path,
     params_from_options,
     parse_range,
+    print_warnings,
     unit_of,
     validate_value,
 )
@@ -105,8 +106,7 @@ def hopf_command(
         console.print(table)
         console.print("l1 with <q,q> = 1, <p,q> = 1 (paper eq. 24): > 0 subcritical "
                       "(unstable cycle), < 0 supercritical (stable cycle)")
-    for w in list(scan.warnings) + [w for hp in scan.points for w in hp.warnings]:
-        console_err.print(f"[yellow]warning:[/] {w}")
+    print_warnings(list(scan.warnings) + [w for hp in scan.points for w in hp.warnings])
 
 
 def _parse_ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
@@ -302,8 +302,7 @@ def hopf_curve_command(
     else:
         console.print("  no codimension-two points inside the bounds")
     console.print(f"wrote {csv_path}, {sp_path} and {', '.join(str(f) for f in figs)}")
-    for w in warnings + [w for c in curves for w in c.warnings]:
-        console_err.print(f"[yellow]warning:[/] {w}")
+    print_warnings(warnings + [w for c in curves for w in c.warnings])
 
 
 def _runs(signs: np.ndarray) -> list[float]:

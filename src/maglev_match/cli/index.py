@@ -19,6 +19,7 @@ from maglev_match.cli.common import (
     console_err,
     emit_json,
     params_from_options,
+    print_warnings,
 )
 
 CASE_TEXT = {
@@ -73,8 +74,7 @@ def index_command(
                       f"{res.cycle_current_min:.3g} A); the clamped system differs there")
     if not res.converged:
         console_err.print(f"[red]continuation failed:[/] {res.message}")
-    for w in res.warnings:
-        console_err.print(f"[yellow]warning:[/] {w}")
+    print_warnings(res.warnings)
 
 
 @app.command("map")

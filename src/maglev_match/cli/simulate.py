@@ -25,6 +25,7 @@ from maglev_match.cli.common import (
     emit_json,
     output_path,
     params_from_options,
+    print_warnings,
 )
 from maglev_match.dynamics.simulate import SimulationOptions
 
@@ -114,8 +115,7 @@ def simulate_command(
         emit_json(summary)
         for w in written:
             console_err.print(f"wrote {w}", highlight=False)
-        for w in sim.warnings:
-            console_err.print(f"warning: {w}", highlight=False)
+        print_warnings(sim.warnings)
         return
     res = sim.result
     console.print(f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "

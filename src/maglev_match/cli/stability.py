@@ -22,10 +22,10 @@ from maglev_match.cli.common import (
     check_model,
     check_param,
     console,
-    console_err,
     emit_json,
     output_path,
     params_from_options,
+    print_warnings,
     unit_of,
     validate_value,
 )
@@ -81,8 +81,7 @@ def stability_command(
                       f"{abs(z.imag) / (2 * np.pi):.4g}", f"{zeta:.4g}")
     console.print(table)
     console.print("(one row per conjugate pair; the rows with Im < 0 are omitted)")
-    for w in res.warnings:
-        console_err.print(f"[yellow]warning:[/] {w}")
+    print_warnings(res.warnings)
 
 
 @app.command("root-locus")
@@ -158,8 +157,7 @@ def root_locus_command(
         state = "stable" if mr[0] < 0 else "unstable"
         console.print(f"no change of stability: {state} throughout")
     console.print(f"wrote {csv_path} and {', '.join(str(f) for f in figs)}")
-    for w in res.warnings:
-        console_err.print(f"[yellow]warning:[/] {w}")
+    print_warnings(res.warnings)
 
 
 @app.command("presets")
