@@ -299,23 +299,18 @@ def run_map(
     checkpoint = Path(checkpoint)
     checkpoint.mkdir(parents=True, exist_ok=True)
     keyfile = checkpoint / "spec.json"
-    if keyfile.exists():
-        if keyfile.read_text() != spec.key():
-            if not resume:
-                for f in checkpoint.glob("tile_*.npz"):
-                    f.unlink()
-            else:
-                raise ParameterError("--resume", str(checkpoint),
-                                     "the checkpoint belongs to a different map; remove it or "
-                                     "drop --resume")
-        elif not resume:
-            for f in checkpoint.glob("tile_*.npz"):
-                f.unlink()
-    keyfile.write_text(spec.key())
-    todo = [t for t in spec.tiles if not _tile_path(checkpoint, t).exists()]
-    if max_tiles is not None:
-        todo = todo[:max_tiles]
-    done = len(spec.tiles) - len([t for t in spec.tiles if not _tile_path(checkpoint, t).exists()])
+    key = spec.key()
+    if resume and keyfile.exists() and keyfile.read_text() != key:
+        raise ParameterError("--resume", str(checkpoint),
+                             "the checkpoint belongs to a different map; remove it or "
+                             "drop --resume")
+    if not resume and keyfile.exists():
+        for f in checkpoint.glob("tile_*.npz"):
+            f.unlink()
+    keyfile.write_text(key)
+    missing = [t for t in spec.tiles if not _tile_path(checkpoint, t).exists()]
+    done = len(spec.tiles) - len(missing)
+    todo = missing if max_tiles is None else missing[:max_tiles]
     total = len(spec.tiles)
     if progress:
         progress(done, total)
