@@ -137,6 +137,7 @@ class MapSpec:
 def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     """All map variables along row ``row`` (y fixed, x varying), continuing cycles along it."""
     from maglev_match import jax_setup  # noqa: F401  (workers: float64 before anything)
+    from maglev_match.dynamics.basin import FAILED
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.equilibria import eigenvalue_analysis
     from maglev_match.dynamics.hopf import locate_hopf_points
@@ -217,7 +218,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
                         reverses[j] = (imin[k] + s * (imin[k + 1] - imin[k])) < 0
         reached = t.max() if step > 0 else t.min()
         heading_in = (t[min(3, t.size - 1)] - hp.value) * step > 0
-        if br.stopped_reason in ("newton failed", "step too small", "max_steps") and heading_in:
+        if br.stopped_reason in (*FAILED, "max_steps") and heading_in:
             # the branch was entering the stretch but stopped: what lies beyond is unknown
             beyond = stretch[(stretch - reached) * step > 0] - off
             beyond = beyond[case[beyond] != CASE_CODES["unstable_cycle"]]
