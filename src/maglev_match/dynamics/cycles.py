@@ -36,6 +36,8 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
+from maglev_match.dynamics.collocation import _lagrange, _tables
+from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 from maglev_match.dynamics.system import System
 
 __all__ = [
@@ -211,39 +213,6 @@ class CorrectionResult:
 # ---------------------------------------------------------------------------------------
 # collocation tables and JAX kernels
 # ---------------------------------------------------------------------------------------
-@cache
-def _tables(m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Nodes c_k = k/m, Gauss points z_l, weights w_l on [0, 1]; L[l,k] = ell_k(z_l),
-    D[l,k] = ell_k'(z_l) for the Lagrange basis on the nodes."""
-    c = np.linspace(0.0, 1.0, m + 1)
-    g, w = np.polynomial.legendre.leggauss(m)
-    z, w = 0.5 * (g + 1.0), 0.5 * w
-    L, D = _lagrange(c, z)
-    return c, z, w, L, D
-
-
-def _lagrange(c: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Values and derivatives of the Lagrange basis on nodes c at points s: (len(s), len(c))."""
-    s = np.asarray(s, float)
-    n = c.size
-    L = np.ones((s.size, n))
-    D = np.zeros((s.size, n))
-    for k in range(n):
-        others = [i for i in range(n) if i != k]
-        denom = np.prod([c[k] - c[i] for i in others])
-        for i in others:
-            L[:, k] *= s - c[i]
-        for i in others:
-            term = np.ones(s.size)
-            for r in others:
-                if r != i:
-                    term *= s - c[r]
-            D[:, k] += term
-        L[:, k] /= denom
-        D[:, k] /= denom
-    return L, D
-
-
 def _node_times(mesh: np.ndarray, m: int) -> np.ndarray:
     h = np.diff(mesh)
     t = (mesh[:-1, None] + h[:, None] * (np.arange(m) / m)[None, :]).ravel()
@@ -476,27 +445,6 @@ def _newton(
 # ---------------------------------------------------------------------------------------
 # Floquet multipliers, read-outs, mesh adaptation
 # ---------------------------------------------------------------------------------------
-def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: int) -> np.ndarray:
-    """Monodromy matrix from the collocation blocks of the variational equation
-    v' = T A(t) v: each interval's block is condensed onto its end points, giving the
-    transfer matrix v(t_{j+1}) = P_j v(t_j); the monodromy is P_{NTST-1} ... P_0.
-    Returns its eigenvalues (all of them, unsorted)."""
-    ntst, _, n, _ = J.shape
-    _, _, _, L, D = _tables(m)
-    blk = (D[None, :, :, None, None] * np.eye(n)[None, None, None]
-           - (T * h)[:, None, None, None, None] * L[None, :, :, None, None]
-           * J[:, :, None, :, :])  # (ntst, m, m+1, n, n)
-    blk = blk.transpose(0, 1, 3, 2, 4).reshape(ntst, m * n, (m + 1) * n)
-    A0 = blk[:, :, :n]
-    A1 = blk[:, :, n:]
-    P = np.linalg.solve(A1, -A0)[:, -n:, :]  # (ntst, n, n)
-    M = np.eye(n)
-    for j in range(ntst):
-        M = P[j] @ M
-        # keep the product's size moderate; eigenvalues scale back exactly
-    return np.linalg.eigvals(M)
-
-
 def _split_trivial(mult: np.ndarray) -> tuple[complex, np.ndarray]:
     k = int(np.argmin(np.abs(mult - 1.0)))
     return complex(mult[k]), np.delete(mult, k)
