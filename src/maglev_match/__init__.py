@@ -1,8 +1,85 @@
 """maglev-match: stability, Hopf bifurcations, limit cycles and the vehicle-track beam
-matching index chi = h / w0 for EMS maglev systems."""
+matching index chi = h / w0 for EMS maglev systems.
 
-from maglev_match import jax_setup  # noqa: F401  (float64 before any model is built)
-from maglev_match.params import ParameterError, Params, load_params, load_preset
+The public API lives at the top level of the package::
+
+    import maglev_match as mm
+
+    p = mm.load_preset("turnout-soft")
+    mm.stability(p)                       # eigenvalues and the verdict
+    mm.matching_index(p, simulate=False)  # chi = h / w0 with the case that decided h
+    ds = mm.design_map("omega1=60:160:11", "sigma=3e-4:5e-4:5", workers=0)
+
+Importing the package is cheap: the names below are loaded on first use (module
+``__getattr__``, PEP 562), so ``import maglev_match`` does not import JAX, Dask, xarray or
+matplotlib.
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
-__all__ = ["Params", "ParameterError", "load_params", "load_preset", "__version__"]
+
+# public name -> module that defines it
+_LAZY: dict[str, str] = {
+    "Params": "maglev_match.params",
+    "ParameterError": "maglev_match.params",
+    "load_params": "maglev_match.params",
+    "load_preset": "maglev_match.params",
+    "available_presets": "maglev_match.params",
+    "System": "maglev_match.dynamics.system",
+    "build_system": "maglev_match.api",
+    "stability": "maglev_match.api",
+    "root_locus": "maglev_match.api",
+    "hopf_points": "maglev_match.api",
+    "hopf_curve": "maglev_match.api",
+    "cycle_branch": "maglev_match.api",
+    "simulate": "maglev_match.api",
+    "matching_index": "maglev_match.api",
+    "design_map": "maglev_match.api",
+    "load_model": "maglev_match.models.user",
+}
+
+# the user-model loader ships in its own module; list it only where that module exists
+if not (Path(__file__).parent / "models" / "user.py").exists():
+    del _LAZY["load_model"]
+
+__all__ = sorted([*_LAZY, "__version__"])
+
+if TYPE_CHECKING:  # for type checkers and IDEs; never executed
+    from maglev_match.api import (  # noqa: F401
+        build_system,
+        cycle_branch,
+        design_map,
+        hopf_curve,
+        hopf_points,
+        matching_index,
+        root_locus,
+        simulate,
+        stability,
+    )
+    from maglev_match.dynamics.system import System  # noqa: F401
+    from maglev_match.params import (  # noqa: F401
+        ParameterError,
+        Params,
+        available_presets,
+        load_params,
+        load_preset,
+    )
+
+
+def __getattr__(name: str) -> Any:
+    """Load a public name on first access (PEP 562)."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'maglev_match' has no attribute '{name}'")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later accesses skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

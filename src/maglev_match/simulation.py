@@ -343,7 +343,9 @@ def save_history(sim: MaglevSimulation, path: str | Path) -> Path:
     variable and point, e.g. ``gap_deviation_3``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    ds = history_dataset(sim)
+    from maglev_match.datasets import simulation_dataset  # units, long names, parameters
+
+    ds = simulation_dataset(sim)
     if path.suffix == ".nc":
         ds.to_netcdf(path, engine="h5netcdf")
         return path

@@ -120,7 +120,9 @@ def map_command(
 
         data = run_map(spec, checkpoint, resume=resume, scheduler=scheduler, workers=workers,
                        progress=progress)
-    ds = map_dataset(spec, data)
+    from maglev_match.datasets import annotate_map
+
+    ds = annotate_map(map_dataset(spec, data), base)
     out.parent.mkdir(parents=True, exist_ok=True)
     ds.to_netcdf(out, engine="h5netcdf")
     figs = save_figure(map_figure(ds), out.with_suffix(""))
