@@ -1,0 +1,88 @@
+"""Every netCDF file the package writes describes itself: units and long_name on every
+variable and coordinate, the parameter set and the package version as attributes."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import maglev_match as mm
+from maglev_match.cli import main as cli_main
+from maglev_match.datasets import annotate, simulation_dataset, state_units
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "maglev_match"
+
+
+def _check_self_describing(path: Path, params: mm.Params) -> xr.Dataset:
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        ds = ds.load()
+    for name in list(ds.data_vars) + list(ds.coords):
+        attrs = ds[name].attrs
+        assert attrs.get("units"), f"{path.name}: '{name}' has no units"
+        assert attrs.get("long_name"), f"{path.name}: '{name}' has no long_name"
+    assert ds.attrs["maglev_match_version"] == mm.__version__
+    stored = json.loads(ds.attrs["params"])
+    for k, v in params.as_dict().items():
+        assert stored[k] == pytest.approx(v, rel=0, abs=0), k
+    return ds
+
+
+def test_the_writers_are_the_ones_checked_here():
+    """If a new netCDF writer appears, this test names it so that it gets a check below."""
+    writers = sorted(str(p.relative_to(SRC)) for p in SRC.rglob("*.py")
+                     if re.search(r"\.to_netcdf\(", p.read_text()))
+    assert writers == ["cli/index.py", "simulation.py"], writers
+
+
+@pytest.mark.parametrize("model,extra", [("unit", ["--x5", "-7e-3"]),
+                                         ("vehicle", ["--initial", "pressed"])])
+def test_simulation_netcdf_is_self_describing(tmp_path, model, extra):
+    out = tmp_path / f"run_{model}.nc"
+    rc = cli_main(["simulate", "--model", model, "--t", "0.2", "--n-save", "51",
+                   "--out", str(out), "--json", *extra])
+    assert rc == 0
+    ds = _check_self_describing(out, mm.load_preset("turnout-soft"))
+    assert ds["time"].attrs["units"] == "s"
+    assert ds["gap_deviation"].attrs["units"] == "m"
+    assert ds["current"].attrs["units"] == "A"
+    if model == "unit":
+        assert ds["di"].attrs["units"] == "A"
+        assert ds.attrs["outcome"] == "collision"
+    else:
+        assert ds["th0"].attrs["units"] == "rad"
+        assert ds["q2_dot"].attrs["units"] == "m/s"
+
+
+def test_map_netcdf_is_self_describing(tmp_path):
+    out = tmp_path / "m.nc"
+    rc = cli_main(["map", "--x", "omega1=120:140:2", "--y", "sigma=3e-4:4e-4:2",
+                   "--preset", "alpha1", "--workers", "0", "--out", str(out), "--json"])
+    assert rc == 0
+    ds = _check_self_describing(out, mm.load_preset("alpha1"))
+    assert ds["chi"].attrs["long_name"].startswith("matching index")
+    assert ds["omega1"].attrs["units"] == "rad/s"
+
+
+def test_state_units_cover_both_models():
+    for model in ("unit", "vehicle"):
+        for name in mm.build_system("turnout-soft", model).state_names:
+            unit, long_name = state_units(name)
+            assert unit and long_name != name, name
+
+
+def test_annotate_refuses_an_undocumented_variable():
+    ds = xr.Dataset({"mystery": ("t", np.zeros(2))}, coords={"t": [0.0, 1.0]})
+    with pytest.raises(ValueError, match="mystery"):
+        annotate(ds, long_names={"t": "time"})
+
+
+def test_simulation_dataset_keeps_the_history():
+    sim = mm.simulate("turnout-soft", x5=-1e-3, t_end=0.1, n_save=21)
+    ds = simulation_dataset(sim)
+    np.testing.assert_array_equal(ds["w"].values, sim.result.x[:, 4])
+    assert ds["gap_deviation"].values[0, 0] == pytest.approx(1e-3, rel=1e-12)
