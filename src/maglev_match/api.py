@@ -233,8 +233,8 @@ def cycle_branch(param: str = "omega1", params: Params | str | None = None, *,
     Hopf points are searched in [``start``, ``stop``] (default: the design value / 4 to
     x 4). The orbits are solved by orthogonal collocation at Gauss points on an adaptive
     mesh (``ntst`` intervals, ``ncol`` points; de Boor & Swartz 1973, Doedel's AUTO
-    notes), continued by pseudo-arclength; Floquet multipliers by the periodic Schur
-    decomposition (Bojanczyk, Golub & Van Dooren 1992). Returns
+    notes), continued by pseudo-arclength; Floquet multipliers from the monodromy matrix
+    of the condensed collocation blocks (Doedel, Keller & Kernevez 1991). Returns
     :class:`~maglev_match.dynamics.cycles.CycleBranch`. Same as ``maglev-match cycles``.
     """
     from maglev_match.dynamics.cycles import cycle_branch as _cycle_branch
@@ -336,9 +336,13 @@ def design_map(x: str = "omega1=40:190:100", y: str = "sigma=2e-4:6e-4:100",
     rows_per_tile, ntst : tile height (rows) and collocation intervals for the cycles.
     progress : called as ``progress(done_tiles, total_tiles)``.
 
-    Returns the Dataset of :func:`maglev_match.maps.map_dataset` with long names, the
-    base parameter set and the package version as attributes; it equals the netCDF of
-    ``maglev-match map`` on the same grid value for value.
+    Returns
+    -------
+    xarray.Dataset
+        The map of :func:`maglev_match.maps.map_dataset` (dimensions named after the two
+        parameters, y first) with long names, the base parameter set and the package
+        version as attributes; equal, value for value, to the netCDF file that
+        ``maglev-match map`` writes for the same grid.
     """
     from maglev_match.datasets import annotate_map
     from maglev_match.maps import MapSpec, compute_tile, map_dataset, parse_axis, run_map

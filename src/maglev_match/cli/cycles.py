@@ -182,6 +182,7 @@ def cycles_command(
         "param": param,
         "at": {k.split("=")[0]: float(k.split("=")[1]) for k in (at or [])},
         "hopf": _hopf_json(h0, param),
+        "label": "b1",  # the label of the branch in the figure and the CSV
         "branch": _branch_rows(main_branch, param),
         "special_points": _special_rows(main_branch, param),
         "stopped_reason": main_branch.stopped_reason,
@@ -193,10 +194,11 @@ def cycles_command(
     }
     if all_hopf and len(branches) > 1:
         result["other_branches"] = [
-            {"hopf": _hopf_json(h, param), "branch": _branch_rows(br, param),
+            {"label": f"b{k + 2}", "hopf": _hopf_json(h, param),
+             "branch": _branch_rows(br, param),
              "special_points": _special_rows(br, param), "stopped_reason": br.stopped_reason,
              "warnings": list(br.warnings)}
-            for h, br in zip(chosen[1:], branches[1:], strict=True)
+            for k, (h, br) in enumerate(zip(chosen[1:], branches[1:], strict=True))
         ]
     files: list[Path] = []
     if out is not None or not json_out:
@@ -210,7 +212,7 @@ def cycles_command(
 
 def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     from maglev_match.plots import save_figure
-    from maglev_match.plots.cycles import cycle_diagram
+    from maglev_match.plots.cycles import branch_label, cycle_diagram
 
     base = output_path(out, f"cycles-{model}-{param}")
     folder = base if base.suffix == "" else base.parent
@@ -219,9 +221,9 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     rows, specials = [], []
     for k, br in enumerate(branches):
         for r in _branch_rows(br, param):
-            rows.append({"branch": k, "hopf": br.hopf.value, **r})
+            rows.append({"branch": branch_label(k), "hopf": br.hopf.value, **r})
         for r in _special_rows(br, param):
-            specials.append({"branch": k, **r})
+            specials.append({"branch": branch_label(k), **r})
     _write_csv(folder / f"{stem}.csv", rows)
     _write_csv(folder / f"{stem}_special_points.csv", specials)
     files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
@@ -233,6 +235,7 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
         branches, param, scan.scan_values[sel], scan.max_real_part[sel] < 0,
         title=f"Cycles along {param}" + (f" ({at_text})" if at_text else ""),
         limits=(params.gap_min - params.c0, params.gap_max - params.c0),
+        design_value=getattr(params, param, None),
     )
     files += save_figure(fig, folder / f"{stem}.png")
     return files

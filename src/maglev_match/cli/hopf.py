@@ -274,7 +274,8 @@ def hopf_curve_command(
 
     title = f"Hopf curve, model {'A' if model == 'unit' else 'B'} ({preset})"
     fig = hopf_curve_figure(curves, names, (unit_of(names[0]), unit_of(names[1])), grid_data,
-                            title=title)
+                            title=title, design_point=(system.param(names[0]),
+                                                       system.param(names[1])))
     figs = save_figure(fig, folder / stem)
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]

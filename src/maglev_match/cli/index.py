@@ -125,7 +125,9 @@ def map_command(
     ds = annotate_map(map_dataset(spec, data), base)
     out.parent.mkdir(parents=True, exist_ok=True)
     ds.to_netcdf(out, engine="h5netcdf")
-    figs = save_figure(map_figure(ds), out.with_suffix(""))
+    figs = save_figure(map_figure(ds, design_point=(float(getattr(base, ax.name)),
+                                                    float(getattr(base, ay.name)))),
+                       out.with_suffix(""))
     summary = {
         "netcdf": str(out), "figures": [str(f) for f in figs], "x": ax.name, "y": ay.name,
         "shape": [ay.count, ax.count], "stable_fraction": float(ds["stable"].mean()),

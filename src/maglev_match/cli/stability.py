@@ -126,8 +126,9 @@ def root_locus_command(
     from maglev_match.plots.rootlocus import root_locus_figure
 
     unit = unit_of(param)
-    figs = save_figure(root_locus_figure(values, res.eigenvalues, param, f"({unit})"),
-                       folder / stem)
+    design = (system.param(param), stability(system).eigenvalues)
+    figs = save_figure(root_locus_figure(values, res.eigenvalues, param, f"({unit})",
+                                         design=design), folder / stem)
     crossings = []
     mr = res.max_real_part
     for k in range(len(values) - 1):

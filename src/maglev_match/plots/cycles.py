@@ -1,20 +1,35 @@
 """Paper Fig. 5-style bifurcation diagram: max/min gap deviation of equilibrium and cycles
-against one parameter (stable solid, unstable dashed), Hopf, fold and limit-touch points."""
+against one parameter (stable solid, unstable dashed), Hopf, fold and limit-touch points.
+
+Branches are labelled ``b1``, ``b2``, ... in the order given; :func:`branch_label` is the
+one place that label is made, and the command line writes the same label into its CSV and
+JSON files.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 import numpy as np
+from matplotlib.lines import Line2D
 
 from maglev_match.dynamics.cycles import CycleBranch
 from maglev_match.plots import new_figure
 
-__all__ = ["cycle_diagram"]
+__all__ = ["cycle_diagram", "branch_label"]
 
 _UNITS = {"omega1": "rad/s", "sigma": "1/kg"}
-_MARK = {"LPC": ("^", "tab:purple"), "PD": ("s", "tab:brown"), "NS": ("D", "tab:olive"),
-         "LIMIT": ("X", "tab:red")}
+_MARK = {"LPC": ("^", "tab:purple", "fold of cycles (LPC)"),
+         "PD": ("s", "tab:brown", "period doubling (PD)"),
+         "NS": ("D", "tab:olive", "torus bifurcation (NS)"),
+         "LIMIT": ("X", "tab:red", "cycle touches a physical limit")}
+_BRANCH_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown",
+                   "tab:pink")
+
+
+def branch_label(k: int) -> str:
+    """The label of the k-th branch (0-based) in figures, CSV and JSON: 'b1', 'b2', ..."""
+    return f"b{k + 1}"
 
 
 def _segments(x: np.ndarray, y: np.ndarray, flag: np.ndarray):
@@ -37,54 +52,91 @@ def cycle_diagram(
     unit: str = "mm",
     title: str = "",
     limits: tuple[float, float] | None = None,
+    design_value: float | None = None,
 ):
-    """Max and min of ``observable`` (times ``scale``, in ``unit``) over each cycle against
-    ``param``; the equilibrium (observable 0) solid where stable, dashed where unstable;
-    Hopf points (circles), LPC/PD/NS and LIMIT points marked. ``limits`` draws the physical
-    range of the observable as dotted lines. Returns (fig, ax)."""
-    fig, ax = new_figure()
+    """Max and min of ``observable`` over each cycle against ``param``.
+
+    Parameters
+    ----------
+    branches : cycle branches, labelled b1, b2, ... in this order and drawn in their own
+        colours; along each, stable cycles solid and unstable cycles dashed.
+    param : the continuation parameter.
+    equilibrium_values, equilibrium_stable : the equilibrium (observable 0) along
+        ``param``, drawn black, solid where stable and dashed where unstable.
+    observable, scale, unit : what to plot (times ``scale``, in ``unit``).
+    title : figure title.
+    limits : the physical range of the observable (SI), drawn as dotted lines.
+    design_value : the design value of ``param``, drawn as a vertical line.
+
+    Hopf points are open circles; folds (LPC), period doublings (PD), torus points (NS) and
+    first contacts with a physical limit (LIMIT) are marked at the cycle's max and min.
+    The legend lists every element drawn. Returns (fig, ax).
+    """
+    fig, ax = new_figure(figsize=(8.0, 5.0))
+    handles: list = []
     if equilibrium_values is not None and equilibrium_stable is not None:
         xs = np.asarray(equilibrium_values)
         st = np.asarray(equilibrium_stable, bool)
         for sx, sy, s in _segments(xs, np.zeros_like(xs), st):
             ax.plot(sx, sy, color="k", ls="-" if s else "--", lw=1.5)
-    labelled = set()
+        if st.any():
+            handles.append(Line2D([], [], color="k", ls="-", lw=1.5,
+                                  label="equilibrium, stable"))
+        if (~st).any():
+            handles.append(Line2D([], [], color="k", ls="--", lw=1.5,
+                                  label="equilibrium, unstable"))
+    styles_seen: set[bool] = set()
+    types_seen: list[str] = []
     for b, br in enumerate(branches):
         if not br.points:
             continue
         v = br.values
         st = br.stable
-        color = f"C{b}"
+        colour = _BRANCH_COLOURS[b % len(_BRANCH_COLOURS)]
         for y in (br.observable_max(observable), br.observable_min(observable)):
             for sx, sy, s in _segments(v, y * scale, st):
-                lab = None
-                key = ("stable" if s else "unstable") + " cycle"
-                if key not in labelled:
-                    lab, _ = key, labelled.add(key)
-                ax.plot(sx, sy, color=color, ls="-" if s else "--", lw=1.5, label=lab)
-        lab = None if "Hopf" in labelled else "Hopf point"
-        labelled.add("Hopf")
-        ax.plot([br.hopf.value], [0.0], "o", color="tab:blue", ms=7, mfc="white", mew=2,
-                label=lab)
-        n_limit = 0
+                ax.plot(sx, sy, color=colour, ls="-" if s else "--", lw=1.5)
+                styles_seen.add(s)
+        handles.append(Line2D([], [], color=colour, lw=3,
+                              label=f"{branch_label(b)}: cycles from the Hopf point at "
+                                    f"{param} = {br.hopf.value:.5g}"))
+        ax.plot([br.hopf.value], [0.0], "o", color=colour, ms=7, mfc="white", mew=2,
+                zorder=5)
+        ymax_end = br.observable_max(observable)[-1] * scale
+        ax.annotate(branch_label(b), (v[-1], ymax_end), textcoords="offset points",
+                    xytext=(4, 4), color=colour, fontsize=9, fontweight="bold")
         for sp in br.special_points:
-            mk, col = _MARK.get(sp.type, ("*", "k"))
-            lab = None if sp.type in labelled else sp.type
-            labelled.add(sp.type)
+            mk, col, _ = _MARK.get(sp.type, ("*", "k", sp.type))
+            if sp.type not in types_seen:
+                types_seen.append(sp.type)
             ymax, ymin = sp.extrema[observable]
             ax.plot([sp.value, sp.value], [ymax * scale, ymin * scale], mk, color=col, ms=8,
-                    label=lab)
-            if sp.type == "LIMIT":
-                n_limit += 1
-                ax.annotate(f"b{b + 1}" if n_limit == 1 else f"b{b + 1}.{n_limit}",
-                            (sp.value, ymax * scale), textcoords="offset points",
-                            xytext=(5, 5), color=col)
+                    ls="none", zorder=6)
+    for s in (True, False):
+        if s in styles_seen:
+            handles.append(Line2D([], [], color="0.35", ls="-" if s else "--", lw=1.5,
+                                  label="stable cycle (max/min)" if s
+                                  else "unstable cycle (max/min)"))
+    if any(br.points for br in branches):
+        handles.append(Line2D([], [], marker="o", color="0.35", ms=7, mfc="white", mew=2,
+                              ls="none", label="Hopf point"))
+    for t in types_seen:
+        mk, col, text = _MARK.get(t, ("*", "k", t))
+        handles.append(Line2D([], [], marker=mk, color=col, ms=8, ls="none", label=text))
     if limits is not None:
         for yl in limits:
-            ax.axhline(yl * scale, color="grey", ls=":", lw=1)
+            ax.axhline(yl * scale, color="grey", ls=":", lw=1.2)
+        handles.append(Line2D([], [], color="grey", ls=":", lw=1.2,
+                              label=f"physical limits ({limits[0] * scale:.3g} and "
+                                    f"{limits[1] * scale:.3g} {unit})"))
+    if design_value is not None:
+        ax.axvline(design_value, color="k", ls="-.", lw=1.0)
+        handles.append(Line2D([], [], color="k", ls="-.", lw=1.0,
+                              label=f"design point {param} = {design_value:.5g}"))
     ax.set_xlabel(f"{param} ({_UNITS.get(param, 'SI')})")
     ax.set_ylabel(f"{observable.replace('_', ' ')} max/min ({unit})")
     if title:
         ax.set_title(title)
-    ax.legend(loc="best", fontsize=8)
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
+              frameon=False)
     return fig, ax

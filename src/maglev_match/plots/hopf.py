@@ -41,6 +41,7 @@ def hopf_curve_figure(
     units: tuple[str, str] = ("", ""),
     grid: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     title: str = "",
+    design_point: tuple[float, float] | None = None,
 ):
     """Figure of Hopf curves in the (params[0], params[1]) plane.
 
@@ -51,6 +52,11 @@ def hopf_curve_figure(
     units : their units for the axis labels.
     grid : optional (values1, values2, max_real_part[len(values2), len(values1)]) of the
         largest real part of the eigenvalues (1/s), used to shade S (< 0) and U (> 0).
+    title : the figure title (default: what the shading means).
+    design_point : optional (value of params[0], value of params[1]) of the design,
+        marked with a star.
+
+    Returns the figure.
     """
     fig, ax = new_figure(figsize=(7.5, 5.2))
     if grid is not None:
@@ -119,6 +125,10 @@ def hopf_curve_figure(
             full = {"GH": "generalised Hopf (Bautin)", "BT": "Bogdanov-Takens",
                     "ZH": "zero-Hopf", "HH": "double Hopf"}[t]
             ax.plot([], [], m, color="k", label=f"{t}: {full}")
+    if design_point is not None:
+        ax.plot(*design_point, "*", color="gold", mec="k", ms=15, zorder=6,
+                label=f"design point ({params[0]} = {design_point[0]:.4g}, "
+                      f"{params[1]} = {design_point[1]:.4g})")
     ax.set_xlabel(f"{params[0]} ({units[0]})" if units[0] else params[0])
     ax.set_ylabel(f"{params[1]} ({units[1]})" if units[1] else params[1])
     if grid is not None:

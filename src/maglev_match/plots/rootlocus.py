@@ -6,27 +6,91 @@ import numpy as np
 
 from maglev_match.plots import new_figure
 
+__all__ = ["root_locus_figure", "zoom_window", "NEAR_TRACKS"]
 
-def root_locus_figure(values: np.ndarray, eigenvalues: np.ndarray, param: str, unit: str = ""):
-    """Left: eigenvalues in the complex plane coloured by the parameter value.
-    Right: the largest real part against the parameter (stability boundary where it
-    crosses zero)."""
-    fig, (ax1, ax2) = new_figure(1, 2, figsize=(11, 4.5))
+# The window shows the eigenvalue tracks nearest the imaginary axis: this many of them
+# (conjugate pairs count twice), i.e. the slowest three modes.
+NEAR_TRACKS = 6
+
+
+def zoom_window(eigenvalues: np.ndarray, n_tracks: int = NEAR_TRACKS
+                ) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Axis limits ((re_lo, re_hi), (im_lo, im_hi)) that frame the ``n_tracks`` eigenvalues
+    of largest real part at every parameter value, with a margin, and always the
+    imaginary axis. ``eigenvalues`` (n_values, dim)."""
+    ev = np.asarray(eigenvalues)
+    order = np.argsort(-ev.real, axis=1)
+    near = np.take_along_axis(ev, order[:, : min(n_tracks, ev.shape[1])], axis=1)
+    re_lo, re_hi = float(near.real.min()), float(max(near.real.max(), 0.0))
+    span = max(re_hi - re_lo, 1e-3)
+    im = float(np.abs(near.imag).max())
+    im = max(im, 0.1 * span)
+    return (re_lo - 0.08 * span, re_hi + 0.08 * span), (-1.08 * im, 1.08 * im)
+
+
+def root_locus_figure(values: np.ndarray, eigenvalues: np.ndarray, param: str, unit: str = "",
+                      design: tuple[float, np.ndarray] | None = None):
+    """Root locus along ``param``.
+
+    Left: the eigenvalues in the complex plane, coloured by the parameter value, zoomed on
+    the tracks nearest the imaginary axis (:func:`zoom_window`); eigenvalues outside the
+    window are counted and their range given in a note. Right: the largest real part
+    against the parameter (the equilibrium is unstable above zero).
+
+    Parameters
+    ----------
+    values : parameter values, shape (n,).
+    eigenvalues : eigenvalues at each value, shape (n, dim) (1/s).
+    param, unit : the parameter's name and unit (unit in parentheses or plain).
+    design : optional (design value, its eigenvalues): marked with black crosses on the
+        left and a vertical line on the right.
+
+    Returns the figure.
+    """
+    values = np.asarray(values, float)
+    eigenvalues = np.asarray(eigenvalues)
+    unit = unit.strip().strip("()")
+    label = f"{param} ({unit})" if unit else param
+    fig, (ax1, ax2) = new_figure(1, 2, figsize=(11.5, 4.8))
+    (x0, x1), (y0, y1) = zoom_window(eigenvalues)
     vv = np.repeat(values[:, None], eigenvalues.shape[1], axis=1)
-    sc = ax1.scatter(eigenvalues.real.ravel(), eigenvalues.imag.ravel(), c=vv.ravel(), s=6,
-                     cmap="viridis")
+    re, im = eigenvalues.real.ravel(), eigenvalues.imag.ravel()
+    inside = (re >= x0) & (re <= x1) & (im >= y0) & (im <= y1)
+    sc = ax1.scatter(re[inside], im[inside], c=vv.ravel()[inside], s=7, cmap="viridis",
+                     vmin=values.min(), vmax=values.max())
     ax1.axvline(0.0, color="k", lw=0.8)
+    ax1.axhline(0.0, color="0.6", lw=0.5)
+    ax1.set_xlim(x0, x1)
+    ax1.set_ylim(y0, y1)
     ax1.set_xlabel("Re(lambda) (1/s)")
     ax1.set_ylabel("Im(lambda) (rad/s)")
-    ax1.set_title("Root locus")
-    # the interesting part is near the imaginary axis; clip far-left poles
-    re = eigenvalues.real.ravel()
-    left = np.percentile(re, 10)
-    ax1.set_xlim(min(left, -1.0) * 1.1, max(re.max(), 1.0) * 1.3)
-    fig.colorbar(sc, ax=ax1, label=f"{param} {unit}".strip())
-    ax2.plot(values, eigenvalues.real.max(axis=1), color="C0")
+    ax1.set_title("Root locus near the imaginary axis")
+    fig.colorbar(sc, ax=ax1, label=label)
+    outside = ~inside
+    if outside.any():
+        # eigenvalues per parameter value outside the window (the same at every value
+        # unless a track crosses the frame)
+        per_value = outside.reshape(eigenvalues.shape).sum(axis=1)
+        count = (f"{per_value.min()}" if per_value.min() == per_value.max()
+                 else f"{per_value.min()}-{per_value.max()}")
+        ax1.text(0.02, 0.02,
+                 f"not shown: {count} eigenvalue(s) per value further out,\n"
+                 f"Re from {re[outside].min():.4g} to {re[outside].max():.4g} 1/s, "
+                 f"|Im| up to {np.abs(im[outside]).max():.4g} rad/s",
+                 transform=ax1.transAxes, fontsize=7, va="bottom", ha="left",
+                 bbox={"boxstyle": "round", "fc": "white", "ec": "0.7", "alpha": 0.9})
+    ax2.plot(values, eigenvalues.real.max(axis=1), color="C0", label="max Re(lambda)")
     ax2.axhline(0.0, color="k", lw=0.8)
-    ax2.set_xlabel(f"{param} {unit}".strip())
+    ax2.set_xlabel(label)
     ax2.set_ylabel("max Re(lambda) (1/s)")
     ax2.set_title("Stability margin (unstable above 0)")
+    if design is not None:
+        dv, dev = float(design[0]), np.asarray(design[1])
+        sel = (dev.real >= x0) & (dev.real <= x1) & (dev.imag >= y0) & (dev.imag <= y1)
+        ax1.plot(dev.real[sel], dev.imag[sel], "kx", ms=8, mew=1.8)
+        ax1.set_title(f"Root locus near the imaginary axis\n(x: eigenvalues at the design "
+                      f"point {param} = {dv:.4g})", fontsize=10)
+        ax2.axvline(dv, color="k", ls="--", lw=1.0, label=f"design point {param} = {dv:.4g}")
+        ax2.plot([dv], [float(dev.real.max())], "kx", ms=8, mew=1.8)
+    ax2.legend(loc="best", fontsize=8)
     return fig

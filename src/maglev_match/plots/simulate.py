@@ -1,96 +1,228 @@
-"""Figures of simulated runs in the style of the paper's Figs. 6-8, 11 and 13: the gap
-deviation's time history beside its phase portrait (gap deviation vs. gap rate) with the
-physical limits drawn; for model B, the gaps of the three levitation frames."""
+"""Figures of simulated runs in the style of the paper's Figs. 6-8, 11 and 13.
+
+Four panels against a time axis fitted to what happened (the collision, or the return to
+equilibrium, with a margin): the gap deviation c - c0 with the physical gap limits, the
+coil current with the zero-current limit, the beam deflection, and the phase portrait
+(gap deviation against gap rate). The title says what was simulated (model, beam,
+initial state, limits) and what happened (collision time, limit and levitation point;
+return; neither by the horizon).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
 
-from maglev_match.plots import new_figure, save_figure
-from maglev_match.simulation import MaglevSimulation, history_dataset
+import numpy as np
 
-__all__ = ["plot_simulation", "simulation_figure"]
+from maglev_match.plots import new_figure, save_figure
+from maglev_match.simulation import MaglevSimulation, equilibrium_state, history_dataset
+
+__all__ = ["plot_simulation", "simulation_figure", "describe_initial", "describe_outcome",
+           "fitted_time_window", "transient_end"]
 
 _COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")
+_LIMIT_STYLE = {"color": "k", "ls": ":", "lw": 1.0}
 
 
-def _limits(ax, sim: MaglevSimulation, axis: str = "y") -> None:
+def describe_initial(sim: MaglevSimulation) -> str:
+    """The initial state in words: the states that differ from the equilibrium (at most
+    three, SI units shown in mm, mm/s or A), or 'pressed onto the free beam' for model B."""
+    from maglev_match.models import vehicle as vehicle_model
+
     p = sim.params
-    for v in ((p.gap_min - p.c0) * 1e3, (p.gap_max - p.c0) * 1e3):
-        if axis == "y":
-            ax.axhline(v, color="k", ls=":", lw=1.0)
-        else:
-            ax.axvline(v, color="k", ls=":", lw=1.0)
+    eq = equilibrium_state(p, sim.model)
+    x0 = np.asarray(sim.x0, float)
+    if sim.model == "vehicle":
+        lay = vehicle_model.layout(p.n_modes)
+        pressed = vehicle_model.pressed_initial_state(p)
+        if np.allclose(x0, pressed, rtol=0, atol=1e-15):
+            return "vehicle pressed onto the free beam"
+        q = x0[lay["q"]]
+        rest = np.delete(x0 - pressed, np.r_[lay["q"]])
+        if np.allclose(rest, 0.0, atol=1e-15) and np.allclose(q[1:], 0.0, atol=1e-15):
+            return f"pressed onto the free beam, q1(0) = {q[0] * 1e3:.3g} mm"
+    diff = np.nonzero(np.abs(x0 - eq) > 1e-15)[0]
+    if diff.size == 0:
+        return "from the equilibrium"
+    names = _state_names(sim)
+    if sim.model == "unit":  # the paper's numbering x1..x9, as in --x5
+        names = tuple(f"x{k + 1}" for k in range(len(names)))
+    parts = []
+    relative = "" if sim.model == "unit" else " from equilibrium"
+    for k in diff[:3]:
+        unit, scale = _display_unit(names[k])
+        parts.append(f"{names[k]}(0) = {(x0[k] - eq[k]) * scale:.3g} {unit}{relative}")
+    if diff.size > 3:
+        parts.append(f"and {diff.size - 3} more states")
+    return ", ".join(parts)
 
 
-def _label(sim: MaglevSimulation, name: str | None) -> str:
-    base = name or ""
+def _state_names(sim: MaglevSimulation) -> tuple[str, ...]:
+    from maglev_match.models import unit as unit_model
+    from maglev_match.models import vehicle as vehicle_model
+
+    if sim.model == "unit":
+        return unit_model.STATE_NAMES
+    return vehicle_model.state_names(sim.params.n_modes)
+
+
+def _display_unit(name: str) -> tuple[str, float]:
+    if name.endswith("_dot") or name in ("v",) or (name.startswith("v") and name[1:].isdigit()):
+        return "mm/s", 1e3
+    if name in ("di",) or (name.startswith("i") and name[1:].isdigit()):
+        return "A", 1.0
+    if name.startswith("th"):
+        return "mrad", 1e3
+    return "mm", 1e3
+
+
+def describe_outcome(sim: MaglevSimulation) -> str:
+    """What happened, in words."""
     if sim.outcome == "collision":
-        return f"{base} collision at {sim.collision_time:.3f} s ({sim.limit}, point {sim.point})"
-    return f"{base} {sim.outcome}".strip()
+        where = "magnet hits the rail (gap 0)" if sim.limit == "lower" else \
+            f"gap opens to its upper limit ({sim.params.gap_max * 1e3:g} mm)"
+        point = f" at levitation point {sim.point}" if sim.model == "vehicle" else ""
+        return f"collision at t = {sim.collision_time:.3f} s: {where}{point}"
+    if sim.outcome == "converged":
+        t = sim.result.converged_time
+        return ("returns to the equilibrium" + (f" (settled from t = {t:.2f} s)"
+                                                if t is not None else ""))
+    if sim.outcome == "running":
+        end = transient_end(sim)
+        tail = (f"; gap oscillation below {SETTLED_FRACTION:.0%} of its peak from "
+                f"t = {end:.2f} s" if end < sim.t_end else "")
+        return f"no collision by t = {sim.t_end:g} s, not yet settled{tail}"
+    return "integration failed: " + "; ".join(sim.warnings)
+
+
+SETTLED_FRACTION = 0.02  # a gap oscillation below 2 % of its peak counts as died out
+
+
+def transient_end(sim: MaglevSimulation) -> float:
+    """When the run's gap transient is over (s): the collision time; the start of the
+    settled stretch of a converged run; otherwise the last time any gap deviation exceeds
+    2 % of its peak over the run (the horizon if it never falls that low)."""
+    if sim.outcome == "collision" and sim.collision_time is not None:
+        return float(sim.collision_time)
+    if sim.outcome == "converged" and sim.result.converged_time is not None:
+        return float(sim.result.converged_time)
+    ds = history_dataset(sim)
+    t = ds.time.values
+    g = np.abs(ds.gap_deviation.values).max(axis=1)
+    if len(t) == 0 or not np.any(g > 0):
+        return float(sim.t_end)
+    above = np.nonzero(g > SETTLED_FRACTION * g.max())[0]
+    return float(t[min(above[-1] + 1, len(t) - 1)])
+
+
+def fitted_time_window(sims: Sequence[MaglevSimulation]) -> float:
+    """The end of the time axis (s): 25 % past the latest end of a transient
+    (:func:`transient_end`), at least 0.1 s, at most the horizon."""
+    horizon = max(s.t_end for s in sims)
+    latest = max(transient_end(s) for s in sims)
+    return float(min(horizon, max(0.1, 1.25 * latest)))
 
 
 def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | None = None,
                       title: str | None = None):
-    """A figure of one or more runs of the same model. Model A: time history of the gap
-    deviation (mm) and the phase portrait (gap deviation vs. gap rate), limits dotted.
-    Model B: the six gaps in three panels (one per frame) and the phase portrait of the
-    first run's points. Returns (fig, axes)."""
+    """A figure of one or more runs of the same model.
+
+    Panels: gap deviation c - c0 (mm) with the gap limits dotted; coil current (A) with
+    zero current dotted; beam deflection (mm: model A's w, model B's modal coordinates);
+    phase portrait of the gap deviation against the gap rate (m/s). Model B draws every
+    levitation point of the first run (points 1-6) and, for further runs, point 1 dashed.
+    Collisions are marked with a cross. The time axis ends 25 % after the latest deciding
+    event (:func:`fitted_time_window`).
+
+    Returns (fig, axes) with axes a 2 x 2 array: [[gap, current], [beam, phase]].
+    """
     if not sims:
         raise ValueError("nothing to plot")
-    labels = list(labels) if labels is not None else [None] * len(sims)
+    labels = list(labels) if labels is not None else [describe_initial(s) for s in sims]
     model = sims[0].model
+    if any(s.model != model for s in sims):
+        raise ValueError("all runs of one figure must be of the same model")
+    p = sims[0].params
+    fig, axes = new_figure(2, 2, figsize=(11.0, 7.2))
+    ax_g, ax_i, ax_w, ax_p = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
+    t_max = fitted_time_window(sims)
+    for k, (sim, lab) in enumerate(zip(sims, labels, strict=True)):
+        ds = history_dataset(sim)
+        t = ds.time.values
+        gd = ds.gap_deviation.values * 1e3
+        cur = ds.current.values
+        rate = ds.gap_rate.values
+        bw = ds.beam_deflection.values * 1e3
+        ls = "-" if k == 0 else "--"
+        if model == "unit" or k > 0:
+            pts = [0]
+        else:
+            pts = list(range(gd.shape[1]))
+        for j in pts:
+            colour = _COLOURS[j % len(_COLOURS)] if (model == "vehicle" and k == 0) else \
+                _COLOURS[k % len(_COLOURS)]
+            name = lab if model == "unit" else (f"point {j + 1}" if k == 0 else
+                                                f"point 1 ({lab})")
+            if model == "vehicle" and k == 0 and j == 0:
+                name = f"point 1 ({lab})"
+            ax_g.plot(t, gd[:, j], color=colour, ls=ls, lw=1.0, label=name)
+            ax_i.plot(t, cur[:, j], color=colour, ls=ls, lw=1.0)
+            shown = t <= t_max
+            ax_p.plot(gd[shown, j], rate[shown, j], color=colour, ls=ls, lw=0.8)
+            if sim.outcome == "collision" and len(t) and (model == "unit"
+                                                           or sim.point == j + 1):
+                ax_g.plot(t[-1], gd[-1, j], "x", color=colour, ms=8, mew=2)
+                ax_p.plot(gd[-1, j], rate[-1, j], "x", color=colour, ms=8, mew=2)
+        if model == "unit":
+            ax_w.plot(t, bw, color=_COLOURS[k % len(_COLOURS)], ls=ls, lw=1.0)
+        else:
+            for n in range(bw.shape[1] if k == 0 else 1):
+                ax_w.plot(t, bw[:, n], color=_COLOURS[n % len(_COLOURS)], ls=ls, lw=1.0,
+                          label=f"q{n + 1}" if k == 0 else None)
+    lo, hi = (p.gap_min - p.c0) * 1e3, (p.gap_max - p.c0) * 1e3
+    for v in (lo, hi):
+        ax_g.axhline(v, **_LIMIT_STYLE)
+        ax_p.axvline(v, **_LIMIT_STYLE)
+    ax_g.plot([], [], **_LIMIT_STYLE, label=f"gap limits ({p.gap_min * 1e3:g} and "
+              f"{p.gap_max * 1e3:g} mm)")
+    if any(s.outcome == "collision" for s in sims):
+        ax_g.plot([], [], "kx", ms=7, mew=2, label="collision")
+    ax_i.axhline(0.0, **_LIMIT_STYLE, label="zero current (never reverses)")
+    i0 = p.i0 if model == "unit" else p.i0_vehicle
+    ax_i.axhline(i0, color="0.6", lw=0.8, ls="-.", label=f"levitation current {i0:.3g} A")
+    for ax in (ax_g, ax_i, ax_w):
+        ax.set_xlim(0.0, t_max)
+        ax.set_xlabel("time t (s)")
+    ax_g.set_ylabel("gap deviation c - c0 (mm)")
+    ax_g.set_title("gap (positive: wider)")
+    ax_i.set_ylabel("coil current i (A)")
+    ax_i.set_title("coil current" + (" (force-producing, max(i, 0))" if sims[0].limited
+                                      else ""))
     if model == "unit":
-        fig, axes = new_figure(1, 2, figsize=(11.0, 4.2))
-        ax_t, ax_p = axes
-        for k, (sim, lab) in enumerate(zip(sims, labels, strict=True)):
-            ds = history_dataset(sim)
-            colour = _COLOURS[k % len(_COLOURS)]
-            ls = "-" if k % 2 == 0 else "--"
-            gd = ds.gap_deviation.values[:, 0] * 1e3
-            ax_t.plot(ds.time.values, gd, color=colour, ls=ls, lw=1.0, label=_label(sim, lab))
-            ax_p.plot(gd, ds.gap_rate.values[:, 0], color=colour, ls=ls, lw=0.8)
-        _limits(ax_t, sims[0], "y")
-        _limits(ax_p, sims[0], "x")
-        ax_t.set_xlabel("time t (s)")
-        ax_t.set_ylabel("gap deviation c - c0 (mm)")
-        ax_t.legend(fontsize=8, loc="best")
-        ax_p.set_xlabel("gap deviation c - c0 (mm)")
-        ax_p.set_ylabel("gap rate dc/dt (m/s)")
-        ax_t.set_title("time history")
-        ax_p.set_title("phase portrait (gap vs. gap rate)")
+        ax_w.set_ylabel("beam deflection w (mm, down positive)")
+        ax_w.set_title("beam deflection under the unit")
     else:
-        fig, axes = new_figure(2, 2, figsize=(11.0, 7.0))
-        panels = [axes[0, 0], axes[0, 1], axes[1, 0]]
-        ax_p = axes[1, 1]
-        for k, (sim, lab) in enumerate(zip(sims, labels, strict=True)):
-            ds = history_dataset(sim)
-            ls = "-" if k == 0 else "--"
-            gd = ds.gap_deviation.values * 1e3
-            for frame in range(3):
-                for side in range(2):
-                    j = 2 * frame + side
-                    panels[frame].plot(
-                        ds.time.values, gd[:, j], color=_COLOURS[side + 2 * (k % 2)], ls=ls,
-                        lw=1.0, label=f"point {j + 1}" + (f" ({lab})" if lab else ""))
-            if k == 0:
-                for j in range(6):
-                    ax_p.plot(gd[:, j], ds.gap_rate.values[:, j], color=_COLOURS[j], lw=0.7,
-                              label=f"point {j + 1}")
-        for frame, ax in enumerate(panels):
-            _limits(ax, sims[0], "y")
-            ax.set_title(f"frame {frame + 1}")
-            ax.set_xlabel("time t (s)")
-            ax.set_ylabel("gap deviation (mm)")
-            ax.legend(fontsize=7, loc="best")
-        _limits(ax_p, sims[0], "x")
-        ax_p.set_xlabel("gap deviation (mm)")
-        ax_p.set_ylabel("gap rate (m/s)")
-        ax_p.set_title("phase portrait")
-        ax_p.legend(fontsize=7, loc="best")
-    outcome = "; ".join(_label(s, lab) for s, lab in zip(sims, labels, strict=True))
-    fig.suptitle(title or outcome, fontsize=10)
+        ax_w.set_ylabel("modal coordinate q_n (mm)")
+        ax_w.set_title("beam modal coordinates (undeflected beam = 0)")
+        ax_w.legend(fontsize=7, loc="best")
+    ax_p.set_xlabel("gap deviation c - c0 (mm)")
+    ax_p.set_ylabel("gap rate dc/dt (m/s)")
+    horizon = max(s.t_end for s in sims)
+    ax_p.set_title(f"phase portrait (0 to {t_max:.3g} s)")
+    if t_max < horizon:
+        ax_w.set_xlabel(f"time t (s); shown: 0 to {t_max:.3g} s of the {horizon:g} s "
+                        "simulated")
+    ax_g.legend(fontsize=7, loc="best")
+    ax_i.legend(fontsize=7, loc="best")
+    if title is None:
+        what = (f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
+                f"omega1 = {float(p.omega1):.4g} rad/s, sigma = {float(p.sigma):.3g} 1/kg, "
+                f"limits {'on' if sims[0].limited else 'off'}")
+        outcomes = [f"{lab}: {describe_outcome(s)}" for s, lab in zip(sims, labels,
+                                                                          strict=True)]
+        title = what + "\n" + "\n".join(outcomes)
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return fig, axes
 
@@ -102,4 +234,3 @@ def plot_simulation(sims: MaglevSimulation | Sequence[MaglevSimulation], path: s
     runs = [sims] if isinstance(sims, MaglevSimulation) else list(sims)
     fig, _ = simulation_figure(runs, labels, title)
     return save_figure(fig, path)
-
