@@ -22,7 +22,7 @@ _UNITS = {"omega1": "rad/s", "sigma": "1/kg"}
 _MARK = {"LPC": ("^", "tab:purple", "fold of cycles (LPC)"),
          "PD": ("s", "tab:brown", "period doubling (PD)"),
          "NS": ("D", "tab:olive", "torus bifurcation (NS)"),
-         "LIMIT": ("X", "tab:red", "cycle touches a physical limit")}
+         "LIMIT": ("X", "tab:red", "cycle touches a physical limit")}  # gap or zero current
 _BRANCH_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown",
                    "tab:pink")
 
