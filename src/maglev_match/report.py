@@ -589,7 +589,8 @@ def run_time_history(params: Params, model: str, t_end: float, *, x5: float | No
         x0 = initial_state(params, "unit", x5=x5)
     else:
         x0 = initial_state(params, "vehicle", initial=initial, q1=q1)
-    sim = simulate_maglev(params, model, x0, t_end)
+    # 10001 saved points (0.3-0.5 ms apart): smooth phase portraits of 20 Hz oscillations
+    sim = simulate_maglev(params, model, x0, t_end, n_save=10001)
     return sim, history_dataset(sim)
 
 
