@@ -204,8 +204,15 @@ class MaglevSimulation:
     result: SimulationResult
     warnings: tuple[str, ...] = field(default=())
 
+    def to_xarray(self):
+        """The history as an :class:`xarray.Dataset` with units, long names, the parameter
+        set and the package version (:func:`maglev_match.datasets.simulation_dataset`)."""
+        from maglev_match.datasets import simulation_dataset
+
+        return simulation_dataset(self)
+
     def summary(self) -> dict[str, Any]:
-        """The machine-readable summary of issue 5."""
+        """The outcome of the run in machine-readable form (SI units)."""
         return {
             "outcome": self.outcome,
             "collision_time": self.collision_time,
