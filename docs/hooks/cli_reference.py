@@ -1,4 +1,5 @@
-"""mkdocs hook: writes the command-line reference and the parameter table from the code.
+"""mkdocs hooks: the command-line reference and the parameter table written from the code,
+and Sphinx roles in rendered docstrings shown as plain code.
 
 The page ``reference/cli.md`` holds the marker ``<!-- cli-reference -->``; at build time it
 is replaced by one section per command (its help text and a table of its options with the
@@ -105,3 +106,13 @@ def on_page_markdown(markdown: str, page, config, files) -> str:
     if PARAMETER_MARKER in markdown:
         markdown = markdown.replace(PARAMETER_MARKER, parameter_table())
     return markdown
+
+
+# Docstrings in the package use Sphinx roles (:func:`name`); mkdocstrings renders them as
+# ":func:<code>name</code>". Show the name alone (the last component for "~a.b.c").
+_ROLE = re.compile(r":(?:class|func|meth|mod|attr|data|exc|obj):<code>~?([\w.]+)</code>")
+
+
+def on_page_content(html: str, page, config, files) -> str:
+    """mkdocs event: drop the Sphinx role prefixes left in rendered docstrings."""
+    return _ROLE.sub(lambda m: f"<code>{m.group(1)}</code>", html)

@@ -57,11 +57,25 @@ DEFAULT_PLANE = {"unit": ("omega1", "sigma"), "vehicle": ("omega1", "kD")}
 
 
 def resolve_params(params: Params | str | None = None, **overrides: Any) -> Params:
-    """The parameter set from a :class:`Params`, a preset name or ``None`` (the default
-    preset ``turnout-soft``), with ``overrides`` applied and validated.
+    """The parameter set of an API call, validated.
 
-    Raises :class:`~maglev_match.params.ParameterError` naming the field, the value and
-    the rule for an unknown name or an invalid value.
+    Parameters
+    ----------
+    params : Params | str | None
+        A [`Params`][maglev_match.params.Params], the name of a shipped preset, or None for
+        the default preset `turnout-soft`.
+    **overrides : float
+        Values applied on top (beam data such as `EI` re-derive omega1 and sigma).
+
+    Returns
+    -------
+    Params
+        The parameter set.
+
+    Raises
+    ------
+    ParameterError
+        For an unknown name or an invalid value, naming the field, the value and the rule.
     """
     if params is None or isinstance(params, str):
         return load_params(params or DEFAULT_PRESET, None, dict(overrides))
@@ -79,9 +93,26 @@ def _check_model(model: str) -> str:
 
 def build_system(params: Params | str | None = None, model: str = "unit", *,
                  limited: bool = False, **overrides: Any) -> System:
-    """The :class:`~maglev_match.dynamics.system.System` (vector field with exact
-    derivatives) of model A (``model="unit"``, 9 states) or B (``"vehicle"``, 16 + 2
-    n_modes + 18 states). ``limited`` puts the current clamp into the vector field."""
+    """The ODE system of model A or B, with exact derivatives.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        preset, or None for the default preset `turnout-soft`.
+    model : str
+        `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
+    **overrides : float
+        Parameter values applied on top, validated like `--set NAME=VALUE`.
+    limited : bool
+        Put the current clamp (the current never reverses) into the vector field.
+
+    Returns
+    -------
+    System
+        The [`System`][maglev_match.dynamics.system.System] (vector field, parameter
+        vector, state names, read-outs).
+    """
     from maglev_match.models import build_system as _build
 
     return _build(resolve_params(params, **overrides), _check_model(model), limited=limited)
@@ -89,10 +120,27 @@ def build_system(params: Params | str | None = None, model: str = "unit", *,
 
 def stability(params: Params | str | None = None, *, model: str = "unit",
               **overrides: Any) -> StabilityResult:
-    """Equilibrium, eigenvalues (1/s, largest real part first) and the stability verdict.
+    """Equilibrium, eigenvalues and the stability verdict (`maglev-match stability`).
 
-    Returns :class:`~maglev_match.dynamics.equilibria.StabilityResult`; ``margin`` is
-    ``-max Re(lambda)`` in 1/s. Same computation as ``maglev-match stability``.
+    The Jacobian is exact (automatic differentiation); the equilibrium is stable when every
+    eigenvalue has a negative real part.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        preset, or None for the default preset `turnout-soft`.
+    model : str
+        `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
+    **overrides : float
+        Parameter values applied on top, validated like `--set NAME=VALUE`.
+
+    Returns
+    -------
+    StabilityResult
+        Eigenvalues (1/s, largest real part first), `stable`, `margin` = -max Re(lambda)
+        (1/s), the equilibrium and warnings; see
+        [`StabilityResult`][maglev_match.dynamics.equilibria.StabilityResult].
     """
     from maglev_match.dynamics.equilibria import stability as _stability
 
@@ -102,9 +150,29 @@ def stability(params: Params | str | None = None, *, model: str = "unit",
 def root_locus(param: str, values: Sequence[float] | np.ndarray,
                params: Params | str | None = None, *, model: str = "unit",
                **overrides: Any) -> RootLocusResult:
-    """Eigenvalues of the equilibrium as ``param`` runs through ``values`` (SI units of
-    that parameter). Returns :class:`~maglev_match.dynamics.equilibria.RootLocusResult`;
-    :func:`maglev_match.datasets.root_locus_dataset` turns it into an xarray Dataset."""
+    """Eigenvalues of the equilibrium along one parameter (`maglev-match root-locus`).
+
+    Parameters
+    ----------
+    param : str
+        The parameter to vary (any parameter of the model).
+    values : array_like
+        Its values, in its SI unit.
+    params : Params | str | None
+        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        preset, or None for the default preset `turnout-soft`.
+    model : str
+        `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
+    **overrides : float
+        Parameter values applied on top, validated like `--set NAME=VALUE`.
+
+    Returns
+    -------
+    RootLocusResult
+        See [`RootLocusResult`][maglev_match.dynamics.equilibria.RootLocusResult];
+        [`root_locus_dataset`][maglev_match.datasets.root_locus_dataset] gives its xarray
+        form.
+    """
     from maglev_match.dynamics.equilibria import root_locus as _root_locus
 
     system = build_system(params, model, **overrides)
@@ -121,14 +189,35 @@ def _check_param(system: System, name: str, field: str) -> None:
 def hopf_points(param: str = "omega1", start: float = 30.0, stop: float = 300.0,
                 params: Params | str | None = None, *, model: str = "unit",
                 n_scan: int = 200, **overrides: Any) -> HopfScan:
-    """Hopf points of the equilibrium along ``param`` in [``start``, ``stop``].
+    """Hopf points of the equilibrium along one parameter (`maglev-match hopf`).
 
-    A scan of ``n_scan`` eigenvalue computations brackets each crossing of a complex pair;
-    each bracket is refined by Newton's method on the Hopf defining system, and the first
-    Lyapunov coefficient l1 is computed there by Kuznetsov's projection formula
-    (Kuznetsov 2004, eq. 3.20). Returns :class:`~maglev_match.dynamics.hopf.HopfScan`
-    (``points``: the :class:`~maglev_match.dynamics.hopf.HopfPoint` list). Same
-    computation as ``maglev-match hopf``.
+    A scan of `n_scan` eigenvalue computations brackets each crossing of a complex pair
+    of eigenvalues; each bracket is refined by Newton's method on the Hopf defining system,
+    and the first Lyapunov coefficient l1 is computed there by Kuznetsov's projection
+    formula (Kuznetsov 2004, eq. 3.20): l1 > 0 subcritical, l1 < 0 supercritical.
+
+    Parameters
+    ----------
+    param : str
+        The parameter to vary.
+    start, stop : float
+        The interval searched, in the parameter's SI unit.
+    params : Params | str | None
+        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        preset, or None for the default preset `turnout-soft`.
+    model : str
+        `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
+    n_scan : int
+        Values of the bracketing scan.
+    **overrides : float
+        Parameter values applied on top, validated like `--set NAME=VALUE`.
+
+    Returns
+    -------
+    HopfScan
+        `points`: the [`HopfPoint`][maglev_match.dynamics.hopf.HopfPoint]s (value,
+        frequency, crossing speed, l1), with the scan itself; see
+        [`HopfScan`][maglev_match.dynamics.hopf.HopfScan].
     """
     from maglev_match.dynamics.hopf import locate_hopf_points
 
@@ -156,16 +245,39 @@ def hopf_curve(params: Params | str | None = None, *, names: tuple[str, str] | N
                n_scan: int = 100, max_step: float = 1e-2,
                progress: Callable[[str], None] | None = None,
                **overrides: Any) -> list[HopfCurve]:
-    """Every branch of the Hopf curve in the plane ``names`` (default (omega1, sigma) for
-    model A, (omega1, kD) for model B) inside ``bounds``.
+    """Every branch of the Hopf curve in a plane of two parameters (`maglev-match
+    hopf-curve`).
 
-    Branches are found by Hopf-point scans of ``names[0]`` at three values of ``names[1]``
+    Branches are found by Hopf-point scans of `names[0]` at three values of `names[1]`
     (the middle, 10 % and 90 % of its range) and continued by pseudo-arclength on the
     standard defining system (Kuznetsov 2004, sec. 10.2; Govaerts 2000), with l1 along the
     curve and its codimension-two points (generalised Hopf with l2, Bogdanov-Takens,
-    zero-Hopf, double Hopf). Default bounds: omega1 30-400 rad/s, sigma 1e-4-8e-4 1/kg,
-    any other parameter 0.5-2 times its value. Returns a list of
-    :class:`~maglev_match.dynamics.hopf.HopfCurve`. Same as ``maglev-match hopf-curve``.
+    zero-Hopf, double Hopf).
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+    names : tuple of str, optional
+        The plane; default (omega1, sigma) for model A, (omega1, kD) for model B.
+    bounds : dict, optional
+        `{name: (low, high)}`; default omega1 30-400 rad/s, sigma 1e-4 to 8e-4 1/kg, any
+        other parameter 0.5 to 2 times its value.
+    model : str
+        `"unit"` or `"vehicle"`.
+    n_scan : int
+        Values of each bracketing scan.
+    max_step : float
+        Largest continuation step, as a fraction of the ranges.
+    progress : callable, optional
+        Called with a line of text when a branch starts.
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    list of HopfCurve
+        One [`HopfCurve`][maglev_match.dynamics.hopf.HopfCurve] per branch.
     """
     from maglev_match.dynamics.hopf import hopf_curve as _hopf_curve
     from maglev_match.dynamics.hopf import locate_hopf_points
@@ -228,14 +340,41 @@ def cycle_branch(param: str = "omega1", params: Params | str | None = None, *,
                  progress: Callable[[int, Any], None] | None = None,
                  **overrides: Any) -> CycleBranch:
     """The branch of periodic orbits born at the Hopf point nearest the design value of
-    ``param``, continued in ``param`` until a physical limit, a fold or ``max_steps``.
+    `param` (`maglev-match cycles`).
 
-    Hopf points are searched in [``start``, ``stop``] (default: the design value / 4 to
-    x 4). The orbits are solved by orthogonal collocation at Gauss points on an adaptive
-    mesh (``ntst`` intervals, ``ncol`` points; de Boor & Swartz 1973, Doedel's AUTO
-    notes), continued by pseudo-arclength; Floquet multipliers from the monodromy matrix
-    of the condensed collocation blocks (Doedel, Keller & Kernevez 1991). Returns
-    :class:`~maglev_match.dynamics.cycles.CycleBranch`. Same as ``maglev-match cycles``.
+    The orbits are solved by orthogonal collocation at Gauss points on an adaptive mesh (de
+    Boor & Swartz 1973; Doedel's AUTO notes) and continued by pseudo-arclength until a
+    physical limit, a failure or `max_steps`; Floquet multipliers come from the monodromy
+    matrix of the condensed collocation blocks (Doedel, Keller & Kernevez 1991).
+
+    Parameters
+    ----------
+    param : str
+        The continuation parameter.
+    params : Params | str | None
+        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        preset, or None for the default preset `turnout-soft`.
+    model : str
+        `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
+    start, stop : float, optional
+        Where Hopf points are searched (default: the design value / 4 to x 4).
+    n_scan : int
+        Values of the bracketing scan.
+    ntst, ncol : int
+        Mesh intervals and collocation points per interval (2 to 7).
+    max_steps : int
+        Continuation steps.
+    ignore_current : bool
+        Do not stop where the coil current reaches zero (only the gap limits stop).
+    progress : callable, optional
+        Called as `progress(step, cycle)` after each accepted step.
+    **overrides : float
+        Parameter values applied on top, validated like `--set NAME=VALUE`.
+
+    Returns
+    -------
+    CycleBranch
+        See [`CycleBranch`][maglev_match.dynamics.cycles.CycleBranch].
     """
     from maglev_match.dynamics.cycles import cycle_branch as _cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
@@ -270,16 +409,43 @@ def simulate(params: Params | str | None = None, *, model: str = "unit",
              q1: float | None = None, x0: Sequence[float] | np.ndarray | None = None,
              limits: bool = True, n_save: int = 5001, rtol: float = 1e-8,
              atol: float = 1e-8, **overrides: Any) -> MaglevSimulation:
-    """Simulate model A or B over [0, ``t_end``] s with the physical limits (current never
-    reverses; leaving the gap range [gap_min, gap_max] ends the run as a collision).
+    """Simulate model A or B with the physical limits (`maglev-match simulate`).
 
-    Initial state: ``initial`` ("equilibrium", or "pressed" for model B: the vehicle at
-    equilibrium on the undeflected beam), then ``x5`` (model A: initial beam deflection,
-    m; negative opens the gap) or ``q1`` (model B: first modal coordinate, m); ``x0`` gives
-    the whole state instead. Returns :class:`~maglev_match.simulation.MaglevSimulation`
-    (``outcome``: collision / converged / running / failed). Same as
-    ``maglev-match simulate``; :func:`maglev_match.datasets.simulation_dataset` gives the
-    history with units.
+    With `limits` the coil current never reverses and leaving the gap range
+    [gap_min, gap_max] ends the run as a collision.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        preset, or None for the default preset `turnout-soft`.
+    model : str
+        `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
+    t_end : float
+        Horizon (s).
+    x5 : float, optional
+        Model A: initial beam deflection x5(0) (m); negative opens the gap.
+    initial : str
+        `"equilibrium"`, or for model B `"pressed"` (the vehicle at equilibrium on the
+        undeflected beam).
+    q1 : float, optional
+        Model B: first modal coordinate q1(0) (m, undeflected beam = 0).
+    x0 : array_like, optional
+        The whole initial state (overrides the above).
+    limits : bool
+        The physical limits.
+    n_save : int
+        Saved time points.
+    rtol, atol : float
+        Tolerances (atol in units of each state's typical size).
+    **overrides : float
+        Parameter values applied on top, validated like `--set NAME=VALUE`.
+
+    Returns
+    -------
+    MaglevSimulation
+        Outcome (collision / converged / running / failed), collision time, limit and
+        point; see [`MaglevSimulation`][maglev_match.simulation.MaglevSimulation].
     """
     from maglev_match.dynamics.simulate import SimulationOptions
     from maglev_match.simulation import initial_state, simulate_maglev
@@ -298,14 +464,27 @@ def simulate(params: Params | str | None = None, *, model: str = "unit",
 
 def matching_index(params: Params | str | None = None, *, simulate: bool = True,
                    **overrides: Any) -> MatchingIndex:
-    """The matching index chi = h / w0 of model A, with the case that decided h.
+    """The matching index chi = h / w0 of model A (`maglev-match index`).
 
-    h = 0 if the equilibrium is unstable; the maximum gap deviation of the unstable cycle
+    h = 0 if the equilibrium is unstable; the largest gap deviation of the unstable cycle
     around the stable equilibrium; or gap_max - c0 when no such cycle lies within the gap
-    range. w0 = sigma (m + M) g / omega1^2 is the static beam deflection. With
-    ``simulate``, h is cross-checked by simulations with the limits on
-    (``h_simulation``). Returns :class:`~maglev_match.matching.MatchingIndex`. Same as
-    ``maglev-match index``.
+    range. w0 = sigma (m + M) g / omega1^2 is the static beam deflection.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+    simulate : bool
+        Also compute h_simulation, the critical beam-deflection disturbance found by
+        simulations with the limits on (slower).
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    MatchingIndex
+        chi, h, w0, the case that decided h and its diagnostics; see
+        [`MatchingIndex`][maglev_match.matching.MatchingIndex].
     """
     from maglev_match.matching import matching_index as _matching_index
 
@@ -319,30 +498,48 @@ def design_map(x: str = "omega1=40:190:100", y: str = "sigma=2e-4:6e-4:100",
                resume: bool = False, rows_per_tile: int = 2, ntst: int = 30,
                progress: Callable[[int, int], None] | None = None,
                **overrides: Any) -> xr.Dataset:
-    """Stability, h, w0 and chi over a grid of two parameters, as an xarray Dataset.
+    """Stability, h, w0 and chi over a grid of two parameters (`maglev-match map`).
 
     Parameters
     ----------
-    x, y : the axes, ``NAME=START:STOP:COUNT`` as on the command line (``--x``/``--y``);
-        NAME is any parameter, including the beam data L, EI, mbar, l, k.
-    preset, config, overrides : the base point (preset, then a TOML file, then
-        NAME=VALUE overrides), as ``--preset``/``--config``/``--set``; or ``params``, a
-        ready :class:`Params` (then ``preset`` and ``config`` are ignored).
-    workers : 0 (default) computes in this process; n > 0 starts a local Dask cluster
-        of n single-threaded worker processes; None uses one per core.
-    scheduler : address of an existing Dask scheduler (``tcp://host:port``).
-    checkpoint : optional folder for tiles (then ``resume`` reuses finished ones); without
-        it the map is assembled in memory and nothing is written.
-    rows_per_tile, ntst : tile height (rows) and collocation intervals for the cycles.
-    progress : called as ``progress(done_tiles, total_tiles)``.
+    x : str
+        The x axis, `NAME=START:STOP:COUNT` as on the command line (`--x`). NAME is any
+        parameter, including the beam data L, EI, mbar, l, k (omega1 and sigma are then
+        derived at every point).
+    y : str
+        The y axis, same syntax (`--y`).
+    preset : str
+        The base point's preset (`--preset`).
+    params : Params, optional
+        A ready base point instead of `preset` and `config`.
+    config : str or Path, optional
+        A TOML file applied on top of the preset (`--config`).
+    workers : int or None
+        0 (default): compute in this process; n > 0: a local Dask cluster of n
+        single-threaded worker processes; None: one per core.
+    scheduler : str, optional
+        Address of an existing Dask scheduler, `tcp://host:port`.
+    checkpoint : str or Path, optional
+        Folder for finished tiles (then `resume` reuses them); without it the map is
+        assembled in memory and nothing is written.
+    resume : bool
+        Reuse the finished tiles of `checkpoint`.
+    rows_per_tile : int
+        Rows of the grid per task.
+    ntst : int
+        Collocation intervals of the cycles.
+    progress : callable, optional
+        Called as `progress(done_tiles, total_tiles)`.
+    **overrides : float
+        Parameter values applied on top of the base point (`--set`).
 
     Returns
     -------
     xarray.Dataset
-        The map of :func:`maglev_match.maps.map_dataset` (dimensions named after the two
-        parameters, y first) with long names, the base parameter set and the package
-        version as attributes; equal, value for value, to the netCDF file that
-        ``maglev-match map`` writes for the same grid.
+        Variables chi, h, w0, stable, max_real_part, hopf_distance, case, omega1_point,
+        sigma_point, current_reverses, resolved over the dimensions (y, x), with units and
+        long names, the base parameter set and the package version as attributes. Equal,
+        value for value, to the netCDF file `maglev-match map` writes for the same grid.
     """
     from maglev_match.datasets import annotate_map
     from maglev_match.maps import MapSpec, compute_tile, map_dataset, parse_axis, run_map

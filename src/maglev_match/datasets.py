@@ -7,11 +7,11 @@ object of every value including the derived ones) and the package version
 ``units``/``long_name`` so that tools such as ``ncdump``, xarray and Panoply label axes
 without the package.
 
-* :func:`simulation_dataset` — a simulated run: states, gaps, gap rates, coil currents and
-  beam deflection against time;
-* :func:`root_locus_dataset` — eigenvalues of the equilibrium along one parameter;
-* :func:`annotate_map` — the design map of :func:`maglev_match.maps.map_dataset`;
-* :func:`annotate` — the general helper the others use.
+* `simulation_dataset`: a simulated run: states, gaps, gap rates, coil currents and beam
+  deflection against time;
+* `root_locus_dataset`: eigenvalues of the equilibrium along one parameter;
+* `annotate_map`: the design map of `maglev_match.maps.map_dataset`;
+* `annotate`: the general helper the others use.
 """
 
 from __future__ import annotations
