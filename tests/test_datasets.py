@@ -85,5 +85,7 @@ def test_simulation_dataset_keeps_the_history():
     sim = mm.simulate("turnout-soft", x5=-1e-3, t_end=0.1, n_save=21)
     ds = simulation_dataset(sim)
     assert ds.identical(sim.to_xarray())
+    assert repr(sim) == ("MaglevSimulation(model='unit', limited=True, t_end=0.1, "
+                         f"outcome={sim.outcome!r}, saved_points=21)")
     np.testing.assert_array_equal(ds["w"].values, sim.result.x[:, 4])
     assert ds["gap_deviation"].values[0, 0] == pytest.approx(1e-3, rel=1e-12)

@@ -204,6 +204,15 @@ class MaglevSimulation:
     result: SimulationResult
     warnings: tuple[str, ...] = field(default=())
 
+    def __repr__(self) -> str:
+        """One line: model, limits, horizon and outcome (not the histories)."""
+        what = f"outcome={self.outcome!r}"
+        if self.outcome == "collision":
+            what += (f", collision_time={self.collision_time:.6g}, limit={self.limit!r}, "
+                     f"point={self.point}")
+        return (f"MaglevSimulation(model={self.model!r}, limited={self.limited}, "
+                f"t_end={self.t_end:g}, {what}, saved_points={len(self.result.t)})")
+
     def to_xarray(self):
         """The history as an :class:`xarray.Dataset` with units, long names, the parameter
         set and the package version (:func:`maglev_match.datasets.simulation_dataset`)."""
