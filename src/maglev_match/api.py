@@ -194,7 +194,7 @@ def hopf_points(param: str = "omega1", start: float = 30.0, stop: float = 300.0,
     A scan of `n_scan` eigenvalue computations brackets each crossing of a complex pair
     of eigenvalues; each bracket is refined by Newton's method on the Hopf defining system,
     and the first Lyapunov coefficient l1 is computed there by Kuznetsov's projection
-    formula (Kuznetsov 2004, eq. 3.20): l1 > 0 subcritical, l1 < 0 supercritical.
+    formula (Kuznetsov 2004, ch. 3 and 5): l1 > 0 subcritical, l1 < 0 supercritical.
 
     Parameters
     ----------
@@ -250,7 +250,7 @@ def hopf_curve(params: Params | str | None = None, *, names: tuple[str, str] | N
 
     Branches are found by Hopf-point scans of `names[0]` at three values of `names[1]`
     (the middle, 10 % and 90 % of its range) and continued by pseudo-arclength on the
-    standard defining system (Kuznetsov 2004, sec. 10.2; Govaerts 2000), with l1 along the
+    standard defining system (Kuznetsov 2004, ch. 10; Govaerts 2000), with l1 along the
     curve and its codimension-two points (generalised Hopf with l2, Bogdanov-Takens,
     zero-Hopf, double Hopf).
 
