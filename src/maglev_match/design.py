@@ -261,6 +261,7 @@ class Candidate:
     evaluations: int
     message: str
     path: np.ndarray  # (k, d) the iterates in parameter units
+    path_chi: np.ndarray  # (k,) chi at the iterates
 
 
 @dataclass(frozen=True)
@@ -450,7 +451,7 @@ def optimise_design(
         return order[:starts]
 
     def run(u0: np.ndarray, chi_bound: float | None) -> tuple[np.ndarray, int, str, list]:
-        path: list[np.ndarray] = [problem.values(u0)]
+        path: list[np.ndarray] = [u0]
         iobj = problem.names.index(problem.objective) if problem.goal == Goal.MINIMIZE else -1
 
         def fun(u):
@@ -483,14 +484,14 @@ def optimise_design(
             cons.append({"type": "ineq", "fun": cf, "jac": cj})
 
         def cb(u):
-            path.append(problem.values(u))
+            path.append(np.array(u))
 
         res = scipy.optimize.minimize(fun, u0, jac=jac, method="SLSQP", bounds=[(0, 1)] * d,
                                       constraints=cons, callback=cb,
                                       options={"maxiter": maxiter, "ftol": 1e-10})
         u = np.clip(res.x, 0.0, 1.0)
         u = _polish(u, cache, problem, _grad_reqs(reqs, chi_bound), margin_scale)
-        path.append(problem.values(u))
+        path.append(u)
         return u, int(res.nit), str(res.message), path
 
     chi_bound = chi_req
@@ -511,7 +512,9 @@ def optimise_design(
             candidates.append(Candidate(
                 start=problem.values(U[i]), values=ev.values, chi=ev.chi, margin=ev.margin,
                 chi_simulation=chi_sim, feasible=short == 0.0, violation=short,
-                iterations=its, evaluations=cache.count, message=msg, path=np.array(path)))
+                iterations=its, evaluations=cache.count, message=msg,
+                path=np.array([problem.values(x) for x in path]),
+                path_chi=np.array([cache(x, gradient=False).chi for x in path])))
         feasible = [c for c in candidates if c.feasible]
         if feasible or not problem.needs_simulation:
             break

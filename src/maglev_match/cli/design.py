@@ -38,8 +38,7 @@ ScatterOpt = Annotated[
 
 def _need_unit(model: str) -> None:
     if check_model(model) != "unit":
-        raise ParameterError("--model", model, "sensitivities and design need model A's "
-                             "index ('unit'); model B has no index yet")
+        raise ParameterError("--model", model, "only 'unit' (model B has no index yet)")
 
 
 def parse_scatter(items: list[str] | None) -> dict[str, float]:

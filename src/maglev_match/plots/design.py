@@ -51,7 +51,7 @@ def design_path_figure(result, title: str = ""):
         ax.plot(x[order], result.grid_chi[order], "o-", color="0.5", label="coarse grid")
         for k, c in enumerate(result.candidates):
             xs = c.path[:, 0]
-            ax.plot(xs, np.full(xs.size, c.chi), ".-", color=f"C{k % 9 + 1}", alpha=0.7,
+            ax.plot(xs, c.path_chi, ".-", color=f"C{k % 9 + 1}", alpha=0.7,
                     label=f"optimiser run {k + 1} ({c.iterations} it.)")
         for b in chi_req:
             ax.axhline(b, color="r", ls="--", label=f"chi >= {b:g}")
