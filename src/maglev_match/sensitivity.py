@@ -80,6 +80,8 @@ __all__ = [
     "engineering_names",
     "derived_map",
     "linearised_spread",
+    "SampledSpread",
+    "sampled_spread",
 ]
 
 Array = Any
@@ -698,3 +700,162 @@ def linearised_spread(sens: IndexSensitivity, scatter: Mapping[str, float]
         parts[name] = abs(r.dchi * r.value * pct / 100.0)
     sd = math.sqrt(sum(v * v for v in parts.values()))
     return {"chi": sens.index.chi, "sd": sd, "contributions": parts}
+
+
+# ---------------------------------------------------------------------------------------
+# sampled spread (Monte Carlo on Dask, resumable)
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SampledSpread:
+    """chi over N parameter sets drawn around ``base`` (independent normal relative
+    scatter per parameter), beside the linearised estimate."""
+
+    n: int
+    chi: np.ndarray  # (n,) NaN where the index failed or the sample was not a valid set
+    samples: np.ndarray  # (n, len(names))
+    names: tuple[str, ...]
+    mean: float
+    sd: float
+    quantiles: dict[str, float]  # "5%", "50%", "95%"
+    failed: int  # samples whose index did not converge
+    invalid: int  # samples outside the parameter rules (not computed)
+    linearised: dict[str, Any] | None = None
+
+    def fraction_below(self, bound: float) -> float:
+        ok = np.isfinite(self.chi)
+        return float(np.mean(self.chi[ok] < bound)) if ok.any() else float("nan")
+
+    def as_json(self) -> dict[str, Any]:
+        return {"n": self.n, "mean": self.mean, "sd": self.sd, "quantiles": self.quantiles,
+                "failed": self.failed, "invalid": self.invalid, "names": list(self.names),
+                "linearised": self.linearised}
+
+
+def _chunk_key(base: Params, scatter: Mapping[str, float], n: int, seed: int,
+               chunk: int) -> str:
+    import json
+
+    d = {"base": {k: v for k, v in sorted(base.as_input_dict().items())},
+         "scatter": dict(sorted(scatter.items())), "n": n, "seed": seed, "chunk": chunk}
+    return json.dumps(d, sort_keys=True, default=float)
+
+
+def _sample(base: Params, scatter: Mapping[str, float], n: int, seed: int) -> np.ndarray:
+    names = tuple(scatter)
+    rng = np.random.default_rng(seed)
+    v0 = np.array([float(getattr(base, k)) for k in names])
+    pct = np.array([scatter[k] for k in names]) / 100.0
+    return v0 * (1.0 + pct * rng.standard_normal((n, len(names))))
+
+
+def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarray
+             ) -> np.ndarray:
+    """chi (no simulation) for each row of sampled values; NaN where the index failed,
+    -inf where the sample breaks a parameter rule. Runs on a Dask worker."""
+    from maglev_match.params import ParameterError, make_params
+
+    out = np.empty(len(rows))
+    for i, r in enumerate(rows):
+        vals = dict(base_values, **{k: float(v) for k, v in zip(names, r, strict=True)})
+        try:
+            p = make_params(vals)
+        except ParameterError:
+            out[i] = -np.inf
+            continue
+        out[i] = matching_index(p, simulate=False).chi
+    return out
+
+
+def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoint: Any, *,
+                   seed: int = 0, chunk: int = 16, resume: bool = False,
+                   workers: int | None = None, scheduler: str | None = None,
+                   progress: Callable[[int, int], None] | None = None,
+                   linearised: dict[str, Any] | None = None) -> SampledSpread:
+    """The distribution of chi over ``n`` samples, chunk by chunk on Dask (the map's worker
+    set-up: single-threaded processes, glibc's malloc thresholds), each chunk saved in
+    ``checkpoint`` as it finishes; with ``resume`` finished chunks are reused (the chunk
+    files carry a key of base, scatter, n and seed, so a resume cannot mix studies).
+    ``workers == 0`` computes in this process."""
+    import os
+    from pathlib import Path
+
+    from maglev_match.params import ParameterError
+
+    if n < 2:
+        raise ParameterError("--monte-carlo", n, "must be at least 2 samples")
+    names = tuple(scatter)
+    X = _sample(base, scatter, n, seed)
+    folder = Path(checkpoint)
+    folder.mkdir(parents=True, exist_ok=True)
+    starts = list(range(0, n, chunk))
+    key0 = _chunk_key(base, scatter, n, seed, chunk)
+    keyfile = folder / "study.json"
+    if resume and keyfile.exists() and keyfile.read_text() != key0:
+        raise ParameterError("--resume", str(folder), "the checkpoint belongs to a different "
+                             "study; remove it or drop --resume")
+    if not resume:
+        for f in folder.glob("chunk_*.npy"):
+            f.unlink()
+    keyfile.write_text(key0)
+
+    def path(a: int) -> Path:
+        return folder / f"chunk_{a:07d}.npy"
+
+    todo = [a for a in starts if not path(a).exists()]
+    done = len(starts) - len(todo)
+    if progress:
+        progress(done, len(starts))
+    base_values = base.as_input_dict()
+    if todo and workers == 0 and scheduler is None:
+        for a in todo:
+            np.save(path(a), mc_chunk(base_values, names, X[a:a + chunk]))
+            done += 1
+            if progress:
+                progress(done, len(starts))
+    elif todo:
+        import dask
+        from dask.distributed import Client, LocalCluster, as_completed
+
+        from maglev_match.maps import (
+            MALLOC_MMAP_THRESHOLD,
+            MALLOC_TRIM_THRESHOLD,
+            SINGLE_THREADED_ENV,
+        )
+
+        cluster = None
+        if scheduler is None:
+            with dask.config.set({
+                "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_":
+                    MALLOC_TRIM_THRESHOLD,
+                "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_":
+                    MALLOC_MMAP_THRESHOLD,
+            }):
+                cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
+                                       threads_per_worker=1, processes=True,
+                                       dashboard_address=None, env=SINGLE_THREADED_ENV)
+            client = Client(cluster)
+        else:
+            client = Client(scheduler)
+        try:
+            futs = {client.submit(mc_chunk, base_values, names, X[a:a + chunk], pure=False,
+                                  retries=2): a for a in todo}
+            for fut in as_completed(futs):
+                np.save(path(futs[fut]), fut.result())
+                done += 1
+                if progress:
+                    progress(done, len(starts))
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    chi = np.concatenate([np.load(path(a)) for a in starts])
+    invalid = int(np.sum(chi == -np.inf))
+    chi = np.where(chi == -np.inf, np.nan, chi)
+    failed = int(np.sum(np.isnan(chi))) - invalid
+    ok = chi[np.isfinite(chi)]
+    q = {f"{int(100 * x)}%": float(np.quantile(ok, x)) if ok.size else float("nan")
+         for x in (0.05, 0.5, 0.95)}
+    return SampledSpread(n=n, chi=chi, samples=X, names=names,
+                         mean=float(np.mean(ok)) if ok.size else float("nan"),
+                         sd=float(np.std(ok, ddof=1)) if ok.size > 1 else float("nan"),
+                         quantiles=q, failed=failed, invalid=invalid, linearised=linearised)
