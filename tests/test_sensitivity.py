@@ -147,3 +147,25 @@ def test_stability_boundary_is_a_zero_of_the_margin(soft):
     assert r.boundary is not None
     st = stability(unit_system(p.replace(kP=r.boundary)))
     assert abs(st.max_real_part) < 1e-9
+
+
+def test_sampled_spread_matches_first_order_and_resumes(soft, tmp_path, monkeypatch):
+    import maglev_match.sensitivity as S
+    from maglev_match.params import ParameterError
+
+    p, sens = soft
+    scatter = {"EI": 0.1, "kD": 0.1}  # small: chi is linear over the spread
+    mc = S.sampled_spread(p, scatter, 4, tmp_path, chunk=2, workers=0,
+                          linearised=linearised_spread(sens, scatter))
+    assert mc.failed == 0 and mc.invalid == 0 and np.isfinite(mc.chi).all()
+    grad = np.array([sens.dchi("EI"), sens.dchi("kD")])
+    x0 = np.array([p.EI, p.kD])
+    first_order = sens.index.chi + (mc.samples - x0) @ grad
+    dev = np.abs(mc.chi - sens.index.chi)
+    np.testing.assert_array_less(np.abs(mc.chi - first_order), 0.02 * dev + 1e-9)
+    calls = []
+    monkeypatch.setattr(S, "mc_chunk", lambda *a: calls.append(a) or np.zeros(2))
+    again = S.sampled_spread(p, scatter, 4, tmp_path, chunk=2, workers=0, resume=True)
+    assert not calls and np.array_equal(again.chi, mc.chi)
+    with pytest.raises(ParameterError, match="--resume"):
+        S.sampled_spread(p, {"EI": 0.2}, 4, tmp_path, chunk=2, workers=0, resume=True)
