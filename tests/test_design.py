@@ -81,7 +81,7 @@ def test_model_a_cheapest_soft_beam_is_rechecked():
 def test_parsing_and_problem_errors():
     assert parse_vary("EI=5e9:4e10") == Variable("EI", 5e9, 4e10)
     assert parse_requirement("margin>=0.2") == Requirement(Quantity.MARGIN, 0.2)
-    for bad in ("EI=4e10:5e9", "EI5e9:4e10", "nope=1:2", "EI=a:b"):
+    for bad in ("EI=4e10:5e9", "EI5e9:4e10", "nope=1:2", "EI=a:b", "k=10:14"):
         with pytest.raises(ParameterError):
             parse_vary(bad)
     for bad in ("chi>5", "size>=3", "chi>=x"):

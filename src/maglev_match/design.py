@@ -38,7 +38,7 @@ import numpy as np
 import scipy.optimize
 
 from maglev_match.matching import MatchingIndex, matching_index
-from maglev_match.params import FIELD_NAMES, ParameterError, Params
+from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError, Params
 from maglev_match.sensitivity import DerivativeStatus, index_sensitivity, system_sensitivity
 
 __all__ = [
@@ -315,6 +315,9 @@ def parse_vary(text: str) -> Variable:
     name, rng = (s.strip() for s in text.split("=", 1))
     if name not in FIELD_NAMES:
         raise ParameterError("--vary", name, "unknown parameter")
+    if name in INTEGER_FIELDS:
+        raise ParameterError("--vary", name, "a whole-number parameter cannot be varied "
+                             "continuously")
     try:
         lo, hi = (float(s) for s in rng.split(":"))
     except ValueError:

@@ -27,7 +27,7 @@ from maglev_match.cli.common import (
     params_from_options,
     print_warnings,
 )
-from maglev_match.params import FIELD_NAMES, ParameterError
+from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
 
 ScatterOpt = Annotated[
     list[str] | None,
@@ -99,6 +99,9 @@ def parse_scatter(items: list[str] | None) -> dict[str, float]:
         name, raw = (s.strip() for s in text.split("=", 1))
         if name not in FIELD_NAMES:
             raise ParameterError("--scatter", name, "unknown parameter")
+        if name in INTEGER_FIELDS:
+            raise ParameterError("--scatter", name, "a whole-number parameter has no "
+                                 "continuous scatter")
         try:
             pct = float(raw.rstrip("%"))
         except ValueError:
@@ -307,6 +310,10 @@ def design_command(
                   + (f", chi_simulation = {idx.chi_simulation:.4g}"
                      if idx.chi_simulation is not None else ""))
     console.print("  active: " + (", ".join(res.active) if res.active else "none"))
+    if goal == Goal.MAXIMIZE and idx.case == "no_cycle_within_limits":
+        console.print("  note: chi is at the ceiling (gap_max - c0) / w0 of the case rule (no "
+                      "unstable cycle within the gap range); it grows further only through "
+                      "w0, so the optimum is not unique")
     console.print(f"  search: {len(res.grid_chi)} grid points, {len(res.candidates)} optimiser "
                   f"runs, {res.iterations} SLSQP iterations, {res.evaluations} index "
                   f"evaluations, {res.seconds:.1f} s")
