@@ -169,3 +169,26 @@ def test_sampled_spread_matches_first_order_and_resumes(soft, tmp_path, monkeypa
     assert not calls and np.array_equal(again.chi, mc.chi)
     with pytest.raises(ParameterError, match="--resume"):
         S.sampled_spread(p, {"EI": 0.2}, 4, tmp_path, chunk=2, workers=0, resume=True)
+
+
+def test_model_a_hopf_point_derivative_matches_finite_differences(soft):
+    p, sens = soft
+    k = unit_system(p).param_index("kD")
+    d = 1e-4 * p.kD
+    hp = matching_index(p.replace(kD=p.kD + d), simulate=False).hopf_value
+    hm = matching_index(p.replace(kD=p.kD - d), simulate=False).hopf_value
+    assert sens.system.hopf_value == pytest.approx(sens.index.hopf_value, rel=1e-10)
+    assert sens.system.dhopf_dp[k] == pytest.approx((hp - hm) / (2 * d), rel=1e-5)
+
+
+def test_unstable_point_has_zero_derivative_and_a_boundary():
+    p = load_preset("turnout-soft").replace(EI=4e10)  # past the Hopf curve
+    sens = index_sensitivity(p)
+    assert sens.index.case == "unstable_equilibrium"
+    assert sens.status == DerivativeStatus.ZERO
+    assert all(r.dchi == 0.0 for r in sens.rows)
+    r = sens.row("EI")
+    assert r.boundary is not None and r.boundary < p.EI
+    st = stability(unit_system(p.replace(EI=r.boundary)))
+    assert abs(st.max_real_part) < 1e-9
+    assert "derivative exactly 0" in r.note
