@@ -192,3 +192,15 @@ def test_unstable_point_has_zero_derivative_and_a_boundary():
     st = stability(unit_system(p.replace(EI=r.boundary)))
     assert abs(st.max_real_part) < 1e-9
     assert "derivative exactly 0" in r.note
+
+
+def test_model_a_derivative_of_the_polynomial_maximum_is_exact_to_1e6(soft):
+    # the index reads h on a fine grid of the cycle (about 1e-8 relative below the
+    # polynomial's maximum, which moves with p); the sensitivities differentiate the
+    # maximum itself, so central differences of that maximum agree much more closely
+    p, sens = soft
+    d = 1e-4 * p.kD
+    sp = index_sensitivity(p.replace(kD=p.kD + d), boundaries=False)
+    sm = index_sensitivity(p.replace(kD=p.kD - d), boundaries=False)
+    fd = (sp.system.h / sp.index.w0 - sm.system.h / sm.index.w0) / (2 * d)
+    assert sens.dchi("kD") == pytest.approx(fd, rel=1e-6)
