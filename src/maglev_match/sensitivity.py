@@ -99,23 +99,40 @@ class DerivativeStatus(StrEnum):
 # ---------------------------------------------------------------------------------------
 # the one place that touches collocation internals
 # ---------------------------------------------------------------------------------------
-def _collocation_system(system: System, orbit: PeriodicOrbit
-                        ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class _Collocation:
+    """What the implicit differentiation needs from the collocation discretisation."""
+
+    A: Any  # sparse Jacobian dF/dY of the bordered system, scaled unknowns
+    dF_dp: np.ndarray  # (size, n_params)
+    S: np.ndarray  # scale of the unknowns: X = S Y
+    idx: np.ndarray  # (NTST, NCOL + 1) node numbers of each mesh interval
+    solve: Callable[[np.ndarray], np.ndarray]  # A^{-1} b (sparse LU, b may have columns)
+    basis: Callable[[np.ndarray], np.ndarray]  # local Lagrange values (len(s), NCOL + 1)
+
+
+def _collocation_system(system: System, orbit: PeriodicOrbit) -> _Collocation:
     """The collocation system of a converged ``orbit`` at fixed parameters: its sparse
-    Jacobian dF/dY (scaled unknowns Y = X / S, X = (nodal profile, T, lambda)) and
-    dF/dp (size, n_params) for every parameter of ``system``.
+    Jacobian dF/dY (scaled unknowns Y = X / S, X = (nodal profile, T, lambda)), factorised,
+    and dF/dp (size, n_params) for every parameter of ``system``.
 
-    Rows: collocation at the Gauss points (NTST NCOL n), periodicity (n), the integral phase
-    condition against the orbit itself (1), and a last row fixing lambda (one parameter
-    taken as the bordered unknown; its value does not move, so dF/dp carries the direct
-    parameter derivative in the collocation rows only, the other rows are independent of p).
+    Rows (de Boor & Swartz 1973; Doedel's AUTO notes):
 
-    Returns (A, dF_dp, S, Uc_index) with ``S`` the unknowns' scale. This is the only
-    function that uses :mod:`maglev_match.dynamics.cycles` internals (``_Problem``,
-    ``_interval_index``) and the collocation tables; re-point it when they move.
+        [ collocation at the Gauss points  (NTST NCOL n) ]   u'(z) - T f(u(z), p) = 0
+        [ periodicity                      (n)           ]   u(1) - u(0) = 0
+        [ integral phase condition         (1)           ]   against the orbit itself
+        [ lambda fixed                     (1)           ]   one parameter as unknown
+
+    The bordered unknown lambda does not move (last row), so dF/dp carries the direct
+    parameter derivative, -T h_j f_p(u(z), p) / scale, in the collocation rows only.
+
+    This is the ONLY function that uses collocation internals (``_Problem``,
+    ``_interval_index``, ``_factorize`` of :mod:`maglev_match.dynamics.cycles`; ``_tables``
+    and ``_lagrange`` of :mod:`maglev_match.dynamics.collocation`): re-point it when they
+    move.
     """
-    from maglev_match.dynamics.collocation import _tables
-    from maglev_match.dynamics.cycles import _interval_index, _Problem
+    from maglev_match.dynamics.collocation import _lagrange, _tables
+    from maglev_match.dynamics.cycles import _factorize, _interval_index, _Problem
 
     p = np.asarray(orbit.p, float)
     m, ntst, n = orbit.ncol, orbit.ntst, system.dim
@@ -127,7 +144,6 @@ def _collocation_system(system: System, orbit: PeriodicOrbit
     last_row[-1] = 1.0
     phase = prob.phase_row(orbit.states)
     _, A, _ = prob.evaluate(Y, phase, orbit.states, last_row, float(Y[-1]))
-    # dF/dp: collocation rows (dU - T f(u(z), p)) h_j / scale  ->  -T h_j f_p / scale
     _, _, _, L, _ = _tables(m)
     idx = _interval_index(ntst, m)
     Uc = np.einsum("lk,jkn->jln", L, orbit.states[idx])  # (ntst, m, n) at Gauss points
@@ -139,7 +155,10 @@ def _collocation_system(system: System, orbit: PeriodicOrbit
     rows = (-orbit.period * h[:, None, None, None] * fp / sc[None, None, :, None])
     dF = np.zeros((prob.size, p.size))
     dF[: ntst * m * n] = rows.reshape(ntst * m * n, p.size)
-    return A, dF, prob.S(), idx
+    lu = _factorize(A)
+    nodes = np.linspace(0.0, 1.0, m + 1)
+    return _Collocation(A=A, dF_dp=dF, S=prob.S(), idx=idx, solve=lu.solve,
+                        basis=lambda s: _lagrange(nodes, np.atleast_1d(s))[0])
 
 
 @cache
@@ -163,12 +182,6 @@ def _observable_derivs(g: Callable) -> Callable:
 @cache
 def _observable_batch(g: Callable) -> Callable:
     return jax.jit(jax.vmap(lambda x, p: jnp.atleast_1d(g(x, p)), (0, None)))
-
-
-def _lagrange_at(m: int, loc: np.ndarray) -> np.ndarray:
-    from maglev_match.dynamics.collocation import _lagrange
-
-    return _lagrange(np.linspace(0.0, 1.0, m + 1), np.atleast_1d(loc))[0]
 
 
 # ---------------------------------------------------------------------------------------
@@ -268,11 +281,9 @@ def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str
                         ) -> tuple[float, np.ndarray, float, float]:
     """h = max over the orbit of ``observable`` and dh/dp for every parameter (implicit
     differentiation + envelope theorem). Returns (h, dh_dp, t_star, relative residual)."""
-    A, dF, S, idx = _collocation_system(system, orbit)
-    from maglev_match.dynamics.cycles import _factorize  # sparse LU of the Newton corrector
-
-    lu = _factorize(A)
-    dY = lu.solve(-dF)
+    col = _collocation_system(system, orbit)
+    A, dF, S, idx, basis = col.A, col.dF_dp, col.S, col.idx, col.basis
+    dY = col.solve(-dF)
     resid = float(np.linalg.norm(A @ dY + dF) / max(np.linalg.norm(dF), 1e-300))
     dX = dY * S[:, None]
     n, m, ntst = system.dim, orbit.ncol, orbit.ntst
@@ -283,7 +294,7 @@ def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str
     pj = jnp.asarray(p)
     # coarse pass over every interval, then Brent's method on the polynomial pieces around it
     ncoarse = 8 * m + 1
-    Lc = _lagrange_at(m, np.linspace(0.0, 1.0, ncoarse))
+    Lc = basis(np.linspace(0.0, 1.0, ncoarse))
     nodes = orbit.states[idx]  # (ntst, m+1, n)
     Xc = np.einsum("sk,jkn->jsn", Lc, nodes).reshape(-1, n)
     vals = np.asarray(_observable_batch(g)(jnp.asarray(Xc), pj)).reshape(ntst, ncoarse, -1)
@@ -291,7 +302,7 @@ def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str
     gb = _observable_batch(g)
 
     def neg(loc: float, j: int) -> float:
-        x = _lagrange_at(m, np.array([loc]))[0] @ nodes[j]
+        x = basis(np.array([loc]))[0] @ nodes[j]
         return -float(np.asarray(gb(jnp.asarray(x[None]), pj))[0, comp])
 
     best = (np.inf, 0, 0.0)
@@ -303,7 +314,7 @@ def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str
             if v < best[0]:
                 best = (v, j, loc)
     _, j, loc = best
-    ell = _lagrange_at(m, np.array([loc]))[0]  # (m+1,)
+    ell = basis(np.array([loc]))[0]  # (m+1,)
     x_star = ell @ nodes[j]
     du = np.einsum("k,knq->nq", ell, dU[idx[j]])  # (n, n_params)
     val, gx, gp = (np.asarray(a) for a in _observable_derivs(g)(jnp.asarray(x_star), pj))
