@@ -147,6 +147,14 @@ def test_stability_boundary_is_a_zero_of_the_margin(soft):
     assert r.boundary is not None
     st = stability(unit_system(p.replace(kP=r.boundary)))
     assert abs(st.max_real_part) < 1e-9
+    # the branch's gap maximum does not depend on gap_max, so the cycle-limit boundary in
+    # gap_max is exact: the case changes there. It lies above c0 + h, because the cycle is
+    # larger on the way from the Hopf point than at the design point.
+    g = sens.row("gap_max").limit_boundary
+    assert g > p.c0 + sens.index.h
+    assert matching_index(p.replace(gap_max=g * 1.001), simulate=False).case == "unstable_cycle"
+    assert matching_index(p.replace(gap_max=g * 0.999), simulate=False).case == \
+        "no_cycle_within_limits"
 
 
 def test_sampled_spread_matches_first_order_and_resumes(soft, tmp_path, monkeypatch):

@@ -65,7 +65,11 @@ from maglev_match import jax_setup  # noqa: F401  (float64)
 from maglev_match.dynamics.cycles import PeriodicOrbit
 from maglev_match.dynamics.equilibria import find_equilibrium
 from maglev_match.dynamics.system import System
-from maglev_match.matching import MatchingIndex, matching_index
+from maglev_match.matching import (
+    MatchingIndex,
+    matching_index,
+    search_ranges,
+)
 from maglev_match.models.unit import PARAM_NAMES as MODEL_A_PARAMS
 from maglev_match.models.unit import unit_system
 from maglev_match.params import PARAMETER_DOCS, Params
@@ -225,6 +229,9 @@ class ParameterSensitivity:
     dhopf_distance: float | None  # d (relative Hopf distance) / d p
     boundary: float | None = None  # value of p at the nearest stability boundary
     boundary_relative: float | None = None  # (boundary - p) / p
+    # first-order value of p where the bounding cycle's gap maximum reaches gap_max - c0
+    # (the boundary between cases unstable_cycle and no_cycle_within_limits)
+    limit_boundary: float | None = None
     note: str = ""
 
 
@@ -277,10 +284,11 @@ class IndexSensitivity:
 # ---------------------------------------------------------------------------------------
 # system level
 # ---------------------------------------------------------------------------------------
-def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str
-                        ) -> tuple[float, np.ndarray, float, float]:
-    """h = max over the orbit of ``observable`` and dh/dp for every parameter (implicit
-    differentiation + envelope theorem). Returns (h, dh_dp, t_star, relative residual)."""
+def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str,
+                        sign: float = 1.0) -> tuple[float, np.ndarray, float, float]:
+    """h = max over the orbit of ``observable`` (min with ``sign`` = -1) and dh/dp for every
+    parameter (implicit differentiation + envelope theorem). Returns (h, dh_dp, t_star,
+    relative residual of the implicit solve)."""
     col = _collocation_system(system, orbit)
     A, dF, S, idx, basis = col.A, col.dF_dp, col.S, col.idx, col.basis
     dY = col.solve(-dF)
@@ -297,13 +305,14 @@ def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str
     Lc = basis(np.linspace(0.0, 1.0, ncoarse))
     nodes = orbit.states[idx]  # (ntst, m+1, n)
     Xc = np.einsum("sk,jkn->jsn", Lc, nodes).reshape(-1, n)
-    vals = np.asarray(_observable_batch(g)(jnp.asarray(Xc), pj)).reshape(ntst, ncoarse, -1)
+    vals = sign * np.asarray(_observable_batch(g)(jnp.asarray(Xc), pj)).reshape(ntst, ncoarse,
+                                                                                 -1)
     j0, _, comp = np.unravel_index(int(np.argmax(vals)), vals.shape)
     gb = _observable_batch(g)
 
     def neg(loc: float, j: int) -> float:
         x = basis(np.array([loc]))[0] @ nodes[j]
-        return -float(np.asarray(gb(jnp.asarray(x[None]), pj))[0, comp])
+        return -sign * float(np.asarray(gb(jnp.asarray(x[None]), pj))[0, comp])
 
     best = (np.inf, 0, 0.0)
     for j in ((j0 - 1) % ntst, j0, (j0 + 1) % ntst):
@@ -322,6 +331,61 @@ def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str
     mesh = np.asarray(orbit.mesh)
     t_star = float(mesh[j] + loc * (mesh[j + 1] - mesh[j]))
     return float(val[comp]), dh, t_star, resid
+
+
+def branch_extremes(system: System, p: np.ndarray, search: Mapping[str, tuple[float, float]],
+                    observable: str = "gap_deviation") -> dict[str, tuple[float, np.ndarray,
+                                                                        float]] | None:
+    """The largest and the smallest value of ``observable`` over the whole branch of the
+    bounding cycle, from its Hopf point to the design point (continued without limits), and
+    their derivatives by every parameter.
+
+    The index's case rule looks at that whole branch: it says ``no_cycle_within_limits`` as
+    soon as the branch touches a limit anywhere before the design point, so the case boundary
+    is where one of these two extremes reaches its limit. An extreme inside the branch is
+    located by Brent's method on the branch parameter (cycles re-solved by
+    :func:`~maglev_match.dynamics.cycles.correct_cycle`); its derivative by the other
+    parameters then follows from the envelope theorem (d/d lambda = 0 there).
+
+    Returns {"max": (value, d/dp, lambda*), "min": (...)} or None when no surrounding cycle
+    is found without limits either.
+    """
+    from maglev_match.dynamics.basin import bounding_cycle
+    from maglev_match.dynamics.cycles import correct_cycle
+    from maglev_match.matching import cycle_settings as cs
+
+    bound = bounding_cycle(system, p, search, limits=None, ntst=cs.ntst, ncol=cs.ncol,
+                           max_steps=cs.max_steps)
+    if bound.case != "unstable_cycle" or not bound.branches:
+        return None
+    br = bound.branches[-1]
+    pts = [pt for pt in br.points if pt.converged]
+    out: dict[str, tuple[float, np.ndarray, float]] = {}
+    for key, sign, col in (("max", 1.0, 0), ("min", -1.0, 1)):
+        vals = np.array([sign * pt.extrema[observable][col] for pt in pts])
+        j = int(np.argmax(vals))
+        pt = pts[j]
+        if 0 < j < len(pts) - 1:
+            lo, hi = sorted((pts[j - 1].value, pts[j + 1].value))
+            solved: dict[float, Any] = {}
+
+            def neg(lam: float, j: int = j, sign: float = sign, col: int = col,
+                    solved: dict = solved) -> float:
+                r = correct_cycle(system, pts[j].orbit, br.param, lam,
+                                  observables=[observable])
+                if not r.converged or r.point is None:
+                    return math.inf
+                solved[lam] = r.point
+                return -sign * r.point.extrema[observable][col]
+
+            res = scipy.optimize.minimize_scalar(
+                neg, bounds=(lo, hi), method="bounded",
+                options={"xatol": 1e-9 * max(abs(pt.value), 1e-12)})
+            if float(res.x) in solved:
+                pt = solved[float(res.x)]
+        val, dval, _, _ = _cycle_h_derivative(system, pt.orbit, observable, sign)
+        out[key] = (val, dval, float(pt.value))
+    return out
 
 
 @cache
@@ -592,6 +656,38 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     bounds: dict[str, tuple[float | None, str]] = {}
     if boundaries:
         bounds = _stability_boundaries(system, fmap, q, names)
+    # the other case boundary: the branch's extreme gap deviation reaching a gap limit
+    limit_b = np.full(len(names), np.nan)
+    limit_note = ""
+    if boundaries and status in (DerivativeStatus.EXACT, DerivativeStatus.RULE):
+        ext = branch_extremes(system, np.asarray(pm), search_ranges(params))
+        if ext is None:
+            limit_note = "no surrounding cycle without the gap limit either: no cycle-limit " \
+                         "boundary"
+        else:
+            (hi_v, hi_d, hi_l), (lo_v, lo_d, lo_l) = ext["max"], ext["min"]
+            c0_k = np.array([1.0 if n == "c0" else 0.0 for n in names])
+            # margins to the limits of the gap deviation: (gap_max - c0) - max, min - (gap_min - c0)
+            margins = [(float(hmax) - hi_v, Hq - hi_d @ Pq),
+                       (lo_v - (params.gap_min - params.c0), lo_d @ Pq + c0_k)]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                deltas = np.array([np.where(d != 0, -m / d, np.nan) for m, d in margins])
+            short = [i for i, (m, _) in enumerate(margins) if m < 0]
+            if short:  # case rule in force: every short margin must be made good
+                dd = deltas[short]
+                same = np.all(np.sign(dd) == np.sign(dd[0]), axis=0)
+                pick = np.where(same, dd[np.argmax(np.abs(np.nan_to_num(dd)), axis=0),
+                                         np.arange(len(names))], np.nan)
+            else:  # the nearest of the two contacts
+                pick = deltas[np.argmin(np.abs(np.nan_to_num(deltas, nan=np.inf)), axis=0),
+                              np.arange(len(names))]
+            limit_b = q + pick
+            limit_note = (f"along the cycle branch from the Hopf point to the design point the "
+                          f"gap deviation reaches {hi_v * 1e3:.4g} mm (at {idx.hopf_param} = "
+                          f"{hi_l:.5g}) and {lo_v * 1e3:.4g} mm (at {lo_l:.5g}); the limits are "
+                          f"{float(hmax) * 1e3:.4g} mm and "
+                          f"{(params.gap_min - params.c0) * 1e3:.4g} mm. 'cycle-limit "
+                          "boundary': where the first of them is reached, to first order")
     rows = []
     for i, n in enumerate(names):
         note = ""
@@ -610,16 +706,8 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
             dchi=float(dchi[i]), elasticity=float(ela), dmargin=float(dmargin[i]),
             dhopf_distance=None if ddist is None else float(ddist[i]),
             boundary=b, boundary_relative=None if b is None else (b - q[i]) / q[i], note=note,
+            limit_boundary=float(limit_b[i]) if np.isfinite(limit_b[i]) else None,
         ))
-    limit_note = ""
-    if status == DerivativeStatus.EXACT:
-        gap_room = float(hmax) - idx.h
-        limit_note = (f"the cycle's gap maximum is {gap_room * 1e3:.3g} mm below the limit "
-                      "gap_max - c0; to first order a parameter reaches that case boundary "
-                      "after a change of (gap_max - c0 - h) / (dh/dp)")
-    elif status == DerivativeStatus.RULE:
-        limit_note = ("h is set by the gap limit (no cycle within it); where the surrounding "
-                      "cycle would re-enter the range is not computed")
     return IndexSensitivity(index=idx, status=status, rows=tuple(rows), system=sens,
                             limit_boundary_note=limit_note, warnings=tuple(warnings))
 

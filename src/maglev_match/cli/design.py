@@ -201,12 +201,14 @@ def sensitivity_command(
         console.print(f"[bold red]numerical failure:[/] {idx.message}")
     table = Table(show_edge=False, header_style="bold")
     for col in ("parameter", "value", "unit", "d chi/dp", "elasticity", "d margin/dp",
-                "d hopf dist/dp", "stability boundary"):
+                "d hopf dist/dp", "stability boundary", "cycle-limit boundary"):
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
     for r in sens.sorted_rows():
         b = ("-" if r.boundary is None else f"{r.boundary:.4g} ({r.boundary_relative:+.0%})")
+        lb = ("-" if r.limit_boundary is None or r.limit_boundary <= 0 else
+              f"{r.limit_boundary:.4g} ({r.limit_boundary / r.value - 1:+.0%})")
         table.add_row(r.name, _fmt(r.value), r.unit, _fmt(r.dchi), _fmt(r.elasticity, "+.3f"),
-                      _fmt(r.dmargin), _fmt(r.dhopf_distance), b)
+                      _fmt(r.dmargin), _fmt(r.dhopf_distance), b, lb)
     console.print(table)
     if sens.limit_boundary_note:
         console.print(f"  note: {sens.limit_boundary_note}")
