@@ -35,9 +35,13 @@ Three layers, each exact to round-off on the discretised problem:
 Where h is set by a case rule the derivative is not a cycle derivative:
 ``unstable_equilibrium`` gives chi = 0 on an open set, so its derivative is exactly zero;
 ``no_cycle_within_limits`` gives h = gap_max - c0, so h moves only with those two values and
-chi only through w0; a failed continuation leaves it undefined. For each parameter the
-distance to the nearest stability boundary (max Re lambda = 0) is then solved by Newton's
-method along that parameter with the exact slope above.
+chi only through w0; a failed continuation leaves it undefined. For each parameter two case
+boundaries are given: the stability boundary (max Re lambda = 0), bracketed by a scan and
+solved by Newton's method with the exact slope above; and, to first order, the cycle-limit
+boundary between ``unstable_cycle`` and ``no_cycle_within_limits``, where the largest (or
+smallest) gap deviation over the whole cycle branch from the Hopf point to the design point
+reaches a gap limit (the extreme inside the branch by Brent's method, its derivative by the
+envelope theorem).
 
 The maglev layer (:func:`index_sensitivity`) chains these model-parameter derivatives with
 exact derivatives of the derived values omega1 = (pi/L)^2 sqrt(EI/mbar),
