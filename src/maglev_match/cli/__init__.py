@@ -32,7 +32,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-COMMAND_MODULES = ("stability", "hopf", "cycles", "simulate", "index", "report")
+COMMAND_MODULES = ("stability", "hopf", "cycles", "simulate", "index", "report", "design")
 _here = Path(__file__).parent
 for _name in COMMAND_MODULES:
     if (_here / f"{_name}.py").exists():

@@ -1,0 +1,339 @@
+"""`maglev-match sensitivity` (d chi / d p for every parameter) and `maglev-match design`
+(the cheapest beam or the best gains meeting requirements on chi, the margin and
+chi_simulation)."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from maglev_match.cli import app
+from maglev_match.cli.common import (
+    DEFAULT_PRESET_NAME,
+    ConfigOpt,
+    JsonOpt,
+    ModelOpt,
+    OutOpt,
+    PresetOpt,
+    SetOpt,
+    check_model,
+    console,
+    console_err,
+    emit_json,
+    output_path,
+    params_from_options,
+    print_warnings,
+)
+from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
+
+ScatterOpt = Annotated[
+    list[str] | None,
+    typer.Option("--scatter", help="NAME=PCT: relative standard deviation of a parameter "
+                 "(repeatable); prints the linearised spread of chi."),
+]
+
+
+McOpt = Annotated[
+    int | None,
+    typer.Option("--monte-carlo", help="N: also sample chi at N parameter sets drawn with "
+                 "the --scatter spreads (Dask, resumable), beside the linearised estimate."),
+]
+WorkersOpt = Annotated[
+    int | None, typer.Option("--workers", help="Local Dask workers for --monte-carlo "
+                             "(default: all cores; 0: none).")]
+ResumeOpt = Annotated[bool, typer.Option("--resume", help="Reuse finished Monte Carlo "
+                                         "chunks in the output folder.")]
+SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed of the Monte Carlo samples.")]
+
+
+def _monte_carlo(params, scatter: dict[str, float], n: int | None, spread: dict | None,
+                 folder, workers: int | None, resume: bool, seed: int):
+    if n is None:
+        return None
+    if not scatter:
+        raise ParameterError("--monte-carlo", n, "needs at least one --scatter NAME=PCT")
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from maglev_match.sensitivity import sampled_spread
+
+    with Progress("[progress.description]{task.description}", BarColumn(),
+                  MofNCompleteColumn(), TimeElapsedColumn(), console=console_err,
+                  transient=True) as prog:
+        task = prog.add_task(f"Monte Carlo, {n} samples", total=None)
+        return sampled_spread(params, scatter, n, folder / "monte-carlo", seed=seed,
+                              resume=resume, workers=workers, linearised=spread,
+                              progress=lambda d, t: prog.update(task, completed=d, total=t))
+
+
+def _print_sampled(mc, bound: float | None = None) -> None:
+    if mc is None:
+        return
+    q = mc.quantiles
+    console.print(f"  sampled ({mc.n} sets): chi mean {mc.mean:.4g}, sd {mc.sd:.3g}, 5% "
+                  f"{q['5%']:.4g}, median {q['50%']:.4g}, 95% {q['95%']:.4g}"
+                  + (f"; {mc.fraction_below(bound):.1%} below chi = {bound:g}"
+                     if bound is not None else ""))
+    if mc.linearised is not None:
+        console.print(f"  linearised vs sampled sd: {mc.linearised['sd']:.3g} vs {mc.sd:.3g}"
+                      " (they differ where chi is not linear over the spread: case changes, "
+                      "the Hopf curve)")
+    if mc.failed or mc.invalid:
+        console.print(f"  [yellow]{mc.failed} samples failed (index not converged), "
+                      f"{mc.invalid} broke a parameter rule; both left out[/]")
+
+
+def _need_unit(model: str) -> None:
+    if check_model(model) != "unit":
+        raise ParameterError("--model", model, "only 'unit' (model B has no index yet)")
+
+
+def parse_scatter(items: list[str] | None) -> dict[str, float]:
+    """NAME=PCT pairs -> {name: percent}."""
+    out: dict[str, float] = {}
+    for text in items or []:
+        if "=" not in text:
+            raise ParameterError("--scatter", text, "expected NAME=PCT, e.g. EI=5")
+        name, raw = (s.strip() for s in text.split("=", 1))
+        if name not in FIELD_NAMES:
+            raise ParameterError("--scatter", name, "unknown parameter")
+        if name in INTEGER_FIELDS:
+            raise ParameterError("--scatter", name, "a whole-number parameter has no "
+                                 "continuous scatter")
+        try:
+            pct = float(raw.rstrip("%"))
+        except ValueError:
+            raise ParameterError("--scatter", text, "the percentage must be a number") from None
+        if not (math.isfinite(pct) and pct >= 0):
+            raise ParameterError("--scatter", text, "the percentage must be >= 0")
+        out[name] = pct
+    return out
+
+
+def _spread(sens, scatter: dict[str, float]) -> dict | None:
+    if not scatter:
+        return None
+    from maglev_match.sensitivity import linearised_spread
+
+    for name in scatter:
+        try:
+            sens.row(name)
+        except KeyError:
+            raise ParameterError("--scatter", name, "has no row in the sensitivity table "
+                                 "(a derived value: scatter its beam parameters)") from None
+    return linearised_spread(sens, scatter)
+
+
+def _print_spread(spread: dict | None) -> None:
+    if spread is None:
+        return
+    parts = ", ".join(f"{k} {v:.3g}" for k, v in spread["contributions"].items())
+    console.print(f"  linearised spread: chi = {spread['chi']:.4g} +- {spread['sd']:.3g} "
+                  f"(one standard deviation; contributions {parts})")
+
+
+def _fmt(v: float | None, spec: str = ".4g") -> str:
+    if v is None or not math.isfinite(v):
+        return "-"
+    return format(v, spec)
+
+
+@app.command("sensitivity")
+def sensitivity_command(
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    model: ModelOpt = "unit",
+    boundaries: Annotated[bool, typer.Option(
+        "--boundaries/--no-boundaries",
+        help="Also solve each parameter's value at the stability boundary.")] = True,
+    scatter: ScatterOpt = None,
+    monte_carlo: McOpt = None,
+    workers: WorkersOpt = None,
+    resume: ResumeOpt = False,
+    seed: SeedOpt = 0,
+    out: OutOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Exact d chi / d p, the elasticity (p / chi) d chi / d p and the margin's sensitivity
+    for every parameter of model A, sorted by magnitude, with a tornado figure."""
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.design import tornado_figure
+    from maglev_match.sensitivity import DerivativeStatus, index_sensitivity
+
+    _need_unit(model)
+    params = params_from_options(preset, config, set_)
+    sc = parse_scatter(scatter)
+    with console_err.status("computing the index and its sensitivities ..."):
+        sens = index_sensitivity(params, boundaries=boundaries)
+    spread = _spread(sens, sc)
+    folder = output_path(out, f"sensitivity-{preset}")
+    figs = save_figure(tornado_figure(sens), folder / "tornado")
+    mc = _monte_carlo(params, sc, monte_carlo, spread, folder, workers, resume, seed)
+    if json_out:
+        data = sens.as_json()
+        data["figures"] = [str(f) for f in figs]
+        data["spread"] = spread
+        data["monte_carlo"] = None if mc is None else mc.as_json()
+        emit_json(data)
+        return
+    idx = sens.index
+    console.print(f"[bold]maglev-match sensitivity[/] — preset {preset}"
+                  + (f", config {config}" if config else "")
+                  + (f", set {' '.join(set_)}" if set_ else ""))
+    console.print(f"  chi = {idx.chi:.5g} ({idx.case}), h = {idx.h * 1e3:.4g} mm, "
+                  f"w0 = {idx.w0 * 1e3:.4g} mm, margin = {-idx.max_real_part:.4g} 1/s"
+                  + (f", Hopf point {idx.hopf_param} = {idx.hopf_value:.6g} "
+                     f"({idx.hopf_distance:.1%} away)" if idx.hopf_param else ""))
+    status_text = {
+        DerivativeStatus.EXACT: "exact: implicit differentiation of the converged unstable "
+                                "cycle",
+        DerivativeStatus.ZERO: "zero: the equilibrium is unstable, chi = 0 on a whole "
+                               "neighbourhood",
+        DerivativeStatus.RULE: "case rule: h = gap_max - c0, chi moves only through w0 "
+                               "(and gap_max, c0)",
+        DerivativeStatus.UNDEFINED: "undefined: the index did not converge",
+    }[sens.status]
+    console.print(f"  derivatives: {status_text}")
+    if sens.status == DerivativeStatus.UNDEFINED:
+        console.print(f"[bold red]numerical failure:[/] {idx.message}")
+    table = Table(show_edge=False, header_style="bold")
+    for col in ("parameter", "value", "unit", "d chi/dp", "elasticity", "d margin/dp",
+                "d hopf dist/dp", "stability boundary", "cycle-limit boundary"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    for r in sens.sorted_rows():
+        b = ("-" if r.boundary is None else f"{r.boundary:.4g} ({r.boundary_relative:+.0%})")
+        lb = ("-" if r.limit_boundary is None or r.limit_boundary <= 0 else
+              f"{r.limit_boundary:.4g} ({r.limit_boundary / r.value - 1:+.0%})")
+        table.add_row(r.name, _fmt(r.value), r.unit, _fmt(r.dchi), _fmt(r.elasticity, "+.3f"),
+                      _fmt(r.dmargin), _fmt(r.dhopf_distance), b, lb)
+    console.print(table)
+    if sens.limit_boundary_note:
+        console.print(f"  note: {sens.limit_boundary_note}")
+    _print_spread(spread)
+    _print_sampled(mc)
+    console.print(f"  figure: {', '.join(str(f) for f in figs)}")
+    print_warnings(sens.warnings + idx.warnings)
+
+
+@app.command("design")
+def design_command(
+    vary: Annotated[list[str], typer.Option("--vary", help="NAME=LO:HI (repeatable), e.g. "
+                                            "EI=5e9:4e10")],
+    minimize: Annotated[str | None, typer.Option("--minimize", help="A varied parameter to "
+                                                 "make as small as possible.")] = None,
+    maximize: Annotated[str | None, typer.Option("--maximize", help="'chi'.")] = None,
+    require: Annotated[list[str] | None, typer.Option(
+        "--require", help="chi>=X, margin>=Y (1/s) or chi_simulation>=Z (repeatable).")] = None,
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    model: ModelOpt = "unit",
+    grid: Annotated[int | None, typer.Option("--grid", help="Start-grid points per varied "
+                                             "parameter (default 9 for one, 5 for two).")] = None,
+    starts: Annotated[int, typer.Option("--starts", help="Optimiser runs.")] = 2,
+    scatter: ScatterOpt = None,
+    monte_carlo: McOpt = None,
+    workers: WorkersOpt = None,
+    resume: ResumeOpt = False,
+    seed: SeedOpt = 0,
+    out: OutOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """The cheapest design (or the largest chi) meeting the requirements: SLSQP with exact
+    gradients from several grid starts, every candidate re-checked by the full index."""
+    from maglev_match.design import (
+        DesignProblem,
+        DesignStatus,
+        Goal,
+        MaglevEvaluator,
+        optimise_design,
+        parse_requirement,
+        parse_vary,
+    )
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.design import design_path_figure
+
+    _need_unit(model)
+    if (minimize is None) == (maximize is None):
+        raise ParameterError("--minimize/--maximize", minimize or maximize,
+                             "give exactly one of them")
+    if starts < 1:
+        raise ParameterError("--starts", starts, "must be at least 1")
+    if grid is not None and grid < 2:
+        raise ParameterError("--grid", grid, "must be at least 2")
+    variables = tuple(parse_vary(v) for v in vary)
+    reqs = tuple(parse_requirement(r) for r in require or [])
+    goal = Goal.MINIMIZE if minimize is not None else Goal.MAXIMIZE
+    problem = DesignProblem(variables, goal, minimize or maximize or "", reqs)
+    base = params_from_options(preset, config, set_)
+    for var in variables:  # both ends must be valid parameter values
+        base.replace(**{var.name: var.lo})
+        base.replace(**{var.name: var.hi})
+    sc = parse_scatter(scatter)
+    evaluator = MaglevEvaluator(base, problem.names)
+    with console_err.status("searching ...") as st:
+        res = optimise_design(problem, evaluator, grid=grid, starts=starts,
+                              progress=lambda s: st.update(s))
+    spread = None
+    design_params = evaluator.params([res.values[n] for n in problem.names])
+    if sc:
+        from maglev_match.sensitivity import index_sensitivity
+
+        spread = _spread(index_sensitivity(design_params, res.index, boundaries=False), sc)
+    folder = output_path(out, "design-" + "-".join(problem.names))
+    figs = save_figure(design_path_figure(res), folder / "design-path")
+    mc = _monte_carlo(design_params, sc, monte_carlo, spread, folder, workers, resume, seed)
+    chi_req = next((r.bound for r in reqs if r.quantity == "chi"), None)
+    if json_out:
+        data = res.as_json()
+        data["figures"] = [str(f) for f in figs]
+        data["spread"] = spread
+        data["monte_carlo"] = None if mc is None else dict(
+            mc.as_json(), fraction_below_requirement=None if chi_req is None
+            else mc.fraction_below(chi_req))
+        emit_json(data)
+        return
+    idx = res.index
+    console.print(f"[bold]maglev-match design[/] — preset {preset}: {goal} {problem.objective}"
+                  + (" subject to " + ", ".join(str(r) for r in reqs) if reqs else ""))
+    ok = res.status == DesignStatus.FEASIBLE
+    console.print(("  [bold green]feasible[/]: " if ok else "  [bold red]no feasible design"
+                   "[/]: ") + res.message)
+    for n, v in res.values.items():
+        var = next(x for x in variables if x.name == n)
+        console.print(f"  [bold]{n} = {v:.6g}[/] (range {var.lo:g} .. {var.hi:g})")
+    console.print(f"  full index there: chi = {idx.chi:.5g} ({idx.case}), h = "
+                  f"{idx.h * 1e3:.4g} mm, w0 = {idx.w0 * 1e3:.4g} mm, margin = "
+                  f"{-idx.max_real_part:.4g} 1/s, omega1 = {idx.omega1:.5g} rad/s, sigma = "
+                  f"{idx.sigma:.4g} 1/kg"
+                  + (f", chi_simulation = {idx.chi_simulation:.4g}"
+                     if idx.chi_simulation is not None else ""))
+    console.print("  active: " + (", ".join(res.active) if res.active else "none"))
+    if goal == Goal.MAXIMIZE and idx.case == "no_cycle_within_limits":
+        console.print("  note: chi is at the ceiling (gap_max - c0) / w0 of the case rule (no "
+                      "unstable cycle within the gap range); it grows further only through "
+                      "w0, so the optimum is not unique")
+    console.print(f"  search: {len(res.grid_chi)} grid points, {len(res.candidates)} optimiser "
+                  f"runs, {res.iterations} SLSQP iterations, {res.evaluations} index "
+                  f"evaluations, {res.seconds:.1f} s")
+    for k, c in enumerate(res.candidates, 1):
+        d = ", ".join(f"{n} = {v:.5g}" for n, v in zip(problem.names, c.values, strict=True))
+        console.print(f"    run {k}: {d}: chi = {c.chi:.5g}, margin = {c.margin:.4g}"
+                      + (f", chi_simulation = {c.chi_simulation:.4g}"
+                         if c.chi_simulation is not None else "")
+                      + (" (meets the requirements)" if c.feasible
+                         else f" (misses by {c.violation:.2%})") + f"; {c.message}")
+    if not idx.converged:
+        console.print(f"[bold red]numerical failure at the design:[/] {idx.message}")
+    _print_spread(spread)
+    _print_sampled(mc, chi_req)
+    console.print(f"  figure: {', '.join(str(f) for f in figs)}")
+    print_warnings(res.warnings + idx.warnings)
+    if not ok:
+        raise typer.Exit(1)
+
+
+__all__ = ["sensitivity_command", "design_command", "parse_scatter"]

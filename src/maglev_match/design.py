@@ -1,0 +1,632 @@
+"""The inverse problem: the cheapest beam or the best gains that meet requirements on the
+matching index chi, the stability margin and chi_simulation.
+
+Formulation (scaled variables u in [0, 1]^d, v = lo + u (hi - lo) for each varied parameter):
+
+    minimise  v_obj            (``--minimize NAME``)   or   -chi(v)   (``--maximize chi``)
+    subject to  chi(v) >= X,   margin(v) = -max Re lambda(v) >= Y,   lo <= v <= hi,
+
+solved by sequential least-squares quadratic programming (SLSQP; Kraft 1988, as in
+``scipy.optimize``) with the exact gradients of :mod:`maglev_match.sensitivity`. chi is not
+convex: it rises, peaks and falls to 0 at the Hopf curve, and it is identically 0 beyond it.
+So the optimiser starts from the best points of a coarse grid over the box, and in the
+unstable region the chi constraint uses the continuous extension chi_ext = -max Re lambda /
+margin_scale (< 0) whose gradient leads back to the stable side (chi -> 0 at the boundary
+from both sides). chi_simulation has no gradient: it is re-checked on the final candidates;
+when it fails, the chi requirement is raised by the ratio found and the optimiser run again
+(at most ``sim_rounds`` times).
+
+Every candidate is re-checked by the full index (and by simulation when chi_simulation is
+required); the design returned is the best re-checked one, or, when none meets the
+requirements, the best found with the status ``infeasible``.
+
+The numerics (grid, starts, SLSQP, re-check) are model-agnostic through the small
+:class:`Evaluator` interface; :class:`MaglevEvaluator` is model A's.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any, Protocol
+
+import numpy as np
+import scipy.optimize
+
+from maglev_match.matching import MatchingIndex, matching_index
+from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError, Params
+from maglev_match.sensitivity import DerivativeStatus, index_sensitivity, system_sensitivity
+
+__all__ = [
+    "Goal",
+    "Quantity",
+    "DesignStatus",
+    "Variable",
+    "Requirement",
+    "DesignProblem",
+    "Evaluation",
+    "DesignResult",
+    "Evaluator",
+    "MaglevEvaluator",
+    "SystemEvaluator",
+    "optimise_design",
+    "parse_vary",
+    "parse_requirement",
+]
+
+
+class Goal(StrEnum):
+    MINIMIZE = "minimize"
+    MAXIMIZE = "maximize"
+
+
+class Quantity(StrEnum):
+    """What a requirement bounds from below."""
+
+    CHI = "chi"
+    MARGIN = "margin"  # -max Re lambda (1/s)
+    CHI_SIMULATION = "chi_simulation"
+
+
+class DesignStatus(StrEnum):
+    FEASIBLE = "feasible"  # the returned design meets every requirement when re-checked
+    INFEASIBLE = "infeasible"  # none found that does: the best found is returned
+
+
+@dataclass(frozen=True)
+class Variable:
+    """A varied parameter and its bounds (SI units)."""
+
+    name: str
+    lo: float
+    hi: float
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.lo) and math.isfinite(self.hi) and self.lo < self.hi):
+            raise ParameterError(f"--vary {self.name}", f"{self.lo}:{self.hi}",
+                                 "expected LO:HI with finite LO < HI")
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """quantity >= bound."""
+
+    quantity: Quantity
+    bound: float
+
+    def __str__(self) -> str:
+        return f"{self.quantity} >= {self.bound:g}"
+
+
+@dataclass(frozen=True)
+class DesignProblem:
+    """What to vary, what to optimise and what to require."""
+
+    variables: tuple[Variable, ...]
+    goal: Goal
+    objective: str  # a varied parameter's name (minimise) or "chi" (maximise)
+    requirements: tuple[Requirement, ...] = ()
+
+    def __post_init__(self) -> None:
+        names = [v.name for v in self.variables]
+        if not names:
+            raise ParameterError("--vary", None, "give at least one NAME=LO:HI")
+        if len(set(names)) != len(names):
+            raise ParameterError("--vary", ",".join(names), "each parameter at most once")
+        if self.goal == Goal.MAXIMIZE and self.objective != "chi":
+            raise ParameterError("--maximize", self.objective, "only chi can be maximised")
+        if self.goal == Goal.MINIMIZE and self.objective not in names:
+            raise ParameterError("--minimize", self.objective,
+                                 f"must be one of the varied parameters ({', '.join(names)})")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(v.name for v in self.variables)
+
+    def values(self, u: np.ndarray) -> np.ndarray:
+        lo = np.array([v.lo for v in self.variables])
+        hi = np.array([v.hi for v in self.variables])
+        return lo + np.clip(u, 0.0, 1.0) * (hi - lo)
+
+    def unit(self, values: np.ndarray) -> np.ndarray:
+        lo = np.array([v.lo for v in self.variables])
+        hi = np.array([v.hi for v in self.variables])
+        return (np.asarray(values, float) - lo) / (hi - lo)
+
+    @property
+    def widths(self) -> np.ndarray:
+        return np.array([v.hi - v.lo for v in self.variables])
+
+    @property
+    def needs_simulation(self) -> bool:
+        return any(r.quantity == Quantity.CHI_SIMULATION for r in self.requirements)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """chi, the margin and their gradients (per unit of each varied parameter) at one point."""
+
+    values: np.ndarray
+    chi: float
+    margin: float  # -max Re lambda (1/s)
+    dchi: np.ndarray | None
+    dmargin: np.ndarray | None
+    status: DerivativeStatus | None
+    index: MatchingIndex
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return math.isfinite(self.chi)
+
+
+class Evaluator(Protocol):
+    """What the optimiser needs from a model: the index (with gradients on request) at a
+    point given by the varied parameters' values, and a full re-check."""
+
+    def evaluate(self, values: np.ndarray, gradient: bool) -> Evaluation: ...
+
+    def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex: ...
+
+
+class MaglevEvaluator:
+    """Model A at ``base`` with the parameters ``names`` set to the given values."""
+
+    def __init__(self, base: Params, names: Sequence[str]):
+        for n in names:
+            if n not in FIELD_NAMES:
+                raise ParameterError("--vary", n, "unknown parameter")
+        self.base = base
+        self.names = tuple(names)
+
+    def params(self, values: np.ndarray) -> Params:
+        return self.base.replace(**{n: float(v) for n, v in zip(self.names, values,
+                                                                strict=True)})
+
+    def evaluate(self, values: np.ndarray, gradient: bool) -> Evaluation:
+        t = time.perf_counter()
+        p = self.params(values)
+        idx = matching_index(p, simulate=False)
+        dchi = dmargin = None
+        status = None
+        if gradient:
+            sens = index_sensitivity(p, idx, boundaries=False)
+            status = sens.status
+            dchi = np.array([_row(sens, n, "dchi") for n in self.names])
+            dmargin = np.array([_row(sens, n, "dmargin") for n in self.names])
+        return Evaluation(np.asarray(values, float), idx.chi, -idx.max_real_part, dchi,
+                          dmargin, status, idx, time.perf_counter() - t)
+
+    def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex:
+        return matching_index(self.params(values), simulate=simulate)
+
+
+def _row(sens, name: str, attr: str) -> float:
+    """A derivative by a varied parameter; a derivable value (omega1, sigma) that is varied
+    becomes explicit, so it has its own row."""
+    try:
+        return float(getattr(sens.row(name), attr))
+    except KeyError:
+        raise ParameterError("--vary", name, "not a parameter of model A's index") from None
+
+
+class SystemEvaluator:
+    """Any :class:`~maglev_match.dynamics.system.System` through
+    :func:`~maglev_match.matching.index_of_system` (used for problems with known answers).
+
+    ``make`` maps the varied values to (system, w0, h_max, search, limits)."""
+
+    def __init__(self, names: Sequence[str], make: Callable[[np.ndarray], tuple]):
+        self.names = tuple(names)
+        self.make = make
+
+    def evaluate(self, values: np.ndarray, gradient: bool) -> Evaluation:
+        from maglev_match.matching import index_of_system
+
+        t = time.perf_counter()
+        system, w0, h_max, search, limits = self.make(np.asarray(values, float))
+        idx = index_of_system(system, system.p, w0=w0, h_max=h_max, search=search,
+                              limits=limits)
+        dchi = dmargin = None
+        status = None
+        if gradient:
+            s = system_sensitivity(system, idx)
+            status = s.h_status
+            k = [system.param_index(n) for n in self.names]
+            dchi = s.dh_dp[k] / w0 if status != DerivativeStatus.ZERO else np.zeros(len(k))
+            dmargin = -s.dmax_re_dp[k]
+        return Evaluation(np.asarray(values, float), idx.chi, -idx.max_real_part, dchi,
+                          dmargin, status, idx, time.perf_counter() - t)
+
+    def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex:
+        return self.evaluate(values, gradient=False).index
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One optimiser run from one start, re-checked."""
+
+    start: np.ndarray
+    values: np.ndarray
+    chi: float
+    margin: float
+    chi_simulation: float | None
+    feasible: bool
+    violation: float  # largest relative shortfall of a requirement (0 if feasible)
+    iterations: int
+    evaluations: int
+    message: str
+    path: np.ndarray  # (k, d) the iterates in parameter units
+    path_chi: np.ndarray  # (k,) chi at the iterates
+
+
+@dataclass(frozen=True)
+class DesignResult:
+    """The design, its full index, active constraints and how it was found."""
+
+    problem: DesignProblem
+    status: DesignStatus
+    values: dict[str, float]
+    index: MatchingIndex
+    objective: float
+    active: tuple[str, ...]  # requirements and bounds active at the design
+    candidates: tuple[Candidate, ...]
+    grid_values: np.ndarray  # (n_grid, d)
+    grid_chi: np.ndarray  # (n_grid,)
+    grid_shape: tuple[int, ...]
+    iterations: int  # SLSQP iterations, all starts
+    evaluations: int  # index evaluations, all kinds
+    seconds: float
+    message: str = ""
+    warnings: tuple[str, ...] = ()
+    margin_scale: float = field(default=1.0, repr=False)
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "status": str(self.status), "design": self.values, "objective": self.objective,
+            "goal": str(self.problem.goal), "objective_name": self.problem.objective,
+            "requirements": [str(r) for r in self.problem.requirements],
+            "active": list(self.active), "index": self.index.as_json(),
+            "iterations": self.iterations, "evaluations": self.evaluations,
+            "seconds": self.seconds, "message": self.message,
+            "candidates": [
+                {"start": dict(zip(self.problem.names, c.start.tolist(), strict=True)),
+                 "design": dict(zip(self.problem.names, c.values.tolist(), strict=True)),
+                 "chi": c.chi, "margin": c.margin, "chi_simulation": c.chi_simulation,
+                 "feasible": c.feasible, "violation": c.violation,
+                 "iterations": c.iterations, "message": c.message}
+                for c in self.candidates
+            ],
+            "warnings": list(self.warnings),
+        }
+
+
+# ---------------------------------------------------------------------------------------
+# parsing
+# ---------------------------------------------------------------------------------------
+def parse_vary(text: str) -> Variable:
+    """``NAME=LO:HI`` -> :class:`Variable`."""
+    if "=" not in text or ":" not in text:
+        raise ParameterError("--vary", text, "expected NAME=LO:HI, e.g. EI=5e9:4e10")
+    name, rng = (s.strip() for s in text.split("=", 1))
+    if name not in FIELD_NAMES:
+        raise ParameterError("--vary", name, "unknown parameter")
+    if name in INTEGER_FIELDS:
+        raise ParameterError("--vary", name, "a whole-number parameter cannot be varied "
+                             "continuously")
+    try:
+        lo, hi = (float(s) for s in rng.split(":"))
+    except ValueError:
+        raise ParameterError("--vary", text, "expected NAME=LO:HI with numbers") from None
+    return Variable(name, lo, hi)
+
+
+def parse_requirement(text: str) -> Requirement:
+    """``chi>=5``, ``margin>=0.5``, ``chi_simulation>=3`` -> :class:`Requirement`."""
+    if ">=" not in text:
+        raise ParameterError("--require", text, "expected QUANTITY>=VALUE, e.g. chi>=5")
+    name, raw = (s.strip() for s in text.split(">=", 1))
+    try:
+        q = Quantity(name)
+    except ValueError:
+        raise ParameterError("--require", name,
+                             "must be one of " + ", ".join(q.value for q in Quantity)) from None
+    try:
+        bound = float(raw)
+    except ValueError:
+        raise ParameterError("--require", text, "the bound must be a number") from None
+    if not math.isfinite(bound):
+        raise ParameterError("--require", text, "the bound must be finite")
+    return Requirement(q, bound)
+
+
+# ---------------------------------------------------------------------------------------
+# the optimiser
+# ---------------------------------------------------------------------------------------
+class _Cache:
+    """Evaluations by point, so SLSQP's separate calls for values and gradients share one
+    index computation; counts index evaluations."""
+
+    def __init__(self, problem: DesignProblem, evaluator: Evaluator):
+        self.problem = problem
+        self.evaluator = evaluator
+        self.store: dict[bytes, Evaluation] = {}
+        self.count = 0
+
+    def __call__(self, u: np.ndarray, gradient: bool = True) -> Evaluation:
+        u = np.clip(np.asarray(u, float), 0.0, 1.0)
+        key = u.tobytes()
+        ev = self.store.get(key)
+        if ev is None or (gradient and ev.dchi is None):
+            ev = self.evaluator.evaluate(self.problem.values(u), gradient)
+            self.count += 1
+            self.store[key] = ev
+        return ev
+
+
+def _grid(d: int, n: int) -> np.ndarray:
+    axes = [np.linspace(0.0, 1.0, n)] * d
+    return np.array(list(itertools.product(*axes)))
+
+
+def _chi_ext(ev: Evaluation, margin_scale: float) -> float:
+    """chi where the equilibrium is stable; -max Re lambda / margin_scale (<= 0) where not."""
+    if ev.index.case == "unstable_equilibrium":
+        return min(ev.margin, 0.0) / margin_scale
+    return ev.chi
+
+
+def _shortfall(reqs: Sequence[Requirement], chi: float, margin: float,
+               chi_sim: float | None) -> float:
+    """Largest relative shortfall of the requirements (0 when all are met; inf if unknown)."""
+    worst = 0.0
+    for r in reqs:
+        v = {Quantity.CHI: chi, Quantity.MARGIN: margin,
+             Quantity.CHI_SIMULATION: chi_sim}[r.quantity]
+        if v is None or not math.isfinite(v):
+            return math.inf
+        worst = max(worst, (r.bound - v) / max(abs(r.bound), 1e-12))
+    return max(worst, 0.0)
+
+
+def optimise_design(
+    problem: DesignProblem,
+    evaluator: Evaluator,
+    *,
+    grid: int | None = None,
+    starts: int = 2,
+    maxiter: int = 40,
+    sim_rounds: int = 2,
+    progress: Callable[[str], None] | None = None,
+) -> DesignResult:
+    """Solve ``problem`` (see the module docstring).
+
+    Parameters
+    ----------
+    problem : varied parameters with bounds, the goal and the requirements.
+    evaluator : the model (:class:`MaglevEvaluator` for model A).
+    grid : points per varied parameter of the coarse start grid (default 9 for one
+        parameter, 5 for two, 3 beyond).
+    starts : optimiser runs, from the best grid points.
+    maxiter : SLSQP iterations per run.
+    sim_rounds : re-runs with a raised chi requirement when chi_simulation falls short.
+    """
+    t0 = time.perf_counter()
+    d = len(problem.variables)
+    n = grid or {1: 9, 2: 5}.get(d, 3)
+    cache = _Cache(problem, evaluator)
+    warnings: list[str] = []
+    say = progress or (lambda s: None)
+    U = _grid(d, n)
+    say(f"coarse grid: {len(U)} points")
+    evs = [cache(u, gradient=False) for u in U]
+    grid_chi = np.array([e.chi for e in evs])
+    margins = np.array([e.margin for e in evs])
+    finite = margins[np.isfinite(margins)]
+    margin_scale = float(np.max(np.abs(finite))) if finite.size else 1.0
+    margin_scale = margin_scale or 1.0
+    n_fail = int(np.sum(~np.isfinite(grid_chi)))
+    if n_fail:
+        warnings.append(f"{n_fail} of {len(U)} grid points: the index did not converge")
+
+    reqs = list(problem.requirements)
+    chi_req = next((r.bound for r in reqs if r.quantity == Quantity.CHI), None)
+    candidates: list[Candidate] = []
+    total_its = 0
+
+    def objective_of(values: np.ndarray, chi: float) -> float:
+        if problem.goal == Goal.MAXIMIZE:
+            return chi
+        return float(values[problem.names.index(problem.objective)])
+
+    def rank_starts(chi_bound: float | None) -> list[int]:
+        def score(i: int) -> tuple[float, float]:
+            e = evs[i]
+            short = _shortfall(_grad_reqs(reqs, chi_bound), e.chi, e.margin, None)
+            obj = objective_of(e.values, e.chi)
+            sign = -1.0 if problem.goal == Goal.MAXIMIZE else 1.0
+            return (short, sign * obj if math.isfinite(obj) else math.inf)
+        order = sorted(range(len(U)), key=score)
+        return order[:starts]
+
+    def run(u0: np.ndarray, chi_bound: float | None) -> tuple[np.ndarray, int, str, list]:
+        path: list[np.ndarray] = [u0]
+        iobj = problem.names.index(problem.objective) if problem.goal == Goal.MINIMIZE else -1
+
+        def fun(u):
+            if iobj >= 0:
+                return float(u[iobj])
+            ev = cache(u)
+            return -ev.chi / max(chi_bound or 1.0, 1.0)
+
+        def jac(u):
+            if iobj >= 0:
+                g = np.zeros(d)
+                g[iobj] = 1.0
+                return g
+            ev = cache(u)
+            return -_grad(ev, "chi", problem, margin_scale) / max(chi_bound or 1.0, 1.0)
+
+        cons = []
+        for r in _grad_reqs(reqs, chi_bound):
+            sc = max(abs(r.bound), 1e-3)
+            q = r.quantity
+
+            def cf(u, q=q, b=r.bound, sc=sc):
+                ev = cache(u)
+                v = _chi_ext(ev, margin_scale) if q == Quantity.CHI else ev.margin
+                return (v - b) / sc
+
+            def cj(u, q=q, sc=sc):
+                return _grad(cache(u), q, problem, margin_scale) / sc
+
+            cons.append({"type": "ineq", "fun": cf, "jac": cj})
+
+        def cb(u):
+            path.append(np.array(u))
+
+        res = scipy.optimize.minimize(fun, u0, jac=jac, method="SLSQP", bounds=[(0, 1)] * d,
+                                      constraints=cons, callback=cb,
+                                      options={"maxiter": maxiter, "ftol": 1e-10})
+        u = np.clip(res.x, 0.0, 1.0)
+        u = _polish(u, cache, problem, _grad_reqs(reqs, chi_bound), margin_scale)
+        path.append(u)
+        return u, int(res.nit), str(res.message), path
+
+    chi_bound = chi_req
+    for round_ in range(sim_rounds + 1):
+        for i in rank_starts(chi_bound):
+            say(f"optimiser from grid point {i + 1}"
+                + (f" (round {round_ + 1})" if round_ else ""))
+            u, its, msg, path = run(U[i], chi_bound)
+            total_its += its
+            ev = cache(u, gradient=False)
+            chi_sim = None
+            if problem.needs_simulation and ev.ok:
+                say("re-checking with simulation")
+                full = evaluator.recheck(ev.values, simulate=True)
+                cache.count += 1
+                chi_sim = full.chi_simulation
+            short = _shortfall(problem.requirements, ev.chi, ev.margin, chi_sim)
+            candidates.append(Candidate(
+                start=problem.values(U[i]), values=ev.values, chi=ev.chi, margin=ev.margin,
+                chi_simulation=chi_sim, feasible=short == 0.0, violation=short,
+                iterations=its, evaluations=cache.count, message=msg,
+                path=np.array([problem.values(x) for x in path]),
+                path_chi=np.array([cache(x, gradient=False).chi for x in path])))
+        feasible = [c for c in candidates if c.feasible]
+        if feasible or not problem.needs_simulation:
+            break
+        # raise the chi requirement by the shortfall ratio of the simulated reading
+        sim_req = next(r.bound for r in reqs if r.quantity == Quantity.CHI_SIMULATION)
+        ratios = [sim_req / c.chi_simulation * 1.02 for c in candidates[-starts:]
+                  if c.chi_simulation and c.chi_simulation > 0 and math.isfinite(c.chi)]
+        if not ratios:
+            break
+        last = candidates[-1]
+        chi_bound = max(chi_bound or 0.0, last.chi * min(ratios))
+        warnings.append(f"chi_simulation fell short: chi requirement raised to {chi_bound:.4g}")
+
+    feasible = [c for c in candidates if c.feasible]
+    sign = -1.0 if problem.goal == Goal.MAXIMIZE else 1.0
+    if feasible:
+        best = min(feasible, key=lambda c: sign * objective_of(c.values, c.chi))
+        status = DesignStatus.FEASIBLE
+        message = "the design meets every requirement when re-checked by the full index"
+    else:
+        pool = candidates or []
+        best = min(pool, key=lambda c: (c.violation, sign * objective_of(c.values, c.chi)))
+        status = DesignStatus.INFEASIBLE
+        message = ("no design in the box meets the requirements; the best found "
+                   f"misses them by {best.violation:.1%}")
+    final = evaluator.recheck(best.values, simulate=problem.needs_simulation)
+    cache.count += 1
+    active = _active(problem, best, final, chi_bound)
+    return DesignResult(
+        problem=problem, status=status,
+        values=dict(zip(problem.names, map(float, best.values), strict=True)), index=final,
+        objective=objective_of(best.values, final.chi), active=active,
+        candidates=tuple(candidates), grid_values=np.array([problem.values(u) for u in U]),
+        grid_chi=grid_chi, grid_shape=(n,) * d, iterations=total_its,
+        evaluations=cache.count, seconds=time.perf_counter() - t0, message=message,
+        warnings=tuple(warnings), margin_scale=margin_scale,
+    )
+
+
+def _grad_reqs(reqs: list[Requirement], chi_bound: float | None) -> tuple[Requirement, ...]:
+    """The requirements with gradients (chi with the possibly raised bound, margin)."""
+    out = []
+    for r in reqs:
+        if r.quantity == Quantity.CHI_SIMULATION:
+            continue
+        if r.quantity == Quantity.CHI and chi_bound is not None:
+            r = Requirement(Quantity.CHI, max(r.bound, chi_bound))
+        out.append(r)
+    if chi_bound is not None and not any(r.quantity == Quantity.CHI for r in out):
+        out.append(Requirement(Quantity.CHI, chi_bound))
+    return tuple(out)
+
+
+def _grad(ev: Evaluation, q: Quantity | str, problem: DesignProblem,
+          margin_scale: float) -> np.ndarray:
+    """Gradient in the unit variables u of chi (its extension where unstable) or the margin."""
+    if ev.dchi is None or ev.dmargin is None:
+        return np.zeros(len(problem.variables))
+    if q == Quantity.MARGIN:
+        g = ev.dmargin
+    elif ev.index.case == "unstable_equilibrium":
+        g = ev.dmargin / margin_scale  # chi_ext = margin / margin_scale there
+    else:
+        g = ev.dchi
+    g = np.where(np.isfinite(g), g, 0.0)
+    return g * problem.widths
+
+
+def _polish(u: np.ndarray, cache: _Cache, problem: DesignProblem,
+            reqs: tuple[Requirement, ...], margin_scale: float, rounds: int = 4) -> np.ndarray:
+    """Move a point that misses a gradient requirement by a little onto its feasible side:
+    Newton steps on the violated constraint along its gradient, aiming 1e-7 (relative)
+    inside, within the box."""
+    for _ in range(rounds):
+        ev = cache(u)
+        worst = None
+        for r in reqs:
+            v = _chi_ext(ev, margin_scale) if r.quantity == Quantity.CHI else ev.margin
+            target = r.bound + 1e-7 * max(abs(r.bound), 1e-3)
+            if v < r.bound and (worst is None or (r.bound - v) > worst[0]):
+                worst = (r.bound - v, r, v, target)
+        if worst is None:
+            return u
+        _, r, v, target = worst
+        g = _grad(ev, r.quantity, problem, margin_scale)
+        gg = float(g @ g)
+        if gg == 0 or not math.isfinite(gg):
+            return u
+        u = np.clip(u + (target - v) * g / gg, 0.0, 1.0)
+    return u
+
+
+def _active(problem: DesignProblem, best: Candidate, index: MatchingIndex,
+            chi_bound: float | None) -> tuple[str, ...]:
+    out = []
+    tol = 1e-4
+    for r in problem.requirements:
+        v = {Quantity.CHI: index.chi, Quantity.MARGIN: -index.max_real_part,
+             Quantity.CHI_SIMULATION: index.chi_simulation}[r.quantity]
+        if v is not None and math.isfinite(v) and abs(v - r.bound) <= tol * max(abs(r.bound), 1):
+            out.append(str(r))
+    if chi_bound is not None and not any(r.quantity == Quantity.CHI and r.bound == chi_bound
+                                         for r in problem.requirements):
+        if abs(index.chi - chi_bound) <= tol * max(abs(chi_bound), 1):
+            out.append(f"chi >= {chi_bound:.4g} (raised for chi_simulation)")
+    for var, val in zip(problem.variables, best.values, strict=True):
+        w = var.hi - var.lo
+        if abs(val - var.lo) <= 1e-6 * w:
+            out.append(f"{var.name} = {var.lo:g} (lower bound)")
+        elif abs(val - var.hi) <= 1e-6 * w:
+            out.append(f"{var.name} = {var.hi:g} (upper bound)")
+    return tuple(out)

@@ -1,0 +1,89 @@
+"""Figures of the sensitivity analysis and of the design search: a tornado chart of the
+elasticities (p / chi) d chi / d p, and the optimiser's path over the chi map of the first
+two varied parameters (chi against the parameter when only one is varied)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from maglev_match.plots import new_figure
+
+
+def tornado_figure(sens, top: int = 15, title: str = ""):
+    """Horizontal bars of the elasticity of chi (left panel) and of the margin's elasticity
+    (p / |margin|) d margin / d p (right panel) for the ``top`` parameters with the largest
+    |elasticity of chi|. ``sens``: an :class:`~maglev_match.sensitivity.IndexSensitivity`."""
+    rows = sens.sorted_rows()[:top][::-1]
+    names = [r.name for r in rows]
+    chi = sens.index.chi
+    ela = np.array([r.elasticity if math.isfinite(r.elasticity) else 0.0 for r in rows])
+    margin = -sens.index.max_real_part
+    mela = np.array([r.dmargin * r.value / abs(margin) if margin else 0.0 for r in rows])
+    fig, (a1, a2) = new_figure(1, 2, figsize=(10, 0.35 * len(rows) + 1.8), sharey=True)
+    y = np.arange(len(rows))
+    a1.barh(y, ela, color=np.where(ela >= 0, "C2", "C3"))
+    a1.axvline(0, color="k", lw=0.8)
+    a1.set_yticks(y, names)
+    a1.set_xlabel("elasticity of chi: (p / chi) d chi / d p")
+    if not chi:
+        a1.text(0.5, 0.5, "chi = 0: derivative 0 (unstable equilibrium)",
+                transform=a1.transAxes, ha="center")
+    a2.barh(y, mela, color=np.where(mela >= 0, "C0", "C1"))
+    a2.axvline(0, color="k", lw=0.8)
+    a2.set_xlabel("elasticity of the margin: (p / |margin|) d margin / d p")
+    fig.suptitle(title or f"Sensitivities at chi = {chi:.3g} ({sens.index.case}), "
+                 f"margin = {margin:.3g} 1/s")
+    return fig
+
+
+def design_path_figure(result, title: str = ""):
+    """The coarse chi map used for the starts and every optimiser path, the design marked.
+    ``result``: a :class:`~maglev_match.design.DesignResult`."""
+    prob = result.problem
+    names = prob.names
+    chi_req = [r.bound for r in prob.requirements if r.quantity == "chi"]
+    if len(names) == 1:
+        fig, ax = new_figure()
+        x = result.grid_values[:, 0]
+        order = np.argsort(x)
+        ax.plot(x[order], result.grid_chi[order], "o-", color="0.5", label="coarse grid")
+        for k, c in enumerate(result.candidates):
+            xs = c.path[:, 0]
+            ax.plot(xs, c.path_chi, ".-", color=f"C{k % 9 + 1}", alpha=0.7,
+                    label=f"optimiser run {k + 1} ({c.iterations} it.)")
+        for b in chi_req:
+            ax.axhline(b, color="r", ls="--", label=f"chi >= {b:g}")
+        ax.plot([result.values[names[0]]], [result.index.chi], "*", ms=16, color="gold",
+                markeredgecolor="k", label=f"design ({result.status})")
+        ax.set_xlabel(names[0])
+        ax.set_ylabel("chi = h / w0")
+    else:
+        fig, ax = new_figure(figsize=(8, 5.5))
+        n = result.grid_shape[0]
+        gv = result.grid_values
+        chi = result.grid_chi.reshape(n, n, *([n] * (len(names) - 2)))
+        while chi.ndim > 2:
+            chi = np.nanmax(chi, axis=-1)
+        x = np.unique(gv[:, 0])
+        y = np.unique(gv[:, 1])
+        mesh = ax.pcolormesh(x, y, np.ma.masked_invalid(chi.T), shading="nearest",
+                             cmap="viridis")
+        fig.colorbar(mesh, ax=ax, label="chi (coarse grid)")
+        for b in chi_req:
+            if np.nanmin(chi) < b < np.nanmax(chi):
+                ax.contour(x, y, chi.T, levels=[b], colors="r", linestyles="--")
+                ax.plot([], [], "r--", label=f"chi = {b:g} (grid)")
+        for k, c in enumerate(result.candidates):
+            ax.plot(c.path[:, 0], c.path[:, 1], ".-", color="w", alpha=0.9)
+            ax.plot(c.path[0, 0], c.path[0, 1], "o", color="w", markeredgecolor="k",
+                    label="start" if k == 0 else None)
+        ax.plot([result.values[names[0]]], [result.values[names[1]]], "*", ms=16,
+                color="gold", markeredgecolor="k", label=f"design ({result.status})")
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
+    ax.set_title(title or f"{prob.goal} {prob.objective}: "
+                 + ", ".join(str(r) for r in prob.requirements))
+    ax.legend(fontsize=8, loc="best")
+    return fig
