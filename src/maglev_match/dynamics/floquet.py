@@ -27,6 +27,18 @@ phase, so multipliers spanning 1e-30 .. 1e3 (and far beyond) keep full relative 
 algorithm is backward stable for each factor, which is what the collocation blocks are accurate
 to; it costs O(K n^3) per shift sweep. Complex arithmetic with single (Wilkinson) shifts is
 used; conjugate pairs of the real problem are re-paired at the end.
+
+Two economies keep the cost per orbit small: the Jacobians are first balanced by one constant
+diagonal similarity (exact, powers of 2), and runs of consecutive transfer matrices are
+multiplied together only while the run's condition number stays below ``group_cond``
+(default 1e4, so at most 4 of the 16 digits are spent there); on the 9-state maglev model with
+NTST 80 the 80 intervals collapse to about 4 factors.
+
+Limits. The result is as accurate as the factors allow, which is the best any method working
+on the collocation blocks can do; near a homoclinic orbit the trivial multiplier is itself
+ill-conditioned (the flow vector almost vanishes near the saddle) and the discretisation of
+the variational equation degrades on long intervals, so its distance from 1 is reported
+(:class:`FloquetResult`) rather than assumed.
 """
 
 from __future__ import annotations
@@ -58,8 +70,8 @@ _EPS = np.finfo(float).eps
 #: Default tolerance on |mu_trivial - 1| below which a point's multipliers are trusted.
 DEFAULT_TRIVIAL_TOL = 1e-4
 #: Largest condition number of a run of transfer matrices multiplied together before the
-#: periodic QZ (see :func:`grouped_transfer_matrices`): costs at most 3 digits of the 16.
-DEFAULT_GROUP_COND = 1e3
+#: periodic QZ (see :func:`grouped_transfer_matrices`): costs at most 4 digits of the 16.
+DEFAULT_GROUP_COND = 1e4
 
 
 class FloquetMethod(StrEnum):
@@ -438,9 +450,22 @@ def grouped_transfer_matrices(F: np.ndarray, E: np.ndarray, max_cond: float) -> 
     return np.stack(groups)
 
 
+def _balanced(J: np.ndarray) -> np.ndarray:
+    """D^-1 J(t) D with one diagonal D (powers of 2, so exact) for the whole orbit, chosen by
+    balancing the mean |J| (Parlett & Reinsch 1969). The transfer matrices become D^-1 P_j D:
+    the same multipliers, but states of very different units (a gap in m, a current in A) no
+    longer make every P_j look ill-conditioned, which would defeat the grouping."""
+    if J.shape[-1] < 2:
+        return J
+    _, (s, _) = scipy.linalg.matrix_balance(np.abs(J).mean(axis=(0, 1)), permute=False,
+                                            separate=True)
+    return J * s[None, None, None, :] / s[None, None, :, None]
+
+
 def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND
                  ) -> tuple[np.ndarray, np.ndarray, PeriodicEigenvalues, int]:
     """(multipliers, ln|multipliers|, raw result, number of factors), by |mu| descending."""
+    J = _balanced(np.asarray(J, float))
     F, E = condensed_pairs(J, T, h, m)
     if group_cond > 1.0:
         F = grouped_transfer_matrices(F, E, group_cond)
