@@ -113,6 +113,26 @@ def test_hopf_on_a_lorenz_file_matches_the_closed_form(capsys, tmp_path, monkeyp
     assert code == 0 and "lorenz" in out and "24.7368" in out
 
 
+def test_hopf_curve_of_a_lorenz_file_is_the_closed_form_curve(capsys, tmp_path):
+    """rho = sigma (sigma + beta + 3) / (sigma - beta - 1), omega^2 = beta (rho + sigma)."""
+    path = write(tmp_path, "lorenz.py", LORENZ)
+    code, out, err = run(capsys, "hopf-curve", "--model", path, "--params", "rho,sigma",
+                         "--range", "rho=2:60", "--range", "sigma=5:20", "--grid", "0",
+                         "--out", str(tmp_path / "hc"), "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    rho = np.array([p["rho"] for p in doc["points"]])
+    sig = np.array([p["sigma"] for p in doc["points"]])
+    om = np.array([p["frequency"] for p in doc["points"]])
+    beta = 8.0 / 3.0
+    assert len(rho) > 20 and np.ptp(sig) > 5.0
+    assert np.allclose(rho, sig * (sig + beta + 3) / (sig - beta - 1), rtol=1e-8, atol=0)
+    assert np.allclose(om, np.sqrt(beta * (rho + sig)), rtol=1e-8, atol=0)
+    assert all(p["l1"] > 0 for p in doc["points"])
+    code, _, err = run(capsys, "hopf-curve", "--model", path)  # no default plane for a file
+    assert code == 2 and "--params" in err
+
+
 def test_stability_of_a_user_model_is_its_hand_computed_eigenvalues(capsys, tmp_path):
     path = write(tmp_path, "nf.py", NORMAL_FORM)
     code, out, err = run(capsys, "stability", "--model", path, "--set", "a=-0.5", "--json")
