@@ -272,3 +272,10 @@ def test_lorenz_cycle_branch_keeps_the_trivial_multiplier_at_one():
     assert res.reliable and res.trivial_error < 1e-5
     naive = fq.floquet_multipliers_product(J, br.points[-1].period, h, 4)
     assert np.min(np.abs(naive - 1.0)) > 1e-3
+
+
+def test_non_finite_jacobian_is_an_error_not_a_result():
+    J, h = gauss_point_jacobians(lambda t: _hopf_block(t), 10, 3, T_HOPF)
+    J[3, 1, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="not finite"):
+        fq.floquet_multipliers_from_blocks(J, T_HOPF, h, 3)

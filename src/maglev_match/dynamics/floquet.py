@@ -465,7 +465,11 @@ def _balanced(J: np.ndarray) -> np.ndarray:
 def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND
                  ) -> tuple[np.ndarray, np.ndarray, PeriodicEigenvalues, int]:
     """(multipliers, ln|multipliers|, raw result, number of factors), by |mu| descending."""
-    J = _balanced(np.asarray(J, float))
+    J = np.asarray(J, float)
+    if not (np.all(np.isfinite(J)) and math.isfinite(T)):
+        raise ValueError("Floquet multipliers: the Jacobian along the orbit (or the period) "
+                         "is not finite")
+    J = _balanced(J)
     F, E = condensed_pairs(J, T, h, m)
     if group_cond > 1.0:
         F = grouped_transfer_matrices(F, E, group_cond)
