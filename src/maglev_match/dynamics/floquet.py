@@ -198,28 +198,49 @@ def _hessenberg_triangular(F: np.ndarray, E: np.ndarray) -> None:
             F[0, r, :] = G @ F[0, r, :]
             F[0, i, k] = 0.0
             E[0, r, :] = G @ E[0, r, :]
-            _chase_fill(F, E, i - 1, start=0)
+            _chase_fill(F, E, i - 1)
 
 
-def _chase_fill(F: np.ndarray, E: np.ndarray, i: int, start: int) -> None:
-    """Rows (i, i+1) of pair ``start`` were rotated, leaving fill E_start[i+1, i]: remove it
-    by a column rotation (basis at node start+1), which fills F_{start+1}[i+1, i], removed by
-    a row rotation of pair start+1, ... until the column rotation of the basis at node 0
-    reaches the columns of F_0 (where the caller deals with what it creates)."""
+def _chase_fill(F: np.ndarray, E: np.ndarray, i: int) -> None:
+    """Rows (i, i+1) of pair 0 were rotated, leaving fill E_0[i+1, i]: remove it by a column
+    rotation Z_1 (basis at node 1), which fills F_1[i+1, i], removed by a row rotation G_1
+    of pair 1, ... until the column rotation Z_0 of the basis at node 0 reaches the columns
+    of F_0 (where the caller deals with what it creates).
+
+    Every factor but F_0 is upper triangular, so each rotation depends only on the 2x2
+    diagonal blocks (i, i+1) of the factors: the rotations are found by a scalar pass over
+    those blocks, then applied to all factors at once (a left and a right rotation of the
+    same matrix commute)."""
     K = F.shape[0]
     c = slice(i, i + 2)
-    for j in range(start, K):
-        Z = _rot_zero_left(E[j, i + 1, i], E[j, i + 1, i + 1])
-        E[j, :, c] = E[j, :, c] @ Z
-        E[j, i + 1, i] = 0.0
+    Zs = np.empty((K, 2, 2), dtype=complex)
+    Gs = np.empty((K, 2, 2), dtype=complex)
+    Gs[0] = np.eye(2)
+    eb = E[:, c, c].tolist()
+    fb = F[:, c, c].tolist()
+    e = eb[0]  # E_0 already carries its row rotation
+    for j in range(K):
+        Z = _rot_zero_left(e[1][0], e[1][1])
+        Zs[j] = Z
         jn = (j + 1) % K
-        F[jn, :, c] = F[jn, :, c] @ Z
         if jn == 0:
-            return
-        G = _rot_zero_below(F[jn, i, i], F[jn, i + 1, i])
-        F[jn, c, :] = G @ F[jn, c, :]
-        F[jn, i + 1, i] = 0.0
-        E[jn, c, :] = G @ E[jn, c, :]
+            break
+        f = fb[jn]
+        z00, z10 = Z[0, 0], Z[1, 0]
+        # column rotation of F_jn's block, then the row rotation that zeroes its (1, 0)
+        a0 = f[0][0] * z00 + f[0][1] * z10
+        a1 = f[1][0] * z00 + f[1][1] * z10
+        G = _rot_zero_below(a0, a1)
+        Gs[jn] = G
+        e = (G @ np.asarray(eb[jn])).tolist()
+    E[:, :, c] = E[:, :, c] @ Zs
+    F[1:, :, c] = F[1:, :, c] @ Zs[:-1]
+    F[0, :, c] = F[0, :, c] @ Zs[K - 1]
+    if K > 1:
+        F[1:, c, :] = Gs[1:] @ F[1:, c, :]
+        E[1:, c, :] = Gs[1:] @ E[1:, c, :]
+        F[1:, i + 1, i] = 0.0
+    E[:, i + 1, i] = 0.0  # only once both rotations of each factor are in
 
 
 def _triangular_product_2x2(F: np.ndarray, E: np.ndarray, i: int
@@ -302,7 +323,7 @@ def _sweep(F: np.ndarray, E: np.ndarray, exceptional: bool, rng: np.random.Gener
         F[0, r, :] = G @ F[0, r, :]
         F[0, k + 2, k] = 0.0
         E[0, r, :] = G @ E[0, r, :]
-        _chase_fill(F, E, k + 1, start=0)
+        _chase_fill(F, E, k + 1)
 
 
 def periodic_eigenvalues(F: np.ndarray, E: np.ndarray | None = None, *,
