@@ -571,15 +571,19 @@ def floquet_analysis(J: np.ndarray, T: float, h: np.ndarray, m: int, *,
     J, T, h, m : as for :func:`floquet_multipliers_from_blocks`.
     group_cond : bound on the condition number of the runs of transfer matrices multiplied
         together before the periodic QZ (1: none; see :func:`grouped_transfer_matrices`).
-    tol : largest accepted |mu_trivial - 1|. The default 1e-4 is chosen so that (a) a
-        converged orbit on the default mesh (NTST 80, NCOL 4, where the collocation error of
-        the multipliers is O(h^(2 NCOL)) and the linear algebra adds O(K eps)) passes with a
-        wide margin — on the maglev model-A branches the measured trivial error is 1e-9 or
-        smaller — and (b) an error large enough to move a nontrivial multiplier across the
-        unit circle at a bifurcation test's resolution (the step of |mu| between continuation
-        points near a crossing is typically 1e-3 .. 1e-2) is flagged. AUTO warns only at
-        5e-2 (Doedel's AUTO-07p manual, "multipliers inaccurate"); a stricter bound is
-        affordable because this method does not degrade with the period.
+    tol : largest accepted |mu_trivial - 1|. The trivial multiplier is exactly 1 for the
+        exact orbit, so its error measures the accuracy of the multipliers near the unit
+        circle, which decide stability and the bifurcations of cycles. The default 1e-4
+        (a) passes converged orbits on the default mesh with a wide margin: NTST 80, NCOL 4
+        gives 1e-13 .. 1e-9 on the maglev model-A branches and <= 1e-6 on the Lorenz cycles
+        up to 8 Hopf periods (where the explicit product is off by 0.1); (b) flags an error
+        that could move a multiplier across the unit circle at the resolution of a
+        continuation step (|mu| changes by 1e-3 .. 1e-2 per step near a crossing), as on
+        the strongly unstable part of the model-A branch with xi0 = 0.7 near omega1 = 79
+        rad/s (|mu| ~ 600 .. 2000), where the trivial error grows to 0.25 with this method
+        and the explicit product alike (a property of the discretised problem, not of the
+        linear algebra). AUTO-07p only warns at 5e-2; a stricter bound is affordable
+        because this method does not degrade with the period.
 
     Returns
     -------
