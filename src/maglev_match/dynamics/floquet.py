@@ -582,8 +582,8 @@ def floquet_analysis(J: np.ndarray, T: float, h: np.ndarray, m: int, *,
         the strongly unstable part of the model-A branch with xi0 = 0.7 near omega1 = 79
         rad/s (|mu| ~ 600 .. 2000), where the trivial error grows to 0.25 with this method
         and the explicit product alike (a property of the discretised problem, not of the
-        linear algebra). AUTO-07p only warns at 5e-2; a stricter bound is affordable
-        because this method does not degrade with the period.
+        linear algebra). A bound this strict is affordable because the linear algebra
+        here does not degrade with the period.
 
     Returns
     -------
