@@ -62,6 +62,7 @@ __all__ = [
     "floquet_multipliers_from_blocks",
     "floquet_multipliers_product",
     "grouped_transfer_matrices",
+    "transfer_matrices",
     "periodic_eigenvalues",
 ]
 
@@ -272,8 +273,13 @@ def _triangular_product_2x2(F: np.ndarray, E: np.ndarray, i: int
     return (a, b, d), logs
 
 
-def _sweep(F: np.ndarray, E: np.ndarray, exceptional: bool, rng: np.random.Generator) -> None:
-    """One implicitly shifted periodic QZ sweep on the active window (views, in place)."""
+def _sweep(F: np.ndarray, E: np.ndarray, exceptional: bool, rng: np.random.Generator,
+           guesses: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    """One implicitly shifted periodic QZ sweep on the active window (views, in place).
+
+    The shift is the Wilkinson shift of the product, or, when estimates of the eigenvalues
+    are given as (ln|mu|, arg mu), the estimate nearest to it: an accurate shift deflates an
+    eigenvalue in one or two sweeps instead of about three."""
     K, w, _ = F.shape
     # Wilkinson shift: eigenvalue of the trailing 2x2 of the product nearer its (2,2) entry
     t = slice(w - 2, w)
@@ -290,6 +296,13 @@ def _sweep(F: np.ndarray, E: np.ndarray, exceptional: bool, rng: np.random.Gener
     sig = min(ev, key=lambda z: abs(z - Mt[1, 1]))
     if exceptional:
         sig = abs(Mt[1, 1]) * (0.75 + 0.5 * rng.random()) * cmath.exp(2j * math.pi * rng.random())
+    elif guesses is not None and abs(sig) > 0.0:
+        gl, gp = guesses
+        dist = np.abs(gl - (math.log(abs(sig)) + lt)) + np.abs(
+            np.angle(np.exp(1j * (gp - cmath.phase(sig)))))
+        k = int(np.argmin(dist))
+        if math.isfinite(gl[k]) and gl[k] - lt < 700.0:
+            sig = math.exp(gl[k] - lt) * cmath.exp(1j * gp[k])
     # first column of (M - sigma I): only its first two entries are non-zero
     (a, b, d), ll = _triangular_product_2x2(F, E, 0)
     h0, h1 = complex(F[0, 0, 0]), complex(F[0, 1, 0])
@@ -328,7 +341,9 @@ def _sweep(F: np.ndarray, E: np.ndarray, exceptional: bool, rng: np.random.Gener
 
 def periodic_eigenvalues(F: np.ndarray, E: np.ndarray | None = None, *,
                          max_sweeps_per_eigenvalue: int = 40,
-                         seed: int = 0) -> PeriodicEigenvalues:
+                         seed: int = 0,
+                         shifts: tuple[np.ndarray, np.ndarray] | None = None
+                         ) -> PeriodicEigenvalues:
     """Eigenvalues of the formal product E_{K-1}^{-1} F_{K-1} ... E_0^{-1} F_0 by the periodic
     QZ algorithm, without forming the product or any inverse of a factor.
 
@@ -338,6 +353,9 @@ def periodic_eigenvalues(F: np.ndarray, E: np.ndarray | None = None, *,
         F_{K-1} ... F_0).
     max_sweeps_per_eigenvalue : sweep budget (n times this in all).
     seed : seed of the random exceptional shifts (after 10 and 20 sweeps without deflation).
+    shifts : optional estimates of the eigenvalues as (ln|mu|, arg mu) arrays, used as
+        shifts (the one nearest each Wilkinson shift); they speed up convergence only, the
+        result is that of the periodic QZ.
 
     Returns
     -------
@@ -375,7 +393,8 @@ def periodic_eigenvalues(F: np.ndarray, E: np.ndarray | None = None, *,
             converged = False
             break
         win = slice(lo, hi + 1)
-        _sweep(F[:, win, win], E[:, win, win], exceptional=since in (10, 20), rng=rng)
+        _sweep(F[:, win, win], E[:, win, win], exceptional=since in (10, 20), rng=rng,
+               guesses=shifts)
         sweeps += 1
         since += 1
     dF = np.diagonal(F, axis1=1, axis2=2)
@@ -444,6 +463,56 @@ def floquet_multipliers_product(J: np.ndarray, T: float, h: np.ndarray, m: int) 
     return np.linalg.eigvals(M)
 
 
+def transfer_matrices(J: np.ndarray, T: float, h: np.ndarray, m: int) -> np.ndarray:
+    """P_j with v(t_{j+1}) = P_j v(t_j): the end-node rows of the solution of each interval's
+    collocation system (one LU solve per interval, no explicit inverse)."""
+    n = J.shape[-1]
+    blk = _interval_blocks(J, T, h, m)
+    return np.linalg.solve(blk[:, :, n:], -blk[:, :, :n])[:, -n:, :]
+
+
+def _group(P: np.ndarray, max_cond: float) -> np.ndarray:
+    groups = []
+    G = P[0]
+    for j in range(1, P.shape[0]):
+        G2 = P[j] @ G
+        if np.linalg.cond(G2) <= max_cond:
+            G = G2
+        else:
+            groups.append(G)
+            G = P[j]
+    groups.append(G)
+    return np.stack(groups)
+
+
+def _cyclic_estimates(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Estimates (ln|mu|, arg mu) of the eigenvalues of G_{K-1} ... G_0 from the block
+    cyclic matrix [[0, ..., G_{K-1}], [G_0, 0, ...], ..., [..., G_{K-2}, 0]], whose
+    eigenvalues are the K-th roots of the multipliers (Kressner 2006, "The periodic QR
+    algorithm is a disguised QR algorithm"): LAPACK's QR on it is fast, and the K-th root
+    compresses the range of magnitudes. The K roots of each multiplier are grouped back."""
+    K, n, _ = G.shape
+    C = np.zeros((K * n, K * n))
+    for j in range(K):
+        jn = (j + 1) % K
+        C[jn * n:(jn + 1) * n, j * n:(j + 1) * n] = G[j]
+    lam = np.linalg.eigvals(C)
+    with np.errstate(divide="ignore"):
+        la = K * np.log(np.abs(lam))
+    ph = np.angle(lam ** K) if K > 1 else np.angle(lam)
+    left = list(np.argsort(-la))
+    out_l, out_p = [], []
+    while left and len(out_l) < n:
+        i = left[0]
+        d = np.abs(la[left] - la[i]) + np.abs(np.angle(np.exp(1j * (ph[left] - ph[i]))))
+        d = np.where(np.isfinite(d), d, np.inf)
+        take = [left[k] for k in np.argsort(d, kind="stable")[:K]]
+        out_l.append(la[i])
+        out_p.append(ph[i])
+        left = [k for k in left if k not in take]
+    return np.array(out_l), np.array(out_p)
+
+
 def grouped_transfer_matrices(F: np.ndarray, E: np.ndarray, max_cond: float) -> np.ndarray:
     """Collapse runs of consecutive transfer matrices E_j^{-1} F_j into their products while
     the 2-norm condition number of a run's product stays <= ``max_cond``.
@@ -456,19 +525,7 @@ def grouped_transfer_matrices(F: np.ndarray, E: np.ndarray, max_cond: float) -> 
     that of the collocation matrix of a single short interval (close to 1 for small T h).
     """
     P = np.linalg.solve(E, F)
-    if max_cond <= 1.0:
-        return P
-    groups = []
-    G = P[0]
-    for j in range(1, P.shape[0]):
-        G2 = P[j] @ G
-        if np.linalg.cond(G2) <= max_cond:
-            G = G2
-        else:
-            groups.append(G)
-            G = P[j]
-    groups.append(G)
-    return np.stack(groups)
+    return P if max_cond <= 1.0 else _group(P, max_cond)
 
 
 def _balanced(J: np.ndarray) -> np.ndarray:
@@ -491,11 +548,12 @@ def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND
         raise ValueError("Floquet multipliers: the Jacobian along the orbit (or the period) "
                          "is not finite")
     J = _balanced(J)
-    F, E = condensed_pairs(J, T, h, m)
     if group_cond > 1.0:
-        F = grouped_transfer_matrices(F, E, group_cond)
-        E = None
-    pe = periodic_eigenvalues(F, E)
+        F, E = _group(transfer_matrices(J, T, h, m), group_cond), None
+        pe = periodic_eigenvalues(F, shifts=_cyclic_estimates(F))
+    else:
+        F, E = condensed_pairs(J, T, h, m)
+        pe = periodic_eigenvalues(F, E)
     la, ph = _pair_conjugates(pe.log_abs, pe.phase)
     order = np.argsort(-la, kind="stable")
     la, ph = la[order], ph[order]
