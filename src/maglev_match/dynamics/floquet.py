@@ -28,11 +28,18 @@ algorithm is backward stable for each factor, which is what the collocation bloc
 to; it costs O(K n^3) per shift sweep. Complex arithmetic with single (Wilkinson) shifts is
 used; conjugate pairs of the real problem are re-paired at the end.
 
-Two economies keep the cost per orbit small: the Jacobians are first balanced by one constant
-diagonal similarity (exact, powers of 2), and runs of consecutive transfer matrices are
-multiplied together only while the run's condition number stays below ``group_cond``
-(default 1e4, so at most 4 of the 16 digits are spent there); on the 9-state maglev model with
-NTST 80 the 80 intervals collapse to about 4 factors.
+Three economies keep the cost per orbit small (all on by default; ``group_cond = 1`` turns
+them off and runs the periodic QZ on the K orthogonally condensed pairs):
+
+- the Jacobians are balanced by one constant diagonal similarity (exact, powers of 2), so
+  states in very different units do not make every transfer matrix look ill-conditioned;
+- runs of consecutive transfer matrices P_j (one LU solve per interval) are multiplied
+  together only while the run's condition number stays below ``group_cond`` (default 1e4, so
+  at most 4 of the 16 digits are spent there): on the 9-state maglev model with NTST 80 the
+  80 intervals collapse to about 4 factors;
+- LAPACK's QR on the block cyclic matrix of the factors (its eigenvalues are the K-th roots
+  of the multipliers) gives estimates that serve as shifts, so the periodic QZ deflates about
+  one eigenvalue per sweep and a half; the eigenvalues returned are the periodic QZ's.
 
 Limits. The result is as accurate as the factors allow, which is the best any method working
 on the collocation blocks can do; near a homoclinic orbit the trivial multiplier is itself
@@ -562,8 +569,8 @@ def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND
 
 def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: int) -> np.ndarray:
     """Floquet multipliers (all n, by |mu| descending) of a collocation orbit from the
-    Jacobian at its Gauss points, by periodic QZ on the condensed interval pairs (see the
-    module docstring).
+    Jacobian at its Gauss points, by periodic QZ on the grouped transfer matrices (see the
+    module docstring); the monodromy matrix is never formed.
 
     Parameters
     ----------
