@@ -39,7 +39,8 @@ SetOpt = Annotated[
     typer.Option("--set", help="Override one value, NAME=VALUE (repeatable), e.g. --set kD=120."),
 ]
 ModelOpt = Annotated[
-    str, typer.Option("--model", help="'unit' (model A, 9 states) or 'vehicle' (model B).")
+    str, typer.Option("--model", help="'unit' (model A, 9 states), 'vehicle' (model B) or a "
+                      "user model file FILE.py (see docs/user-models.md).")
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object (SI units).")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Output file or folder.")]
@@ -54,7 +55,8 @@ def params_from_options(preset: str, config: Path | None, sets: list[str] | None
 
 def check_model(model: str) -> str:
     if model not in ("unit", "vehicle"):
-        raise ParameterError("--model", model, "must be 'unit' or 'vehicle'")
+        raise ParameterError("--model", model,
+                             "must be 'unit', 'vehicle' or a model file ending in .py")
     return model
 
 

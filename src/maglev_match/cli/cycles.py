@@ -31,6 +31,7 @@ from maglev_match.cli.common import (
     output_path,
 )
 from maglev_match.cli.common import params_from_options as _params
+from maglev_match.cli.models import is_model_file, user_cycles
 from maglev_match.dynamics.cycles import CycleBranch, cycle_branch
 from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
 from maglev_match.limits_check import cycle_limit_margins
@@ -130,11 +131,14 @@ def cycles_command(
     out: OutOpt = None,
 ) -> None:
     """Cycles born at Hopf points, continued in --param until a physical limit (Fig. 5)."""
-    check_model(model)
     if not 2 <= ncol <= 7:
         raise ParameterError("--ncol", ncol, "must be between 2 and 7")
     if ntst < 4:
         raise ParameterError("--ntst", ntst, "must be at least 4")
+    if is_model_file(model):  # a user model file: no maglev limits or read-outs
+        return user_cycles(model, set_, at, param, start, stop, all_hopf, n_scan, ntst, ncol,
+                           max_steps, json_out, out)
+    check_model(model)
     params = apply_at(_params(preset, config, set_), at)
     system = build_system(params, model)
     try:

@@ -20,18 +20,17 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
-    check_model,
     check_param,
     console,
     console_err,
     emit_json,
     output_path,
-    params_from_options,
     parse_range,
     print_warnings,
     unit_of,
     validate_value,
 )
+from maglev_match.cli.models import resolve_model
 from maglev_match.dynamics.hopf import (
     HopfCurve,
     HopfPoint,
@@ -39,7 +38,6 @@ from maglev_match.dynamics.hopf import (
     locate_hopf_points,
     stability_grid,
 )
-from maglev_match.models import build_system
 from maglev_match.params import ParameterError
 
 # The plane of the paper's Fig. 4 for model A; model B has no sigma (that is model A's force
@@ -77,24 +75,25 @@ def hopf_command(
 ) -> None:
     """Hopf points of the equilibrium along one parameter: value, frequency, crossing speed
     d Re(lambda)/d param and the first Lyapunov coefficient l1 (> 0 subcritical)."""
-    check_model(model)
     if steps < 2:
         raise ParameterError("--steps", steps, "must be at least 2")
     if not start < stop:
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
-    params = params_from_options(preset, config, set_)
-    system = build_system(params, model)
+    rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
+    params, system, model = rm.params, rm.system, rm.label
     check_param(system, model, param, "--param")
     for v in (start, stop):
-        validate_value(params, param, v)
+        if params is not None:
+            validate_value(params, param, v)
     scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
-    names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE[model]))
+    names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
     records = [_point_record(hp, system, names) for hp in scan.points]
     if json_out:
         emit_json({"param": param, "model": model, "from": start, "to": stop,
                    "points": records, "warnings": list(scan.warnings)})
         return
-    console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit_of(param)}, "
+    unit = "" if rm.is_user else unit_of(param)
+    console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit}, "
                   f"model {model}: {len(records)} found")
     if records:
         table = Table(*names, "omega (rad/s)", "dRe/dp", "l1", "type", "others stable",
@@ -186,9 +185,11 @@ def hopf_curve_command(
 ) -> None:
     """The Hopf curve in two parameters by continuation, with l1 along it and the
     codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
-    check_model(model)
-    params = params_from_options(preset, config, set_)
-    system = build_system(params, model)
+    rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
+    params, system, model = rm.params, rm.system, rm.label
+    if params_opt is None and rm.is_user:
+        raise UserError(f"--params: give the two parameters of model {model}, e.g. "
+                        f"--params {','.join(system.param_names[:2])}")
     if params_opt is None:
         names = DEFAULT_PLANE[model]
     else:
@@ -206,13 +207,14 @@ def hopf_curve_command(
     for n in names:
         if n in given:
             bounds[n] = given[n]
-        elif n in DEFAULT_RANGES:
+        elif n in DEFAULT_RANGES and not rm.is_user:
             bounds[n] = DEFAULT_RANGES[n]
         else:
             v = system.param(n)
             bounds[n] = (0.5 * v, 2.0 * v) if v > 0 else (v - 1.0, v + 1.0)
         for v in bounds[n]:
-            validate_value(params, n, v)
+            if params is not None:
+                validate_value(params, n, v)
     a, b = bounds[names[1]]
     scan_values = [a + f * (b - a) for f in (0.5, 0.1, 0.9)]
 
@@ -272,10 +274,11 @@ def hopf_curve_command(
     from maglev_match.plots import save_figure
     from maglev_match.plots.hopf import hopf_curve_figure
 
-    title = f"Hopf curve, model {'A' if model == 'unit' else 'B'} ({preset})"
-    fig = hopf_curve_figure(curves, names, (unit_of(names[0]), unit_of(names[1])), grid_data,
-                            title=title, design_point=(system.param(names[0]),
-                                                       system.param(names[1])))
+    title = (f"Hopf curve, model {model}" if rm.is_user else
+             f"Hopf curve, model {'A' if model == 'unit' else 'B'} ({preset})")
+    units = ("", "") if rm.is_user else (unit_of(names[0]), unit_of(names[1]))
+    fig = hopf_curve_figure(curves, names, units, grid_data, title=title,
+                            design_point=(system.param(names[0]), system.param(names[1])))
     figs = save_figure(fig, folder / stem)
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]

@@ -21,6 +21,7 @@ from maglev_match.cli.common import (
     params_from_options,
     print_warnings,
 )
+from maglev_match.cli.models import MaglevOnlyModelOpt, refuse_model_file
 
 CASE_TEXT = {
     "unstable_equilibrium": "the equilibrium is unstable (h = 0)",
@@ -40,8 +41,10 @@ def index_command(
         bool, typer.Option("--no-simulation", help="Skip the simulation-based h_simulation.")
     ] = False,
     json_out: JsonOpt = False,
+    model: MaglevOnlyModelOpt = None,
 ) -> None:
     """The matching index chi = h / w0 of model A, with the case that decided h."""
+    refuse_model_file(model, "index")
     from maglev_match.matching import matching_index
 
     params = params_from_options(preset, config, set_)
@@ -95,8 +98,10 @@ def map_command(
     rows_per_tile: Annotated[int, typer.Option("--rows-per-tile")] = 2,
     ntst: Annotated[int, typer.Option("--ntst", help="Collocation intervals for cycles.")] = 30,
     json_out: JsonOpt = False,
+    model: MaglevOnlyModelOpt = None,
 ) -> None:
     """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure)."""
+    refuse_model_file(model, "map")
     from maglev_match.maps import MapSpec, map_dataset, parse_axis, run_map
     from maglev_match.params import ParameterError
     from maglev_match.plots import save_figure

@@ -22,6 +22,7 @@ from maglev_match.cli.common import (
     emit_json,
     params_from_options,
 )
+from maglev_match.cli.models import MaglevOnlyModelOpt, refuse_model_file
 
 QuickOpt = Annotated[
     bool, typer.Option("--quick", help="Coarse, fast settings (previews and tests).")
@@ -47,9 +48,11 @@ def report_command(
         "--vehicle/--no-vehicle", help="Also analyse model B (full vehicle).")] = True,
     t_end: Annotated[float, typer.Option("--t-end", help="Simulation horizon (s).")] = 3.0,
     json_out: JsonOpt = False,
+    model: MaglevOnlyModelOpt = None,
 ) -> None:
     """Self-contained HTML study report of one vehicle-beam pair (figures embedded; the
     PNG/SVG files are written to <out stem>_figures/ beside it)."""
+    refuse_model_file(model, "report")
     from maglev_match.report import ReportSettings, study_report
 
     if out.suffix.lower() not in (".html", ".htm"):
@@ -86,9 +89,11 @@ def reproduce_command(
         "--only", help="Figure sections to include (repeatable): fig4, fig5, fig6-8, "
         "fig11-13, fig12, variants. Default: all.")] = None,
     json_out: JsonOpt = False,
+    model: MaglevOnlyModelOpt = None,
 ) -> None:
     """Recompute the paper's figures (Figs. 4-8, 11-13) and its claims with the printed
     defaults; writes reproduce.html, claims.csv, claims.json and figures/ into --out."""
+    refuse_model_file(model, "reproduce")
     from maglev_match.report import ReportSettings
     from maglev_match.reproduce import SECTIONS, reproduce
 

@@ -27,6 +27,7 @@ from maglev_match.cli.common import (
     params_from_options,
     print_warnings,
 )
+from maglev_match.cli.models import is_model_file, user_simulate
 from maglev_match.dynamics.simulate import SimulationOptions
 
 
@@ -87,7 +88,8 @@ def simulate_command(
     (time, limit, levitation point), convergence or neither by the horizon."""
     from maglev_match.simulation import initial_state, save_history, simulate_maglev
 
-    check_model(model)
+    if not is_model_file(model):
+        check_model(model)
     if not t > 0:
         raise UserError(f"--t {t}: the horizon must be > 0 s")
     if n_save < 2:
@@ -96,8 +98,10 @@ def simulate_command(
         raise UserError("--rtol and --atol must be > 0")
     if out is not None and out.suffix not in (".csv", ".nc"):
         raise UserError(f"--out {out}: the history file must end in .csv or .nc")
-    params = params_from_options(preset, config, set_)
     state = _read_state(x0) if x0 is not None else None
+    if is_model_file(model):  # a user model file: no maglev limits or initial states
+        return user_simulate(model, set_, t, state, n_save, rtol, atol, json_out, out)
+    params = params_from_options(preset, config, set_)
     x_init = initial_state(params, model, initial=initial, x5=x5, q1=q1, state=state)
     console_err.print(f"simulating model {'A' if model == 'unit' else 'B'} for {t:g} s ...",
                       highlight=False)

@@ -19,18 +19,16 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
-    check_model,
     check_param,
     console,
     emit_json,
     output_path,
-    params_from_options,
     print_warnings,
     unit_of,
     validate_value,
 )
+from maglev_match.cli.models import resolve_model
 from maglev_match.dynamics.equilibria import root_locus, stability
-from maglev_match.models import build_system
 from maglev_match.params import ParameterError, available_presets, load_preset
 
 
@@ -43,33 +41,31 @@ def stability_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Equilibrium, eigenvalues and the stability verdict with its margin."""
-    check_model(model)
-    params = params_from_options(preset, config, set_)
-    system = build_system(params, model)
+    rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
+    params, system = rm.params, rm.system
     res = stability(system)
     if json_out:
         out = {
-            "model": model,
+            "model": rm.label,
             "stable": res.stable,
             "max_real_part": res.max_real_part,
             "margin": res.margin,
             "eigenvalues": [[float(z.real), float(z.imag)] for z in res.eigenvalues],
-            "omega1": float(params.omega1),
-            "sigma": float(params.sigma),
+            "omega1": float(params.omega1) if params else None,
+            "sigma": float(params.sigma) if params else None,
             "equilibrium_converged": res.equilibrium.converged,
             "equilibrium_scaled_residual": res.equilibrium.scaled_residual,
             "warnings": list(res.warnings),
         }
-        if model == "vehicle":
+        if rm.is_user:
+            out["parameters"] = dict(zip(system.param_names, system.p.tolist(), strict=True))
+        if model == "vehicle" or rm.is_user:
             out["equilibrium"] = res.equilibrium.x.tolist()
             out["state_names"] = list(system.state_names)
         emit_json(out)
         return
     verdict = "[bold green]STABLE[/]" if res.stable else "[bold red]UNSTABLE[/]"
-    console.print(
-        f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
-        f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg"
-    )
+    console.print(rm.description, highlight=False)
     console.print(f"Equilibrium: {verdict}  max Re(lambda) = {res.max_real_part:.6g} 1/s "
                   f"(margin {res.margin:.6g} 1/s)")
     table = Table("#", "Re (1/s)", "Im (rad/s)", "f (Hz)", "damping ratio")
@@ -98,16 +94,16 @@ def root_locus_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Eigenvalues along one parameter: writes CSV and a PNG/SVG figure."""
-    check_model(model)
     if steps < 2:
         raise ParameterError("--steps", steps, "must be at least 2")
     if not start < stop:
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
-    params = params_from_options(preset, config, set_)
-    system = build_system(params, model)
+    rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
+    params, system, model = rm.params, rm.system, rm.label
     check_param(system, model, param, "--param")
     for v in (start, stop):
-        validate_value(params, param, v)
+        if params is not None:
+            validate_value(params, param, v)
     values = np.linspace(start, stop, steps)
     res = root_locus(system, param, values)
     base = output_path(out, f"root-locus-{model}-{param}")

@@ -1,0 +1,289 @@
+"""``--model``: the built-in maglev models (``unit``, ``vehicle``) or a user model file.
+
+A value ending in ``.py`` is a user model (see :mod:`maglev_match.models.user`): ``--set
+NAME=VALUE`` then applies to the file's PARAMS and ``--preset``/``--config`` (maglev parameter
+sets) do not apply. Commands whose physics only make sense for the maglev models refuse a
+file with one clear line (:func:`refuse_model_file`). The user-model versions of ``cycles``
+and ``simulate`` live here too, so the maglev command modules only gain a branch.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from maglev_match.cli.common import (
+    UserError,
+    check_model,
+    console,
+    console_err,
+    emit_json,
+    output_path,
+    params_from_options,
+    print_warnings,
+)
+from maglev_match.dynamics.system import System
+from maglev_match.models.user import ModelFileError, UserModel, is_model_file, load_model
+from maglev_match.params import ParameterError, Params
+
+__all__ = ["ResolvedModel", "is_model_file", "refuse_model_file", "resolve_model"]
+
+
+@dataclass(frozen=True)
+class ResolvedModel:
+    """What a command needs from ``--model``.
+
+    system : the ODE system at the chosen parameter values.
+    description : one line naming the model and its key values, for text output.
+    label : 'unit', 'vehicle' or the model file's stem (used in output names and JSON).
+    params : the maglev parameter set, or None for a user model.
+    user : the loaded user model, or None for a built-in one.
+    """
+
+    system: System
+    description: str
+    label: str
+    params: Params | None = None
+    user: UserModel | None = None
+
+    @property
+    def is_user(self) -> bool:
+        return self.user is not None
+
+
+def parse_sets(user: UserModel, sets: list[str] | None, option: str = "--set"
+               ) -> dict[str, float]:
+    """NAME=VALUE items for a user model's PARAMS (unknown names list the valid ones)."""
+    values: dict[str, float] = {}
+    for item in sets or []:
+        if "=" not in item:
+            raise UserError(f"{option} '{item}': expected NAME=VALUE, e.g. "
+                            f"{next(iter(user.params), 'a')}=1.5")
+        name, text = (t.strip() for t in item.split("=", 1))
+        if name not in user.params:
+            raise ParameterError(option, name, f"model file {user.path} has no such parameter; "
+                                 f"valid names: {', '.join(user.params) or '(none)'}")
+        try:
+            v = float(text)
+        except ValueError:
+            raise ParameterError(name, text, "must be a number") from None
+        if not math.isfinite(v):
+            raise ParameterError(name, text, "must be finite")
+        values[name] = v
+    return values
+
+
+def load_user_model(path: str) -> UserModel:
+    """:func:`load_model` with its error turned into a command-line error (exit code 2)."""
+    try:
+        return load_model(path)
+    except ModelFileError as exc:
+        raise UserError(str(exc)) from None
+
+
+def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
+                  config: Path | None = None, *, limited: bool = False) -> ResolvedModel:
+    """The system ``--model`` names, with ``--set`` (and, for the maglev models,
+    ``--preset``/``--config``) applied.
+
+    Parameters
+    ----------
+    model : 'unit', 'vehicle' or a path ending in .py.
+    sets : the ``--set NAME=VALUE`` items.
+    preset, config : the maglev parameter set options (a user model refuses ``--config``).
+    limited : the maglev model with its physical limits (built-in models only).
+    """
+    if is_model_file(model):
+        if config is not None:
+            raise UserError(f"--config {config}: maglev parameter files do not apply to a "
+                            f"user model ({model}); use --set NAME=VALUE")
+        user = load_user_model(model)
+        values = parse_sets(user, sets)
+        vals = user.values_with(values)
+        desc = (f"Model {user.name} ({model}, {len(user.states)} states), "
+                + ", ".join(f"{k} = {v:.6g}" for k, v in vals.items()))
+        return ResolvedModel(system=user.system(values), description=desc, label=user.name,
+                             user=user)
+    check_model(model)
+    from maglev_match.cli.common import DEFAULT_PRESET_NAME
+    from maglev_match.models import build_system
+
+    params = params_from_options(preset or DEFAULT_PRESET_NAME, config, sets)
+    desc = (f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
+            f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg")
+    return ResolvedModel(system=build_system(params, model, limited=limited), description=desc,
+                         label=model, params=params)
+
+
+#: ``--model`` on the commands that analyse the maglev models themselves (index, map,
+#: report, reproduce): accepted only to refuse a model file with a clear message.
+MaglevOnlyModelOpt = Annotated[
+    str | None, typer.Option("--model", hidden=True,
+                             help="Not an option of this command (maglev models only).")
+]
+
+
+def refuse_model_file(model: str | None, command: str) -> None:
+    """Commands built on the maglev physics (index, map, report, reproduce) refuse a file
+    (and any other --model value: they choose the maglev models themselves)."""
+    if model is None:
+        return
+    if is_model_file(model):
+        raise UserError(f"--model {model}: '{command}' works on the maglev models only; "
+                        "user model files are accepted by stability, root-locus, hopf, "
+                        "hopf-curve, cycles and simulate")
+    raise UserError(f"--model {model}: '{command}' has no --model option (it analyses the "
+                    "maglev models itself)")
+
+
+# ---------------------------------------------------------------------------------------
+# cycles and simulate for a user model
+# ---------------------------------------------------------------------------------------
+def _at_values(user: UserModel, at: list[str] | None) -> dict[str, float]:
+    return parse_sets(user, at, option="--at")
+
+
+def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param: str,
+                start: float | None, stop: float | None, all_hopf: bool, n_scan: int,
+                ntst: int, ncol: int, max_steps: int, json_out: bool, out: Path | None
+                ) -> None:
+    """``cycles`` on a user model: Hopf points along ``param``, then the cycle branch from
+    the one nearest the current value (or from all with ``--all``), continued without
+    physical limits; extrema of every state and observable along the branch."""
+    from maglev_match.dynamics.cycles import cycle_branch
+    from maglev_match.dynamics.hopf import locate_hopf_points
+
+    user = load_user_model(model)
+    values = {**parse_sets(user, sets), **_at_values(user, at)}
+    system = user.system(values)
+    if param not in system.param_names:
+        raise ParameterError("--param", param, f"model file {model} has no such parameter; "
+                             f"valid names: {', '.join(system.param_names)}")
+    design = system.param(param)
+    a = (design / 4 if design > 0 else design - 1.0) if start is None else start
+    b = (design * 4 if design > 0 else design + 1.0) if stop is None else stop
+    if not (np.isfinite(a) and np.isfinite(b)) or a == b:
+        raise UserError(f"--from/--to: empty search range [{a}, {b}]")
+    scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+    hopfs = sorted((h for h in scan.points if h.converged), key=lambda h: abs(h.value - design))
+    if not hopfs:
+        raise UserError(f"no Hopf point of the equilibrium along {param} in "
+                        f"[{min(a, b):.6g}, {max(a, b):.6g}]; widen --from/--to")
+    chosen = hopfs if all_hopf else hopfs[:1]
+    names = tuple(system.observables)
+    branches = []
+    for h in chosen:
+        console_err.print(f"cycles from Hopf at {param} = {h.value:.6g} ...", highlight=False)
+        branches.append(cycle_branch(system, h, param, ntst=ntst, ncol=ncol,
+                                     max_steps=max_steps, observables=names))
+
+    def rows(br) -> list[dict[str, Any]]:
+        out_rows = []
+        for c in br.points:
+            r = {param: c.value, "period": c.period, "stable": c.stable,
+                 "unstable_multipliers": c.n_unstable,
+                 "trivial_multiplier_error": abs(c.trivial_multiplier - 1.0),
+                 "max_abs_multiplier": float(np.max(np.abs(c.multipliers)))
+                 if len(c.multipliers) else 0.0, "kind": c.kind}
+            for k, (hi, lo) in c.extrema.items():
+                r[f"{k}_max"], r[f"{k}_min"] = hi, lo
+            out_rows.append(r)
+        return out_rows
+
+    def specials(br) -> list[dict[str, Any]]:
+        return [{"type": s.type, param: s.value, "period": s.period, "located": s.located,
+                 "detail": s.detail} for s in br.special_points]
+
+    result = {
+        "model": user.name, "model_file": str(model), "param": param, "values": values,
+        "hopf_points": [{param: h.value, "frequency": h.frequency, "l1": h.l1,
+                         "kind": h.kind} for h in hopfs],
+        "branches": [{"hopf": h.value, "branch": rows(br), "special_points": specials(br),
+                      "stopped_reason": br.stopped_reason, "warnings": list(br.warnings)}
+                     for h, br in zip(chosen, branches, strict=True)],
+        "warnings": list(scan.warnings),
+    }
+    if out is not None:
+        import csv
+
+        base = output_path(out, str(out))
+        path = base if base.suffix == ".csv" else base / f"cycles_{user.name}_{param}.csv"
+        allrows = [{"branch": k, **r} for k, br in enumerate(branches) for r in rows(br)]
+        with path.open("w", newline="") as fh:
+            if allrows:
+                w = csv.DictWriter(fh, fieldnames=list(allrows[0]))
+                w.writeheader()
+                w.writerows(allrows)
+        result["files"] = [str(path)]
+    if json_out:
+        emit_json(result)
+        return
+    for h, br in zip(chosen, branches, strict=True):
+        console.print(f"Hopf point {param} = {h.value:.8g}, frequency {h.frequency:.6g} rad/s, "
+                      f"l1 = {h.l1:.4g} ({h.kind}); branch stopped: {br.stopped_reason} after "
+                      f"{br.steps} steps", highlight=False)
+        pts = br.points
+        for k in sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1])):
+            c = pts[k]
+            console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
+                          f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
+                          f"multipliers, |trivial - 1| = {abs(c.trivial_multiplier - 1):.1e})",
+                          highlight=False)
+        for s in br.special_points:
+            console.print(f"  {s.type} at {param} = {s.value:.8g} ({s.located})"
+                          f"{': ' + s.detail if s.detail else ''}", highlight=False)
+        print_warnings(br.warnings)
+    for f in result.get("files", []):
+        console.print(f"wrote {f}", highlight=False)
+    print_warnings(scan.warnings)
+
+
+def user_simulate(model: str, sets: list[str] | None, t: float, state: np.ndarray | None,
+                  n_save: int, rtol: float, atol: float, json_out: bool, out: Path | None
+                  ) -> None:
+    """``simulate`` on a user model: from ``--x0`` (default X0, the file's equilibrium
+    guess), without physical limits; reports the outcome and the final state."""
+    from maglev_match.dynamics.simulate import SimulationOptions, simulate
+
+    user = load_user_model(model)
+    system = user.system(parse_sets(user, sets))
+    x0 = user.x0 if state is None else np.asarray(state, float)
+    if x0.shape != (system.dim,):
+        raise UserError(f"--x0: {x0.size} values given, model {user.name} has "
+                        f"{system.dim} states ({', '.join(system.state_names)})")
+    console_err.print(f"simulating model {user.name} for {t:g} s ...", highlight=False)
+    res = simulate(system, x0, t, options=SimulationOptions(rtol=rtol, atol=atol),
+                   n_save=n_save)
+    written = []
+    if out is not None:
+        if out.suffix != ".csv":
+            raise UserError(f"--out {out}: for a user model the history file must end in .csv")
+        path = output_path(out, str(out))
+        header = ",".join(["t", *system.state_names])
+        np.savetxt(path, np.column_stack([res.t, res.x]), delimiter=",", header=header,
+                   comments="")
+        written.append(str(path))
+    summary = {"model": user.name, "model_file": str(model), "outcome": res.outcome,
+               "final_time": res.final_time,
+               "final_state": dict(zip(system.state_names, res.final_state.tolist(),
+                                       strict=True)),
+               "converged_time": res.converged_time, "accepted": res.accepted,
+               "rejected": res.rejected, "warnings": list(res.warnings), "files": written}
+    if json_out:
+        emit_json(summary)
+        print_warnings(res.warnings)
+        return
+    console.print(f"Model {user.name} ({model}): {res.outcome} at t = {res.final_time:.6g} s",
+                  highlight=False)
+    console.print("final state: " + ", ".join(
+        f"{n} = {v:.6g}" for n, v in zip(system.state_names, res.final_state, strict=True)),
+        highlight=False)
+    console.print(f"steps: {res.accepted} accepted, {res.rejected} rejected", highlight=False)
+    for w in written:
+        console.print(f"wrote {w}", highlight=False)
+    print_warnings(res.warnings)

@@ -1,0 +1,284 @@
+"""User models: an ODE system x' = f(x, p) defined in a Python file.
+
+The file defines, at module level::
+
+    STATES = ["x", "y", "z"]                          # names of the states (list of str)
+    PARAMS = {"sigma": 10.0, "rho": 28.0, ...}        # name -> default value (SI units)
+    def rhs(x, p): ...                                # jax.numpy; x 1-D array, p mapping
+    X0 = [...]                                        # optional: equilibrium guess
+    SCALES = [...]                                    # optional: typical size of each state
+    OBSERVABLES = {"name": lambda x, p: ...}          # optional: read-outs g(x, p)
+
+``rhs`` must be written with ``jax.numpy`` so that it can be traced and differentiated
+exactly (no ``numpy``/``math`` on the state, no ``float()``, no Python ``if`` on a value
+that depends on x or p: use ``jnp.where``). :func:`load_model` checks all of this once, by
+evaluating and tracing the file's functions at X0 and the defaults, and turns every problem
+into a :class:`ModelFileError` whose one-line message names the file and the problem.
+
+The result is a :class:`UserModel`; ``UserModel.system(values)`` gives the model-agnostic
+:class:`~maglev_match.dynamics.system.System` every analysis works on.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+import traceback
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from numbers import Real
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from maglev_match import jax_setup  # noqa: F401  (float64 on)
+from maglev_match.dynamics.system import System
+
+__all__ = ["ModelFileError", "UserModel", "is_model_file", "load_model"]
+
+_TRACE_ERRORS = (
+    jax.errors.ConcretizationTypeError,
+    jax.errors.TracerArrayConversionError,
+    jax.errors.TracerBoolConversionError,
+    jax.errors.TracerIntegerConversionError,
+)
+
+
+class ModelFileError(ValueError):
+    """A user model file that cannot be used; the message is one line naming the file."""
+
+    def __init__(self, path: str | Path, problem: str):
+        self.path = str(path)
+        self.problem = problem
+        super().__init__(f"model file {self.path}: {problem}")
+
+
+def is_model_file(model: str) -> bool:
+    """True when a ``--model`` value names a Python file rather than a built-in model."""
+    return str(model).endswith(".py")
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+def _line_in(path: Path, exc: BaseException) -> str:
+    """' (line N)' of the innermost frame of ``exc`` inside the model file, if any."""
+    line = None
+    for fr in traceback.extract_tb(exc.__traceback__):
+        if Path(fr.filename).resolve() == path.resolve():
+            line = fr.lineno
+    return f" (line {line})" if line is not None else ""
+
+
+@dataclass(frozen=True, eq=False)
+class UserModel:
+    """A model loaded from a file.
+
+    name : the file's stem (used in output names).
+    path : the file.
+    states : state names.
+    params : default parameter values, name -> value.
+    x0 : equilibrium guess (zeros if the file gives none).
+    scales : typical magnitude of each state (ones if the file gives none).
+    observables : name -> g(x, p) with p a mapping (as in the file).
+    rhs : the file's ``rhs(x, p)`` (p a mapping).
+    """
+
+    name: str
+    path: Path
+    states: tuple[str, ...]
+    params: Mapping[str, float]
+    x0: np.ndarray
+    scales: np.ndarray
+    observables: Mapping[str, Callable[..., Any]]
+    rhs: Callable[..., Any]
+    _vector_rhs: Callable[..., Any] = field(repr=False, default=None)  # type: ignore[assignment]
+    _vector_obs: Mapping[str, Callable[..., Any]] = field(repr=False, default_factory=dict)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(self.params)
+
+    @property
+    def defaults(self) -> dict[str, float]:
+        return dict(self.params)
+
+    def values_with(self, overrides: Mapping[str, float] | None = None) -> dict[str, float]:
+        """The defaults with some values replaced; an unknown name is a ValueError that lists
+        the valid ones."""
+        vals = dict(self.params)
+        for k, v in (overrides or {}).items():
+            if k not in vals:
+                raise ValueError(f"model '{self.name}' has no parameter '{k}'; "
+                                 f"valid names: {', '.join(self.params)}")
+            vals[k] = float(v)
+        return vals
+
+    def system(self, values: Mapping[str, float] | None = None) -> System:
+        """The :class:`System` at the defaults with ``values`` applied. Every System of one
+        UserModel shares the same right-hand side function, so it is compiled once."""
+        vals = self.values_with(values)
+        return System(
+            rhs=self._vector_rhs,
+            p=np.array([vals[n] for n in self.param_names], float),
+            param_names=self.param_names,
+            state_names=self.states,
+            x_guess=self.x0,
+            state_scale=self.scales,
+            observables=dict(self._vector_obs),
+            name=self.name,
+        )
+
+
+def _vectorised(fn: Callable[..., Any], names: tuple[str, ...]) -> Callable[..., Any]:
+    """``fn(x, mapping)`` as ``g(x, p_vector)`` (the form System expects): the mapping is
+    built from the vector inside the trace, so derivatives in p stay exact."""
+
+    def g(x, p):
+        return jnp.asarray(fn(x, {n: p[i] for i, n in enumerate(names)}), dtype=jnp.float64)
+
+    g.__name__ = getattr(fn, "__name__", "user_function")
+    return g
+
+
+def _real_vector(path: Path, name: str, value: Any, n: int) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelFileError(path, f"{name} must be a list of {n} numbers, got "
+                             f"{type(value).__name__}") from None
+    if arr.shape != (n,):
+        raise ModelFileError(path, f"{name} has {arr.size if arr.ndim else 'a scalar'} "
+                             f"entries, expected {n} (one per state in STATES)")
+    if not np.all(np.isfinite(arr)):
+        raise ModelFileError(path, f"{name} has non-finite entries: {arr.tolist()}")
+    return arr
+
+
+def _import(path: Path):
+    try:
+        source = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ModelFileError(path, f"cannot be read ({_first_line(exc)})") from None
+    try:
+        code = compile(source, str(path), "exec")
+    except SyntaxError as exc:
+        raise ModelFileError(path, f"syntax error at line {exc.lineno}: {exc.msg}") from None
+    modname = f"maglev_match_user_model_{abs(hash(str(path.resolve())))}"
+    spec = importlib.util.spec_from_loader(modname, loader=None, origin=str(path))
+    module = importlib.util.module_from_spec(spec)
+    module.__file__ = str(path)
+    sys.modules[modname] = module  # dataclasses and pickling look their module up
+    try:
+        exec(code, module.__dict__)  # noqa: S102  (running the user's model file is the point)
+    except Exception as exc:  # anything the file raises while loading
+        raise ModelFileError(path, f"error while loading{_line_in(path, exc)}: "
+                             f"{_first_line(exc)}") from None
+    return module
+
+
+def _check_traceable(path: Path, what: str, fn: Callable, x: np.ndarray, p: np.ndarray,
+                     ) -> np.ndarray:
+    """Evaluate ``fn(x, p)`` under jit and its x-Jacobian under jacfwd; return the value."""
+    hint = ("write it with jax.numpy (jnp.sin, jnp.where ...), not numpy/math, float() or a "
+            "Python `if` on values that depend on x or p")
+    try:
+        val = jax.jit(fn)(jnp.asarray(x), jnp.asarray(p))
+        jax.jit(jax.jacfwd(fn))(jnp.asarray(x), jnp.asarray(p))
+    except _TRACE_ERRORS as exc:
+        raise ModelFileError(path, f"{what} is not JAX-traceable{_line_in(path, exc)}: "
+                             f"{type(exc).__name__}; {hint}") from None
+    except Exception as exc:
+        raise ModelFileError(path, f"{what} failed at X0 and the default parameters"
+                             f"{_line_in(path, exc)}: {_first_line(exc)}") from None
+    return np.asarray(val)
+
+
+def load_model(path: str | Path) -> UserModel:
+    """Load and check a user model file (see the module docstring for the contract).
+
+    Parameters
+    ----------
+    path : the ``.py`` file.
+
+    Returns
+    -------
+    UserModel.
+
+    Raises
+    ------
+    ModelFileError : the file is missing, a directory, not Python, fails to load, misses
+        STATES/PARAMS/rhs, has values of the wrong type or length, an rhs that is not
+        JAX-traceable, of the wrong shape or not finite at X0, or non-positive SCALES.
+    """
+    path = Path(path)
+    if path.suffix != ".py":
+        raise ModelFileError(path, "a model file must be a Python file ending in .py")
+    if not path.exists():
+        raise ModelFileError(path, "no such file")
+    if not path.is_file():
+        raise ModelFileError(path, "is a directory, not a file")
+    mod = _import(path)
+    missing = [k for k in ("STATES", "PARAMS", "rhs") if not hasattr(mod, k)]
+    if missing:
+        raise ModelFileError(path, f"missing {', '.join(missing)} (a model file defines "
+                             "STATES, PARAMS and rhs(x, p))")
+    states = mod.STATES
+    if (not isinstance(states, list | tuple) or not states
+            or not all(isinstance(s, str) and s for s in states)):
+        raise ModelFileError(path, f"STATES must be a non-empty list of names (strings), got "
+                             f"{states!r}"[:200])
+    if len(set(states)) != len(states):
+        raise ModelFileError(path, f"STATES has repeated names: {list(states)}")
+    params = mod.PARAMS
+    if not isinstance(params, Mapping):
+        raise ModelFileError(path, f"PARAMS must be a dict name -> default value, got "
+                             f"{type(params).__name__}")
+    clean: dict[str, float] = {}
+    for k, v in params.items():
+        if not isinstance(k, str) or not k or "=" in k:
+            raise ModelFileError(path, f"PARAMS key {k!r} must be a non-empty name without '='")
+        if isinstance(v, bool) or not isinstance(v, Real) or not math.isfinite(float(v)):
+            raise ModelFileError(path, f"PARAMS['{k}'] = {v!r} must be a finite number")
+        clean[k] = float(v)
+    if not callable(mod.rhs):
+        raise ModelFileError(path, f"rhs must be a function rhs(x, p), got "
+                             f"{type(mod.rhs).__name__}")
+    n = len(states)
+    x0 = (_real_vector(path, "X0", mod.X0, n) if getattr(mod, "X0", None) is not None
+          else np.zeros(n))
+    scales = (_real_vector(path, "SCALES", mod.SCALES, n)
+              if getattr(mod, "SCALES", None) is not None else np.ones(n))
+    if np.any(scales <= 0.0):
+        raise ModelFileError(path, f"SCALES must be positive (typical size of each state), "
+                             f"got {scales.tolist()}")
+    obs_in = getattr(mod, "OBSERVABLES", None) or {}
+    if not isinstance(obs_in, Mapping) or not all(
+            isinstance(k, str) and callable(f) for k, f in obs_in.items()):
+        raise ModelFileError(path, "OBSERVABLES must be a dict name -> function g(x, p)")
+    names = tuple(clean)
+    p0 = np.array([clean[k] for k in names], float)
+    vrhs = _vectorised(mod.rhs, names)
+    f0 = _check_traceable(path, "rhs", vrhs, x0, p0)
+    if f0.shape != (n,):
+        raise ModelFileError(path, f"rhs returns shape {f0.shape}, expected ({n},) "
+                             "(one derivative per state in STATES)")
+    if not np.all(np.isfinite(f0)):
+        raise ModelFileError(path, f"rhs is not finite at X0 = {x0.tolist()}: {f0.tolist()}")
+    vobs = {}
+    for k, g in obs_in.items():
+        vg = _vectorised(g, names)
+        val = _check_traceable(path, f"OBSERVABLES['{k}']", vg, x0, p0)
+        if val.ndim > 1:
+            raise ModelFileError(path, f"OBSERVABLES['{k}'] returns shape {val.shape}; "
+                                 "expected a scalar or a 1-D array")
+        vobs[k] = vg
+    return UserModel(name=path.stem, path=path, states=tuple(states), params=clean, x0=x0,
+                     scales=scales, observables=dict(obs_in), rhs=mod.rhs, _vector_rhs=vrhs,
+                     _vector_obs=vobs)
