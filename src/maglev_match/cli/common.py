@@ -240,6 +240,16 @@ horizon_option = bounded(0.0, HORIZON_MAX, lo_open=True, unit="s")
 workers_option = bounded(0, WORKERS_MAX, integer=True, why="0: compute in this process")
 rows_per_tile_option = bounded(1, ROWS_PER_TILE_MAX, integer=True)
 fraction_option = bounded(0.0, 1.0, lo_open=True)
+# initial displacements (x5, q1): finite and at most 1 m (gaps are millimetres)
+displacement_option = bounded(-1.0, 1.0, unit="m")
+
+
+def check_index_params(params: Params) -> None:
+    """The index chi = h / w0 needs w0 > 0: sigma = 0 (no force on the beam) leaves the
+    beam undeflected and chi undefined."""
+    if not params.w0 > 0:
+        raise ParameterError("sigma", params.sigma, "must be > 0 for the index: chi = h / w0 "
+                             f"needs a beam deflection w0 > 0 (w0 = {params.w0:g} m)")
 
 
 SCHEDULER_RE = re.compile(r"^(tcp|tls|ucx|ws|wss)://(\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.-]+):"
