@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import math
 import os
 import signal
@@ -403,8 +404,12 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
             if progress:
                 progress(done, total)
     except KeyboardInterrupt:
-        with contextlib.suppress(Exception):
-            client.cancel(list(futures))
+        # stop quietly: the shutdown of interrupted workers is expected, not news
+        for name in ("distributed", "tornado", "asyncio"):
+            logging.getLogger(name).setLevel(logging.CRITICAL)
+        if cluster is None:  # an existing scheduler: drop our tasks there
+            with contextlib.suppress(Exception):
+                client.cancel(list(futures))
         raise checkpoint_mod.MapStopped(
             _stopped_text("interrupted", done, total, checkpoint), 130) from None
     except (OSError, TimeoutError) as exc:
