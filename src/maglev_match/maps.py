@@ -405,8 +405,10 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
                 progress(done, total)
     except KeyboardInterrupt:
         # stop quietly: the shutdown of interrupted workers is expected, not news
-        for name in ("distributed", "tornado", "asyncio"):
-            logging.getLogger(name).setLevel(logging.CRITICAL)
+        _quiet_logging()
+        if cluster is not None:  # the local workers too (they log to our stderr)
+            with contextlib.suppress(Exception):
+                client.run(_quiet_logging)
         if cluster is None:  # an existing scheduler: drop our tasks there
             with contextlib.suppress(Exception):
                 client.cancel(list(futures))
@@ -422,6 +424,13 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
         if cluster is not None:
             with contextlib.suppress(Exception):
                 cluster.close(timeout=10)
+
+
+def _quiet_logging() -> None:
+    """Silence Dask's shutdown chatter (cancelled tasks, heartbeats to a closing scheduler)
+    after an interrupt: the shutdown is expected, not news."""
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 def _is_lost_connection(exc: BaseException) -> bool:

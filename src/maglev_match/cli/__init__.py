@@ -25,7 +25,9 @@ Messages are printed as plain text (square brackets in values are kept).
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -134,7 +136,21 @@ _default_showwarning = warnings.showwarning
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit code (see the module docstring)."""
+    """Entry point of the console script; returns the exit code (see the module docstring).
+
+    Run as a program (``argv`` None) and interrupted, the process ends at once with code 130
+    after flushing its output: tearing down an interpreter whose XLA computation was
+    interrupted midway can crash (SIGSEGV seen), which would hide the exit code."""
+    code = _main(argv)
+    if code == 130 and argv is None:
+        with contextlib.suppress(Exception):
+            sys.stdout.flush()
+            sys.stderr.flush()
+        os._exit(130)
+    return code
+
+
+def _main(argv: list[str] | None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     if debug:
