@@ -395,6 +395,7 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
                 raise
             except Exception as exc:
                 if _is_lost_connection(exc):
+                    _quiet_logging()  # the client's reconnect attempts end in tracebacks
                     raise checkpoint_mod.MapStopped(_stopped_text(
                         f"lost the Dask scheduler ({type(exc).__name__})", done, total,
                         checkpoint)) from None
@@ -415,6 +416,7 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
         raise checkpoint_mod.MapStopped(
             _stopped_text("interrupted", done, total, checkpoint), 130) from None
     except (OSError, TimeoutError) as exc:
+        _quiet_logging()
         raise checkpoint_mod.MapStopped(_stopped_text(
             f"lost the Dask scheduler ({type(exc).__name__}: {exc})", done, total,
             checkpoint)) from None
@@ -429,8 +431,10 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
 def _quiet_logging() -> None:
     """Silence Dask's shutdown chatter (cancelled tasks, heartbeats to a closing scheduler)
     after an interrupt: the shutdown is expected, not news."""
-    for name in ("distributed", "tornado", "asyncio"):
-        logging.getLogger(name).setLevel(logging.CRITICAL)
+    prefixes = ("distributed", "tornado", "asyncio")
+    names = [n for n in list(logging.root.manager.loggerDict) if n.startswith(prefixes)]
+    for name in (*prefixes, *names):  # Dask's config gives some loggers their own levels
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
 def _is_lost_connection(exc: BaseException) -> bool:
