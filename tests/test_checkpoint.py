@@ -190,3 +190,27 @@ def test_resumed_map_recomputes_corrupt_and_foreign_tiles(tmp_path):
     assert tile_path(folder, t0).name in msgs and tile_path(folder, t1).name in msgs
     for k in MAP_VARIABLES:
         np.testing.assert_array_equal(again[k], ref[k])
+
+
+@pytest.mark.parametrize("changes,option", [({"ntst": 1}, "--ntst"), ({"ntst": 0}, "--ntst"),
+                                            ({"ncol": 8}, "--ncol"),
+                                            ({"max_steps": -1}, "--max-steps")])
+def test_run_map_refuses_unresolving_mesh_before_work(tmp_path, changes, option):
+    """NTST 1 once gave a wrong map marked resolved; the library refuses it too, before the
+    checkpoint folder is even created."""
+    from dataclasses import replace
+
+    from maglev_match.params import ParameterError
+
+    spec = replace(_spec(), **changes)
+    with pytest.raises(ParameterError) as err:
+        run_map(spec, tmp_path / "ck", workers=0)
+    assert err.value.field == option
+    assert not (tmp_path / "ck").exists()
+
+
+def test_run_map_refuses_negative_workers(tmp_path):
+    from maglev_match.params import ParameterError
+
+    with pytest.raises(ParameterError, match="--workers"):
+        run_map(_spec(), tmp_path / "ck", workers=-1)

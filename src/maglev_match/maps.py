@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from maglev_match import checkpoint as checkpoint_mod
+from maglev_match.options import CollocationMesh
 from maglev_match.params import FIELD_NAMES, ParameterError, Params, make_params
 
 __all__ = ["Axis", "MapSpec", "parse_axis", "compute_row", "run_map", "map_dataset",
@@ -306,6 +307,7 @@ def run_map(
     lost scheduler.
     """
     spec.validate()
+    CollocationMesh(spec.ntst, spec.ncol, spec.max_steps)  # raises ParameterError
     if workers is not None and workers < 0:
         raise ParameterError("--workers", workers, "must be >= 0 (0: compute in this process)")
     checkpoint = Path(checkpoint)

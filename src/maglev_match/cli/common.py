@@ -18,6 +18,7 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
+from maglev_match.options import NCOL_MAX, NCOL_MIN, NTST_MAX, NTST_MIN, STEPS_MAX, TOL_MAX
 from maglev_match.params import (
     DEFAULT_PRESET,
     PARAMETER_DOCS,
@@ -161,16 +162,8 @@ def output_path(out: Path | None, default: str) -> Path:
 # Bounds of the numerical options. Each is enforced while the command line is parsed
 # (before any computation) and reported as "Invalid value for '--opt': ..." with exit code 2.
 
-# Smallest collocation mesh accepted. Measured on a map row of model A (turnout-soft,
-# omega1 110..140 rad/s, sigma 4e-4, NCOL 4) against NTST 60: the bounding cycle's h agrees
-# within 6e-4 relative for NTST >= 4, but is off by 0.5 % at NTST 3 and by 36 % at NTST 2
-# (NTST 1 gave chi 25.4 instead of 6.59 on a full map). NTST 8 keeps a factor-2 margin.
-NTST_MIN = 8
-NTST_MAX = 2000
-NCOL_MIN, NCOL_MAX = 2, 7  # Gauss-Legendre collocation points per interval (AUTO: 2..7)
-TOL_MAX = 0.1  # relative/absolute tolerances: (0, 0.1]
+# NTST_MIN: the smallest mesh that resolves a cycle (measured; see maglev_match.options).
 SCAN_MAX = 20_000  # values of an eigenvalue scan (each one an eigenvalue problem)
-STEPS_MAX = 100_000  # continuation steps
 GRID_MAX = 400  # stability-grid points per axis (GRID_MAX^2 eigenvalue problems)
 N_SAVE_MAX = 1_000_000  # saved time points of a simulation
 HORIZON_MAX = 1e5  # s, simulation horizon
