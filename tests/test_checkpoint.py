@@ -214,3 +214,55 @@ def test_run_map_refuses_negative_workers(tmp_path):
 
     with pytest.raises(ParameterError, match="--workers"):
         run_map(_spec(), tmp_path / "ck", workers=-1)
+
+
+def test_lost_scheduler_stops_with_resume_hint(tmp_path):
+    """The scheduler of an existing cluster dies mid-map: one line naming the loss and how to
+    resume, exit code 1, no Dask traceback; the tiles finished so far stay valid."""
+    import signal
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    dask_bin = os.path.join(os.path.dirname(sys.executable), "dask")
+    procs = []
+    try:
+        sched = subprocess.Popen([dask_bin, "scheduler", "--host", "127.0.0.1", "--port",
+                                  str(port), "--no-dashboard"], env=env,
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        procs.append(sched)
+        addr = f"tcp://127.0.0.1:{port}"
+        procs.append(subprocess.Popen([dask_bin, "worker", addr, "--nthreads", "1",
+                                       "--no-dashboard"], env=env,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        out = tmp_path / "m.nc"
+        cmd = [sys.executable, "-m", "maglev_match.cli", "map", "--x", "omega1=100:140:6",
+               "--y", "sigma=3e-4:5e-4:100", "--rows-per-tile", "1", "--scheduler", addr,
+               "--out", str(out)]
+        mp = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True)
+        procs.append(mp)
+        folder = tmp_path / "m.nc.tiles"
+        deadline = time.time() + 300
+        while not list(folder.glob("tile_*.npz")):
+            assert mp.poll() is None, mp.communicate()[1][-2000:]
+            assert time.time() < deadline
+            time.sleep(0.2)
+        sched.send_signal(signal.SIGKILL)
+        _, err = mp.communicate(timeout=120)
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    assert mp.returncode == 1, err[-2000:]
+    assert "lost the Dask scheduler" in err and "--resume" in err
+    assert "Traceback" not in err
+    spec_key = (folder / "spec.json").read_text()
+    tiles = sorted(folder.glob("tile_*.npz"))
+    assert tiles
+    for f in tiles:
+        a, b = (int(v) for v in f.stem.split("_")[1:])
+        assert check_tile(folder, (a, b), spec_key, MAP_VARIABLES, 6).ok

@@ -339,3 +339,13 @@ def test_ctrl_c_stops_map_with_130_and_resume_hint(tmp_path, workers):
     assert "--resume" in err and "Traceback" not in err and "KeyboardInterrupt" not in err
     assert elapsed < 60
     assert not out.exists()
+
+
+def test_disk_full_is_one_line_exit_1(monkeypatch):
+    def full(*a, **k):
+        raise OSError(28, "No space left on device", "/data/root_locus.csv")
+
+    monkeypatch.setattr(stability_cli, "stability", full)
+    code, _, err = run(["stability"])
+    assert code == 1 and "Traceback" not in err
+    assert err.strip() == "error: system error /data/root_locus.csv: No space left on device"
