@@ -40,7 +40,10 @@ def _read_state(text: str) -> np.ndarray:
     the numbers themselves separated by commas."""
     path = Path(text)
     if path.is_file():
-        raw = path.read_text().strip()
+        try:
+            raw = path.read_bytes()[:10_000_000].decode("utf-8").strip()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UserError(f"--x0 {text}: not a readable UTF-8 text file ({exc})") from None
         if raw.startswith("["):
             try:
                 return np.asarray(json.loads(raw), dtype=float).ravel()
