@@ -156,3 +156,108 @@ def test_invalid_toml(tmp_path):
 def test_unknown_preset():
     with pytest.raises(ParameterError, match="no such preset"):
         load_preset("turnout-medium")
+
+
+# ----- finite ranges, derived values, config files (issue: hardening) ----------------------
+import os  # noqa: E402
+import warnings  # noqa: E402
+
+from maglev_match.params import RANGES, ParameterWarning, load_toml  # noqa: E402
+
+
+@pytest.mark.parametrize("name,value", [
+    ("m", 1e300), ("g", 1e308), ("kD", 1e308), ("c0", 1e-300), ("A", 1e-300),
+    ("N", 1e-300), ("kP", 1e300), ("EI", 1e30), ("mu0", 1e-200), ("j_b", 1e200),
+])
+def test_overflow_and_underflow_values_are_refused(name, value):
+    """Values whose products overflow or underflow double precision never reach numpy."""
+    with pytest.raises(ParameterError) as err:
+        load_params("turnout-soft", sets={name: value})
+    assert err.value.field == name and "must lie in" in str(err.value)
+
+
+def test_every_preset_lies_inside_the_ranges():
+    for name in available_presets():
+        p = load_preset(name)
+        for field_name, (lo, hi) in RANGES.items():
+            assert lo <= getattr(p, field_name) <= hi, (name, field_name)
+
+
+def test_range_corners_never_overflow():
+    """Every corner of the ranges of the values in i0, w0, omega1 and sigma is either
+    accepted with finite derived values or refused by a rule (never an OverflowError,
+    ZeroDivisionError or an inf/NaN that reaches the solvers)."""
+    import itertools
+
+    names = ("m", "M", "g", "c0", "N", "A", "mu0", "EI", "mbar", "L")
+    accepted = 0
+    for corner in itertools.product((0, 1), repeat=len(names)):
+        sets = {n: RANGES[n][k] for n, k in zip(names, corner, strict=True)}
+        sets["gap_max"] = 1.0
+        sets["l"] = min(12.1, sets["L"])
+        try:
+            p = load_params("turnout-soft", sets=sets)
+        except ParameterError:
+            continue
+        accepted += 1
+        assert all(math.isfinite(v) for v in p.derived.values()), sets
+    assert accepted > 0
+
+
+@pytest.mark.parametrize("sets,derived,inputs", [
+    ({"mbar": 1e-2}, "sigma", ("k = 12", "mbar = 0.01")),
+    ({"k": 10_000}, "sigma", ("k = 1e+04",)),
+    ({"EI": 1e15, "mbar": 1e-3}, "omega1", ("EI = 1e+15", "mbar = 0.001")),
+    ({"omega1": 1.0}, "w0", ("omega1 = 1",)),
+])
+def test_derived_values_checked_naming_their_inputs(sets, derived, inputs):
+    with pytest.raises(ParameterError) as err:
+        load_params("turnout-soft", sets=sets)
+    assert err.value.field == derived
+    for text in inputs:
+        assert text in str(err.value)
+
+
+def test_explicit_omega1_with_beam_value_warns_naming_both():
+    with pytest.warns(ParameterWarning, match=r"omega1 = 100 .* EI = 3e\+10"):
+        p = load_params("turnout-soft", sets=["omega1=100", "EI=3e10"])
+    assert p.omega1 == 100.0
+    with pytest.warns(ParameterWarning) as record:
+        load_params("alpha1", sets=["mbar=2500"])
+    assert {str(w.message).split()[0] for w in record} == {"omega1", "sigma"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ParameterWarning)
+        load_params("turnout-soft", sets=["EI=3e10"])  # derived: no warning
+        load_params("alpha1", sets=["kD=120"])  # not a beam value: no warning
+
+
+@pytest.mark.parametrize("kind,fragment", [
+    ("utf16", "not UTF-8"), ("binary", "not UTF-8"), ("nul", "NUL"),
+    ("deep", "nested"), ("bigint", "finite"), ("directory", "folder"),
+    ("devnull", "not a regular file"), ("fifo", "not a regular file"), ("huge", "bytes"),
+])
+def test_config_files_that_are_not_small_utf8_toml(tmp_path, kind, fragment):
+    f = tmp_path / "c.toml"
+    if kind == "utf16":
+        f.write_bytes("kD = 120.0\n".encode("utf-16"))
+    elif kind == "binary":
+        f.write_bytes(bytes(range(256)))
+    elif kind == "nul":
+        f.write_bytes(b"kD = 1\x00\n")
+    elif kind == "deep":
+        f.write_text("kD = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    elif kind == "bigint":
+        f.write_text("kD = " + "9" * 401 + "\n")
+    elif kind == "directory":
+        f.mkdir()
+    elif kind == "devnull":
+        f = "/dev/null"
+    elif kind == "fifo":
+        os.mkfifo(f)
+    elif kind == "huge":
+        f.write_text("# " + "x" * 2_000_000 + "\n")
+    with pytest.raises(ParameterError) as err:
+        load_toml(f) if kind != "bigint" else load_params("turnout-soft", config=f)
+    assert fragment in str(err.value)
+    assert err.value.field in ("config", "kD")
+    assert len(str(err.value)) < 400  # a 401-digit value is shortened in the message

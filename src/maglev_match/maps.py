@@ -16,16 +16,21 @@ depend on which worker ran them, so a resumed map equals a map computed in one g
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import math
 import os
-from collections.abc import Callable
+import signal
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from maglev_match import checkpoint as checkpoint_mod
+from maglev_match.options import CollocationMesh
 from maglev_match.params import FIELD_NAMES, ParameterError, Params, make_params
 
 __all__ = ["Axis", "MapSpec", "parse_axis", "compute_row", "run_map", "map_dataset",
@@ -44,6 +49,7 @@ SINGLE_THREADED_ENV = {
 }
 MALLOC_TRIM_THRESHOLD = 256 * 2**20
 MALLOC_MMAP_THRESHOLD = 64 * 2**20  # a fixed trim threshold disables glibc's adaptive one
+SCHEDULER_TIMEOUT = "10s"  # waiting for an existing scheduler to answer
 # Largest grid accepted (points); beyond it the result arrays alone would not fit.
 MAX_POINTS = 4_000_000
 
@@ -265,14 +271,13 @@ def compute_tile(spec: MapSpec, rows: tuple[int, int]) -> dict[str, np.ndarray]:
 
 
 def _tile_path(folder: Path, rows: tuple[int, int]) -> Path:
-    return folder / f"tile_{rows[0]:05d}_{rows[1]:05d}.npz"
+    return checkpoint_mod.tile_path(folder, rows)
 
 
-def _save_tile(folder: Path, rows: tuple[int, int], data: dict[str, np.ndarray]) -> None:
-    target = _tile_path(folder, rows)
-    tmp = target.with_suffix(".tmp.npz")
-    np.savez(tmp, **data)
-    os.replace(tmp, target)  # atomic: a tile file is either complete or absent
+def _save_tile(folder: Path, rows: tuple[int, int], data: dict[str, np.ndarray],
+               spec: MapSpec) -> None:
+    """Atomically write a tile with its map's fingerprint (see :mod:`maglev_match.checkpoint`)."""
+    checkpoint_mod.save_tile(folder, rows, data, spec.key())
 
 
 def run_map(
@@ -290,41 +295,70 @@ def run_map(
     Parameters
     ----------
     checkpoint : folder for the tiles (created); with ``resume`` its tiles are reused.
+        The folder is locked for the duration of the run (a second run on it raises
+        :class:`~maglev_match.checkpoint.CheckpointLocked`); tiles of another map or
+        unreadable tiles are named in a warning and recomputed.
     scheduler : address of an existing Dask scheduler (tcp://host:port); default a local
         cluster with ``workers`` processes (default: all cores), or no cluster at all when
         ``workers == 0`` (compute in this process).
     max_tiles : compute at most this many new tiles, then stop (for tests of resuming).
-    Returns the assembled arrays, shape (ny, nx); raises RuntimeError when tiles are missing.
+    Returns the assembled arrays, shape (ny, nx); raises RuntimeError when tiles are missing
+    and :class:`~maglev_match.checkpoint.MapStopped` (with the resume hint) on Ctrl-C or a
+    lost scheduler.
     """
     spec.validate()
+    CollocationMesh(spec.ntst, spec.ncol, spec.max_steps)  # raises ParameterError
+    if workers is not None and workers < 0:
+        raise ParameterError("--workers", workers, "must be >= 0 (0: compute in this process)")
     checkpoint = Path(checkpoint)
-    checkpoint.mkdir(parents=True, exist_ok=True)
-    keyfile = checkpoint / "spec.json"
     key = spec.key()
-    if resume and keyfile.exists() and keyfile.read_text() != key:
-        raise ParameterError("--resume", str(checkpoint),
-                             "the checkpoint belongs to a different map; remove it or "
-                             "drop --resume")
-    if not resume and keyfile.exists():
-        for f in checkpoint.glob("tile_*.npz"):
-            f.unlink()
-    keyfile.write_text(key)
-    missing = [t for t in spec.tiles if not _tile_path(checkpoint, t).exists()]
-    done = len(spec.tiles) - len(missing)
-    todo = missing if max_tiles is None else missing[:max_tiles]
-    total = len(spec.tiles)
-    if progress:
-        progress(done, total)
-    if todo:
-        if workers == 0 and scheduler is None:
-            for t in todo:
-                _save_tile(checkpoint, t, compute_tile(spec, t))
-                done += 1
-                if progress:
-                    progress(done, total)
-        else:
-            _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, total)
-    return assemble(spec, checkpoint)
+    with checkpoint_mod.lock_folder(checkpoint):
+        try:
+            checkpoint_mod.prepare_folder(checkpoint, key, resume)
+        except ValueError as exc:
+            raise ParameterError("--resume", str(checkpoint), str(exc)) from None
+        missing, _ = checkpoint_mod.usable_tiles(checkpoint, spec.tiles, key, MAP_VARIABLES,
+                                                 spec.x.count)
+        done = len(spec.tiles) - len(missing)
+        todo = missing if max_tiles is None else missing[:max_tiles]
+        total = len(spec.tiles)
+        if progress:
+            progress(done, total)
+        if todo:
+            if workers == 0 and scheduler is None:
+                try:
+                    for t in todo:
+                        _save_tile(checkpoint, t, compute_tile(spec, t), spec)
+                        done += 1
+                        if progress:
+                            progress(done, total)
+                except KeyboardInterrupt:
+                    raise checkpoint_mod.MapStopped(
+                        _stopped_text("interrupted", done, total, checkpoint), 130) from None
+            else:
+                _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, total)
+        return assemble(spec, checkpoint)
+
+
+def _stopped_text(what: str, done: int, total: int, checkpoint: Path) -> str:
+    return (f"{what}: {done} of {total} tiles are saved in {checkpoint}; run the same command "
+            "with --resume to continue")
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """Ignore SIGINT while worker processes are started, so that they inherit the ignored
+    disposition: Ctrl-C in a terminal reaches the whole process group, and only this
+    (the client) process should react; the workers are shut down by the client."""
+    try:
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals cannot be changed here
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
 
 
 def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, total) -> None:
@@ -342,36 +376,88 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
         with dask.config.set({
             "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": MALLOC_TRIM_THRESHOLD,
             "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": MALLOC_MMAP_THRESHOLD,
-        }):
+        }), _sigint_ignored():
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                    dashboard_address=None, env=SINGLE_THREADED_ENV)
         client = Client(cluster)
     else:
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
+        except (OSError, TimeoutError, ValueError, TypeError) as exc:
+            raise ParameterError("--scheduler", scheduler,
+                                 f"no Dask scheduler answered there ({exc})") from None
+    futures: dict = {}
     try:
         futures = {client.submit(compute_tile, spec, t, pure=False, retries=2): t for t in todo}
         for fut in as_completed(futures):
             t = futures[fut]
-            _save_tile(checkpoint, t, fut.result())
+            try:
+                data = fut.result()
+            except KeyboardInterrupt:
+                raise
+            except Exception as exc:
+                if _is_lost_connection(exc):
+                    _quiet_logging()  # the client's reconnect attempts end in tracebacks
+                    raise checkpoint_mod.MapStopped(_stopped_text(
+                        f"lost the Dask scheduler ({type(exc).__name__})", done, total,
+                        checkpoint)) from None
+                raise
+            _save_tile(checkpoint, t, data, spec)
             done += 1
             if progress:
                 progress(done, total)
+    except KeyboardInterrupt:
+        # stop quietly: the shutdown of interrupted workers is expected, not news
+        _quiet_logging()
+        if cluster is not None:  # the local workers too (they log to our stderr)
+            with contextlib.suppress(Exception):
+                client.run(_quiet_logging)
+        if cluster is None:  # an existing scheduler: drop our tasks there
+            with contextlib.suppress(Exception):
+                client.cancel(list(futures))
+        raise checkpoint_mod.MapStopped(
+            _stopped_text("interrupted", done, total, checkpoint), 130) from None
+    except (OSError, TimeoutError) as exc:
+        _quiet_logging()
+        raise checkpoint_mod.MapStopped(_stopped_text(
+            f"lost the Dask scheduler ({type(exc).__name__}: {exc})", done, total,
+            checkpoint)) from None
     finally:
-        client.close()
+        with contextlib.suppress(Exception):
+            client.close(timeout=10)
         if cluster is not None:
-            cluster.close()
+            with contextlib.suppress(Exception):
+                cluster.close(timeout=10)
+
+
+def _quiet_logging() -> None:
+    """Silence Dask's shutdown chatter (cancelled tasks, heartbeats to a closing scheduler)
+    after an interrupt: the shutdown is expected, not news."""
+    prefixes = ("distributed", "tornado", "asyncio")
+    names = [n for n in list(logging.root.manager.loggerDict) if n.startswith(prefixes)]
+    for name in (*prefixes, *names):  # Dask's config gives some loggers their own levels
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+def _is_lost_connection(exc: BaseException) -> bool:
+    """Whether a task's exception means the cluster went away (not an error in the task)."""
+    from concurrent.futures import CancelledError
+
+    name = type(exc).__name__
+    return isinstance(exc, CancelledError | OSError | TimeoutError) or name in (
+        "FutureCancelledError", "CommClosedError", "CancelledError")
 
 
 def assemble(spec: MapSpec, checkpoint: Path) -> dict[str, np.ndarray]:
-    """Stack the checkpointed tiles into (ny, nx) arrays."""
-    missing = [t for t in spec.tiles if not _tile_path(checkpoint, t).exists()]
+    """Stack the checkpointed tiles into (ny, nx) arrays (each tile checked first)."""
+    key = spec.key()
+    missing = [t for t in spec.tiles
+               if not checkpoint_mod.check_tile(checkpoint, t, key, MAP_VARIABLES,
+                                                spec.x.count).ok]
     if missing:
         raise RuntimeError(f"{len(missing)} of {len(spec.tiles)} tiles not computed yet "
                            f"(checkpoint {checkpoint}); run again with --resume")
-    parts = []
-    for t in spec.tiles:
-        with np.load(_tile_path(checkpoint, t)) as z:
-            parts.append({k: z[k] for k in z.files})
+    parts = [checkpoint_mod.load_tile(checkpoint, t) for t in spec.tiles]
     return {k: np.concatenate([p[k] for p in parts], axis=0) for k in parts[0]}
 
 

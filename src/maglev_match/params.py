@@ -15,7 +15,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import stat
 import tomllib
+import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -24,6 +27,8 @@ from typing import Any
 __all__ = [
     "Params",
     "ParameterError",
+    "ParameterWarning",
+    "RANGES",
     "PARAMETER_DOCS",
     "available_presets",
     "load_params",
@@ -75,6 +80,41 @@ PARAMETER_DOCS: dict[str, tuple[str, str]] = {
     "s0": ("m", "distance between neighbouring frame centres"),
     "n_modes": ("-", "number of beam modes in the full-vehicle model"),
 }
+
+
+# Finite ranges of the input values, [low, high] in SI units. They are wide (several orders
+# of magnitude around every shipped preset) but keep every product and quotient the models
+# form (forces K (i/c)^2, stiffnesses over masses, the levitation current) far inside double
+# precision: beyond them values like m = 1e300 or c0 = 1e-300 overflow or underflow to
+# inf/0 and the eigenvalue and ODE solvers see NaN. Zero is allowed where the lower bound is 0.
+RANGES: dict[str, tuple[float, float]] = {
+    "m": (1e-3, 1e7), "M": (1e-3, 1e7), "g": (1e-3, 1e3), "ks": (1e-6, 1e10),
+    "cs": (0.0, 1e9), "mu0": (1e-9, 1e-3), "N": (1.0, 1e6), "A": (1e-8, 1e2),
+    "c0": (1e-6, 1.0), "omega0": (1e-3, 1e6), "xi0": (1e-4, 1e3), "kP": (0.0, 1e8),
+    "kD": (0.0, 1e7), "ke": (1e-6, 1e6), "L": (0.1, 1e4), "EI": (1e-3, 1e15),
+    "mbar": (1e-3, 1e7), "l": (1e-2, 1e4), "k": (1, 10_000), "gap_max": (0.0, 1.0),
+    "m_s": (1e-3, 1e8), "j_s": (1e-3, 1e10), "m_b": (1e-3, 1e8), "j_b": (1e-3, 1e10),
+    "k2": (1e-6, 1e10), "c2": (0.0, 1e9), "s": (1e-4, 1e4), "s0": (0.0, 1e4),
+}
+# Inputs from which each derived value is computed (named in its error message).
+DERIVED_FROM: dict[str, tuple[str, ...]] = {
+    "omega1": ("L", "EI", "mbar"),
+    "sigma": ("k", "L", "l", "mbar"),
+    "w0": ("sigma", "m", "M", "g", "omega1"),
+    "i0": ("c0", "N", "m", "M", "g", "mu0", "A"),
+}
+# Largest static deflection accepted, as a fraction of the span: the beam model is linear
+# (Euler-Bernoulli), valid for deflections small against the span.
+W0_MAX_FRACTION = 0.1
+I0_MAX = 1e5  # A: the levitation current of one unit (a coil carries tens of amperes)
+# Limits on user TOML files: size, nesting depth.
+CONFIG_MAX_BYTES = 1_000_000
+CONFIG_MAX_DEPTH = 8
+
+
+class ParameterWarning(UserWarning):
+    """A parameter combination that is valid but probably not what the user meant (e.g. a
+    beam value given while omega1 is set explicitly and so does not depend on it)."""
 
 
 class ParameterError(ValueError):
@@ -265,9 +305,13 @@ def _validate_inputs(p: Params) -> None:
         if v is None:
             continue
         if isinstance(v, bool) or not isinstance(v, int | float):
-            raise ParameterError(f.name, v, "must be a number")
-        if not math.isfinite(v):
-            raise ParameterError(f.name, v, "must be a finite number")
+            raise ParameterError(f.name, _short(v), "must be a number")
+        try:
+            finite = math.isfinite(v)
+        except OverflowError:  # an int too large for a float (e.g. 401 digits in TOML)
+            finite = False
+        if not finite:
+            raise ParameterError(f.name, _short(v), "must be a finite number")
     for n in INTEGER_FIELDS:
         v = getattr(p, n)
         if float(v) != int(v):
@@ -293,9 +337,64 @@ def _validate_inputs(p: Params) -> None:
         raise ParameterError("l", p.l, f"the vehicle must fit on the beam: l <= L = {p.L}")
     if not 1 <= p.n_modes <= 20:
         raise ParameterError("n_modes", p.n_modes, "must be a whole number in 1..20")
+    for name, (lo, hi) in RANGES.items():
+        v = getattr(p, name)
+        if v is not None and not lo <= v <= hi:
+            unit = PARAMETER_DOCS[name][0]
+            raise ParameterError(
+                name, v, f"must lie in [{lo:g}, {hi:g}] {unit} (the range in which the "
+                "model's arithmetic stays finite and physical)",
+            )
+
+
+def _short(v: Any) -> Any:
+    """A value for an error message: long texts and huge integers cut to a readable size."""
+    text = repr(v)
+    if len(text) <= 60:
+        return v
+    return text[:40] + f"... ({len(text)} characters)"
+
+
+def _from(p: Params, name: str) -> str:
+    parts = []
+    for n in DERIVED_FROM[name]:
+        unit = PARAMETER_DOCS[n][0]
+        parts.append(f"{n} = {float(getattr(p, n)):.4g}" + (f" {unit}" if unit != "-" else ""))
+    return ", ".join(parts)
 
 
 def _validate_derived(p: Params) -> None:
+    """Derived values (omega1, sigma from the beam; w0; i0) against their rules, naming the
+    inputs they came from."""
+    if "omega1" not in p.explicit and not 0 < p.omega1 <= 1e5:  # type: ignore[operator]
+        raise ParameterError(
+            "omega1", p.omega1, f"derived from {_from(p, 'omega1')}; must lie in (0, 1e5] "
+            "rad/s: change these beam values or set omega1 directly",
+        )
+    if "sigma" not in p.explicit and not 0 <= p.sigma <= 0.1:  # type: ignore[operator]
+        raise ParameterError(
+            "sigma", p.sigma, f"derived from {_from(p, 'sigma')}; must lie in [0, 0.1] 1/kg: "
+            "change these values or set sigma directly",
+        )
+    try:
+        w0 = p.w0
+    except (ZeroDivisionError, OverflowError):
+        w0 = math.inf
+    w0_max = W0_MAX_FRACTION * p.L
+    if not 0 <= w0 <= w0_max:
+        raise ParameterError(
+            "w0", w0, f"the static deflection sigma (m+M) g / omega1^2, from {_from(p, 'w0')}, "
+            f"must lie in [0, {w0_max:g}] m ({W0_MAX_FRACTION:g} L: the beam model is linear)",
+        )
+    try:
+        i0 = p.i0
+    except (ZeroDivisionError, OverflowError, ValueError):
+        i0 = math.inf
+    if not 0 < i0 <= I0_MAX:
+        raise ParameterError(
+            "i0", i0, f"the levitation current, from {_from(p, 'i0')}, must lie in "
+            f"(0, {I0_MAX:g}] A",
+        )
     reach = float(p.s0) + float(p.s)  # type: ignore[arg-type]
     if reach >= p.L / 2:
         raise ParameterError(
@@ -356,15 +455,67 @@ def _preset_values(name: str) -> dict[str, Any]:
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
-    """Flat parameter values from a user TOML file (validated names, not yet values)."""
+    """Flat parameter values from a user TOML file (validated names, not yet values).
+
+    The file must be a regular file of at most :data:`CONFIG_MAX_BYTES` bytes of UTF-8 text,
+    nested at most :data:`CONFIG_MAX_DEPTH` levels deep; anything else (a folder, a device
+    such as /dev/null, a FIFO, binary or UTF-16 data) is a :class:`ParameterError`.
+    """
     path = Path(path)
-    if not path.is_file():
-        raise ParameterError("config", str(path), "file does not exist")
     try:
-        doc = tomllib.loads(path.read_text())
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise ParameterError("config", str(path), "file does not exist") from None
+    except OSError as exc:
+        raise ParameterError("config", str(path), f"cannot be read: {exc.strerror}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ParameterError("config", str(path), "is a folder; give a TOML file")
+    if not stat.S_ISREG(st.st_mode):
+        raise ParameterError("config", str(path), "is not a regular file (a device, FIFO or "
+                             "socket); give a TOML file")
+    if st.st_size > CONFIG_MAX_BYTES:
+        raise ParameterError("config", str(path), f"is {st.st_size} bytes; a parameter file "
+                             f"has at most {CONFIG_MAX_BYTES} bytes")
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(CONFIG_MAX_BYTES + 1)
+    except OSError as exc:
+        raise ParameterError("config", str(path), f"cannot be read: {exc.strerror}") from None
+    if len(raw) > CONFIG_MAX_BYTES:
+        raise ParameterError("config", str(path), f"a parameter file has at most "
+                             f"{CONFIG_MAX_BYTES} bytes")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ParameterError("config", str(path), f"is not UTF-8 text (byte {exc.start}); "
+                             "save it as UTF-8") from None
+    if "\x00" in text:
+        raise ParameterError("config", str(path), "contains NUL bytes: not a text file")
+    depth = _max_nesting(text)
+    if depth > CONFIG_MAX_DEPTH:
+        raise ParameterError("config", str(path), f"nested {depth} levels deep; at most "
+                             f"{CONFIG_MAX_DEPTH} are allowed")
+    try:
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ParameterError("config", str(path), f"not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ParameterError("config", str(path), "nested too deeply") from None
     return _flatten(doc, str(path))
+
+
+def _max_nesting(text: str) -> int:
+    """Upper bound of the bracket nesting depth of a TOML text (brackets inside strings are
+    counted too, so this can over-estimate; used only to refuse absurd nesting before the
+    recursive parser sees it)."""
+    depth = best = 0
+    for ch in text:
+        if ch in "[{":
+            depth += 1
+            best = max(best, depth)
+        elif ch in "]}":
+            depth = max(0, depth - 1)
+    return best
 
 
 def load_preset(name: str = DEFAULT_PRESET) -> Params:
@@ -382,7 +533,7 @@ def parse_assignment(text: str) -> tuple[str, float]:
     try:
         value: float = float(raw)
     except ValueError:
-        raise ParameterError(name, raw, "must be a number") from None
+        raise ParameterError(name, _short(raw), "must be a number") from None
     return name, value
 
 
@@ -393,12 +544,36 @@ def load_params(
 ) -> Params:
     """Preset, then a user TOML file, then NAME=VALUE overrides, each on top of the last."""
     values: dict[str, Any] = _preset_values(preset) if preset else {}
+    user: set[str] = set()
     if config is not None:
-        values.update(load_toml(config))
+        from_file = load_toml(config)
+        values.update(from_file)
+        user |= set(from_file)
     if sets:
         items = sets.items() if isinstance(sets, dict) else (parse_assignment(s) for s in sets)
         for name, v in items:
             if name not in FIELD_NAMES:
                 raise ParameterError(name, v, _unknown_rule())
             values[name] = v
-    return make_params(values)
+            user.add(name)
+    params = make_params(values)
+    warn_overridden(params, user)
+    return params
+
+
+def warn_overridden(params: Params, given: set[str] | frozenset[str]) -> None:
+    """Warn (:class:`ParameterWarning`) when the user gave beam values that an explicitly set
+    omega1 or sigma makes irrelevant: e.g. ``--set omega1=100 --set EI=3e10`` keeps
+    omega1 = 100 whatever EI is."""
+    for derived in ("omega1", "sigma"):
+        if derived not in params.explicit:
+            continue
+        ignored = [n for n in DERIVED_FROM[derived] if n in given]
+        if ignored:
+            shown = ", ".join(f"{n} = {getattr(params, n):g}" for n in ignored)
+            warnings.warn(
+                f"{derived} = {getattr(params, derived):g} is set explicitly, so {shown} "
+                f"does not change it ({derived} derives from "
+                f"{', '.join(DERIVED_FROM[derived])} only when it is not set)",
+                ParameterWarning, stacklevel=2,
+            )

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from maglev_match.io import atomic_write_text
 from maglev_match.params import PARAMETER_DOCS, Params
 
 log = logging.getLogger(__name__)
@@ -333,8 +334,7 @@ def write_report(path: Path, title: str, intro_html: str, sections: Sequence[Sec
     """Write the HTML file and return a :class:`ReportResult`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(assemble_html(title, intro_html, sections, settings, params),
-                    encoding="utf-8")
+    atomic_write_text(path, assemble_html(title, intro_html, sections, settings, params))
     figures = tuple(f for s in sections for f in s.figures)
     seconds = time.perf_counter() - t_start if t_start is not None else 0.0
     return ReportResult(path=path, sections=tuple(sections), figures=figures, seconds=seconds)

@@ -38,6 +38,7 @@ from maglev_match.dynamics.simulate import (
     simulate_batch,
 )
 from maglev_match.dynamics.system import System
+from maglev_match.io import atomic_write
 from maglev_match.models import build_system
 from maglev_match.models import unit as unit_model
 from maglev_match.models import vehicle as vehicle_model
@@ -363,7 +364,7 @@ def save_history(sim: MaglevSimulation, path: str | Path) -> Path:
 
     ds = simulation_dataset(sim)
     if path.suffix == ".nc":
-        ds.to_netcdf(path, engine="h5netcdf")
+        atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
         return path
     cols: dict[str, np.ndarray] = {"time": ds["time"].values}
     for name, var in ds.data_vars.items():
@@ -374,8 +375,8 @@ def save_history(sim: MaglevSimulation, path: str | Path) -> Path:
             for k, lab in enumerate(ds[other].values):
                 cols[f"{name}_{lab}"] = var.values[:, k]
     header = ",".join(cols)
-    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=header,
-               comments="")
+    atomic_write(path, lambda tmp: np.savetxt(tmp, np.column_stack(list(cols.values())),
+                                              delimiter=",", header=header, comments=""))
     return path
 
 

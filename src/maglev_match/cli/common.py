@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import re
+import tempfile
+import warnings
+from collections.abc import Callable
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Annotated, Any
@@ -11,11 +16,14 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 from rich.console import Console
+from rich.text import Text
 
+from maglev_match.options import NCOL_MAX, NCOL_MIN, NTST_MAX, NTST_MIN, STEPS_MAX, TOL_MAX
 from maglev_match.params import (
     DEFAULT_PRESET,
     PARAMETER_DOCS,
     ParameterError,
+    ParameterWarning,
     Params,
     load_params,
 )
@@ -49,8 +57,16 @@ DEFAULT_PRESET_NAME = DEFAULT_PRESET
 
 
 def params_from_options(preset: str, config: Path | None, sets: list[str] | None) -> Params:
-    """Preset, then --config, then --set overrides."""
-    return load_params(preset, config, sets or [])
+    """Preset, then --config, then --set overrides. Warnings about values that an explicit
+    omega1 or sigma makes irrelevant are printed on stderr."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ParameterWarning)
+        params = load_params(preset, config, sets or [])
+    print_warnings([str(w.message) for w in caught if issubclass(w.category, ParameterWarning)])
+    for w in caught:
+        if not issubclass(w.category, ParameterWarning):
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    return params
 
 
 def check_model(model: str) -> str:
@@ -60,10 +76,19 @@ def check_model(model: str) -> str:
     return model
 
 
-def print_warnings(warnings) -> None:
-    """Warnings of a computation on stderr, one line each (stdout stays clean for --json)."""
-    for w in warnings:
-        console_err.print(f"[yellow]warning:[/] {w}", highlight=False)
+def print_warnings(items) -> None:
+    """Warnings of a computation on stderr, one line each (stdout stays clean for --json).
+    The text is printed literally (no Rich markup: brackets in values are kept)."""
+    for w in items:
+        console_err.print(Text.assemble(("warning: ", "yellow"), str(w)), highlight=False,
+                          soft_wrap=True)
+
+
+def print_error(message: str, prefix: str = "error") -> None:
+    """One error line on stderr, printed literally (no Rich markup)."""
+    line = " ".join(str(message).split())
+    console_err.print(Text.assemble((f"{prefix}: ", "bold red"), line), highlight=False,
+                      soft_wrap=True)
 
 
 def check_param(system, model: str, name: str, option: str) -> None:
@@ -133,3 +158,157 @@ def output_path(out: Path | None, default: str) -> Path:
     else:
         path.parent.mkdir(parents=True, exist_ok=True)
     return path
+
+
+# ----- validation of typed options -------------------------------------------------------
+# Bounds of the numerical options. Each is enforced while the command line is parsed
+# (before any computation) and reported as "Invalid value for '--opt': ..." with exit code 2.
+
+# NTST_MIN: the smallest mesh that resolves a cycle (measured; see maglev_match.options).
+SCAN_MAX = 20_000  # values of an eigenvalue scan (each one an eigenvalue problem)
+GRID_MAX = 400  # stability-grid points per axis (GRID_MAX^2 eigenvalue problems)
+N_SAVE_MAX = 1_000_000  # saved time points of a simulation
+HORIZON_MAX = 1e5  # s, simulation horizon
+WORKERS_MAX = 256
+ROWS_PER_TILE_MAX = 10_000
+
+
+def _fmt(v: float) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def check_number(value: Any, lo: float | None = None, hi: float | None = None, *,
+                 lo_open: bool = False, hi_open: bool = False, integer: bool = False,
+                 unit: str = "", why: str = "") -> str | None:
+    """The rule ``value`` breaks, or None. Non-finite numbers always break it."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return "must be a number"
+    if isinstance(value, float) and not math.isfinite(value):
+        return "must be a finite number"
+    if integer and isinstance(value, float) and not value.is_integer():
+        return "must be a whole number"
+    bad = ((lo is not None and (value <= lo if lo_open else value < lo))
+           or (hi is not None and (value >= hi if hi_open else value > hi)))
+    if not bad:
+        return None
+    left = ("(" if lo_open else "[") + (_fmt(lo) if lo is not None else "-inf")
+    right = (_fmt(hi) if hi is not None else "inf") + (")" if hi_open else "]")
+    kind = "a whole number" if integer else "a number"
+    rule = f"must be {kind} in {left}, {right}" + (f" {unit}" if unit else "")
+    return rule + (f" ({why})" if why else "")
+
+
+def bounded(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
+            hi_open: bool = False, integer: bool = False, unit: str = "",
+            why: str = "") -> Callable[[Any], Any]:
+    """A typer option callback enforcing a finite range (see :func:`check_number`); use as
+    ``typer.Option("--ntst", callback=bounded(NTST_MIN, NTST_MAX, integer=True))``."""
+
+    def callback(value: Any) -> Any:
+        values = value if isinstance(value, list | tuple) else [value]
+        for v in values:
+            rule = check_number(v, lo, hi, lo_open=lo_open, hi_open=hi_open,
+                                integer=integer, unit=unit, why=why)
+            if rule is not None:
+                raise typer.BadParameter(f"{v!r}: {rule}")
+        return value
+
+    return callback
+
+
+def finite(value: Any) -> Any:
+    """Option callback: any finite number (or None)."""
+    return bounded()(value)
+
+
+ntst_option = bounded(NTST_MIN, NTST_MAX, integer=True,
+                      why=f"fewer than {NTST_MIN} mesh intervals do not resolve a cycle")
+ncol_option = bounded(NCOL_MIN, NCOL_MAX, integer=True)
+tolerance_option = bounded(0.0, TOL_MAX, lo_open=True)
+scan_option = bounded(2, SCAN_MAX, integer=True)
+steps_option = bounded(1, STEPS_MAX, integer=True)
+grid_option = bounded(0, GRID_MAX, integer=True, why="0: no grid")
+n_save_option = bounded(2, N_SAVE_MAX, integer=True)
+horizon_option = bounded(0.0, HORIZON_MAX, lo_open=True, unit="s")
+workers_option = bounded(0, WORKERS_MAX, integer=True, why="0: compute in this process")
+rows_per_tile_option = bounded(1, ROWS_PER_TILE_MAX, integer=True)
+fraction_option = bounded(0.0, 1.0, lo_open=True)
+# initial displacements (x5, q1): finite and at most 1 m (gaps are millimetres)
+displacement_option = bounded(-1.0, 1.0, unit="m")
+
+
+def check_index_params(params: Params) -> None:
+    """The index chi = h / w0 needs w0 > 0: sigma = 0 (no force on the beam) leaves the
+    beam undeflected and chi undefined."""
+    if not params.w0 > 0:
+        raise ParameterError("sigma", params.sigma, "must be > 0 for the index: chi = h / w0 "
+                             f"needs a beam deflection w0 > 0 (w0 = {params.w0:g} m)")
+
+
+SCHEDULER_RE = re.compile(r"^(tcp|tls|ucx|ws|wss)://(\[[0-9a-fA-F:]+\]|[A-Za-z0-9_.-]+):"
+                          r"(\d{1,5})/?$")
+
+
+def scheduler_option(value: str | None) -> str | None:
+    """Option callback: a Dask scheduler address PROTOCOL://HOST:PORT."""
+    if value is None:
+        return value
+    m = SCHEDULER_RE.match(value.strip())
+    if m is None or not 1 <= int(m.group(3)) <= 65535:
+        raise typer.BadParameter(f"{value!r}: expected a Dask scheduler address "
+                                 "PROTOCOL://HOST:PORT, e.g. tcp://127.0.0.1:8786")
+    return value.strip()
+
+
+# ----- output paths ----------------------------------------------------------------------
+SYSTEM_FOLDERS = ("/proc", "/sys", "/dev")
+
+
+def check_output_path(path: Path | str | None, option: str = "--out", *,
+                      kind: str = "auto", suffixes: tuple[str, ...] | None = None) -> None:
+    """Check before any computation that an output can be written at ``path``.
+
+    ``kind`` is 'file', 'folder' or 'auto' (a name without a suffix is a folder, as in
+    :func:`output_path`). The path must not lie in a system folder (/proc, /sys, /dev), a
+    file must not be an existing folder (nor a folder an existing file), no part of the
+    path above it may be a plain file, and the nearest existing folder must accept a new
+    file (tested by creating and removing one). Raises :class:`ParameterError` naming
+    ``option``.
+    """
+    if path is None:
+        return
+    p = Path(path)
+    text = str(path)
+    if text.strip() == "" or "\x00" in text:
+        raise ParameterError(option, text, "must be a file or folder name")
+    if kind == "auto":
+        kind = "folder" if p.suffix == "" else "file"
+    if suffixes is not None and kind == "file" and p.suffix.lower() not in suffixes:
+        raise ParameterError(option, text, f"must end in {' or '.join(suffixes)}")
+    absolute = Path(os.path.abspath(p))
+    for system in SYSTEM_FOLDERS:
+        if absolute == Path(system) or Path(system) in absolute.parents:
+            raise ParameterError(option, text, f"lies in the system folder {system}; choose "
+                                 "a folder of your own")
+    if absolute.exists():
+        if kind == "file" and absolute.is_dir():
+            raise ParameterError(option, text, "is an existing folder; give a file name")
+        if kind == "folder" and not absolute.is_dir():
+            raise ParameterError(option, text, "is an existing file; give a folder name")
+    # the nearest existing ancestor must be a folder we can write to
+    probe = absolute if (kind == "folder" and absolute.is_dir()) else absolute.parent
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ParameterError(option, text, f"lies under {probe}, which is a file, not a folder")
+    try:
+        fd, name = tempfile.mkstemp(prefix=".maglev-match-probe-", dir=probe)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        raise ParameterError(option, text, f"cannot write in {probe}: "
+                             f"{exc.strerror or exc}") from None
+    if len(absolute.name.encode()) > 255:
+        raise ParameterError(option, text, "the file name is longer than 255 bytes")

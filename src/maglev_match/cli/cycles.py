@@ -17,6 +17,7 @@ from rich.table import Table
 from maglev_match.cli import app
 from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,
+    SCAN_MAX,
     ConfigOpt,
     JsonOpt,
     ModelOpt,
@@ -24,16 +25,23 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
+    bounded,
     check_model,
+    check_output_path,
     console,
     console_err,
     emit_json,
+    finite,
+    ncol_option,
+    ntst_option,
     output_path,
+    steps_option,
 )
 from maglev_match.cli.common import params_from_options as _params
 from maglev_match.cli.models import is_model_file, user_cycles
 from maglev_match.dynamics.cycles import CycleBranch, cycle_branch
 from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
+from maglev_match.io import atomic_open, atomic_write_text
 from maglev_match.limits_check import cycle_limit_margins
 from maglev_match.models import build_system
 from maglev_match.params import ParameterError, Params
@@ -96,9 +104,9 @@ def _hopf_json(h: HopfPoint, param: str) -> dict[str, Any]:
 
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
     if not rows:
-        path.write_text("")
+        atomic_write_text(path, "")
         return
-    with path.open("w", newline="") as fh:
+    with atomic_open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
@@ -109,17 +117,23 @@ def cycles_command(
     param: Annotated[str, typer.Option("--param", help="Continuation parameter.")] = "omega1",
     at: AtOpt = None,
     start: Annotated[float | None, typer.Option(
-        "--from", help="Search Hopf points from this value (default: design value / 4).")] = None,
+        "--from", help="Search Hopf points from this value (default: design value / 4).",
+        callback=finite)] = None,
     stop: Annotated[float | None, typer.Option(
-        "--to", help="... up to this value (default: design value x 4).")] = None,
+        "--to", help="... up to this value (default: design value x 4).",
+        callback=finite)] = None,
     all_hopf: Annotated[bool, typer.Option(
         "--all", help="Continue from every Hopf point in the range (default: the one "
         "nearest the design value).")] = False,
     n_scan: Annotated[int, typer.Option(
-        "--scan", help="Grid points of the eigenvalue scan that brackets Hopf points.")] = 100,
-    ntst: Annotated[int, typer.Option("--ntst", help="Mesh intervals.")] = 80,
-    ncol: Annotated[int, typer.Option("--ncol", help="Collocation points (2-7).")] = 4,
-    max_steps: Annotated[int, typer.Option("--max-steps", help="Continuation steps.")] = 300,
+        "--scan", help="Grid points of the eigenvalue scan that brackets Hopf points.",
+        callback=bounded(3, SCAN_MAX, integer=True))] = 100,
+    ntst: Annotated[int, typer.Option("--ntst", help="Mesh intervals.",
+                                      callback=ntst_option)] = 80,
+    ncol: Annotated[int, typer.Option("--ncol", help="Collocation points (2-7).",
+                                      callback=ncol_option)] = 4,
+    max_steps: Annotated[int, typer.Option("--max-steps", help="Continuation steps.",
+                                           callback=steps_option)] = 300,
     ignore_current: Annotated[bool, typer.Option(
         "--ignore-current", help="Do not stop where the coil current reaches 0 (only the "
         "gap limits stop the branch).")] = False,
@@ -131,6 +145,7 @@ def cycles_command(
     out: OutOpt = None,
 ) -> None:
     """Cycles born at Hopf points, continued in --param until a physical limit (Fig. 5)."""
+    check_output_path(out)
     if not 2 <= ncol <= 7:
         raise ParameterError("--ncol", ncol, "must be between 2 and 7")
     if ntst < 4:

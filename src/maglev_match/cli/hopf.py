@@ -20,13 +20,18 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
+    check_output_path,
     check_param,
     console,
     console_err,
     emit_json,
+    finite,
+    fraction_option,
+    grid_option,
     output_path,
     parse_range,
     print_warnings,
+    scan_option,
     unit_of,
     validate_value,
 )
@@ -38,6 +43,7 @@ from maglev_match.dynamics.hopf import (
     locate_hopf_points,
     stability_grid,
 )
+from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError
 
 # The plane of the paper's Fig. 4 for model A; model B has no sigma (that is model A's force
@@ -64,9 +70,10 @@ def _point_record(hp: HopfPoint, system, names: tuple[str, ...]) -> dict:
 @app.command("hopf")
 def hopf_command(
     param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
-    start: Annotated[float, typer.Option("--from", help="First value.")] = 30.0,
-    stop: Annotated[float, typer.Option("--to", help="Last value.")] = 300.0,
-    steps: Annotated[int, typer.Option("--steps", help="Values of the bracketing scan.")] = 200,
+    start: Annotated[float, typer.Option("--from", help="First value.", callback=finite)] = 30.0,
+    stop: Annotated[float, typer.Option("--to", help="Last value.", callback=finite)] = 300.0,
+    steps: Annotated[int, typer.Option("--steps", help="Values of the bracketing scan.",
+                                       callback=scan_option)] = 200,
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
     set_: SetOpt = None,
@@ -170,11 +177,12 @@ def hopf_curve_command(
         typer.Option("--range", help="NAME=FROM:TO bounds of a parameter (repeatable); "
                      "defaults omega1=30:400, sigma=1e-4:8e-4, others 0.5x..2x the value."),
     ] = None,
-    scan_steps: Annotated[int, typer.Option("--scan-steps",
+    scan_steps: Annotated[int, typer.Option("--scan-steps", callback=scan_option,
                                             help="Values of each bracketing scan.")] = 100,
-    grid: Annotated[int, typer.Option("--grid", help="Stability grid points per axis for "
-                                      "shading S/U (0: no grid).")] = 60,
-    max_step: Annotated[float, typer.Option("--max-step", help="Largest continuation step, "
+    grid: Annotated[int, typer.Option("--grid", callback=grid_option, help="Stability grid "
+                                      "points per axis for shading S/U (0: no grid).")] = 60,
+    max_step: Annotated[float, typer.Option("--max-step", callback=fraction_option,
+                                            help="Largest continuation step, "
                                             "as a fraction of the ranges.")] = 1e-2,
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
@@ -185,6 +193,7 @@ def hopf_curve_command(
 ) -> None:
     """The Hopf curve in two parameters by continuation, with l1 along it and the
     codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
+    check_output_path(out)
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
     if params_opt is None and rm.is_user:
@@ -257,14 +266,14 @@ def hopf_curve_command(
             if sp.type == "HH":
                 rec["other_frequency"] = sp.other_frequency
             special.append(rec)
-    with csv_path.open("w", newline="") as fh:
+    with atomic_open(csv_path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["branch", names[0], names[1], "frequency", "l1", "others_stable"])
         for r in points:
             w.writerow([r["branch"], f"{r[names[0]]:.12g}", f"{r[names[1]]:.12g}",
                         f"{r['frequency']:.12g}", f"{r['l1']:.8g}", r["others_stable"]])
     sp_path = folder / f"{stem}_special.csv"
-    with sp_path.open("w", newline="") as fh:
+    with atomic_open(sp_path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["type", names[0], names[1], "frequency", "l2", "branch"])
         for r in special:

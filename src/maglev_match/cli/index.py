@@ -15,11 +15,17 @@ from maglev_match.cli.common import (
     JsonOpt,
     PresetOpt,
     SetOpt,
+    check_index_params,
+    check_output_path,
     console,
     console_err,
     emit_json,
+    ntst_option,
     params_from_options,
     print_warnings,
+    rows_per_tile_option,
+    scheduler_option,
+    workers_option,
 )
 from maglev_match.cli.models import MaglevOnlyModelOpt, refuse_model_file
 
@@ -48,6 +54,7 @@ def index_command(
     from maglev_match.matching import matching_index
 
     params = params_from_options(preset, config, set_)
+    check_index_params(params)
     with console_err.status("computing the matching index ..."):
         res = matching_index(params, simulate=not no_simulation)
     if json_out:
@@ -90,23 +97,29 @@ def map_command(
     out: Annotated[Path, typer.Option("--out", help="netCDF file to write.")] = Path("map.nc"),
     resume: Annotated[bool, typer.Option("--resume", help="Reuse finished tiles.")] = False,
     scheduler: Annotated[
-        str | None, typer.Option("--scheduler", help="Existing Dask scheduler, tcp://host:port.")
+        str | None, typer.Option("--scheduler", help="Existing Dask scheduler, tcp://host:port.",
+                                 callback=scheduler_option)
     ] = None,
     workers: Annotated[
-        int | None, typer.Option("--workers", help="Local workers (default: all cores; 0: none).")
+        int | None, typer.Option("--workers", help="Local workers (default: all cores; 0: none).",
+                                 callback=workers_option)
     ] = None,
-    rows_per_tile: Annotated[int, typer.Option("--rows-per-tile")] = 2,
-    ntst: Annotated[int, typer.Option("--ntst", help="Collocation intervals for cycles.")] = 30,
+    rows_per_tile: Annotated[int, typer.Option("--rows-per-tile",
+                                               callback=rows_per_tile_option)] = 2,
+    ntst: Annotated[int, typer.Option("--ntst", help="Collocation intervals for cycles.",
+                                      callback=ntst_option)] = 30,
     json_out: JsonOpt = False,
     model: MaglevOnlyModelOpt = None,
 ) -> None:
     """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure)."""
     refuse_model_file(model, "map")
+    from maglev_match.io import atomic_write
     from maglev_match.maps import MapSpec, map_dataset, parse_axis, run_map
     from maglev_match.params import ParameterError
     from maglev_match.plots import save_figure
     from maglev_match.plots.maps import map_figure
 
+    check_output_path(out, kind="file")
     base = params_from_options(preset, config, set_)
     ax, ay = parse_axis(x, "--x"), parse_axis(y, "--y")
     if rows_per_tile < 1:
@@ -129,7 +142,7 @@ def map_command(
 
     ds = annotate_map(map_dataset(spec, data), base)
     out.parent.mkdir(parents=True, exist_ok=True)
-    ds.to_netcdf(out, engine="h5netcdf")
+    atomic_write(out, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
     figs = save_figure(map_figure(ds, design_point=(float(getattr(base, ax.name)),
                                                     float(getattr(base, ay.name)))),
                        out.with_suffix(""))

@@ -17,9 +17,11 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
+    check_output_path,
     console,
     console_err,
     emit_json,
+    horizon_option,
     params_from_options,
 )
 from maglev_match.cli.models import MaglevOnlyModelOpt, refuse_model_file
@@ -46,7 +48,8 @@ def report_command(
     quick: QuickOpt = False,
     model_b: Annotated[bool, typer.Option(
         "--vehicle/--no-vehicle", help="Also analyse model B (full vehicle).")] = True,
-    t_end: Annotated[float, typer.Option("--t-end", help="Simulation horizon (s).")] = 3.0,
+    t_end: Annotated[float, typer.Option("--t-end", help="Simulation horizon (s).",
+                                         callback=horizon_option)] = 3.0,
     json_out: JsonOpt = False,
     model: MaglevOnlyModelOpt = None,
 ) -> None:
@@ -59,6 +62,7 @@ def report_command(
         raise UserError(f"--out {out}: the report is an HTML file; give a name ending in .html")
     if not t_end > 0:
         raise UserError(f"--t-end {t_end:g}: must be > 0")
+    check_output_path(out, kind="file")
     params = params_from_options(preset, config, set_)
     base = ReportSettings.quick_settings() if quick else ReportSettings()
     settings = ReportSettings(**{**base.as_dict(), "include_vehicle": model_b, "t_end": t_end})
@@ -103,6 +107,7 @@ def reproduce_command(
             raise UserError(f"--only {k}: no such section; choose from {', '.join(keys)}")
     if out.suffix:
         raise UserError(f"--out {out}: give a folder (reproduce writes several files)")
+    check_output_path(out, kind="folder")
     settings = ReportSettings.quick_settings() if quick else ReportSettings()
     t0 = time.perf_counter()
     report, claims = reproduce(out, settings, only=only or None, progress=_progress(t0))

@@ -20,12 +20,17 @@ from maglev_match.cli.common import (
     SetOpt,
     UserError,
     check_model,
+    check_output_path,
     console,
     console_err,
+    displacement_option,
     emit_json,
+    horizon_option,
+    n_save_option,
     output_path,
     params_from_options,
     print_warnings,
+    tolerance_option,
 )
 from maglev_match.cli.models import is_model_file, user_simulate
 from maglev_match.dynamics.simulate import SimulationOptions
@@ -36,7 +41,10 @@ def _read_state(text: str) -> np.ndarray:
     the numbers themselves separated by commas."""
     path = Path(text)
     if path.is_file():
-        raw = path.read_text().strip()
+        try:
+            raw = path.read_bytes()[:10_000_000].decode("utf-8").strip()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UserError(f"--x0 {text}: not a readable UTF-8 text file ({exc})") from None
         if raw.startswith("["):
             try:
                 return np.asarray(json.loads(raw), dtype=float).ravel()
@@ -59,26 +67,30 @@ def simulate_command(
     config: ConfigOpt = None,
     set_: SetOpt = None,
     model: ModelOpt = "unit",
-    t: Annotated[float, typer.Option("--t", help="Horizon (s).")] = 5.0,
+    t: Annotated[float, typer.Option("--t", help="Horizon (s).", callback=horizon_option)] = 5.0,
     x5: Annotated[float | None, typer.Option(
-        "--x5", help="Model A: initial beam deflection x5(0) (m); negative opens the gap.")
+        "--x5", help="Model A: initial beam deflection x5(0) (m); negative opens the gap.",
+        callback=displacement_option)
     ] = None,
     initial: Annotated[str, typer.Option(
         "--initial", help="'equilibrium' or 'pressed' (model B: vehicle pressed onto the "
         "free beam, beam undeflected).")] = "equilibrium",
     q1: Annotated[float | None, typer.Option(
         "--q1", help="Model B: absolute first modal coordinate q1(0) (m), set on top of "
-        "--initial (undeflected beam = 0).")] = None,
+        "--initial (undeflected beam = 0).", callback=displacement_option)] = None,
     x0: Annotated[str | None, typer.Option(
         "--x0", help="Explicit initial state: a file of numbers (or JSON list) or "
         "comma-separated values; overrides --initial/--x5/--q1.")] = None,
     limits: Annotated[bool, typer.Option(
         "--limits/--no-limits", help="Physical limits (current clamp, gap collision).")
     ] = True,
-    rtol: Annotated[float, typer.Option("--rtol", help="Relative tolerance.")] = 1e-8,
+    rtol: Annotated[float, typer.Option("--rtol", help="Relative tolerance.",
+                                        callback=tolerance_option)] = 1e-8,
     atol: Annotated[float, typer.Option(
-        "--atol", help="Absolute tolerance, in units of each state's typical size.")] = 1e-8,
-    n_save: Annotated[int, typer.Option("--n-save", help="Saved time points.")] = 5001,
+        "--atol", help="Absolute tolerance, in units of each state's typical size.",
+        callback=tolerance_option)] = 1e-8,
+    n_save: Annotated[int, typer.Option("--n-save", help="Saved time points.",
+                                        callback=n_save_option)] = 5001,
     out: OutOpt = None,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Figure file (PNG; an SVG is written beside it).")] = None,
@@ -90,6 +102,8 @@ def simulate_command(
 
     if not is_model_file(model):
         check_model(model)
+    check_output_path(out, suffixes=(".csv", ".nc"))
+    check_output_path(plot, "--plot", kind="file")
     if not t > 0:
         raise UserError(f"--t {t}: the horizon must be > 0 s")
     if n_save < 2:

@@ -19,16 +19,20 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
+    check_output_path,
     check_param,
     console,
     emit_json,
+    finite,
     output_path,
     print_warnings,
+    scan_option,
     unit_of,
     validate_value,
 )
 from maglev_match.cli.models import resolve_model
 from maglev_match.dynamics.equilibria import root_locus, stability
+from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError, available_presets, load_preset
 
 
@@ -83,9 +87,10 @@ def stability_command(
 @app.command("root-locus")
 def root_locus_command(
     param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
-    start: Annotated[float, typer.Option("--from", help="First value.")] = 40.0,
-    stop: Annotated[float, typer.Option("--to", help="Last value.")] = 190.0,
-    steps: Annotated[int, typer.Option("--steps", help="Number of values.")] = 151,
+    start: Annotated[float, typer.Option("--from", help="First value.", callback=finite)] = 40.0,
+    stop: Annotated[float, typer.Option("--to", help="Last value.", callback=finite)] = 190.0,
+    steps: Annotated[int, typer.Option("--steps", help="Number of values.",
+                                       callback=scan_option)] = 151,
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
     set_: SetOpt = None,
@@ -94,6 +99,7 @@ def root_locus_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Eigenvalues along one parameter: writes CSV and a PNG/SVG figure."""
+    check_output_path(out)
     if steps < 2:
         raise ParameterError("--steps", steps, "must be at least 2")
     if not start < stop:
@@ -110,7 +116,7 @@ def root_locus_command(
     folder = base if base.suffix == "" else base.parent
     stem = f"root_locus_{model}_{param}"
     csv_path = folder / f"{stem}.csv"
-    with csv_path.open("w", newline="") as fh:
+    with atomic_open(csv_path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow([param, "index", "re", "im", "max_real_part", "equilibrium_converged"])
         for v, eig, mr, ok in zip(values, res.eigenvalues, res.max_real_part, res.converged,

@@ -10,6 +10,8 @@ import matplotlib
 matplotlib.use("Agg")  # files only; never needs a display
 import matplotlib.pyplot as plt  # noqa: E402
 
+from maglev_match.io import atomic_write  # noqa: E402
+
 STYLE = {
     "figure.figsize": (7.0, 4.5),
     "figure.dpi": 110,
@@ -36,7 +38,7 @@ def save_figure(fig, path: str | Path, formats: tuple[str, ...] = ("png", "svg")
     with plt.rc_context(STYLE):
         for fmt in formats:
             target = path.with_suffix("." + fmt)
-            fig.savefig(target)
+            atomic_write(target, lambda tmp, fmt=fmt: fig.savefig(tmp, format=fmt))
             written.append(target)
     plt.close(fig)
     return written
