@@ -204,7 +204,9 @@ def check_tile(folder: Path, rows: tuple[int, int], spec_key: str,
     try:
         data = _read(path)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        return TileCheck(path, TileStatus.UNREADABLE, f"cannot be read ({exc})")
+        detail = " ".join(str(exc).split())[:80]
+        return TileCheck(path, TileStatus.UNREADABLE, "cannot be read: truncated or corrupt "
+                         f"({type(exc).__name__}: {detail})")
     fp = data.get(FINGERPRINT_KEY)
     if fp is None:
         return TileCheck(path, TileStatus.FOREIGN, "has no map fingerprint (written by "
