@@ -47,7 +47,7 @@ def test_model_a_equilibrium_is_origin():
 
 
 def test_model_a_equation_by_hand():
-    """One evaluation of the vector field against SPEC.md section 3 written out in NumPy."""
+    """One evaluation of the vector field against the model equations written out in NumPy."""
     p = load_preset("alpha1")
     x = np.array([1e-4, 2e-3, -5e-5, 1e-3, 2e-4, -3e-3, 0.7, 5e-5, 1e-3])
     K = p.mu0 * p.N**2 * p.A

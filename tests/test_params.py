@@ -43,7 +43,7 @@ def test_static_deflection_formula():
     p = load_preset("turnout-soft")
     expected = p.sigma * (p.m + p.M) * p.g / p.omega1**2
     assert p.w0 == pytest.approx(expected, rel=1e-15)
-    # independent arithmetic from the SPEC formula with the beam values
+    # independent arithmetic from the sigma formula with the beam values
     w1 = (math.pi / 18.0) ** 2 * math.sqrt(1.96e10 / 1920.0)
     sig = 8 * 12 * 18.0 / (math.pi**2 * 12.1**2 * 1920.0) * math.sin(math.pi * 12.1 / 36.0) ** 2
     assert p.w0 == pytest.approx(sig * 1700 * 9.8 / w1**2, rel=1e-12)

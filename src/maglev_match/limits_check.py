@@ -1,4 +1,4 @@
-"""Maglev physical limits as read-outs of a periodic orbit (SPEC.md sections 5 and 6.4).
+"""Maglev physical limits as read-outs of a periodic orbit.
 
 The cycle continuation (:func:`maglev_match.dynamics.cycles.cycle_branch`) is
 model-agnostic; it takes a ``limits(system, orbit)`` callable. This module builds that

@@ -1,4 +1,4 @@
-"""Parameter sets for the levitation unit, the beam and the full vehicle (SPEC.md section 2).
+"""Parameter sets for the levitation unit, the beam and the full vehicle.
 
 A :class:`Params` holds every input value in SI units. Values that the paper derives
 (the levitation current ``i0``, the beam's modal frequencies ``omega_n``, the force gain

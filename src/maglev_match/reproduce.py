@@ -1,4 +1,4 @@
-"""The paper's figures and claims recomputed with the printed defaults (SPEC.md section 8).
+"""The paper's figures and claims recomputed with the printed defaults.
 
 :func:`reproduce` writes one self-contained HTML file (plus PNG/SVG figures and the claims
 as CSV/JSON) with
@@ -861,7 +861,7 @@ def reproduce(
     (out / "claims.json").write_text(json.dumps([asdict(c) for c in claims], indent=2))
     intro = (
         "<p>Every figure and claim of the paper that its text describes, recomputed with the "
-        "printed equations (SPEC.md sections 3-5) and the printed default parameters: presets "
+        "printed equations and the printed default parameters: presets "
         "<code>alpha1</code>, <code>alpha2</code>, <code>alpha3</code>, "
         "<code>turnout-soft</code> and <code>turnout-stiff</code>. The paper's numbers are "
         "claims to check, not targets; where they do not follow from the printed equations "

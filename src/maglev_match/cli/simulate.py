@@ -1,4 +1,4 @@
-"""`maglev-match simulate`: a time simulation with the physical limits (SPEC.md 5, 6.5)."""
+"""`maglev-match simulate`: a time simulation with the physical limits."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Model A: one levitation unit on the first beam mode (9 states, SPEC.md section 3).
+"""Model A: one levitation unit on the first beam mode (9 states).
 
 State x = [z1, z1', z2, z2', w, w', i - i0, y1, y2 - z1'] with z down-positive from the
 static equilibrium, w the equivalent beam deflection and y1, y2 the observer outputs.
@@ -66,12 +66,12 @@ def _rhs(x, p, limited: bool):
 
 
 def unit_rhs(x, p):
-    """Model A vector field (smooth: no current clamp). SPEC.md section 3."""
+    """Model A vector field (smooth: no current clamp)."""
     return _rhs(x, p, limited=False)
 
 
 def unit_rhs_limited(x, p):
-    """Model A with the no-reversal rule for the coil current (SPEC.md section 5)."""
+    """Model A with the no-reversal rule for the coil current."""
     return _rhs(x, p, limited=True)
 
 

@@ -1,5 +1,5 @@
 """Model B: the full vehicle (three levitation frames and a car body) over an n-mode
-simply supported beam (SPEC.md section 4).
+simply supported beam.
 
 State layout (16 + 2 n_modes + 18 entries):
 
@@ -164,7 +164,7 @@ def equilibrium_guess(params: Params) -> np.ndarray:
 
 def pressed_initial_state(params: Params) -> np.ndarray:
     """'Vehicle pressed onto the free beam': all vehicle and controller states at
-    equilibrium, beam undeflected (q = 0, q' = 0). SPEC.md section 4."""
+    equilibrium, beam undeflected (q = 0, q' = 0)."""
     x = equilibrium_guess(params)
     x[layout(params.n_modes)["q"]] = 0.0
     return x
