@@ -1,5 +1,5 @@
-"""The physical limits (the coil current never reverses; the gap stays in [0, gap_max]), as
-a separate layer the models call when ``limited=True``.
+"""The physical limits of the levitation magnets, as a separate layer the models call when
+``limited=True``.
 
 * The coil current never reverses: the force uses max(i, 0), and di/dt is held at 0 while
   i <= 0 and di/dt < 0.
