@@ -193,6 +193,11 @@ def test_open_simulation_is_a_warning_not_silence():
     out = with_simulation(res, _cd("open", 0.002, 0.004))
     assert out.h_simulation == 0.002  # only what was seen to return is claimed
     assert any("inconclusive" in w for w in out.warnings)
+    # nothing seen to return (runs undecided within the horizon): no claim at all
+    none = with_simulation(res, _cd("open", None, 0.004))
+    assert none.h_simulation is None and none.reading_basis == "simulation"
+    assert none.reading.startswith("unknown")
+    assert any("inconclusive" in w for w in none.warnings)
 
 
 def coupled_rhs(x, p):

@@ -400,6 +400,8 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
     warnings = list(res.warnings)
     sizes: list[float | None] = []
     info: dict[str, Any] = {"rule": rule}
+    collisions: list[str] = []
+    unconfirmed = False  # a direction where no size was seen to return at all
     for cd, label, key in ((up, labels[0], "up"), (down, labels[1], "down")):
         if cd is None:
             sizes.append(None)
@@ -412,19 +414,26 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
             lr = "none" if cd.largest_return is None else f"{cd.largest_return * mm:.4g} mm"
             sc = ("none" if cd.smallest_collision is None
                   else f"{cd.smallest_collision * mm:.4g} mm")
+            slow = ""
+            if res.max_real_part < 0 and -1.0 / res.max_real_part > cd.horizon / 4:
+                slow = (f"; the slowest decay time of the equilibrium, "
+                        f"{-1.0 / res.max_real_part:.3g} s, is long against the horizon "
+                        f"{cd.horizon:g} s")
             warnings.append(
-                f"simulation ({label}) inconclusive: {cd.unresolved} run(s) unresolved, largest "
-                f"return {lr}, smallest collision {sc}; the reading uses the largest size "
-                "seen to return")
+                f"simulation ({label}) inconclusive: {cd.unresolved} run(s) undecided, largest "
+                f"return {lr}, smallest collision {sc}{slow}")
+            unconfirmed = unconfirmed or cd.largest_return is None
         if (res.case == Case.NO_CYCLE_WITHIN_LIMITS and res.stable
                 and cd.smallest_collision is not None and cd.smallest_collision < cd.gap_range):
-            warnings.append(
-                f"contradiction: by the paper's rule the basin covers the whole gap range "
-                f"(h = {res.h * mm:.4g} mm, no unstable cycle within the limits), but a "
-                f"disturbance of {cd.smallest_collision * mm:.4g} mm ({label}), inside the gap "
-                f"range, collides in simulation; the reading does not claim that range")
+            collisions.append(f"{cd.smallest_collision * mm:.4g} mm ({label})")
+    if collisions:
+        warnings.append(
+            f"contradiction: by the paper's rule the basin covers the whole gap range "
+            f"(h = {res.h * mm:.4g} mm, no unstable cycle within the limits), but disturbances "
+            f"inside the gap range collide in simulation: {'; '.join(collisions)}; the reading "
+            "does not claim that range")
     known = [s for s in sizes if s is not None]
-    h_sim = min(known) if known else None
+    h_sim = None if unconfirmed or not known else min(known)
     chi_sim = None if h_sim is None else h_sim / res.w0
     chi_used, basis = res.chi, Basis.PAPER
     if chi_sim is not None and math.isfinite(res.chi) and chi_sim < res.chi:
@@ -436,6 +445,12 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
                 f"chi (paper) = {res.chi:.4g} and chi_simulation = {chi_sim:.4g} differ by more "
                 f"than a factor {factor:g}; the reading uses the smaller ({basis})")
     text = reading(chi_used, res.case, res.stable)
+    if unconfirmed:
+        # nothing was seen to return: the simulation supports no claim at all
+        basis = Basis.SIMULATION
+        text = ("unknown: no simulated disturbance was seen to return within the horizon, so "
+                f"no robustness is claimed (the paper's definition alone gives chi = "
+                f"{res.chi:.4g}: {reading(res.chi, res.case, res.stable).split(':')[0]})")
     every = (res.case == Case.NO_CYCLE_WITHIN_LIMITS and down is not None
              and all(cd is not None and cd.status == "all_return" for cd in (up, down)))
     if every:

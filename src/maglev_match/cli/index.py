@@ -106,8 +106,9 @@ def print_index(res, preset: str, config, set_) -> None:
         console.print(f"    rule: {sim.get('rule', '')}", markup=False, highlight=False)
     used = res.chi if res.reading_basis == "paper" else res.chi_simulation
     basis = ("the paper's definition" if res.reading_basis == "paper"
-             else "the simulation (the smaller index)")
-    console.print(f"  [bold]reading[/] (from {basis}, index {used:.4g}): [bold]{res.reading}[/]",
+             else "the simulation, the smaller index")
+    used_text = "" if used is None else f", index {used:.4g}"
+    console.print(f"  [bold]reading[/] (from {basis}{used_text}): [bold]{res.reading}[/]",
                   highlight=False)
     if res.warnings:
         console.print(f"  [yellow]warnings ({len(res.warnings)}):[/]")
@@ -135,7 +136,7 @@ def map_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure)."""
-    from maglev_match.maps import MapSpec, map_dataset, parse_axis, run_map
+    from maglev_match.maps import MapSpec, map_dataset, map_warnings, parse_axis, run_map
     from maglev_match.params import ParameterError
     from maglev_match.plots import save_figure
     from maglev_match.plots.maps import map_figure
@@ -158,7 +159,9 @@ def map_command(
 
         data = run_map(spec, checkpoint, resume=resume, scheduler=scheduler, workers=workers,
                        progress=progress)
-    ds = map_dataset(spec, data)
+    with console_err.status("spot check: recomputing sample points one by one ..."):
+        ds = map_dataset(spec, data)
+    warnings = map_warnings(ds)
     out.parent.mkdir(parents=True, exist_ok=True)
     ds.to_netcdf(out, engine="h5netcdf")
     figs = save_figure(map_figure(ds), out.with_suffix(""))
@@ -166,6 +169,11 @@ def map_command(
         "netcdf": str(out), "figures": [str(f) for f in figs], "x": ax.name, "y": ay.name,
         "shape": [ay.count, ax.count], "stable_fraction": float(ds["stable"].mean()),
         "chi_max": float(ds["chi"].max()), "unresolved": int((ds["resolved"] == 0).sum()),
+        "spot_check": {"points": int(ds.attrs["spot_check_points"]),
+                       "max_rel_diff": float(ds.attrs["spot_check_max_rel_diff"]),
+                       "tolerance": float(ds.attrs["spot_check_tolerance"]),
+                       "passed": bool(ds.attrs["spot_check_passed"])},
+        "warnings": warnings,
     }
     if json_out:
         emit_json(summary)
@@ -173,3 +181,8 @@ def map_command(
     console.print(f"wrote {out} and {', '.join(str(f) for f in figs)}")
     console.print(f"stable at {summary['stable_fraction']:.0%} of the points; chi up to "
                   f"{summary['chi_max']:.3g}; {summary['unresolved']} unresolved points")
+    sc = summary["spot_check"]
+    console.print(f"spot check: {sc['points']} point(s) recomputed one by one, largest relative "
+                  f"difference of h {sc['max_rel_diff']:.3g} (tolerance {sc['tolerance']:g})")
+    for w in warnings:
+        console.print(f"  - {w}", style="yellow", markup=False, highlight=False)
