@@ -224,13 +224,19 @@ def matching_index(
         search = {"omega1": search_ranges(params)["omega1"]}
     else:
         raise ParameterError("model", model, "must be 'unit' or 'vehicle'")
-    res = index_of_system(
-        system, system.p, w0=w0, h_max=params.gap_max - params.c0,
-        search=search,
-        limits=cycle_limit_margins(params, include_current=False),
-        stability_result=stability_result,
-        omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
-    )
+    from threadpoolctl import threadpool_limits
+
+    # The collocation blocks are small dense matrices; BLAS threads only contend for the
+    # cores there (the vehicle's Floquet condensation: 1.5 s per cycle with OpenBLAS's
+    # threads on the 2-core machine under load, 0.05 s single-threaded; measured).
+    with threadpool_limits(1 if model == "vehicle" else None):
+        res = index_of_system(
+            system, system.p, w0=w0, h_max=params.gap_max - params.c0,
+            search=search,
+            limits=cycle_limit_margins(params, include_current=False),
+            stability_result=stability_result,
+            omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
+        )
     res = replace(res, model=model)
     if not simulate:
         return res
