@@ -24,7 +24,7 @@ def test_vehicle_unstable_equilibrium_gives_chi_exactly_zero():
 
 def test_vehicle_w0_is_the_static_mid_span_deflection():
     """w0 of the vehicle = sum_n q_n* sin(n pi / 2) with q_n* the static modal
-    coordinates under the six point loads (m_s / 2 + m_b / 6) g (SPEC section 4)."""
+    coordinates under the six point loads (m_s / 2 + m_b / 6) g."""
     from maglev_match.simulation import vehicle_disturbance_geometry
 
     p = SOFT

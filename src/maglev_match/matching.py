@@ -194,7 +194,7 @@ def matching_index(
     stability_result: StabilityResult | None = None,
     simulation_kwargs: dict[str, Any] | None = None,
 ) -> MatchingIndex:
-    """chi = h / w0 at ``params`` (SPEC.md 6.6, and 6.8 for the vehicle), with the case that
+    """chi = h / w0 at ``params``, with the case that
     decided h, the simulated critical disturbance in both directions and the reading.
 
     Parameters
@@ -392,7 +392,7 @@ def _sim_info(cd: Any, label: str) -> dict[str, Any]:
 def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
                     labels: tuple[str, str] = ("up", "down"), rule: str = "",
                     factor: float = DISAGREEMENT_FACTOR) -> MatchingIndex:
-    """Combine the paper's index with simulated critical disturbances (SPEC.md 6.6).
+    """Combine the paper's index with simulated critical disturbances.
 
     ``up``/``down`` are :class:`~maglev_match.simulation.CriticalDisturbance` results of the
     two directions (``down`` may be None). h_simulation is the smaller supported size,

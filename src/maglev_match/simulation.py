@@ -490,7 +490,7 @@ def vehicle_critical_disturbance(
     max_rounds: int = 8,
     options: SimulationOptions | None = None,
 ) -> CriticalDisturbance:
-    """Critical disturbance of model B along the paper's initial state (SPEC.md 6.8): the
+    """Critical disturbance of model B along the paper's initial state: the
     state x_eq + s (pressed - x_eq), sizes d = s w_mid measured as the mid-span beam
     displacement (m) from its static position. direction -1: the beam lifted towards the
     free beam (d = w_mid is "pressed onto the free beam"); +1: the beam pushed further down.
