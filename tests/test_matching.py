@@ -257,3 +257,29 @@ def test_limit_before_design_point_and_escaping_disturbance_claims_no_robustness
     assert good.simulation["up"]["status"] == "all_return"
     assert good.reading_basis == "paper"
     assert not any(w.startswith("contradiction") for w in good.warnings)
+
+
+def test_cli_index_kd120_text_and_json_agree(capsys):
+    """`index --set kD=120` (the issue's case): the cycle branch touches the limit before
+    the design point; the simulation shows collisions inside the gap range. The text names
+    the reading's basis and prints every warning of the JSON, and never claims every
+    disturbance; the paper's chi is kept as "chi" and "chi_paper"."""
+    import json
+
+    from maglev_match.cli import main
+
+    assert main(["index", "--set", "kD=120", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["chi"] == doc["chi_paper"] == pytest.approx(12.051, rel=1e-3)
+    assert doc["case"] == "no_cycle_within_limits"
+    assert doc["reading_basis"] == "simulation"
+    assert 0 < doc["h_simulation_down"] < doc["h_simulation_up"] < 0.01
+    assert doc["h_simulation"] == doc["h_simulation_down"]
+    assert "every disturbance" not in doc["reading"]
+    assert any("touches a limit" in w for w in doc["warnings"])
+    assert any(w.startswith("contradiction") for w in doc["warnings"])
+    assert main(["index", "--set", "kD=120"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for w in doc["warnings"]:
+        assert " ".join(w.split()) in text
+    assert "reading (from the simulation" in text

@@ -75,8 +75,10 @@ CASES = tuple(c.value for c in Case)
 DISAGREEMENT_FACTOR = 1.5
 # a design point closer than this (relative) to its Hopf point is a warning
 NEAR_HOPF = 0.05
-# |l2| r^2 / |l1| above this within the gap range: near a generalised-Hopf point
-NEAR_GH = 1.0
+# |l2| r^2 / |l1| above this within the gap range: near a generalised-Hopf point (the
+# quintic term of the normal form an order of magnitude above the cubic one; about 1 at the
+# presets, 406 at alpha1 with omega1 = 158.8, sigma = 4.92e-5)
+NEAR_GH = 10.0
 # reading thresholds on the index used (this project's choice), with their words
 READING_LEVELS = (
     (1.0, "poor: stable, but a disturbance the size of the static deflection escapes"),
