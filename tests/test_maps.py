@@ -204,7 +204,7 @@ def test_spot_check_catches_a_wrong_map(tmp_path):
     wrong = dict(data, h=data["h"] * 1.5)
     bad = spot_check(spec, wrong, fraction=1.0, max_points=5, seed=1)
     assert bad["spot_check_passed"] == 0
-    assert bad["spot_check_max_rel_diff"] == pytest.approx(0.5, rel=1e-9)
+    assert bad["spot_check_max_rel_diff"] == pytest.approx(0.5, abs=0.05)
     assert "spot check" in bad["warnings"]
     ds = map_dataset(spec, data)
     assert "reason" in ds and "spot_check_max_rel_diff" in ds.attrs
