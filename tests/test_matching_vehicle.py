@@ -59,3 +59,26 @@ def test_vehicle_cycle_agrees_with_shooting():
     # h is the largest over the six points, and the cycle is unstable (it bounds the basin)
     assert res.cycle_unstable_multipliers >= 1
     assert np.max(np.abs(sh.multipliers)) > 1.0 + 1e-6
+
+
+@pytest.mark.slow
+def test_vehicle_critical_disturbance_bracket_is_consistent():
+    """The pressed-state line: the size just inside the bracket returns, the one just outside
+    collides (simulated independently), and d = w0 is the paper's pressed state."""
+    from maglev_match.models.vehicle import pressed_initial_state
+    from maglev_match.simulation import (
+        simulate_maglev,
+        vehicle_critical_disturbance,
+        vehicle_disturbance_geometry,
+    )
+
+    p = SOFT
+    x_eq, delta, w_mid = vehicle_disturbance_geometry(p)
+    np.testing.assert_allclose(x_eq + delta, pressed_initial_state(p), atol=1e-15)
+    cd = vehicle_critical_disturbance(p, direction=-1)
+    assert cd.status == "bracketed", cd
+    assert cd.smallest_collision - cd.largest_return <= cd.tol * 1.0000001
+    inside = x_eq + cd.largest_return / w_mid * delta
+    outside = x_eq + cd.smallest_collision / w_mid * delta
+    assert simulate_maglev(p, "vehicle", inside, 20.0).outcome == "converged"
+    assert simulate_maglev(p, "vehicle", outside, 20.0).outcome == "collision"
