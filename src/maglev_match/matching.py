@@ -77,7 +77,7 @@ DISAGREEMENT_FACTOR = 1.5
 NEAR_HOPF = 0.05
 # |l2| r^2 / |l1| above this within the gap range: near a generalised-Hopf point (the
 # quintic term of the normal form an order of magnitude above the cubic one; about 1 at the
-# presets, 406 at alpha1 with omega1 = 158.8, sigma = 4.92e-5)
+# presets, 175 at alpha1 with omega1 = 158.8, sigma = 4.92e-5)
 NEAR_GH = 10.0
 # reading thresholds on the index used (this project's choice), with their words
 READING_LEVELS = (
