@@ -137,3 +137,74 @@ def test_distributed_map_on_real_scheduler_and_two_workers(tmp_path):
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+# ---------------------------------------------------------------------------------------
+# maps check themselves
+# ---------------------------------------------------------------------------------------
+KD_ROWS = MapSpec(base=load_preset("turnout-soft").as_input_dict(),
+                  x=Axis("omega1", 60.0, 140.0, 13),
+                  y=Axis("kD", 80.0 + 10 * 170.0 / 12, 80.0 + 11 * 170.0 / 12, 2), ntst=30)
+
+
+def test_row_with_hopf_point_just_outside_the_grid_matches_pointwise_index():
+    """`map --x omega1=60:140:13 --y kD=80:250:13`, row kD = 221.7: the Hopf point lies
+    just beyond omega1 = 140; its cycle bounds the basin at omega1 = 133.3. The map once
+    missed it (coarse extension) and gave h = 10 mm; the point-wise index gives 5.156 mm."""
+    from maglev_match.maps import compute_row
+    from maglev_match.matching import matching_index
+
+    row = compute_row(KD_ROWS, 0)
+    j = 11
+    assert KD_ROWS.x.values[j] == pytest.approx(133.33333333333334)
+    point = matching_index(KD_ROWS.point(KD_ROWS.x.values[j], KD_ROWS.y.values[0]),
+                           simulate=False)
+    assert point.case == "unstable_cycle"
+    assert point.h == pytest.approx(5.156e-3, rel=1e-3)
+    assert row["resolved"][j]
+    assert row["case"][j] == 1
+    assert row["h"][j] == pytest.approx(point.h, rel=3e-2)
+    # the distance to that Hopf point is measured in omega1 (rad/s), beyond the grid too
+    hopf_w = point.hopf_value
+    assert row["hopf_distance"][-1] == pytest.approx(abs(hopf_w - 140.0), rel=1e-6)
+
+
+def test_unmatched_sign_change_is_unresolved_with_its_reason(monkeypatch):
+    """If no Hopf point can be matched to a sign change of max Re (here: the Hopf search
+    made to find nothing), the stable points next to it are unresolved with reason code
+    REASON_NO_HOPF, never silently given h = gap_max - c0."""
+    import maglev_match.dynamics.hopf as hopf
+    from maglev_match.maps import REASON_CODES, REASON_NO_HOPF, compute_row
+
+    def nothing(system, param, start, stop, p=None, n_scan=200, progress=None):
+        return hopf.HopfScan(param, start, stop, [], np.linspace(start, stop, 2),
+                             np.zeros(2), ())
+
+    monkeypatch.setattr(hopf, "locate_hopf_points", nothing)
+    spec = small_spec()
+    row = compute_row(spec, 1)  # sigma = 4e-4: stable below the Hopf point, unstable above
+    stable = row["stable"]
+    assert stable.any() and (~stable).any()
+    assert not row["resolved"][stable].any()
+    assert np.all(row["reason"][stable] == REASON_NO_HOPF)
+    assert np.all(np.isnan(row["h"][stable]))
+    assert row["resolved"][~stable].all() and np.all(row["h"][~stable] == 0.0)
+    assert "without a Hopf" in REASON_CODES[REASON_NO_HOPF]
+
+
+def test_spot_check_catches_a_wrong_map(tmp_path):
+    from maglev_match.maps import spot_check
+
+    spec = small_spec()
+    data = run_map(spec, tmp_path / "s", workers=0)
+    ok = spot_check(spec, data, fraction=1.0, max_points=5, seed=1)
+    recs = __import__("json").loads(ok["spot_check_records"])
+    assert any(r[3] > 0 for r in recs)  # at least one stable point checked
+    assert ok["spot_check_passed"] == 1 and ok["spot_check_max_rel_diff"] < 3e-2
+    wrong = dict(data, h=data["h"] * 1.5)
+    bad = spot_check(spec, wrong, fraction=1.0, max_points=5, seed=1)
+    assert bad["spot_check_passed"] == 0
+    assert bad["spot_check_max_rel_diff"] == pytest.approx(0.5, abs=0.05)
+    assert "spot check" in bad["warnings"]
+    ds = map_dataset(spec, data)
+    assert "reason" in ds and "spot_check_max_rel_diff" in ds.attrs

@@ -1,13 +1,27 @@
 """Matching index: the three cases of h on a synthetic Hopf normal form with a known cycle,
+the reading (monotone, never more than the simulation supports, the contradiction warned),
 and the trend of h and h_simulation approaching a subcritical Hopf point on model A."""
+
+import math
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from maglev_match.dynamics.system import System
-from maglev_match.matching import CASES, index_of_system, matching_index, reading
+from maglev_match.matching import (
+    CASES,
+    READING_LEVELS,
+    index_of_system,
+    matching_index,
+    reading,
+    reading_rank,
+    with_simulation,
+)
 from maglev_match.params import load_params
+from maglev_match.simulation import CriticalDisturbance, critical_disturbance_of_system
 
 
 def normal_form_rhs(x, p):
@@ -105,11 +119,13 @@ def test_h_and_h_simulation_shrink_towards_subcritical_hopf():
         assert res.case == "unstable_cycle", res
         hopf = res.hopf_value
         hs.append(res.h)
-        hsims.append(res.h_simulation)
-        assert res.simulation["status"] == "bracketed"
+        hsims.append(res.h_simulation_up)  # x5(0) < 0, the paper's direction
+        assert res.simulation["up"]["status"] == "bracketed"
+        assert res.h_simulation == min(res.h_simulation_up, res.h_simulation_down)
+        assert res.chi_paper == res.chi
         if w == 128.0:
-            inside = res.simulation["largest_return"]
-            outside = res.simulation["smallest_collision"]
+            inside = res.simulation["up"]["largest_return"]
+            outside = res.simulation["up"]["smallest_collision"]
             ok = simulate_maglev(p, "unit", initial_state(p, "unit", x5=-inside), 40.0)
             bad = simulate_maglev(p, "unit", initial_state(p, "unit", x5=-outside), 40.0)
             assert ok.outcome == "converged"
@@ -119,3 +135,151 @@ def test_h_and_h_simulation_shrink_towards_subcritical_hopf():
     assert hsims[0] > hsims[1] > hsims[2] > 0
     # close to the Hopf point the cycle is small (amplitude ~ sqrt(distance))
     assert hs[2] < 0.5 * hs[0]
+
+
+# ---------------------------------------------------------------------------------------
+# the reading
+# ---------------------------------------------------------------------------------------
+@settings(max_examples=300, deadline=None)
+@given(st.floats(min_value=0.0, max_value=1e6), st.floats(min_value=0.0, max_value=1e6))
+def test_reading_is_monotone_in_the_index(a, b):
+    lo, hi = min(a, b), max(a, b)
+    assert reading_rank(lo) <= reading_rank(hi)
+    # the words depend on the rank only (for a stable equilibrium)
+    if reading_rank(lo) == reading_rank(hi):
+        assert reading(lo) == reading(hi)
+
+
+def test_reading_levels_are_ordered():
+    """The issue's counterexample: chi 7.64 must not read better than chi 9.56."""
+    uppers = [u for u, _ in READING_LEVELS]
+    assert uppers == sorted(uppers)
+    assert reading_rank(7.64) <= reading_rank(9.56)
+    assert reading_rank(0.0) == 0 and reading_rank(math.inf) == len(READING_LEVELS)
+    assert reading(float("nan")).startswith("unknown")
+
+
+def _cd(status, lo, hi, gap_range=0.01, direction=-1):
+    crit = None if lo is None or hi is None else 0.5 * (lo + hi)
+    return CriticalDisturbance(direction=direction, largest_return=lo, smallest_collision=hi,
+                               critical=crit, status=status, gap_range=gap_range, tol=1e-5,
+                               runs=16, unresolved=0, unresolved_sizes=(), horizon=20.0,
+                               rounds=1, collision_time=None if hi is None else 0.1,
+                               nonmonotone=False)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.floats(min_value=1e-4, max_value=0.5), st.floats(min_value=1e-4, max_value=0.0099))
+def test_reading_uses_the_smaller_index(h_cycle, d_crit):
+    """Whatever the two readings, the words follow min(chi, chi_simulation); a
+    disagreement beyond the stated factor is a warning."""
+    s = synthetic(-0.04, 1.0)
+    res = index_of_system(s, s.p, w0=W0, h_max=H_MAX, search=SEARCH)
+    res = res.__class__(**{**{k: getattr(res, k) for k in res.__dataclass_fields__},
+                           "chi": h_cycle / W0, "chi_paper": h_cycle / W0, "h": h_cycle})
+    out = with_simulation(res, _cd("bracketed", d_crit - 5e-6, d_crit + 5e-6))
+    chi_used = min(out.chi, out.chi_simulation)
+    assert reading_rank(chi_used) == reading_rank(
+        out.chi if out.reading_basis == "paper" else out.chi_simulation)
+    assert out.reading == reading(chi_used)
+    assert out.chi == out.chi_paper == h_cycle / W0  # the paper's index is never altered
+    ratio = max(out.chi, out.chi_simulation) / min(out.chi, out.chi_simulation)
+    assert any("differ by more than" in w for w in out.warnings) == (ratio > 1.5)
+
+
+def test_open_simulation_is_a_warning_not_silence():
+    s = synthetic(-0.04, 1.0)
+    res = index_of_system(s, s.p, w0=W0, h_max=H_MAX, search=SEARCH)
+    out = with_simulation(res, _cd("open", 0.002, 0.004))
+    assert out.h_simulation == 0.002  # only what was seen to return is claimed
+    assert any("inconclusive" in w for w in out.warnings)
+    # nothing seen to return (runs undecided within the horizon): no claim at all
+    none = with_simulation(res, _cd("open", None, 0.004))
+    assert none.h_simulation is None and none.reading_basis == "simulation"
+    assert none.reading.startswith("unknown")
+    assert any("inconclusive" in w for w in none.warnings)
+
+
+def coupled_rhs(x, p):
+    """The normal form of :func:`normal_form_rhs` with the stable state x3 driving x1:
+    x1' += k x3. The plane x3 = 0 is invariant, so the cycle is the same circle, but an
+    initial x3 kicks the gap x1 out by about k x3(0) / 2 before it decays."""
+    base = normal_form_rhs(x, p)
+    return base.at[0].add(p[2] * x[2])
+
+
+def test_limit_before_design_point_and_escaping_disturbance_claims_no_robustness():
+    """The unstable cycle (radius sqrt(0.2) = 0.45) lies beyond the gap limit 0.1: the branch
+    touches the limit before the design point, so the paper's rule gives h = 0.1. But an
+    initial x3 inside the disturbance range kicks the gap past its limit: the reading must
+    not claim robustness, and a warning names the contradiction."""
+    limit = 0.1
+    w0 = 0.05
+
+    def limits(system, orbit):
+        g = system.observe("gap_deviation", orbit.states, orbit.p)
+        return {"upper": float(limit - g.max()), "lower": float(g.min() + limit)}
+
+    def events(x, p):
+        return jnp.stack([x[0] + limit, limit - x[0]])
+
+    def run(k):
+        s = System(rhs=coupled_rhs, p=np.array([-0.2, 1.0, k]), param_names=("mu", "l", "k"),
+                   state_names=("x1", "x2", "x3"), state_scale=np.full(3, 0.01),
+                   observables={"gap_deviation": lambda x, p: x[0],
+                                "current": lambda x, p: 1.0 + x[1]},
+                   name="coupled Hopf normal form")
+        res = index_of_system(s, s.p, w0=w0, h_max=limit, search={"mu": (-0.5, 0.5)},
+                              limits=limits)
+        assert res.case == "no_cycle_within_limits" and res.h == limit
+        assert any("touches a limit" in w for w in res.warnings)
+
+        def x0_of(sizes):
+            x0 = np.zeros((sizes.size, 3))
+            x0[:, 2] = sizes
+            return x0
+
+        cd = critical_disturbance_of_system(s, x0_of, limit, events=events,
+                                            x_ref=np.zeros(3), t_max=60.0, tol=1e-4)
+        return with_simulation(res, cd)
+
+    bad = run(10.0)
+    assert bad.simulation["up"]["status"] == "bracketed"
+    assert 0 < bad.h_simulation < limit
+    assert bad.reading_basis == "simulation"
+    assert reading_rank(bad.chi_simulation) < reading_rank(bad.chi)
+    assert bad.reading == reading(bad.chi_simulation)
+    assert "every disturbance" not in bad.reading
+    assert any(w.startswith("contradiction") for w in bad.warnings)
+    assert bad.chi == limit / w0  # the paper's index itself is kept
+    # control: without the coupling every disturbance returns and nothing is contradicted
+    good = run(0.0)
+    assert good.simulation["up"]["status"] == "all_return"
+    assert good.reading_basis == "paper"
+    assert not any(w.startswith("contradiction") for w in good.warnings)
+
+
+def test_cli_index_kd120_text_and_json_agree(capsys):
+    """`index --set kD=120` (the issue's case): the cycle branch touches the limit before
+    the design point; the simulation shows collisions inside the gap range. The text names
+    the reading's basis and prints every warning of the JSON, and never claims every
+    disturbance; the paper's chi is kept as "chi" and "chi_paper"."""
+    import json
+
+    from maglev_match.cli import main
+
+    assert main(["index", "--set", "kD=120", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["chi"] == doc["chi_paper"] == pytest.approx(12.051, rel=1e-3)
+    assert doc["case"] == "no_cycle_within_limits"
+    assert doc["reading_basis"] == "simulation"
+    assert 0 < doc["h_simulation_down"] < doc["h_simulation_up"] < 0.01
+    assert doc["h_simulation"] == doc["h_simulation_down"]
+    assert "every disturbance" not in doc["reading"]
+    assert any("touches a limit" in w for w in doc["warnings"])
+    assert any(w.startswith("contradiction") for w in doc["warnings"])
+    assert main(["index", "--set", "kD=120"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    for w in doc["warnings"]:
+        assert " ".join(w.split()) in text
+    assert "reading (from the simulation" in text

@@ -34,11 +34,28 @@ from maglev_match.options import CollocationMesh
 from maglev_match.params import FIELD_NAMES, ParameterError, Params, make_params
 
 __all__ = ["Axis", "MapSpec", "parse_axis", "compute_row", "run_map", "map_dataset",
-           "MAP_VARIABLES"]
+           "spot_check", "map_warnings", "MAP_VARIABLES", "REASON_CODES"]
 
 CASE_CODES = {"unstable_equilibrium": 0, "unstable_cycle": 1, "no_cycle_within_limits": 2}
 MAP_VARIABLES = ("chi", "h", "w0", "stable", "max_real_part", "hopf_distance", "case",
-                 "omega1_point", "sigma_point", "current_reverses", "resolved")
+                 "omega1_point", "sigma_point", "current_reverses", "resolved", "reason")
+# why a point is unresolved (variable ``reason``; 0 for resolved points)
+REASON_FAILED = 1
+REASON_MAX_STEPS = 2
+REASON_NO_HOPF = 3
+REASON_NO_BRANCH = 4
+REASON_CODES = {
+    0: "",
+    REASON_FAILED: "the cycle continuation failed (Newton or step size) before the point",
+    REASON_MAX_STEPS: "the cycle branch reached its step limit before the point",
+    REASON_NO_HOPF: "max Re(lambda) changes sign next to the stable stretch without a Hopf "
+                    "point, even on a refined scan",
+    REASON_NO_BRANCH: "no cycle branch could be started at the Hopf point",
+}
+# self-check: share of points recomputed point-wise, at most this many, and the tolerance
+SPOT_CHECK_FRACTION = 0.01
+SPOT_CHECK_MAX = 12
+SPOT_CHECK_TOL = 0.03
 # One worker process per core, each single-threaded: on 2 cores a row of 100 points runs in
 # 1.6 s single-threaded against 2.3 s with XLA's and BLAS's own thread pools (measured).
 SINGLE_THREADED_ENV = {
@@ -141,7 +158,15 @@ class MapSpec:
 
 
 def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
-    """All map variables along row ``row`` (y fixed, x varying), continuing cycles along it."""
+    """All map variables along row ``row`` (y fixed, x varying), continuing cycles along it.
+
+    The row's path is extended beyond both ends by up to one span, sampled at the grid
+    spacing, so that Hopf points just outside the grid (whose cycles reach into it) are
+    found with the same resolution as inside. Self-check: every sign change of max Re
+    between neighbouring path nodes must hold a Hopf point; where the first scan has none,
+    the interval is scanned again finely, and if there is still none the adjacent stable
+    grid points are marked unresolved (``reason`` :data:`REASON_NO_HOPF`).
+    """
     from maglev_match import jax_setup  # noqa: F401  (workers: float64 before anything)
     from maglev_match.dynamics.basin import FAILED
     from maglev_match.dynamics.cycles import cycle_branch
@@ -159,52 +184,78 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     P = np.array([param_vector(p) for p in pts])
     w0 = np.array([p.w0 for p in pts])
     h_max = np.array([p.gap_max - p.c0 for p in pts])
-    J = np.asarray(system.derivatives.jacobian_batch(np.zeros((nx, system.dim)), P))
-    max_re = np.array([eigenvalue_analysis(Jk)[0].real.max() for Jk in J])
-    stable = max_re < 0
+
+    # the path: extension below, the grid, extension above; grid point j sits at t = j + off
+    ext_lo, ext_hi = _extension(spec, xs, yv)
+    x_nodes = np.array([x for x, _ in ext_lo[::-1]] + list(xs) + [x for x, _ in ext_hi])
+    nodes = np.array([param_vector(q) for _, q in ext_lo[::-1]] + list(P)
+                     + [param_vector(q) for _, q in ext_hi])
+    off = len(ext_lo)
+    n_nodes = len(nodes)
+    J = np.asarray(system.derivatives.jacobian_batch(np.zeros((n_nodes, system.dim)), nodes))
+    max_re_all = np.array([eigenvalue_analysis(Jk)[0].real.max() for Jk in J])
+    stable_all = max_re_all < 0
+    max_re = max_re_all[off:off + nx]
+    stable = stable_all[off:off + nx]
     h = np.where(stable, h_max, 0.0)
     case = np.where(stable, CASE_CODES["no_cycle_within_limits"],
                     CASE_CODES["unstable_equilibrium"])
     resolved = np.ones(nx, dtype=bool)
+    reason = np.zeros(nx, dtype=np.int8)
     reverses = np.zeros(nx, dtype=bool)
-    hopf_t: list[float] = []
 
-    # The row's path, extended beyond both ends so that Hopf points just outside the grid
-    # (whose cycles reach into it) are found too; grid point j sits at t = j + off.
-    ext_lo, ext_hi = _extension(spec, xs, yv)
-    nodes = [param_vector(ext_lo)] if ext_lo is not None else []
-    off = len(nodes)
-    nodes += list(P)
-    if ext_hi is not None:
-        nodes.append(param_vector(ext_hi))
-    t_end = len(nodes) - 1.0
-    path = path_system(system, np.array(nodes))
+    t_end = n_nodes - 1.0
+    path = path_system(system, nodes)
     limits = cycle_limit_margins(pts[0], include_current=False)
-    scan = locate_hopf_points(path, PATH_PARAM, 0.0, t_end, n_scan=3 * len(nodes))
-    grid_t = np.arange(nx) + off
-    stable_t = {int(t): bool(st) for t, st in zip(grid_t, stable, strict=True)}
-    for hp in scan.points:
-        if not hp.converged:
+    scan = locate_hopf_points(path, PATH_PARAM, 0.0, t_end, n_scan=3 * n_nodes)
+    hopf_points = [hp for hp in scan.points if hp.converged]
+
+    def stretch_from(k: int, step: int) -> np.ndarray:
+        """The stable nodes from node k (stable) walking in direction ``step``."""
+        end = k
+        while 0 <= end + step < n_nodes and stable_all[end + step]:
+            end += step
+        return np.arange(min(k, end), max(k, end) + 1)
+
+    def mark(tj: np.ndarray, code: int) -> None:
+        j = tj[(tj >= off) & (tj < off + nx)] - off
+        j = j[stable[j]]
+        resolved[j] = False
+        reason[j] = np.where(reason[j] == 0, code, reason[j])
+
+    # self-check: a sign change of max Re between nodes k, k+1 needs a Hopf point there
+    for k in np.flatnonzero(stable_all[:-1] != stable_all[1:]):
+        if any(k <= hp.value <= k + 1 for hp in hopf_points):
             continue
-        hopf_t.append(hp.value - off)
-        # the grid points of the stable stretch next to this Hopf point
+        fine = locate_hopf_points(path, PATH_PARAM, float(k), float(k + 1), n_scan=17)
+        found = [hp for hp in fine.points if hp.converged and k <= hp.value <= k + 1]
+        if found:
+            hopf_points.extend(found)
+            continue
+        side, step = (k, -1) if stable_all[k] else (k + 1, 1)
+        mark(stretch_from(side, step), REASON_NO_HOPF)
+    hopf_points.sort(key=lambda hp: hp.value)
+
+    for hp in hopf_points:
+        # the nodes of the stable stretch next to this Hopf point
         j_lo, j_hi = math.floor(hp.value), math.ceil(hp.value)
-        if stable_t.get(j_hi, False):
+        if j_hi < n_nodes and stable_all[j_hi]:
             side, step = j_hi, 1
-        elif stable_t.get(j_lo, False):
+        elif j_lo >= 0 and stable_all[j_lo]:
             side, step = j_lo, -1
         else:
             continue
-        end = side
-        while stable_t.get(end + step, False):
-            end += step
-        stretch = np.arange(min(side, end), max(side, end) + 1)  # in t units
+        stretch = stretch_from(side, step)
+        in_grid = stretch[(stretch >= off) & (stretch < off + nx)]
+        if in_grid.size == 0:
+            continue  # the stretch lies wholly outside the grid
+        end = int(in_grid.max() if step > 0 else in_grid.min())
         br = cycle_branch(path, hp, PATH_PARAM, stop_at=float(end), ntst=spec.ntst,
                           ncol=spec.ncol, max_steps=spec.max_steps, limits=limits,
                           param_bounds=(0.0, t_end), lam_scale=1.0)
         t = br.values
         if t.size == 0:
-            resolved[stretch - off] = False
+            mark(in_grid, REASON_NO_BRANCH)
             continue
         gmax = br.observable_max("gap_deviation")
         imin = br.observable_min("current")
@@ -213,7 +264,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
             lo, hi = sorted((t[k], t[k + 1]))
             if not (hi > lo and unstable[k] and unstable[k + 1]):
                 continue
-            for tj in stretch:
+            for tj in in_grid:
                 if lo <= tj <= hi:
                     j = tj - off
                     s = (tj - t[k]) / (t[k + 1] - t[k])
@@ -226,14 +277,14 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         heading_in = (t[min(3, t.size - 1)] - hp.value) * step > 0
         if br.stopped_reason in (*FAILED, "max_steps") and heading_in:
             # the branch was entering the stretch but stopped: what lies beyond is unknown
-            beyond = stretch[(stretch - reached) * step > 0] - off
-            beyond = beyond[case[beyond] != CASE_CODES["unstable_cycle"]]
-            resolved[beyond] = False
-    hopf_t_arr = np.array(hopf_t)
-    if hopf_t_arr.size:
+            beyond = in_grid[(in_grid - reached) * step > 0]
+            beyond = beyond[case[beyond - off] != CASE_CODES["unstable_cycle"]]
+            mark(beyond, REASON_FAILED if br.stopped_reason in FAILED else REASON_MAX_STEPS)
+    if hopf_points:
         # distance to the nearest Hopf point along the row, in units of the x parameter
-        dx = (xs[-1] - xs[0]) / (nx - 1)
-        dist = np.min(np.abs(np.arange(nx)[:, None] - hopf_t_arr[None, :]), axis=1) * dx
+        # (the path position t maps to x through the nodes, extension included)
+        x_hopf = np.interp([hp.value for hp in hopf_points], np.arange(n_nodes), x_nodes)
+        dist = np.min(np.abs(xs[:, None] - x_hopf[None, :]), axis=1)
     else:
         dist = np.full(nx, np.inf)
     h = np.where(resolved, h, np.nan)
@@ -243,24 +294,25 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         "hopf_distance": dist, "case": case.astype(np.int8),
         "omega1_point": P[:, system.param_index("omega1")],
         "sigma_point": P[:, system.param_index("sigma")],
-        "current_reverses": reverses, "resolved": resolved,
+        "current_reverses": reverses, "resolved": resolved, "reason": reason,
     }
 
 
-def _extension(spec: MapSpec, xs: np.ndarray, yv: float) -> tuple[Params | None, Params | None]:
-    """Parameter sets beyond both ends of a row (one span further out), or None where no
-    valid parameter set lies there (tried at 1, 1/2, 1/4 and 1/8 of a span)."""
-    span = xs[-1] - xs[0]
-    out: list[Params | None] = []
+def _extension(spec: MapSpec, xs: np.ndarray, yv: float
+               ) -> tuple[list[tuple[float, Params]], list[tuple[float, Params]]]:
+    """Parameter sets beyond both ends of a row, at the grid spacing, out to one span (or
+    to the last valid parameter set before that): lists of (x, Params), nearest first."""
+    dx = (xs[-1] - xs[0]) / (xs.size - 1)
+    out: list[list[tuple[float, Params]]] = []
     for end, sign in ((xs[0], -1.0), (xs[-1], 1.0)):
-        found = None
-        for frac in (1.0, 0.5, 0.25, 0.125):
+        side: list[tuple[float, Params]] = []
+        for k in range(1, xs.size):
+            xv = end + sign * k * dx
             try:
-                found = spec.point(end + sign * frac * span, yv)
-                break
+                side.append((xv, spec.point(xv, yv)))
             except ParameterError:
-                continue
-        out.append(found)
+                break
+        out.append(side)
     return out[0], out[1]
 
 
@@ -461,17 +513,116 @@ def assemble(spec: MapSpec, checkpoint: Path) -> dict[str, np.ndarray]:
     return {k: np.concatenate([p[k] for p in parts], axis=0) for k in parts[0]}
 
 
-def map_dataset(spec: MapSpec, data: dict[str, np.ndarray]):
-    """The map as an xarray Dataset over coordinates named after the swept parameters."""
+def spot_check(spec: MapSpec, data: dict[str, np.ndarray], *,
+               fraction: float = SPOT_CHECK_FRACTION, max_points: int = SPOT_CHECK_MAX,
+               seed: int = 0, tol: float = SPOT_CHECK_TOL,
+               budget: float | None = None) -> dict[str, Any]:
+    """Recompute a seeded random sample of the map's points with the point-wise index
+    (:func:`maglev_match.matching.matching_index`, no simulation) and compare h.
+
+    ``fraction`` of the points, at least one and at most ``max_points`` (the cap keeps the
+    check within about 10 % of the map's time: a point-wise index costs roughly as much as
+    a few dozen map points). The disagreement at a point is |h_map - h_point| / h_point
+    (0 when both are 0; 1 when they disagree on stability). Unresolved map points are
+    skipped (counted). ``budget`` (s): stop after the point during which the check's time
+    exceeded it (at least one point is always checked); the sample order is seeded, so a
+    shorter check is a prefix of a longer one. Returns the attributes stored on the dataset.
+    """
+    import time
+
+    from maglev_match.matching import matching_index
+
+    started = time.perf_counter()
+
+    ny, nx = data["h"].shape
+    n = max(1, min(max_points, math.ceil(fraction * nx * ny)))
+    rng = np.random.default_rng(seed)
+    flat = rng.choice(nx * ny, size=min(n, nx * ny), replace=False)
+    worst, worst_at, checked, skipped = 0.0, None, 0, 0
+    records = []
+    for f in (int(v) for v in flat):
+        if budget is not None and checked and time.perf_counter() - started > budget:
+            break
+        i, j = divmod(f, nx)
+        if not data["resolved"][i, j]:
+            skipped += 1
+            continue
+        xv, yv = spec.x.values[j], spec.y.values[i]
+        pt = matching_index(spec.point(xv, yv), simulate=False)
+        h_map, h_pt = float(data["h"][i, j]), float(pt.h)
+        if bool(data["stable"][i, j]) != pt.stable or not math.isfinite(h_pt):
+            diff = 1.0
+        elif h_pt == 0.0:
+            diff = 0.0 if h_map == 0.0 else 1.0
+        else:
+            diff = abs(h_map - h_pt) / abs(h_pt)
+        checked += 1
+        records.append([float(xv), float(yv), h_map, h_pt, diff])
+        if diff >= worst:
+            worst, worst_at = diff, records[-1]
+    warnings = []
+    if worst > tol and worst_at is not None:
+        warnings.append(
+            f"spot check: at {spec.x.name} = {worst_at[0]:.6g}, {spec.y.name} = {worst_at[1]:.6g} "
+            f"the map gives h = {worst_at[2] * 1e3:.4g} mm and the point-wise index "
+            f"{worst_at[3] * 1e3:.4g} mm (relative difference {worst:.3g} > {tol:g})")
+    return {
+        "spot_check_points": checked,
+        "spot_check_planned": int(flat.size),
+        "spot_check_seconds": round(time.perf_counter() - started, 3),
+        "spot_check_skipped_unresolved": skipped,
+        "spot_check_seed": seed,
+        "spot_check_max_rel_diff": float(worst),
+        "spot_check_tolerance": tol,
+        "spot_check_passed": int(worst <= tol),
+        "spot_check_records": json.dumps(records),
+        "warnings": json.dumps(warnings),
+    }
+
+
+def map_warnings(ds) -> list[str]:
+    """Every warning of a map dataset: the spot check's and the unresolved points by
+    reason."""
+    out = list(json.loads(ds.attrs.get("warnings", "[]")))
+    if "reason" in ds:
+        codes, counts = np.unique(ds["reason"].values, return_counts=True)
+        for c, k in zip(codes, counts, strict=True):
+            if c != 0:
+                out.append(f"{k} unresolved point(s): {REASON_CODES.get(int(c), str(c))}")
+    return out
+
+
+def map_dataset(spec: MapSpec, data: dict[str, np.ndarray], *, check: bool = True,
+                seed: int = 0, budget: float | None = None):
+    """The map as an xarray Dataset over coordinates named after the swept parameters.
+
+    With ``check`` (default) a seeded sample of points is recomputed point-wise
+    (:func:`spot_check`, within ``budget`` seconds) and the result stored in the attributes
+    ``spot_check_*`` and
+    ``warnings`` (a JSON list). ``reason`` codes the cause of every unresolved point
+    (attribute ``reason_codes``)."""
     import xarray as xr
 
     from maglev_match.params import PARAMETER_DOCS
 
+    data = dict(data)
+    if "reason" not in data:  # tiles computed before the reason variable existed
+        data["reason"] = np.where(data["resolved"], 0, -1).astype(np.int8)
     dims = (spec.y.name, spec.x.name)
     units = {"chi": "1", "h": "m", "w0": "m", "stable": "bool", "max_real_part": "1/s",
              "hopf_distance": PARAMETER_DOCS.get(spec.x.name, ("",))[0], "case": "code",
              "omega1_point": "rad/s", "sigma_point": "1/kg", "current_reverses": "bool",
-             "resolved": "bool"}
+             "resolved": "bool", "reason": "code"}
+    attrs: dict[str, Any] = {
+        "title": "maglev-match design map",
+        "case_codes": json.dumps(CASE_CODES),
+        "reason_codes": json.dumps({str(k): v for k, v in REASON_CODES.items()}),
+        "spec": spec.key(),
+    }
+    if check:
+        attrs.update(spot_check(spec, data, seed=seed, budget=budget))
+    else:
+        attrs["warnings"] = json.dumps(["no spot check was run"])
     ds = xr.Dataset(
         {k: (dims, data[k], {"units": units.get(k, "")}) for k in MAP_VARIABLES},
         coords={
@@ -480,13 +631,10 @@ def map_dataset(spec: MapSpec, data: dict[str, np.ndarray]):
             spec.y.name: (spec.y.name, spec.y.values,
                           {"units": PARAMETER_DOCS.get(spec.y.name, ("",))[0]}),
         },
-        attrs={
-            "title": "maglev-match design map",
-            "case_codes": json.dumps(CASE_CODES),
-            "spec": spec.key(),
-        },
+        attrs=attrs,
     )
     ds["stable"] = ds["stable"].astype(np.int8)
     ds["current_reverses"] = ds["current_reverses"].astype(np.int8)
     ds["resolved"] = ds["resolved"].astype(np.int8)
+    ds["reason"] = ds["reason"].astype(np.int8)
     return ds

@@ -703,11 +703,12 @@ def matching_rows(mi: Any) -> list[tuple[str, Any, str]]:
         return None if v is None else float(v) * 1e3
 
     return [
-        ("chi = h / w0", mi.chi, "-"),
+        ("chi = h / w0 (the paper's definition)", mi.chi, "-"),
         ("h (basin along the gap)", mm(mi.h), "mm"),
         ("w0 (static deflection, typical disturbance)", mm(mi.w0), "mm"),
         ("case that decided h", mi.case, ""),
         ("reading", mi.reading, ""),
+        ("reading based on", getattr(mi, "reading_basis", "paper"), ""),
         ("equilibrium stable", mi.stable, ""),
         ("max Re(lambda)", mi.max_real_part, "1/s"),
         ("Hopf point used", None if mi.hopf_param is None
@@ -718,13 +719,33 @@ def matching_rows(mi: Any) -> list[tuple[str, Any, str]]:
          None if mi.cycle_gap_max is None
          else f"{mi.cycle_gap_max * 1e3:.4g} / {mi.cycle_gap_min * 1e3:.4g}", "mm"),
         ("coil current reverses on the cycle", mi.current_reverses, ""),
-        ("h from simulation (critical disturbance)", mm(mi.h_simulation), "mm"),
-        ("chi from simulation", mi.chi_simulation, "-"),
+        ("critical disturbance, beam up / down",
+         None if mi.h_simulation is None and getattr(mi, "h_simulation_up", None) is None
+         else " / ".join("-" if v is None else f"{v * 1e3:.4g}"
+                         for v in (mi.h_simulation_up, mi.h_simulation_down)), "mm"),
+        ("chi from simulation (the smaller direction)", mi.chi_simulation, "-"),
+    ]
+
+
+def side_by_side_rows(unit: Any, vehicle: Any) -> list[tuple[str, Any, Any]]:
+    """(quantity, model A, model B) rows comparing the two indices for the same beam."""
+    def mm(v: Any) -> Any:
+        return None if v is None else float(v) * 1e3
+
+    return [
+        ("chi (the paper's definition)", unit.chi, vehicle.chi),
+        ("h (mm)", mm(unit.h), mm(vehicle.h)),
+        ("w0 (mm)", mm(unit.w0), mm(vehicle.w0)),
+        ("case", unit.case, vehicle.case),
+        ("chi_simulation", unit.chi_simulation, vehicle.chi_simulation),
+        ("reading based on", unit.reading_basis, vehicle.reading_basis),
+        ("reading", unit.reading, vehicle.reading),
     ]
 
 
 def section_matching(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
-    """h, w0, chi, the case and the reading (SPEC.md 6.6)."""
+    """h, w0, chi, the case and the reading; with the vehicle included, the
+    full vehicle's index beside model A's for the same beam."""
     from maglev_match.matching import matching_index
 
     mi = ctx.cache.get("matching")
@@ -733,11 +754,18 @@ def section_matching(params: Params, ctx: ReportContext) -> tuple[str, list[Path
         ctx.cache["matching"] = mi
     parts = [f'<p class="verdict-big">chi = {fmt(mi.chi, 4)}: {esc(mi.reading)}</p>',
              table_html(["quantity", "value", "unit"], matching_rows(mi), "matching")]
-    if mi.message:
-        parts.append(note_html(mi.message))
     for w in mi.warnings:
         parts.append(note_html(w, "warning"))
-    return "".join(parts), [], mi.as_json() if hasattr(mi, "as_json") else mi
+    data = mi.as_json() if hasattr(mi, "as_json") else mi
+    if ctx.settings.include_vehicle:
+        mv = matching_index(params, model="vehicle", simulate=not ctx.settings.quick)
+        parts.append("<h3>Model A and the full vehicle (model B) on the same beam</h3>")
+        parts.append(table_html(["quantity", "model A (one unit)", "model B (full vehicle)"],
+                                side_by_side_rows(mi, mv), "matching-side-by-side"))
+        for w in mv.warnings:
+            parts.append(note_html(f"model B: {w}", "warning"))
+        data = {"unit": data, "vehicle": mv.as_json()}
+    return "".join(parts), [], data
 
 
 # ---------------------------------------------------------------------------------------

@@ -551,7 +551,8 @@ def _matching_note(mi: Any) -> str:
     if mi.hopf_param is not None and mi.hopf_value is not None:
         parts.append(f"cycle from the Hopf point {mi.hopf_param} = {mi.hopf_value:.5g}")
     if mi.h_simulation is not None:
-        parts.append(f"simulation cross-check (critical x5(0)): {mi.h_simulation * 1e3:.3g} mm")
+        parts.append(f"simulation cross-check (critical |x5(0)|, smaller direction): "
+                     f"{mi.h_simulation * 1e3:.3g} mm")
     if mi.current_reverses:
         parts.append("the coil current would reverse on the cycle (smooth model)")
     return "; ".join(parts)

@@ -57,6 +57,9 @@ __all__ = [
     "history_dataset",
     "save_history",
     "critical_disturbance",
+    "critical_disturbance_of_system",
+    "vehicle_critical_disturbance",
+    "vehicle_disturbance_geometry",
 ]
 
 INITIAL_CONDITIONS = ("equilibrium", "pressed")
@@ -442,16 +445,16 @@ def critical_disturbance(
     cross-check of h): the size d such that x5(0) = direction * d returns to the
     equilibrium for smaller d and collides for larger d.
 
-    Each round simulates ``batch`` sizes spread inside the current bracket in one vmapped
-    call, so the bracket shrinks by a factor ``batch + 1`` per round. A run that neither
-    collides nor converges by the horizon ``t_max`` (s) is re-run with the horizon doubled,
-    up to ``max_extend`` times; if still undecided it is *unresolved* and left out of the
-    bracket (never counted as a return).
+    The runs use the limited model: the coil current is clamped at zero (the force uses
+    max(i, 0) and di/dt is held at 0 while i <= 0 and falling) and leaving the gap range
+    [gap_min, gap_max] is a collision. See :func:`critical_disturbance_of_system` for the
+    bracketing.
 
     Parameters
     ----------
     params : parameter set (model A).
-    direction : -1 for x5(0) < 0 (the paper's Figs. 6-8), +1 for x5(0) > 0.
+    direction : -1 for x5(0) < 0 (beam above its static position, the gap opens: the
+        paper's Figs. 6-8), +1 for x5(0) > 0 (beam pressed further down, the gap closes).
     t_max : first horizon (s). tol : bracket width to reach (m).
     max_extend : how many times the horizon may double for undecided runs.
     batch : sizes per batched call. max_rounds : bound on rounds.
@@ -463,14 +466,109 @@ def critical_disturbance(
     """
     if direction not in (-1, 1):
         raise ParameterError("direction", direction, "must be -1 or +1")
-    if not tol > 0:
-        raise ParameterError("tol", tol, "must be > 0")
-    opts = options or SimulationOptions()
-    opts = dataclasses.replace(opts, stop_on_converged=True)
     system = _system(params, "unit", True)
     events = _events_for(params, "unit")
     # x5 = -d opens the gap (c = c0 + d): upper limit at d = gap_max - c0
     gap_range = (params.gap_max - params.c0) if direction < 0 else (params.c0 - params.gap_min)
+
+    def x0_of(sizes: np.ndarray) -> np.ndarray:
+        x0 = np.zeros((sizes.size, system.dim))
+        x0[:, 4] = direction * sizes
+        return x0
+
+    return critical_disturbance_of_system(
+        system, x0_of, gap_range, events=events, x_ref=np.zeros(system.dim),
+        direction=direction, t_max=t_max, tol=tol, max_extend=max_extend, batch=batch,
+        max_rounds=max_rounds, options=options)
+
+
+def vehicle_disturbance_geometry(params: Params) -> tuple[np.ndarray, np.ndarray, float]:
+    """Model B's "pressed" disturbance line: (x_eq, delta, w_mid).
+
+    x_eq is the static equilibrium, ``delta = pressed - x_eq`` the step to the vehicle
+    pressed onto the free beam (every modal coordinate from q_n* to 0), and w_mid the
+    static mid-span deflection sum_n q_n* sin(n pi / 2) (m). The state
+    x_eq + (d / w_mid) * delta lifts the beam's mid-span by d metres above its static
+    position (d = w_mid is the paper's initial state)."""
+    x_eq = equilibrium_state(params, "vehicle")
+    delta = vehicle_model.pressed_initial_state(params) - x_eq
+    q_static = x_eq[vehicle_model.layout(params.n_modes)["q"]]
+    n = np.arange(1, params.n_modes + 1)
+    w_mid = float(np.sum(q_static * np.sin(n * np.pi / 2.0)))
+    return x_eq, delta, w_mid
+
+
+def vehicle_critical_disturbance(
+    params: Params,
+    *,
+    direction: int = -1,
+    t_max: float = 10.0,
+    tol: float = 2e-5,
+    max_extend: int = 1,
+    batch: int = 16,
+    max_rounds: int = 8,
+    options: SimulationOptions | None = None,
+) -> CriticalDisturbance:
+    """Critical disturbance of model B along the paper's initial state: the
+    state x_eq + s (pressed - x_eq), sizes d = s w_mid measured as the mid-span beam
+    displacement (m) from its static position. direction -1: the beam lifted towards the
+    free beam (d = w_mid is "pressed onto the free beam"); +1: the beam pushed further down.
+    Limits on (current clamp, gap range at all six points). Same bracketing as model A."""
+    if direction not in (-1, 1):
+        raise ParameterError("direction", direction, "must be -1 or +1")
+    system = _system(params, "vehicle", True)
+    events = _events_for(params, "vehicle")
+    x_eq, delta, w_mid = vehicle_disturbance_geometry(params)
+    gap_fn = _vehicle_gap(params.n_modes)
+    # gap change per metre of mid-span lift, at each point: c_j(s) - c0 is linear in s
+    dgap = (np.asarray(gap_fn(jnp.asarray(x_eq + delta), jnp.asarray(system.p)))
+            - params.c0) / w_mid
+    # lifting (direction -1) opens the gaps (dgap > 0); pushing down closes them
+    slope = float(np.max(np.abs(dgap)))
+    room = (params.gap_max - params.c0) if direction < 0 else (params.c0 - params.gap_min)
+    gap_range = room / slope
+
+    def x0_of(sizes: np.ndarray) -> np.ndarray:
+        s = (-direction) * sizes / w_mid
+        return x_eq[None, :] + s[:, None] * delta[None, :]
+
+    return critical_disturbance_of_system(
+        system, x0_of, gap_range, events=events, x_ref=x_eq, direction=direction,
+        t_max=t_max, tol=tol, max_extend=max_extend, batch=batch, max_rounds=max_rounds,
+        options=options)
+
+
+def critical_disturbance_of_system(
+    system: System,
+    x0_of,
+    gap_range: float,
+    *,
+    events=None,
+    x_ref: np.ndarray | None = None,
+    direction: int = -1,
+    t_max: float = 20.0,
+    tol: float = 1e-5,
+    max_extend: int = 2,
+    batch: int = 16,
+    max_rounds: int = 12,
+    options: SimulationOptions | None = None,
+) -> CriticalDisturbance:
+    """The disturbance size that separates return from collision, for any system.
+
+    ``x0_of(sizes)`` maps an array of disturbance sizes (>= 0, in the unit of
+    ``gap_range``) to initial states (batch, dim); ``events`` ends a run as a collision.
+    Each round simulates ``batch`` sizes spread inside the current bracket in one vmapped
+    call, so the bracket shrinks by a factor ``batch + 1`` per round. A run that neither
+    collides nor converges by the horizon ``t_max`` (s) is re-run with the horizon doubled,
+    up to ``max_extend`` times; if still undecided it is *unresolved* and left out of the
+    bracket (never counted as a return). Sizes are searched in (0, gap_range): the clamp
+    rule is that a size beyond ``gap_range`` is not a disturbance inside the physical range,
+    so when every size returns the result is ``all_return`` at ``gap_range``.
+    """
+    if not tol > 0:
+        raise ParameterError("tol", tol, "must be > 0")
+    opts = options or SimulationOptions()
+    opts = dataclasses.replace(opts, stop_on_converged=True)
 
     sizes_seen: dict[float, tuple[str, float]] = {}
     unresolved: list[float] = []
@@ -485,9 +583,8 @@ def critical_disturbance(
         for ext in range(max_extend + 1):
             if pending.size == 0:
                 break
-            x0 = np.zeros((pending.size, 9))
-            x0[:, 4] = direction * pending
-            b = simulate_batch(system, x0, t, event_fn=events, options=opts)
+            b = simulate_batch(system, x0_of(pending), t, event_fn=events, x_ref=x_ref,
+                               options=opts)
             runs += pending.size
             horizon = max(horizon, t)
             undecided = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Annotated
 
@@ -13,21 +14,22 @@ from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,
     ConfigOpt,
     JsonOpt,
+    ModelOpt,
     PresetOpt,
     SetOpt,
     check_index_params,
+    check_model,
     check_output_path,
     console,
     console_err,
     emit_json,
     ntst_option,
     params_from_options,
-    print_warnings,
     rows_per_tile_option,
     scheduler_option,
     workers_option,
 )
-from maglev_match.cli.models import MaglevOnlyModelOpt, refuse_model_file
+from maglev_match.cli.models import MaglevOnlyModelOpt, is_model_file, refuse_model_file
 
 CASE_TEXT = {
     "unstable_equilibrium": "the equilibrium is unstable (h = 0)",
@@ -43,28 +45,39 @@ def index_command(
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
     set_: SetOpt = None,
+    model: ModelOpt = "unit",
     no_simulation: Annotated[
         bool, typer.Option("--no-simulation", help="Skip the simulation-based h_simulation.")
     ] = False,
     json_out: JsonOpt = False,
-    model: MaglevOnlyModelOpt = None,
 ) -> None:
-    """The matching index chi = h / w0 of model A, with the case that decided h."""
-    refuse_model_file(model, "index")
+    """The matching index chi = h / w0 (model A or the full vehicle), with the case that
+    decided h, the simulated critical disturbance in both directions and the reading."""
+    if is_model_file(model):
+        refuse_model_file(model, "index")
     from maglev_match.matching import matching_index
 
+    model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
     with console_err.status("computing the matching index ..."):
-        res = matching_index(params, simulate=not no_simulation)
+        res = matching_index(params, model=model, simulate=not no_simulation)
     if json_out:
         emit_json(res.as_json())
         return
+    print_index(res, preset, config, set_)
+
+
+def print_index(res, preset: str, config, set_) -> None:
+    """The text form of a :class:`~maglev_match.matching.MatchingIndex` (every warning
+    of the JSON form is printed here too)."""
     mm = 1e3
     verdict = "[bold green]stable[/]" if res.stable else "[bold red]unstable[/]"
-    console.print(f"[bold]maglev-match index[/] — preset {preset}"
+    name = "model A (one levitation unit)" if res.model == "unit" else \
+        "model B (full vehicle, six levitation points)"
+    console.print(f"[bold]maglev-match index[/] — {name}, preset {preset}"
                   + (f", config {config}" if config else "")
-                  + (f", set {' '.join(set_)}" if set_ else ""))
+                  + (f", set {' '.join(set_)}" if set_ else ""), highlight=False)
     console.print(f"  beam: omega1 = {res.omega1:.5g} rad/s, sigma = {res.sigma:.4g} 1/kg")
     console.print(f"  equilibrium: {verdict}, max Re(lambda) = {res.max_real_part:.4g} 1/s")
     if res.hopf_param is not None:
@@ -72,19 +85,46 @@ def index_command(
         kind = ("subcritical" if (res.l1 or 0) > 0 else "supercritical") if res.l1 else ""
         console.print(f"  nearest Hopf point: {res.hopf_param} = {res.hopf_value:.6g}{dist}"
                       + (f", {kind}, l1 = {res.l1:.3g}" if kind else ""))
-    console.print(f"  h  = {res.h * mm:.4g} mm: {CASE_TEXT.get(res.case, res.case)}")
-    console.print(f"  w0 = {res.w0 * mm:.4g} mm (static beam deflection)")
-    console.print(f"  [bold]chi = {res.chi:.4g}[/]: {res.reading}")
-    if res.h_simulation is not None:
-        console.print(f"  by simulation: the largest beam-deflection disturbance x5(0) that "
-                      f"returns is {res.h_simulation * mm:.4g} mm, chi_simulation = "
-                      f"{res.chi_simulation:.4g}")
-    if res.current_reverses:
-        console.print("  [yellow]note:[/] the coil current on the cycle would reverse (min "
-                      f"{res.cycle_current_min:.3g} A); the clamped system differs there")
-    if not res.converged:
-        console_err.print(f"[red]continuation failed:[/] {res.message}")
-    print_warnings(res.warnings)
+    console.print("  [bold]by the paper's definition[/]:")
+    console.print(f"    h  = {res.h * mm:.4g} mm: {CASE_TEXT.get(res.case, res.case)}")
+    w0_text = ("static beam deflection" if res.model == "unit"
+               else "static mid-span beam deflection under the vehicle")
+    console.print(f"    w0 = {res.w0 * mm:.4g} mm ({w0_text})")
+    console.print(f"    chi = {res.chi:.4g}")
+    sim = res.simulation
+    if sim is None:
+        console.print("  by simulation: not run (--no-simulation); the reading rests on the "
+                      "paper's definition alone")
+    elif sim.get("status") == "skipped":
+        console.print(f"  by simulation: not run ({sim['reason']})")
+    else:
+        console.print("  [bold]by simulation[/] (critical disturbance along the paper's initial "
+                      "state, both directions):")
+        for key, size in (("up", res.h_simulation_up), ("down", res.h_simulation_down)):
+            d = sim.get(key)
+            if d is None:
+                continue
+            val = "unknown" if size is None else f"{size * mm:.4g} mm"
+            extra = ""
+            if d["status"] == "all_return":
+                extra = " (every size returned: the whole gap range)"
+            elif d["status"] == "open":
+                extra = " (inconclusive: largest size seen to return)"
+            console.print(f"    {d['label']}: {val}{extra}", highlight=False)
+        chi_s = "unknown" if res.chi_simulation is None else f"{res.chi_simulation:.4g}"
+        h_s = "unknown" if res.h_simulation is None else f"{res.h_simulation * mm:.4g} mm"
+        console.print(f"    h_simulation = {h_s} (the smaller), chi_simulation = {chi_s}")
+        console.print(f"    rule: {sim.get('rule', '')}", markup=False, highlight=False)
+    used = res.chi if res.reading_basis == "paper" else res.chi_simulation
+    basis = ("the paper's definition" if res.reading_basis == "paper"
+             else "the simulation, the smaller index")
+    used_text = "" if used is None else f", index {used:.4g}"
+    console.print(f"  [bold]reading[/] (from {basis}{used_text}): [bold]{res.reading}[/]",
+                  highlight=False)
+    if res.warnings:
+        console.print(f"  [yellow]warnings ({len(res.warnings)}):[/]")
+        for w in res.warnings:
+            console.print(f"    - {w}", style="yellow", markup=False, highlight=False)
 
 
 @app.command("map")
@@ -114,7 +154,7 @@ def map_command(
     """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure)."""
     refuse_model_file(model, "map")
     from maglev_match.io import atomic_write
-    from maglev_match.maps import MapSpec, map_dataset, parse_axis, run_map
+    from maglev_match.maps import MapSpec, map_dataset, map_warnings, parse_axis, run_map
     from maglev_match.params import ParameterError
     from maglev_match.plots import save_figure
     from maglev_match.plots.maps import map_figure
@@ -136,11 +176,17 @@ def map_command(
         def progress(done: int, total: int) -> None:
             prog.update(task, completed=done, total=total)
 
+        started = time.perf_counter()
         data = run_map(spec, checkpoint, resume=resume, scheduler=scheduler, workers=workers,
                        progress=progress)
+        elapsed = time.perf_counter() - started
+    with console_err.status("spot check: recomputing sample points one by one ..."):
+        # the self-check gets 10 % of the map's time (at least one point is checked)
+        ds = map_dataset(spec, data, budget=0.1 * elapsed)
     from maglev_match.datasets import annotate_map
 
-    ds = annotate_map(map_dataset(spec, data), base)
+    ds = annotate_map(ds, base)
+    warnings = map_warnings(ds)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
     figs = save_figure(map_figure(ds, design_point=(float(getattr(base, ax.name)),
@@ -150,6 +196,11 @@ def map_command(
         "netcdf": str(out), "figures": [str(f) for f in figs], "x": ax.name, "y": ay.name,
         "shape": [ay.count, ax.count], "stable_fraction": float(ds["stable"].mean()),
         "chi_max": float(ds["chi"].max()), "unresolved": int((ds["resolved"] == 0).sum()),
+        "spot_check": {"points": int(ds.attrs["spot_check_points"]),
+                       "max_rel_diff": float(ds.attrs["spot_check_max_rel_diff"]),
+                       "tolerance": float(ds.attrs["spot_check_tolerance"]),
+                       "passed": bool(ds.attrs["spot_check_passed"])},
+        "warnings": warnings,
     }
     if json_out:
         emit_json(summary)
@@ -157,3 +208,8 @@ def map_command(
     console.print(f"wrote {out} and {', '.join(str(f) for f in figs)}")
     console.print(f"stable at {summary['stable_fraction']:.0%} of the points; chi up to "
                   f"{summary['chi_max']:.3g}; {summary['unresolved']} unresolved points")
+    sc = summary["spot_check"]
+    console.print(f"spot check: {sc['points']} point(s) recomputed one by one, largest relative "
+                  f"difference of h {sc['max_rel_diff']:.3g} (tolerance {sc['tolerance']:g})")
+    for w in warnings:
+        console.print(f"  - {w}", style="yellow", markup=False, highlight=False)

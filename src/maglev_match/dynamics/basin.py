@@ -7,8 +7,10 @@ Model-agnostic. At a design parameter point p, with the equilibrium stable:
 2. from each, continue the branch of periodic orbits in that parameter until it reaches the
    design value. If the cycle there is unstable, it surrounds the equilibrium: that cycle
    bounds the basin (case ``unstable_cycle``). If the branch first touches a limit (the
-   ``limits`` callable), the surrounding cycle lies beyond the physical range (case
-   ``beyond_limits``). If it turns away or leaves the search range, that Hopf point gives no
+   ``limits`` callable) between the Hopf point and the design value, the surrounding cycle
+   lies beyond the physical range (case ``beyond_limits``); a contact on the far side of
+   the Hopf point (the branch heading away from the design) counts as turning away. If it
+   turns away or leaves the search range, that Hopf point gives no
    surrounding cycle and the next is tried;
 3. with no Hopf point's branch surrounding the equilibrium: case ``no_cycle``.
 
@@ -108,7 +110,15 @@ def bounding_cycle(
                             "design point; it does not bound the basin")
             continue
         if br.stopped_reason == "limit":
-            limited = limited or hp
+            # only a contact between the Hopf point and the design point means that the
+            # surrounding cycle leaves the range; a branch that touched a limit on the far
+            # side of its Hopf point (heading away from the design) turned away
+            v = last.value if last is not None else hp.value
+            if (v - hp.value) * (target - hp.value) > 0:
+                limited = limited or hp
+            else:
+                warnings.append(f"the cycle branch from {hp.param} = {hp.value:.6g} touched a "
+                                f"limit at {v:.6g}, on the far side from the design point")
             continue
         if br.stopped_reason in FAILED:
             failed.append(f"branch from {hp.param} = {hp.value:.6g}: {br.stopped_reason}")
