@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.integrate
+from systems import CYCLE_OMEGA, FOLD_NF, HOPF_NF, LINEAR_PART, Q5, Q_CRIT
 
 from maglev_match.dynamics.cycles import (
     _adapt_mesh,
@@ -17,40 +18,9 @@ from maglev_match.dynamics.cycles import (
     floquet_multipliers,
     hopf_start,
 )
-from maglev_match.dynamics.system import System
 
-OMEGA = 2.0
-LINEAR_PART = np.array([[-1.0, 0.0, 0.0], [0.0, -2.0, 1.0], [0.0, -1.0, -3.0]])
-_Q, _ = np.linalg.qr(np.random.default_rng(7).normal(size=(5, 5)))
-_QJ = jnp.asarray(_Q)
-
-
-def _embedded(radial):
-    """Planar system r' = r g(mu, r^2), theta' = omega, plus a stable linear 3-block,
-    rotated by a fixed orthogonal matrix (so no coordinate is special)."""
-
-    def rhs(x, p):
-        mu, om, l1 = p[0], p[1], p[2]
-        z = _QJ.T @ x
-        a, b = z[0], z[1]
-        g = radial(mu, l1, a * a + b * b)
-        w = jnp.asarray(LINEAR_PART) @ z[2:]
-        dz = jnp.concatenate([jnp.stack([g * a - om * b, om * a + g * b]), w])
-        return _QJ @ dz
-
-    return System(
-        rhs=rhs, p=np.array([0.0, OMEGA, -1.0]), param_names=("mu", "omega", "l1"),
-        state_names=tuple(f"x{i}" for i in range(5)),
-        observables={
-            "radius": lambda x, p: jnp.sqrt(jnp.sum((_QJ.T @ x)[:2] ** 2)),
-            "x0": lambda x, p: x[0],
-        },
-    )
-
-
-HOPF_NF = _embedded(lambda mu, l1, r2: mu + l1 * r2)
-FOLD_NF = _embedded(lambda mu, l1, r2: mu + 2.0 * r2 - r2 * r2)
-Q_CRIT = _Q @ np.array([1.0, -1.0j, 0, 0, 0]) / math.sqrt(2.0)
+OMEGA = CYCLE_OMEGA
+_Q = Q5
 
 
 def _start(system, l1):

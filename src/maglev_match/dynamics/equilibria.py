@@ -10,8 +10,8 @@ interval; H(u) = f(x, alpha) / r_s with a fixed residual scale r_s. Test functio
 evaluated at every accepted point by :func:`~maglev_match.dynamics.continuation.continuation`:
 
 * LP: the parameter component of the tangent, t_alpha (changes sign at a fold);
-* BP: sign det [H_u; t^T] times the smallest singular value of that bordered matrix (the
-  bordered matrix stays regular at a fold and is singular at a branch point);
+* BP: det [H_u; (W t)^T], the determinant of the bordered matrix (regular at a fold,
+  singular at a branch point, where it changes sign; Govaerts 2000, sec. 4.2);
 * H:  the bialternate-product test prod_{i<j} (lambda_i + lambda_j), normalised as the
   geometric mean of (lambda_i + lambda_j) / (|lambda_i| + |lambda_j|) with its sign; it
   vanishes at Hopf points and at neutral saddles (a real pair +-a); a located zero is a Hopf
@@ -22,7 +22,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cache
 
+import jax
 import numpy as np
 import scipy.linalg
 
@@ -279,8 +281,25 @@ class EquilibriumBranch:
         return self.max_real_part < 0
 
 
+@cache
+def _branch_kernel(rhs):
+    """(f, f_x, f_p e) at (x, p) in one jitted call (cached per right-hand side)."""
+    jac = jax.jacfwd(rhs, argnums=0)
+
+    def kernel(x, p, e):
+        fx, fe = jax.jvp(lambda q: rhs(x, q), (p,), (e,))
+        return fx, jac(x, p), fe
+
+    return jax.jit(kernel)
+
+
 def _sorted_eigs(w: np.ndarray) -> np.ndarray:
     return w[np.lexsort((-np.abs(w.imag), -w.real))]
+
+
+@cache
+def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.triu_indices(n, 1)
 
 
 def _hopf_test(w: np.ndarray) -> tuple[float, int, int]:
@@ -289,7 +308,7 @@ def _hopf_test(w: np.ndarray) -> tuple[float, int, int]:
     n = w.size
     if n < 2:
         return 1.0, 0, 0
-    i, j = np.triu_indices(n, 1)
+    i, j = _pairs(n)
     s = w[i] + w[j]
     den = np.abs(w[i]) + np.abs(w[j])
     r = np.where(den > 0, s / np.where(den > 0, den, 1.0), 0.0)
@@ -319,7 +338,9 @@ class EquilibriumProblem:
         self.rs = system.residual_scale(J0 * 1.0)
         self.weights = np.concatenate([np.full(n, 1.0 / n), [1.0]])
         self.tol = tol
-        self._pj = system.derivatives.param_jacobian
+        self._kernel = _branch_kernel(system.rhs)
+        self._e = np.zeros(self.base.size)
+        self._e[self.k] = 1.0
 
     def unpack(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         n = self.system.dim
@@ -334,9 +355,9 @@ class EquilibriumProblem:
         return float(u[-1] * self.alpha_scale)
 
     def fun(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """H(u) and H_u(u) = [f_x X_s, f_alpha alpha_s] / r_s (one compiled call)."""
         x, p = self.unpack(u)
-        fx, J = self.system.f_and_jacobian(x, p)
-        fa = np.asarray(self._pj(x, p))[:, self.k]
+        fx, J, fa = (np.asarray(a) for a in self._kernel(x, p, self._e))
         A = np.column_stack([J * self.xs[None, :], fa * self.alpha_scale]) / self.rs[:, None]
         return fx / self.rs, A
 
@@ -348,14 +369,15 @@ class EquilibriumProblem:
         return _sorted_eigs(np.linalg.eigvals(self.system.jacobian(x, p)))
 
     def test_functions(self, pt: BranchPoint) -> dict[str, float]:
-        w = self.eigenvalues(pt.u)
+        # the Jacobian of the corrector's last iterate (within the Newton tolerance of
+        # the solution) serves for the eigenvalues and the bordered determinant
+        _, A = pt.correction.data
+        J = A[:, :-1] * self.rs[:, None] / self.xs[None, :]
+        w = _sorted_eigs(np.linalg.eigvals(J))
         pt.info["eigenvalues"] = w
-        _, A = self.fun(pt.u)
         M = np.vstack([A, (self.weights * pt.t)[None, :]])
-        sv = np.linalg.svd(M, compute_uv=False)
-        sign, _ = np.linalg.slogdet(M)
         h, _, _ = _hopf_test(w)
-        return {"LP": float(pt.t[-1]), "BP": float(sign * sv[-1]), "H": h}
+        return {"LP": float(pt.t[-1]), "BP": float(np.linalg.det(M)), "H": h}
 
     def event_kind(self, name: str) -> SpecialPointKind:
         return {"LP": SpecialPointKind.LP, "BP": SpecialPointKind.BP,

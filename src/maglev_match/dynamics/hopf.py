@@ -29,6 +29,7 @@ differences.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -40,7 +41,6 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from maglev_match.dynamics.equilibria import find_equilibrium
 from maglev_match.dynamics.system import System
 
 __all__ = [
@@ -79,6 +79,7 @@ class HopfPoint:
     converged: bool
     residual: float  # max |defining system| at the solution (scaled)
     warnings: tuple[str, ...] = ()
+    message: str = ""  # why the point is not converged ('' when it is)
 
     @property
     def kind(self) -> str:
@@ -456,15 +457,25 @@ def refine_hopf_point(
     tol: float = 1e-11,
     max_iter: int = 30,
     value_scale: float | None = None,
+    bounds: tuple[float, float] | None = None,
 ) -> HopfPoint:
     """Refine an approximate Hopf point by Newton's method on the defining system
     (x, v1, v2, omega, param), then compute eigenvectors, crossing speed and l1.
+
+    A converged Newton iteration is validated before the point is called converged
+    (Kuznetsov 2004, sec. 10.2.2: the defining system also has spurious solutions, e.g.
+    neutral saddles, and Newton may run to a Hopf point of another, unphysical region):
+    omega > 0, +-i omega is an eigenvalue pair of the Jacobian there (to 1e-6 relative),
+    and the parameter lies inside ``bounds``. Otherwise ``converged`` is False and the
+    reason is the point's ``message`` (and a warning).
 
     Parameters
     ----------
     value, x, omega : initial guesses (parameter value, equilibrium state, frequency rad/s).
     q : guess of the complex eigenvector (computed from J when not given).
     value_scale : typical size of ``param`` for the convergence test (default |value|).
+    bounds : (lo, hi) of ``param``, the search interval (None: not checked); the
+        system's ``param_ranges`` (valid range) is checked too.
     """
     base = system.p if p is None else np.asarray(p, float)
     k = system.param_index(param)
@@ -522,7 +533,39 @@ def refine_hopf_point(
         om, v2 = -om, -v2
     val = float(al[0])
     pv = system.params_with(base, **{param: val})
-    return _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings)
+    message = ""
+    if converged:
+        message = _hopf_validation(system, param, val, xs, pv, om, omega, bounds)
+        if message:
+            converged = False
+            warnings.append(f"not a valid Hopf point: {message}")
+    else:
+        message = f"Newton on the Hopf defining system did not converge in {n_iter} steps"
+    hp = _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings)
+    return dataclasses.replace(hp, message=message) if message else hp
+
+
+def _hopf_validation(system, param, val, xs, pv, om, omega_guess, bounds) -> str:
+    """Why a solution of the defining system is not an acceptable Hopf point ('' if it is)."""
+    if not (np.all(np.isfinite(xs)) and math.isfinite(val) and math.isfinite(om)):
+        return "non-finite solution"
+    if not om > 1e-8 * max(1.0, abs(omega_guess)):
+        return f"frequency omega = {om:.3g} rad/s is not positive (Bogdanov-Takens?)"
+    w = np.linalg.eigvals(system.jacobian(xs, pv))
+    dist = float(np.min(np.abs(w - 1j * om)))
+    if dist > 1e-6 * max(1.0, om):
+        return (f"+-i {om:.6g} is not an eigenvalue pair of the Jacobian (nearest "
+                f"eigenvalue {dist:.2e} away)")
+    for rng, what in ((bounds, "the search bounds"),
+                      (system.param_ranges.get(param), "its valid range")):
+        if rng is None:
+            continue
+        lo, hi = sorted(map(float, rng))
+        slack = 1e-12 * max(1.0, abs(lo) if math.isfinite(lo) else 1.0,
+                            abs(hi) if math.isfinite(hi) else 1.0)
+        if not lo - slack <= val <= hi + slack:
+            return f"{param} = {val:.8g} lies outside [{lo:g}, {hi:g}] ({what})"
+    return ""
 
 
 def _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings) -> HopfPoint:
@@ -574,81 +617,42 @@ def locate_hopf_points(
 ) -> HopfScan:
     """Hopf points of the equilibrium as ``param`` runs from ``start`` to ``stop``.
 
-    A coarse root locus (``n_scan`` values) brackets every value where a complex pair of
-    eigenvalues crosses the imaginary axis; each bracket is refined to full precision by
-    Newton's method on the Hopf defining system (x, v1, v2, omega, param) (SPEC.md 6.2).
+    The equilibrium is followed by pseudo-arclength continuation
+    (:func:`~maglev_match.dynamics.equilibria.equilibrium_branch`, through folds, so every
+    part of an S-shaped equilibrium curve is visited), sampled at least as finely as
+    ``n_scan`` values; the Hopf test function (bialternate product) is located by solving
+    inside its step, then each point is refined to full precision by Newton's method on
+    the Hopf defining system (x, v1, v2, omega, param) and validated
+    (:func:`refine_hopf_point`). ``scan_values`` and ``max_real_part`` are the branch's
+    parameter values and largest real parts, in branch order.
     """
+    from maglev_match.dynamics.continuation import SpecialPointKind
+    from maglev_match.dynamics.equilibria import equilibrium_branch
+
     base = system.p if p is None else np.asarray(p, float)
-    values = np.linspace(start, stop, int(n_scan))
-    eqs, eig, conv, warnings = _scan_equilibria(system, param, values, base, progress)
-    max_real = eig.real.max(axis=1)
+    branch = equilibrium_branch(system, param, start, stop, p=base, n_points=int(n_scan),
+                                progress=progress)
+    warnings = list(branch.warnings)
+    lo, hi = sorted((float(start), float(stop)))
     points: list[HopfPoint] = []
-    for j in range(len(values) - 1):
-        wa, wb = eig[j], eig[j + 1]
-        if not (conv[j] and conv[j + 1]):
+    for sp in branch.special_points:
+        if sp.type != SpecialPointKind.HOPF:
             continue
-        # complex eigenvalues with Im > 0 at the left end, matched to the right end
-        for lam_a in wa[wa.imag > 1e-9]:
-            kb = int(np.argmin(np.abs(wb - lam_a)))
-            lam_b = wb[kb]
-            if lam_b.imag <= 1e-9:
-                continue
-            if np.sign(lam_a.real) == np.sign(lam_b.real) or lam_a.real == 0:
-                continue
-            t = lam_a.real / (lam_a.real - lam_b.real)
-            v0 = values[j] + t * (values[j + 1] - values[j])
-            om0 = float(lam_a.imag + t * (lam_b.imag - lam_a.imag))
-            x0 = eqs[j] + t * (eqs[j + 1] - eqs[j])
-            pk = system.params_with(base, **{param: v0})
-            eq = find_equilibrium(system, pk, x0)
-            hp = refine_hopf_point(system, param, v0, eq.x, om0, p=base,
-                                  value_scale=max(abs(v0), abs(stop - start)))
-            lo, hi = sorted((values[j], values[j + 1]))
-            span = hi - lo
-            if not (lo - span <= hp.value <= hi + span):
-                hp = _with_warning(hp, "refined Hopf point left its bracket "
-                                   f"[{lo:g}, {hi:g}]")
-            if any(abs(hp.value - o.value) <= 1e-9 * max(1.0, abs(o.value))
-                   and abs(hp.frequency - o.frequency) <= 1e-6 * o.frequency for o in points):
-                continue
-            points.append(hp)
+        hp = refine_hopf_point(system, param, sp.value, sp.x, sp.frequency, p=base,
+                               value_scale=max(abs(sp.value), hi - lo), bounds=(lo, hi))
+        if sp.located != "solved":
+            hp = _with_warning(hp, f"Hopf test function {sp.located}")
+        if any(abs(hp.value - o.value) <= 1e-9 * max(1.0, abs(o.value))
+               and abs(hp.frequency - o.frequency) <= 1e-6 * o.frequency for o in points):
+            continue
+        points.append(hp)
     points.sort(key=lambda h: h.value)
     return HopfScan(param=param, start=float(start), stop=float(stop), points=points,
-                    scan_values=values, max_real_part=max_real,
+                    scan_values=branch.values, max_real_part=branch.max_real_part,
                     warnings=tuple(warnings))
 
 
-def _scan_equilibria(system: System, param: str, values: np.ndarray, base: np.ndarray,
-                     progress=None):
-    """Equilibria and sorted eigenvalues along ``param`` (natural continuation, falling back
-    to the system's guess; an equilibrium whose Newton stalls at round-off level, scaled
-    residual < 1e-9, is accepted for bracketing since every Hopf point is refined after)."""
-    eqs, eigs, conv, warnings = [], [], [], []
-    x = system.x_guess
-    for k, v in enumerate(values):
-        pk = system.params_with(base, **{param: float(v)})
-        eq = find_equilibrium(system, pk, x)
-        if not eq.converged:
-            eq2 = find_equilibrium(system, pk, system.x_guess)
-            if eq2.scaled_residual < eq.scaled_residual:
-                eq = eq2
-        ok = eq.converged or eq.scaled_residual < 1e-9
-        if ok:
-            x = eq.x
-        else:
-            warnings.append(f"{param} = {v:g}: equilibrium not found ({eq.message})")
-        w = np.linalg.eigvals(np.asarray(system.derivatives.jacobian(eq.x, pk)))
-        eigs.append(w[np.lexsort((-np.abs(w.imag), -w.real))])
-        eqs.append(eq.x)
-        conv.append(ok)
-        if progress is not None:
-            progress(k + 1, len(values))
-    return np.array(eqs), np.array(eigs), np.array(conv), warnings
-
-
 def _with_warning(hp: HopfPoint, msg: str) -> HopfPoint:
-    import dataclasses
-
     return dataclasses.replace(hp, warnings=hp.warnings + (msg,))
 
 
