@@ -416,7 +416,9 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
     """Zero of test function ``name`` between a (s = 0) and b (s = s_step): Illinois
     regula falsi on s, every trial re-corrected onto the branch."""
     lo, glo, hi, ghi = 0.0, a.tests[name], s_step, b.tests[name]
+    g_start = glo
     best: tuple[float, float, BranchPoint] | None = None
+    best_before: tuple[float, float, BranchPoint] | None = None  # on the side of a
     side = 0
     s_prev = None
     located = f"not solved: no convergence in {opt.event_max_iter} iterations"
@@ -442,6 +444,9 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
             break
         if best is None or abs(g) <= abs(best[0]):
             best = (g, sm, pt)
+        if (g == 0 or (g > 0) == (g_start > 0)) and (best_before is None
+                                                      or abs(g) <= abs(best_before[0])):
+            best_before = (g, sm, pt)
         if g == 0 or (hi - lo) < opt.event_tol * s_step or (
                 s_prev is not None and abs(sm - s_prev) < opt.event_tol * s_step):
             located = SOLVED
@@ -462,6 +467,9 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
         return Event(name=name, kind=str(kind), step=step, point=None, located=located,
                      value=float("nan"), terminal=name.startswith("__") or bool(terminal(name)),
                      s=s_step)
+    is_terminal = name.startswith("__") or bool(terminal(name))
+    if is_terminal and located == SOLVED and best_before is not None:
+        best = best_before  # a branch ends on the near side of its terminal event
     g, sm, pt = best
     if name.startswith("__"):
         pt.kind = "bound"

@@ -24,9 +24,11 @@ of the variational equation. The mesh is adapted by equidistributing |u^(NCOL+1)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 from functools import cache, lru_cache
 from typing import Any
 
@@ -37,6 +39,15 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from maglev_match.dynamics.collocation import _lagrange, _tables
+from maglev_match.dynamics.continuation import (
+    SOLVED,
+    BranchPoint,
+    ContinuationOptions,
+    Correction,
+    SpecialPointKind,
+    StopReason,
+    continuation,
+)
 from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 from maglev_match.dynamics.system import System
 
@@ -47,6 +58,9 @@ __all__ = [
     "SpecialPoint",
     "CycleBranch",
     "CorrectionResult",
+    "CycleStop",
+    "CycleProblem",
+    "multiplier_tests",
     "hopf_start",
     "cycle_branch",
     "correct_cycle",
@@ -132,7 +146,8 @@ class CyclePoint:
     converged: bool
     iterations: int
     residual: float
-    kind: str = "step"  # "step", "stop_at", "limit", "LPC"
+    kind: str = "step"  # "step", "stop_at", "limit", "bound", or a special-point type
+    reliable: bool = True  # |trivial multiplier - 1| within tolerance: stability trusted
 
     def max(self, name: str) -> float:
         return self.extrema[name][0]
@@ -143,15 +158,22 @@ class CyclePoint:
 
 @dataclass(frozen=True)
 class SpecialPoint:
-    """A detected bifurcation of cycles (LPC, PD, NS) or a physical-limit contact (LIMIT)."""
+    """A bifurcation of cycles (LPC, BP, PD, NS) or a physical-limit contact (LIMIT),
+    located by solving its test function inside the step where it changed sign.
+
+    ``type`` is a :class:`~maglev_match.dynamics.continuation.SpecialPointKind` value;
+    ``located`` is "solved" or the reason it could not be solved; ``label`` is unique
+    along the branch (PD1, LPC2, ...); ``point`` is the solved cycle there."""
 
     type: str
     value: float
     period: float
     extrema: Mapping[str, tuple[float, float]]
     step: int  # index of the branch point just before it
-    located: str  # "solved" (located by a corrector) or "interpolated"
+    located: str  # "solved" or the reason it was not
     detail: str = ""
+    label: str = ""
+    point: CyclePoint | None = None
 
 
 @dataclass(frozen=True)
@@ -580,6 +602,187 @@ def _margin(limits: LimitFn | None, system: System, orbit: PeriodicOrbit) -> tup
     return float(out), "limit"
 
 
+class CycleStop(StrEnum):
+    """Why a cycle branch stopped (same strings as before in JSON)."""
+
+    STOP_AT = "reached stop_at"
+    LIMIT = "limit"
+    BOUND = "left parameter range"
+    PERIOD = "period too large (homoclinic?)"
+    STEP_TOO_SMALL = "step too small"
+    NEWTON_FAILED = "newton failed"
+    MAX_STEPS = "max_steps"
+
+
+# multiplier test functions and the kinds they detect
+_MULTIPLIER_TESTS = {"PD": SpecialPointKind.PD, "NS": SpecialPointKind.NS,
+                     "BP": SpecialPointKind.BP}
+
+
+def _signed_geometric_mean(r: np.ndarray) -> float:
+    """A real number with the sign of prod r (r complex; non-real factors come in
+    conjugate pairs) and magnitude the geometric mean of |r| (no under/overflow)."""
+    if r.size == 0:
+        return 1.0
+    a = np.abs(r)
+    if np.any(a == 0):
+        return 0.0
+    real = np.abs(r.imag) <= 1e-9 * a
+    sign = float(np.prod(np.sign(r.real[real]))) if np.any(real) else 1.0
+    return sign * float(np.exp(np.mean(np.log(a))))
+
+
+def multiplier_tests(mult: np.ndarray) -> dict[str, float]:
+    """Test functions of the nontrivial multipliers mu_i (Kuznetsov 2004, sec. 10.3.2):
+
+    * PD: prod (mu_i + 1) / (1 + |mu_i|)          zero when a real mu passes -1;
+    * NS: prod_{i<j} (mu_i mu_j - 1) / (1 + |mu_i mu_j|)   zero on a complex pair with
+      |mu| = 1 (and on a real pair mu, 1/mu, which is no bifurcation: see the classifier);
+    * BP: prod (mu_i - 1) / (1 + |mu_i|)          zero when a real mu passes +1 (also at a
+      fold, where the LPC test changes sign too).
+
+    Each is returned as a signed geometric mean of its factors (same sign as the product)."""
+    mult = np.asarray(mult, complex)
+    i, j = np.triu_indices(mult.size, 1)
+    prod = mult[i] * mult[j]
+    return {
+        "PD": _signed_geometric_mean((mult + 1.0) / (1.0 + np.abs(mult))),
+        "NS": _signed_geometric_mean((prod - 1.0) / (1.0 + np.abs(prod))),
+        "BP": _signed_geometric_mean((mult - 1.0) / (1.0 + np.abs(mult))),
+    }
+
+
+class CycleProblem:
+    """The collocation BVP of periodic orbits in one parameter as a problem for
+    :func:`~maglev_match.dynamics.continuation.continuation`: corrector (sparse Newton on
+    the bordered system), weights, read-outs (a :class:`CyclePoint` per point) and test
+    functions (LPC from the tangent, PD / NS / BP from the multipliers, the limit margin,
+    the stop value)."""
+
+    def __init__(self, prob: _Problem, names, limits, stop_at, trivial_tol: float,
+                 max_period: float, adapt_every: int, tol: float, start_orbit):
+        self.prob = prob
+        self.names = names
+        self.limits = limits
+        self.stop_at = stop_at
+        self.trivial_tol = trivial_tol
+        self.max_period = max_period
+        self.adapt_every = adapt_every
+        self.tol = tol
+        self.weights = prob.W()
+        self.start_orbit = start_orbit
+        self.accepted = 0
+        self.warnings: list[str] = []
+
+    # --- corrector and read-outs ---
+    def correct(self, u_pred, row, target, max_iter):
+        Uref, _, _ = self.prob.unpack(u_pred)
+        Y, ok, its, res, lu, blocks = _newton(self.prob, u_pred, Uref, row, target,
+                                              self.tol, max_iter)
+        if not ok:
+            return None
+        return Correction(u=Y, iterations=its, residual=res, solve=lu.solve,
+                          data=(blocks, self.prob.mesh.copy()))
+
+    def parameter(self, u) -> float:
+        return self.prob.unpack(u)[2]
+
+    def admissible(self, a, u_new, s) -> bool:
+        return self.prob.unpack(u_new)[1] > 0
+
+    def cycle_point(self, pt: BranchPoint, kind: str = "step") -> CyclePoint:
+        prob = self.prob
+        (J, Tb, h), mesh = pt.correction.data
+        U, T, lam = prob.unpack(pt.u)
+        triv, mult = _split_trivial(floquet_multipliers_from_blocks(J, Tb, h, prob.m))
+        nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
+        reliable = bool(abs(triv - 1.0) <= self.trivial_tol)
+        orbit = PeriodicOrbit(mesh=mesh, ncol=prob.m, states=U, period=T, p=prob.params(lam))
+        return CyclePoint(value=lam, period=T, orbit=orbit, multipliers=mult,
+                          trivial_multiplier=triv, n_unstable=nun, stable=nun == 0,
+                          extrema=orbit_extrema(prob.system, orbit, self.names),
+                          converged=True, iterations=pt.correction.iterations,
+                          residual=pt.correction.residual, kind=kind, reliable=reliable)
+
+    # --- test functions ---
+    def test_functions(self, pt: BranchPoint) -> dict[str, float]:
+        if pt.kind == "start":  # the Hopf point: a constant profile, no multipliers
+            out = {}
+            if self.limits is not None:
+                out["LIMIT"] = _margin(self.limits, self.prob.system, self.start_orbit)[0]
+            if self.stop_at is not None:
+                out["STOP"] = pt.value - self.stop_at
+            return out
+        c = self.cycle_point(pt)
+        pt.info["cycle"] = c
+        out = {"LPC": float(pt.t[-1])}
+        if c.reliable:
+            out.update(multiplier_tests(np.asarray(c.multipliers)))
+        if self.limits is not None:
+            out["LIMIT"], pt.info["limit"] = _margin(self.limits, self.prob.system, c.orbit)
+        if self.stop_at is not None:
+            out["STOP"] = c.value - self.stop_at
+        return out
+
+    def event_kind(self, name: str) -> str:
+        return {"LPC": SpecialPointKind.LPC, "LIMIT": SpecialPointKind.LIMIT,
+                "STOP": "STOP", **_MULTIPLIER_TESTS}[name]
+
+    def terminal(self, name: str) -> bool:
+        return name in ("LIMIT", "STOP")
+
+    def classify(self, name: str, pt: BranchPoint, a: BranchPoint, b: BranchPoint):
+        if name not in _MULTIPLIER_TESTS:
+            return self.event_kind(name)
+        c = pt.info.get("cycle")
+        if c is None or not c.reliable:
+            self.warnings.append(f"{name} test changed sign between {a.value:.8g} and "
+                                 f"{b.value:.8g}, but the multipliers there are unreliable "
+                                 "(trivial multiplier away from 1): not reported")
+            return None
+        mult = np.asarray(c.multipliers)
+        if name == "BP":
+            # a multiplier through +1 is a fold when the tangent turns in the same step
+            if a.tests.get("LPC", 0.0) * b.tests.get("LPC", 0.0) < 0:
+                return None
+            return SpecialPointKind.BP
+        if name == "PD":
+            k = int(np.argmin(np.abs(mult + 1.0)))
+            return SpecialPointKind.PD if abs(mult[k] + 1.0) < 1e-3 else None
+        # NS: the pair with mu_i mu_j = 1 must be complex (a real pair mu, 1/mu is a
+        # neutral saddle cycle, no bifurcation)
+        i, j = np.triu_indices(mult.size, 1)
+        k = int(np.argmin(np.abs(mult[i] * mult[j] - 1.0)))
+        mu = mult[i[k]]
+        if abs(mu.imag) <= 1e-6 * max(1.0, abs(mu)) or abs(abs(mu) - 1.0) > 1e-3:
+            return None
+        return SpecialPointKind.NS
+
+    # --- hooks ---
+    def after_accept(self, pt: BranchPoint) -> BranchPoint:
+        self.accepted += 1
+        if not (self.adapt_every and self.accepted % self.adapt_every == 0):
+            return pt
+        prob = self.prob
+        U, T, lam = prob.unpack(pt.u)
+        Ut, Tt, lt = prob.unpack(pt.t)
+        new_mesh = _adapt_mesh(prob.mesh, prob.m, U, prob.scale)
+        U2 = _remesh(prob.mesh, prob.m, U, new_mesh)
+        Ut2 = _remesh(prob.mesh, prob.m, Ut, new_mesh)
+        prob.mesh = new_mesh
+        t = prob.pack(Ut2, Tt, lt)
+        t /= math.sqrt(float(np.sum(self.weights * t * t)))
+        return BranchPoint(u=prob.pack(U2, T, lam), t=t, value=pt.value,
+                           correction=pt.correction, tests=pt.tests, kind=pt.kind,
+                           info=pt.info)
+
+    def stop(self, pt: BranchPoint) -> str | None:
+        c = pt.info["cycle"]
+        if c.period > self.max_period:
+            return CycleStop.PERIOD
+        return None
+
+
 def cycle_branch(
     system: System,
     hopf: Any,
@@ -601,8 +804,24 @@ def cycle_branch(
     adapt_every: int = 3,
     lam_scale: float | None = None,
     max_period_factor: float = 50.0,
+    trivial_tol: float = 1e-4,
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
+
+    The branch is followed by the package's one pseudo-arclength driver
+    (:func:`~maglev_match.dynamics.continuation.continuation`) on the collocation problem
+    (:class:`CycleProblem`). Special points are zeros of test functions located by solving
+    inside the step where they change sign (each a converged periodic orbit):
+
+    * LPC (fold of cycles): the parameter component of the tangent;
+    * PD / NS / BP: products over the nontrivial multipliers (:func:`multiplier_tests`);
+      NS only for a complex pair on the unit circle, BP only without a fold in the step;
+    * LIMIT: the smallest limit margin (terminal: the branch ends on the contact);
+    * the stop value ``stop_at`` (terminal; the last point is then solved at exactly it).
+
+    The trivial multiplier is checked at every point: when |mu_trivial - 1| exceeds
+    ``trivial_tol`` the point's stability is marked unreliable (``CyclePoint.reliable``)
+    and no PD / NS / BP is declared from it.
 
     Parameters
     ----------
@@ -615,23 +834,24 @@ def cycle_branch(
     max_steps : maximum accepted continuation steps.
     limits : ``limits(system, orbit)`` -> mapping of limit name -> margin (positive
         inside, in any unit) or the name of the touched limit (None if none). The branch
-        stops at the first contact, located by secant on the margin (kind "limit").
+        stops at the first contact, a solved orbit on the limit (kind "limit").
     progress : called as progress(step, point) after each accepted step.
     observables : names of the system's observables to read out (default: all).
     ds, ds_min, ds_max : initial, smallest and largest arclength step (scaled units: the
         profile in units of ``system.state_scale`` RMS over the mesh, the period in units
         of the Hopf period, the parameter in units of ``lam_scale``).
-    param_bounds : stop when the parameter leaves this interval.
+    param_bounds : stop when the parameter reaches a bound of this interval (solved there).
     tol : Newton tolerance on the scaled update.
     adapt_every : adapt the mesh every this many steps (0: never).
     lam_scale : unit of the parameter in the arclength norm (default 5 % of |value|).
     max_period_factor : stop when the period exceeds this multiple of the Hopf period
         (approach to a homoclinic orbit).
+    trivial_tol : largest accepted |mu_trivial - 1| for reliable multipliers.
 
     Returns
     -------
-    CycleBranch with the accepted points, special points (LPC, PD, NS, LIMIT), the reason
-    the continuation stopped and warnings. Failure is reported, never raised.
+    CycleBranch with the accepted points, special points (LPC, BP, PD, NS, LIMIT), the
+    reason the continuation stopped and warnings. Failure is reported, never raised.
     """
     start = _as_start(system, hopf, param)
     ipar = system.param_index(param)
@@ -643,28 +863,21 @@ def cycle_branch(
     m = int(ncol)
     if not 2 <= m <= 7:
         raise ValueError("ncol must be between 2 and 7")
+    if not (math.isfinite(max_period_factor) and max_period_factor > 1):
+        raise ValueError(f"max_period_factor = {max_period_factor!r}: must be a finite "
+                         "number > 1")
+    if not trivial_tol > 0:
+        raise ValueError(f"trivial_tol = {trivial_tol!r}: must be > 0")
+    options = ContinuationOptions(
+        ds=ds, ds_min=ds_min, ds_max=ds_max, max_steps=max_steps, newton_tol=tol,
+        newton_max_iter=max_newton,
+        param_bounds=None if param_bounds is None else tuple(map(float, param_bounds)))
     prob = _Problem(system=system, ipar=ipar, p0=np.array(start.p, float),
                     mesh=np.linspace(0.0, 1.0, ntst + 1), m=m,
                     scale=np.asarray(system.state_scale, float), T_scale=T0,
                     lam_scale=float(lam_scale))
-    warnings: list[str] = []
     W = prob.W()
-
-    def make_point(Y, lu_blocks, its, resid, kind="step") -> CyclePoint:
-        U, T, lam = prob.unpack(Y)
-        J, Tb, h = lu_blocks
-        mult_all = floquet_multipliers_from_blocks(J, Tb, h, m)
-        triv, mult = _split_trivial(mult_all)
-        nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
-        orbit = PeriodicOrbit(mesh=prob.mesh.copy(), ncol=m, states=U, period=T,
-                              p=prob.params(lam))
-        ext = orbit_extrema(system, orbit, names)
-        return CyclePoint(value=lam, period=T, orbit=orbit, multipliers=mult,
-                          trivial_multiplier=triv, n_unstable=nun, stable=nun == 0,
-                          extrema=ext, converged=True, iterations=its, residual=resid,
-                          kind=kind)
-
-    # --- initial tangent: the Hopf eigenvector profile -------------------------------
+    # --- the start: the Hopf point as a constant profile, tangent = eigenvector profile
     s_nodes = _node_times(prob.mesh, m)
     qv = np.asarray(start.q, complex)
     V = np.real(qv[None, :] * np.exp(2j * math.pi * s_nodes)[:, None])
@@ -672,238 +885,111 @@ def cycle_branch(
     Yh = prob.pack(Ueq, T0, lam0)
     tY = np.concatenate([(V / prob.scale).ravel(), [0.0, 0.0]])
     tY /= math.sqrt(float(np.sum(W * tY * tY)))
-    Yprev = Yh
-    h_step = ds
-    points: list[CyclePoint] = []
+    start_orbit = PeriodicOrbit(mesh=prob.mesh.copy(), ncol=m, states=Ueq, period=T0,
+                                p=prob.params(lam0))
+    cyc = CycleProblem(prob, names, limits, stop_at, trivial_tol, max_period_factor * T0,
+                       adapt_every, tol, start_orbit)
+    first = Correction(u=Yh, iterations=0, residual=0.0, solve=lambda e: tY, data=None)
+
+    def notify(step, pt):
+        if progress is not None and "cycle" in pt.info:
+            progress(step, pt.info["cycle"])
+
+    res = continuation(cyc, Yh, tY, options, progress=notify, first=first)
+    warnings = list(cyc.warnings)
+    points: list[CyclePoint] = [pt.info["cycle"] for pt in res.points[1:]
+                                if "cycle" in pt.info]
     specials: list[SpecialPoint] = []
-    stopped = "max_steps"
-    rejected = 0
-    step = 0
-    prev_tlam = None
-
-    def corrector(Ybase, tbase, s, iters=max_newton):
-        Ypred = Ybase + s * tbase
-        Uref, _, _ = prob.unpack(Ypred)
-        row = W * tbase
-        rhs_val = float(row @ Ybase) + s
-        return _newton(prob, Ypred, Uref, row, rhs_val, tol, iters)
-
-    def tangent_from(lu, t_old):
-        t = lu.solve(np.concatenate([np.zeros(prob.size - 1), [1.0]]))
-        t /= math.sqrt(float(np.sum(W * t * t)))
-        if float(np.sum(W * t * t_old)) < 0:
-            t = -t
-        return t
-
-    def fixed_param_solve(Yguess, value):
-        row = np.zeros(prob.size)
-        row[-1] = 1.0
-        Uref, _, _ = prob.unpack(Yguess)
-        return _newton(prob, Yguess, Uref, row, value / prob.lam_scale, tol, max_newton + 4)
-
-    def secant_locate(Ybase, tbase, s1, fun, f0, f1, inside=False):
-        """Find s in (0, s1) with fun(solution at step s) = 0 (Illinois regula falsi).
-        Returns the evaluated point with the smallest |fun| (with ``inside``: among those
-        with fun >= 0, if any)."""
-        a, fa, b, fb = 0.0, f0, s1, f1
-        cands = []
-        side = 0
-        s_last = None
-        for _ in range(30):
-            s = (a * fb - b * fa) / (fb - fa) if fb != fa else 0.5 * (a + b)
-            if not (min(a, b) < s < max(a, b)):
-                s = 0.5 * (a + b)
-            Y, ok, its, res, lu, blocks = corrector(Ybase, tbase, s, 3 * max_newton)
-            if not ok:
-                break
-            fs = fun(Y, lu)
-            cands.append((fs, (Y, its, res, lu, blocks, s)))
-            if fs == 0 or (s_last is not None and abs(s - s_last) < 1e-10 * abs(s1)):
-                break
-            s_last = s
-            if (fs > 0) == (fb > 0):
-                b, fb = s, fs
-                if side == -1:
-                    fa *= 0.5
-                side = -1
-            else:
-                a, fa = s, fs
-                if side == 1:
-                    fb *= 0.5
-                side = 1
-        if not cands:
-            return None
-        pool = [c for c in cands if c[0] >= 0] if inside else []
-        return min(pool or cands, key=lambda c: abs(c[0]))[1]
-
-    while step < max_steps:
-        Y, ok, its, resid, lu, blocks = corrector(Yprev, tY, h_step)
-        if ok and points:
-            # reject a step whose parameter or period jumps too far (branch jumping)
-            _, Tn, _ = prob.unpack(Y)
-            if Tn <= 0:
-                ok = False
-        if not ok:
-            rejected += 1
-            h_step *= 0.5
-            if h_step < ds_min:
-                stopped = "step too small" if points else "newton failed"
-                warnings.append(f"continuation stopped: no convergence at step {step + 1} "
-                                f"with the smallest step {ds_min:g} (residual {resid:.2e})")
-                break
+    counts: dict[str, int] = {}
+    stopped: str = {StopReason.MAX_STEPS: CycleStop.MAX_STEPS,
+                    StopReason.BOUND: CycleStop.BOUND,
+                    StopReason.PROBLEM: CycleStop.PERIOD}.get(res.stop_reason, "")
+    if res.stop_reason in (StopReason.STEP_TOO_SMALL, StopReason.NEWTON_FAILED):
+        stopped = CycleStop.STEP_TOO_SMALL if points else CycleStop.NEWTON_FAILED
+        warnings.append(f"continuation stopped: no convergence after step {len(points)} "
+                        f"with the smallest step {ds_min:g} ({res.message})")
+    if stopped == CycleStop.PERIOD:
+        warnings.append(f"period {points[-1].period:.3g} s exceeds {max_period_factor} x "
+                        "the Hopf period")
+    for ev in res.events:
+        if ev.kind == SpecialPointKind.BOUND:
+            if ev.point is not None and "cycle" in ev.point.info:
+                points[-1] = dataclasses.replace(points[-1], kind="bound")
             continue
-        step += 1
-        t_new = tangent_from(lu, tY)
-        pt = make_point(Y, blocks, its, resid)
-        # --- stop_at crossing ------------------------------------------------------
-        if stop_at is not None and points or stop_at is not None and step == 1:
-            lam_a = prob.unpack(Yprev)[2] if points else lam0
-            lam_b = pt.value
-            if (lam_a - stop_at) * (lam_b - stop_at) <= 0 and lam_b != lam_a:
-                frac = (stop_at - lam_a) / (lam_b - lam_a)
-                Yg = Yprev + frac * (Y - Yprev) if points else Y
-                Ys, oks, itss, ress, _, blks = fixed_param_solve(Yg, stop_at)
-                if oks:
-                    cand = make_point(Ys, blks, itss, ress, kind="stop_at")
-                    mg, _ = _margin(limits, system, cand.orbit)
-                    if mg >= 0:
-                        points.append(cand)
-                        stopped = "reached stop_at"
-                        _notify(progress, step, cand)
-                        break
-                else:
-                    warnings.append(f"could not solve the cycle at {param} = {stop_at:g}")
-        # --- physical limits -------------------------------------------------------
-        mg_new, lname = _margin(limits, system, pt.orbit)
-        if mg_new < 0:
-            if points:
-                mg_old, _ = _margin(limits, system, points[-1].orbit)
+        if ev.kind == "STOP":
+            if ev.point is None:
+                warnings.append(f"could not solve the cycle at {param} = {stop_at:g}")
+                continue
+            # the located point is refined at exactly the stop value
+            fixed = _fixed_param(prob, ev.point.u, float(stop_at), tol, max_newton + 4)
+            c = cyc.cycle_point(fixed, kind="stop_at") if fixed is not None else \
+                dataclasses.replace(ev.point.info["cycle"], kind="stop_at")
+            if points and points[-1] is ev.point.info.get("cycle"):
+                points[-1] = c
             else:
-                mg_old = 1.0
-            found = None
-            if limits is not None and points and np.isfinite(mg_old):
-                def fmargin(Yc, _lu):
-                    U, T, lam = prob.unpack(Yc)
-                    orb = PeriodicOrbit(prob.mesh.copy(), m, U, T, prob.params(lam))
-                    return _margin(limits, system, orb)[0]
-
-                found = secant_locate(Yprev, tY, h_step, fmargin, mg_old, mg_new,
-                                      inside=True)
-            if found is not None:
-                Yl, itl, resl, _, blkl, _ = found
-                lim_pt = make_point(Yl, blkl, itl, resl, kind="limit")
+                points.append(c)
+            stopped = CycleStop.STOP_AT
+            continue
+        kind = SpecialPointKind(ev.kind)
+        counts[kind] = counts.get(kind, 0) + 1
+        label = f"{kind}{counts[kind]}"
+        if ev.point is None or "cycle" not in ev.point.info:
+            warnings.append(f"{kind} between steps {ev.step} and {ev.step + 1} not located: "
+                            f"{ev.located}")
+            if kind == SpecialPointKind.LIMIT:
+                stopped = CycleStop.LIMIT
+            continue
+        c = ev.point.info["cycle"]
+        detail, located = "", ev.located
+        if kind == SpecialPointKind.LIMIT:
+            mg_c, lname = _margin(limits, system, c.orbit)
+            detail = lname
+            located = SOLVED if abs(mg_c) <= 1e-6 else f"bracketed (margin {mg_c:.2e})"
+            if located != SOLVED:
+                warnings.append(f"limit contact '{lname}' bracketed, not solved: the "
+                                f"corrector failed closer to it (margin {mg_c:.2e})")
+            c = dataclasses.replace(c, kind="limit")
+            if points and points[-1] is ev.point.info["cycle"]:
+                points[-1] = c
             else:
-                lim_pt = dataclass_replace_kind(pt, "limit")
-                warnings.append("limit contact not located accurately (first point past it)")
-            located = "interpolated"
-            if found is not None:  # name the limit closest at the contact point
-                mg_c, lname_c = _margin(limits, system, lim_pt.orbit)
-                lname = lname_c or lname
-                located = "solved" if abs(mg_c) <= 1e-6 else f"bracketed (margin {mg_c:.2e})"
-                if located != "solved":
-                    warnings.append(f"limit contact '{lname}' bracketed, not solved: the "
-                                    f"corrector failed closer to it (margin {mg_c:.2e})")
-            points.append(lim_pt)
-            specials.append(SpecialPoint(type="LIMIT", value=lim_pt.value,
-                                         period=lim_pt.period, extrema=lim_pt.extrema,
-                                         step=len(points) - 2,
-                                         located=located, detail=lname))
-            stopped = "limit"
-            _notify(progress, step, lim_pt)
-            break
-        # --- cycle bifurcations between the previous point and this one -------------
-        tlam = float(t_new[-1])
-        if points:
-            prev = points[-1]
-            if prev_tlam is not None and tlam * prev_tlam < 0:
-                def ftl(Yc, luc, t_ref=tY):
-                    return float(tangent_from(luc, t_ref)[-1])
-
-                found = secant_locate(Yprev, tY, h_step, ftl, prev_tlam, tlam)
-                if found is not None:
-                    lpc = make_point(found[0], found[4], found[1], found[2], kind="LPC")
-                    specials.append(SpecialPoint("LPC", lpc.value, lpc.period, lpc.extrema,
-                                                 len(points) - 1, "solved"))
+                points.append(c)
+            stopped = CycleStop.LIMIT
+        else:
+            c = dataclasses.replace(c, kind=str(kind))
+            if kind in (SpecialPointKind.PD, SpecialPointKind.NS, SpecialPointKind.BP):
+                mult = np.asarray(c.multipliers)
+                target = {SpecialPointKind.PD: -1.0, SpecialPointKind.BP: 1.0}.get(kind)
+                if target is None:
+                    k = int(np.argmin(np.abs(np.abs(mult) - 1.0) + (np.abs(mult.imag) < 1e-9)))
                 else:
-                    specials.append(_interp_special("LPC", prev, pt, prev_tlam, tlam,
-                                                    len(points) - 1))
-            specials.extend(_multiplier_crossings(prev, pt, len(points) - 1))
-        points.append(pt)
-        prev_tlam = tlam
-        _notify(progress, step, pt)
-        # --- other stops -----------------------------------------------------------
-        if param_bounds is not None and not param_bounds[0] <= pt.value <= param_bounds[1]:
-            stopped = "left parameter range"
-            break
-        if pt.period > max_period_factor * T0:
-            stopped = "period too large (homoclinic?)"
-            warnings.append(f"period {pt.period:.3g} s exceeds {max_period_factor} x the "
-                            "Hopf period")
-            break
-        # --- mesh adaptation and step control ------------------------------------
-        if adapt_every and step % adapt_every == 0:
-            U, T, lam = prob.unpack(Y)
-            Ut, Tt, lt = prob.unpack(t_new)
-            new_mesh = _adapt_mesh(prob.mesh, m, U, prob.scale)
-            U2 = _remesh(prob.mesh, m, U, new_mesh)
-            Ut2 = _remesh(prob.mesh, m, Ut, new_mesh)
-            prob.mesh = new_mesh
-            Y = prob.pack(U2, T, lam)
-            t_new = prob.pack(Ut2, Tt, lt)
-            t_new /= math.sqrt(float(np.sum(W * t_new * t_new)))
-        Yprev, tY = Y, t_new
-        if its <= 3:
-            h_step = min(h_step * 1.5, ds_max)
-        elif its >= 6:
-            h_step = max(h_step * 0.6, ds_min)
+                    k = int(np.argmin(np.abs(mult - target)))
+                detail = f"multiplier {mult[k].real:.6g}{mult[k].imag:+.6g}j"
+            if located != SOLVED:
+                warnings.append(f"{label} at {param} = {c.value:.8g}: {located}")
+        specials.append(SpecialPoint(type=str(kind), value=c.value, period=c.period,
+                                     extrema=c.extrema, step=ev.step - 1, located=located,
+                                     detail=detail, label=label, point=c))
+    if not stopped:
+        stopped = str(res.stop_reason)
     return CycleBranch(param=param, hopf=start, points=tuple(points),
                        special_points=tuple(specials), stopped_reason=stopped,
-                       warnings=tuple(warnings), ntst=ntst, ncol=m, steps=step,
-                       rejected_steps=rejected)
+                       warnings=tuple(warnings), ntst=ntst, ncol=m,
+                       steps=max(len(res.points) - 1, 0), rejected_steps=res.rejected)
 
 
-def dataclass_replace_kind(pt: CyclePoint, kind: str) -> CyclePoint:
-    import dataclasses
-
-    return dataclasses.replace(pt, kind=kind)
-
-
-def _notify(progress, step, pt) -> None:
-    if progress is not None:
-        progress(step, pt)
-
-
-def _interp_special(kind, a: CyclePoint, b: CyclePoint, fa: float, fb: float,
-                    step: int, detail: str = "") -> SpecialPoint:
-    w = fa / (fa - fb) if fa != fb else 0.5
-    ext = {k: (a.extrema[k][0] + w * (b.extrema[k][0] - a.extrema[k][0]),
-               a.extrema[k][1] + w * (b.extrema[k][1] - a.extrema[k][1])) for k in a.extrema}
-    return SpecialPoint(kind, a.value + w * (b.value - a.value),
-                        a.period + w * (b.period - a.period), ext, step, "interpolated", detail)
-
-
-def _multiplier_crossings(a: CyclePoint, b: CyclePoint, step: int) -> list[SpecialPoint]:
-    """PD / NS between two points: a multiplier crossing the unit circle at -1 or off the
-    real axis (crossings at +1 are folds, detected from the tangent)."""
-    out = []
-    if a.n_unstable == b.n_unstable:
-        return out
-    # the multiplier of b nearest the unit circle decides the type
-    mb = b.multipliers
-    ma = a.multipliers
-    k = int(np.argmin(np.abs(np.abs(mb) - 1.0)))
-    mu = mb[k]
-    ka = int(np.argmin(np.abs(ma - mu)))
-    fa, fb = math.log(abs(ma[ka])), math.log(abs(mu))
-    if abs(mu.imag) > 1e-6 * max(1.0, abs(mu)):
-        kind = "NS"
-    elif mu.real < 0:
-        kind = "PD"
-    else:
-        return out  # a real multiplier through +1: a fold (LPC) or branch point
-    detail = f"multiplier {mu.real:.4g}{mu.imag:+.4g}j"
-    out.append(_interp_special(kind, a, b, fa, fb, step, detail))
-    return out
+def _fixed_param(prob: _Problem, Y: np.ndarray, value: float, tol: float, max_iter: int
+                 ) -> BranchPoint | None:
+    """The cycle at ``param`` = value exactly, from a nearby point Y (Newton)."""
+    row = np.zeros(prob.size)
+    row[-1] = 1.0
+    Uref, _, _ = prob.unpack(Y)
+    Yv, ok, its, res, lu, blocks = _newton(prob, Y, Uref, row, value / prob.lam_scale, tol,
+                                           max_iter)
+    if not ok:
+        return None
+    corr = Correction(u=Yv, iterations=its, residual=res, solve=lu.solve,
+                      data=(blocks, prob.mesh.copy()))
+    return BranchPoint(u=Yv, t=np.zeros_like(Yv), value=value, correction=corr)
 
 
 def correct_cycle(
