@@ -219,6 +219,8 @@ class ContinuationProblem(Protocol):
     * ``classify(name, point, a, b)`` : the kind of a located zero, or None to drop it
       (e.g. a neutral saddle found by the Hopf test function).
     * ``terminal(name)`` : whether the event stops the branch.
+    * ``worth_locating(name, a, b)`` : False skips a sign change that the end points
+      already show is no special point (saves the solves).
     * ``admissible(a, u_new, s)`` : reject a corrected point (branch jumping).
     * ``after_accept(point)`` : hook (mesh adaptation), returns the point to continue from.
     * ``stop(point)`` : a reason to stop after this point, or None.
@@ -318,6 +320,7 @@ def continuation(
     terminal = _hook(problem, "terminal", lambda name: False)
     admissible = _hook(problem, "admissible", lambda a, u, s: True)
     after_accept = _hook(problem, "after_accept", lambda pt: pt)
+    worth = _hook(problem, "worth_locating", lambda name, a, b: True)
     stop_hook = _hook(problem, "stop", lambda pt: None)
     t0 = np.asarray(t0, float) / math.sqrt(float(np.sum(W * t0 * t0)))
 
@@ -333,8 +336,11 @@ def continuation(
 
     def correct_at(a: BranchPoint, s: float, max_iter: int | None = None):
         row = W * a.t
-        return problem.correct(a.u + s * a.t, row, float(row @ a.u) + s,
+        corr = problem.correct(a.u + s * a.t, row, float(row @ a.u) + s,
                                max_iter or opt.newton_max_iter)
+        if corr is not None and not admissible(a, corr.u, s):
+            return None
+        return corr
 
     if first is None:
         row = W * t0
@@ -352,8 +358,6 @@ def continuation(
     step = 0
     while step < opt.max_steps:
         corr = correct_at(a, s)
-        if corr is not None and not admissible(a, corr.u, s):
-            corr = None
         if corr is None:
             rejected += 1
             s *= opt.shrink
@@ -370,6 +374,8 @@ def continuation(
         for name, gb in b.tests.items():
             ga = a.tests.get(name, np.nan)
             if not (np.isfinite(ga) and np.isfinite(gb)) or ga == 0 or ga * gb > 0:
+                continue
+            if not worth(name, a, b):
                 continue
             ev = _locate(problem, name, a, b, s, correct_at, make_point, opt, classify,
                          terminal, step - 1)
@@ -410,6 +416,17 @@ def continuation(
                               message=message, rejected=rejected)
 
 
+def _inside_step(u: np.ndarray, ua: np.ndarray, ub: np.ndarray, W: np.ndarray) -> bool:
+    """Whether u lies within the step from ua to ub: no farther from either end than the
+    chord (with a margin for the curvature of the branch)."""
+    def dist(x, y):
+        d = x - y
+        return math.sqrt(float(np.sum(W * d * d)))
+
+    chord = dist(ua, ub)
+    return dist(u, ua) <= 1.2 * chord and dist(u, ub) <= 1.2 * chord
+
+
 def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correct_at,
             make_point, opt: ContinuationOptions, classify, terminal, step: int
             ) -> Event | None:
@@ -422,18 +439,27 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
     side = 0
     s_prev = None
     located = f"not solved: no convergence in {opt.event_max_iter} iterations"
+    W = np.asarray(problem.weights, float)
+    failures = 0  # failed corrections (at most 8 per event)
     for _ in range(opt.event_max_iter):
         sm = (lo * ghi - hi * glo) / (ghi - glo) if ghi != glo else 0.5 * (lo + hi)
         if not lo < sm < hi:
             sm = 0.5 * (lo + hi)
-        corr = correct_at(a, sm, 3 * opt.newton_max_iter)
-        for nudge in (1e-7, -1e-7):
-            # at a branch point the bordered matrix is singular: step just beside it
-            if corr is None:
-                sm_n = sm + nudge * (hi - lo)
-                corr = correct_at(a, sm_n, 3 * opt.newton_max_iter)
-                if corr is not None:
-                    sm = sm_n
+        corr = None
+        for attempt in range(3):
+            if failures >= 8:
+                break
+            corr = correct_at(a, sm, 3 * opt.newton_max_iter if attempt == 0
+                              else opt.newton_max_iter)
+            if corr is not None and not _inside_step(corr.u, a.u, b.u, W):
+                corr = None  # converged to a point that does not lie in this step
+            if corr is not None:
+                break
+            failures += 1
+            if attempt == 0:  # at a branch point the bordered matrix is singular: nudge
+                sm = sm + 1e-7 * (hi - lo)
+            else:  # the corrector fails here: try closer to the near end of the bracket
+                sm = lo + 0.5 * (sm - lo)
         if corr is None:
             located = "not solved: the corrector failed inside the step"
             break
@@ -468,7 +494,7 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
                      value=float("nan"), terminal=name.startswith("__") or bool(terminal(name)),
                      s=s_step)
     is_terminal = name.startswith("__") or bool(terminal(name))
-    if is_terminal and located == SOLVED and best_before is not None:
+    if is_terminal and best_before is not None:
         best = best_before  # a branch ends on the near side of its terminal event
     g, sm, pt = best
     if name.startswith("__"):

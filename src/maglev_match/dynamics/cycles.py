@@ -652,6 +652,24 @@ def multiplier_tests(mult: np.ndarray) -> dict[str, float]:
     }
 
 
+def _n_complex_outside(mult) -> int:
+    """Number of non-real multipliers with |mu| > 1."""
+    mult = np.asarray(mult, complex)
+    return int(np.sum((np.abs(mult.imag) > 1e-6 * np.maximum(1.0, np.abs(mult)))
+                      & (np.abs(mult) > 1.0)))
+
+
+def _ns_pair_real(mult) -> bool:
+    """Whether the pair of multipliers with mu_i mu_j nearest 1 is real."""
+    mult = np.asarray(mult, complex)
+    if mult.size < 2:
+        return True
+    i, j = np.triu_indices(mult.size, 1)
+    k = int(np.argmin(np.abs(mult[i] * mult[j] - 1.0)))
+    return bool(abs(mult[i[k]].imag) <= 1e-6 * max(1.0, abs(mult[i[k]]))
+                and abs(mult[j[k]].imag) <= 1e-6 * max(1.0, abs(mult[j[k]])))
+
+
 class CycleProblem:
     """The collocation BVP of periodic orbits in one parameter as a problem for
     :func:`~maglev_match.dynamics.continuation.continuation`: corrector (sparse Newton on
@@ -688,7 +706,13 @@ class CycleProblem:
         return self.prob.unpack(u)[2]
 
     def admissible(self, a, u_new, s) -> bool:
-        return self.prob.unpack(u_new)[1] > 0
+        """A positive period, and no jump to another branch: the corrected point stays
+        within 3 s of the point before (the arclength constraint fixes only the tangent
+        component)."""
+        if not self.prob.unpack(u_new)[1] > 0:
+            return False
+        d = u_new - a.u
+        return float(np.sqrt(np.sum(self.weights * d * d))) <= 3.0 * s
 
     def cycle_point(self, pt: BranchPoint, kind: str = "step") -> CyclePoint:
         prob = self.prob
@@ -731,6 +755,18 @@ class CycleProblem:
     def terminal(self, name: str) -> bool:
         return name in ("LIMIT", "STOP")
 
+    def worth_locating(self, name: str, a: BranchPoint, b: BranchPoint) -> bool:
+        """Skip sign changes that the end points show are no special point: BP in a step
+        where the tangent turns (the fold's multiplier +1), NS when the number of
+        non-real multipliers outside the unit circle is the same at both ends (the NS test
+        then changed sign on a real pair mu, 1/mu)."""
+        if name == "BP":
+            return a.tests.get("LPC", 0.0) * b.tests.get("LPC", 0.0) >= 0
+        if name == "NS":
+            return _n_complex_outside(a.info["cycle"].multipliers) != \
+                _n_complex_outside(b.info["cycle"].multipliers)
+        return True
+
     def classify(self, name: str, pt: BranchPoint, a: BranchPoint, b: BranchPoint):
         if name not in _MULTIPLIER_TESTS:
             return self.event_kind(name)
@@ -754,7 +790,7 @@ class CycleProblem:
         i, j = np.triu_indices(mult.size, 1)
         k = int(np.argmin(np.abs(mult[i] * mult[j] - 1.0)))
         mu = mult[i[k]]
-        if abs(mu.imag) <= 1e-6 * max(1.0, abs(mu)) or abs(abs(mu) - 1.0) > 1e-3:
+        if _ns_pair_real(mult) or abs(abs(mu) - 1.0) > 1e-3:
             return None
         return SpecialPointKind.NS
 
