@@ -238,3 +238,84 @@ def test_cli_cycles_user_errors(capsys):
     assert code == 2 and "ncol" in err
     code, _, err = _run(capsys, "cycles", "--at", "sigma")
     assert code == 2 and "NAME=VALUE" in err
+
+
+# ------------------------------------------------- special points from test functions
+def test_period_doubling_located_exactly_with_closed_form_multipliers():
+    from systems import PD_NU, pd_multipliers, pd_system
+
+    from maglev_match.dynamics.hopf import locate_hopf_points
+
+    system = pd_system()
+    hp = locate_hopf_points(system, "nu", -0.2, 0.3, n_scan=10).points[0]
+    assert abs(hp.value) < 1e-12
+    br = cycle_branch(system, hp, "nu", stop_at=0.4, ntst=20, ncol=4, max_steps=100,
+                      lam_scale=0.05)
+    assert br.stopped_reason == "reached stop_at"
+    assert [s.type for s in br.special_points] == ["PD"]
+    pd = br.special_points[0]
+    assert pd.located == "solved" and pd.label == "PD1"
+    assert pd.value == pytest.approx(PD_NU, abs=1e-6)
+    assert abs(np.min(np.abs(np.asarray(pd.point.multipliers) + 1.0))) < 1e-6
+    # the PD lies inside its step, between the points around it
+    assert br.points[pd.step].value < pd.value < br.points[pd.step + 1].value
+    for c in br.points:
+        expected = pd_multipliers(c.value)[1:]  # the trivial one is split off
+        got = np.sort_complex(np.asarray(c.multipliers))
+        np.testing.assert_allclose(got.real, np.sort(expected), atol=1e-8)
+        assert abs(c.trivial_multiplier - 1.0) < 1e-8 and c.reliable
+        assert c.n_unstable == (1 if c.value > PD_NU else 0)
+
+
+def test_planar_system_never_reports_pd_or_ns():
+    from systems import planar_system
+
+    from maglev_match.dynamics.hopf import locate_hopf_points
+
+    system = planar_system()
+    hp = locate_hopf_points(system, "mu", -0.5, 1.0, n_scan=10).points[0]
+    br = cycle_branch(system, hp, "mu", stop_at=3.0, ntst=20, ncol=4, max_steps=100)
+    assert br.stopped_reason == "reached stop_at"
+    assert not [s for s in br.special_points if s.type in ("PD", "NS", "BP")]
+    for c in br.points:  # r = sqrt(mu), period 2 pi / (1 + mu), multiplier exp(-2 mu T)
+        assert c.max("radius") == pytest.approx(math.sqrt(c.value), rel=1e-6)
+        assert c.period == pytest.approx(2 * math.pi / (1 + c.value), rel=1e-6)
+        assert c.multipliers[0] == pytest.approx(math.exp(-2 * c.value * c.period), rel=1e-6)
+        assert c.stable and c.reliable
+
+
+def test_lorenz_branch_to_the_homoclinic_end_has_no_pd_or_ns():
+    from systems import LORENZ_RHO_H, lorenz
+
+    from maglev_match.dynamics.hopf import locate_hopf_points
+
+    system = lorenz()
+    scan = locate_hopf_points(system, "rho", 20.0, 30.0, n_scan=50)
+    assert len(scan.points) == 1
+    hp = scan.points[0]
+    assert hp.value == pytest.approx(LORENZ_RHO_H, rel=1e-12)
+    assert hp.l1 > 0  # subcritical
+    br = cycle_branch(system, hp, "rho", ntst=60, ncol=4, max_steps=300,
+                      max_period_factor=30, lam_scale=1.0)
+    assert br.stopped_reason == "period too large (homoclinic?)"
+    assert br.points[-1].value == pytest.approx(13.926, abs=2e-3)  # the homoclinic orbit
+    assert not [s for s in br.special_points if s.type in ("PD", "NS")]
+    # unstable cycles (one multiplier outside) wherever the multipliers are trusted
+    short = [c for c in br.points if c.period < 2.0]
+    assert short and all(c.reliable and c.n_unstable == 1 for c in short)
+    assert all(abs(c.trivial_multiplier - 1) < 1e-4 for c in short)
+
+
+@pytest.mark.xfail(strict=True, reason="the monodromy product loses the trivial multiplier "
+                   "at long periods; fixed by the periodic-Schur Floquet method (i11f): "
+                   "remove this mark when it lands")
+def test_lorenz_trivial_multiplier_stays_at_one_up_to_the_homoclinic_end():
+    from systems import lorenz
+
+    from maglev_match.dynamics.hopf import locate_hopf_points
+
+    system = lorenz()
+    hp = locate_hopf_points(system, "rho", 20.0, 30.0, n_scan=50).points[0]
+    br = cycle_branch(system, hp, "rho", ntst=60, ncol=4, max_steps=300,
+                      max_period_factor=30, lam_scale=1.0)
+    assert all(c.reliable for c in br.points)
