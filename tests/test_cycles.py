@@ -222,6 +222,11 @@ def test_cli_cycles_json_shape(capsys, tmp_path):
         assert row["stable"] == (row["unstable_multipliers"] == 0)
     types = {s["type"] for s in doc["special_points"]}
     assert types <= {"LPC", "PD", "NS", "LIMIT"}
+    labels = [s["label"] for s in doc["special_points"]]
+    assert len(set(labels)) == len(labels) and all(labels)
+    assert all(s["located"] == "solved" or s["located"].startswith(("bracketed", "not "))
+               for s in doc["special_points"])
+    assert all(isinstance(r["stability_reliable"], bool) for r in doc["branch"])
     if doc["stopped_reason"] == "limit":
         lim = [s for s in doc["special_points"] if s["type"] == "LIMIT"][0]
         last = doc["branch"][-1]

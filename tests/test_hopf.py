@@ -236,6 +236,9 @@ def test_cli_hopf_json(capsys, unit_scan):
     ref = unit_scan.points[0]  # same Hopf point found from a different scan
     assert rec["omega1"] == pytest.approx(ref.value, rel=1e-9)
     assert rec["l1"] == pytest.approx(ref.l1, rel=1e-6)
+    hs = [sp for sp in doc["special_points"] if sp["type"] == "H"]
+    assert len(hs) == 1 and hs[0]["label"] == "H1" and hs[0]["located"] == "solved"
+    assert hs[0]["omega1"] == pytest.approx(rec["omega1"], rel=1e-8)  # before refinement
 
 
 def test_cli_hopf_curve_json_and_figure(capsys, tmp_path):

@@ -72,6 +72,8 @@ def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
             "unstable_multipliers": c.n_unstable,
             "max_abs_multiplier": float(np.max(np.abs(c.multipliers))),
             "kind": c.kind,
+            "trivial_multiplier_error": float(abs(c.trivial_multiplier - 1.0)),
+            "stability_reliable": c.reliable,
         })
     return rows
 
@@ -83,7 +85,7 @@ def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
         rows.append({"type": s.type, param: s.value, "period": s.period, "gap_max": gmax,
                      "gap_min": gmin, "current_min": s.extrema["current"][1],
                      "limit": s.detail if s.type == "LIMIT" else "",
-                     "detail": s.detail, "located": s.located})
+                     "detail": s.detail, "located": s.located, "label": s.label})
     return rows
 
 
@@ -252,11 +254,18 @@ def _print_summary(result, branches, chosen, param, files) -> None:
             table.add_row(f"{c.value:.7g}", f"{c.period:.5f}",
                           f"{c.extrema['gap_deviation'][0] * 1e3:.4f}",
                           f"{c.extrema['gap_deviation'][1] * 1e3:.4f}",
-                          f"{c.extrema['current'][1]:.3f}", "yes" if c.stable else "no",
-                          str(c.n_unstable))
+                          f"{c.extrema['current'][1]:.3f}",
+                          ("yes" if c.stable else "no") + ("" if c.reliable else "?"),
+                          str(c.n_unstable) + ("" if c.reliable else "?"))
         console.print(table)
+        unreliable = [c for c in pts if not c.reliable]
+        if unreliable:
+            console.print(f"  [yellow]{len(unreliable)} of {len(pts)} cycles have unreliable "
+                          "multipliers (trivial multiplier away from 1, marked ?): their "
+                          "stability is not trusted and no PD/NS/BP is declared there[/]")
         for s in br.special_points:
-            console.print(f"  {s.type} at {param} = {s.value:.8g} ({s.located})"
+            console.print(f"  {s.label or s.type}: {s.type} at {param} = {s.value:.8g} "
+                          f"({s.located})"
                           f"{': ' + s.detail if s.detail else ''}, gap max "
                           f"{s.extrema['gap_deviation'][0] * 1e3:.4f} mm, min "
                           f"{s.extrema['gap_deviation'][1] * 1e3:.4f} mm")

@@ -90,9 +90,13 @@ def hopf_command(
     scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
     names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE[model]))
     records = [_point_record(hp, system, names) for hp in scan.points]
+    specials = [{"type": str(sp.type), param: sp.value, "located": sp.located,
+                 "label": sp.label, "frequency": sp.frequency}
+                for sp in scan.special_points]
     if json_out:
         emit_json({"param": param, "model": model, "from": start, "to": stop,
-                   "points": records, "warnings": list(scan.warnings)})
+                   "points": records, "special_points": specials,
+                   "warnings": list(scan.warnings)})
         return
     console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit_of(param)}, "
                   f"model {model}: {len(records)} found")
@@ -106,6 +110,10 @@ def hopf_command(
         console.print(table)
         console.print("l1 with <q,q> = 1, <p,q> = 1 (paper eq. 24): > 0 subcritical "
                       "(unstable cycle), < 0 supercritical (stable cycle)")
+    folds = [sp for sp in specials if sp["type"] != "H"]
+    for sp in folds:
+        console.print(f"  {sp['label']}: {sp['type']} of the equilibrium at {param} = "
+                      f"{sp[param]:.8g} ({sp['located']})")
     print_warnings(list(scan.warnings) + [w for hp in scan.points for w in hp.warnings])
 
 

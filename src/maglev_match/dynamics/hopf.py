@@ -95,9 +95,10 @@ class HopfScan:
     start: float
     stop: float
     points: list[HopfPoint]
-    scan_values: np.ndarray  # the coarse grid used to bracket the crossings
-    max_real_part: np.ndarray  # max Re(lambda) on that grid (1/s)
+    scan_values: np.ndarray  # parameter along the equilibrium branch (branch order)
+    max_real_part: np.ndarray  # max Re(lambda) there (1/s)
     warnings: tuple[str, ...] = ()
+    special_points: tuple = ()  # LP, BP, H of the equilibrium branch (EquilibriumSpecialPoint)
 
 
 @dataclass(frozen=True)
@@ -649,7 +650,7 @@ def locate_hopf_points(
     points.sort(key=lambda h: h.value)
     return HopfScan(param=param, start=float(start), stop=float(stop), points=points,
                     scan_values=branch.values, max_real_part=branch.max_real_part,
-                    warnings=tuple(warnings))
+                    warnings=tuple(warnings), special_points=branch.special_points)
 
 
 def _with_warning(hp: HopfPoint, msg: str) -> HopfPoint:
