@@ -324,3 +324,42 @@ def test_lorenz_trivial_multiplier_stays_at_one_up_to_the_homoclinic_end():
     br = cycle_branch(system, hp, "rho", ntst=60, ncol=4, max_steps=300,
                       max_period_factor=30, lam_scale=1.0)
     assert all(c.reliable for c in br.points)
+
+
+def test_collocation_problem_exposes_residual_jacobian_and_parameter_derivative():
+    from maglev_match.dynamics.collocation import CollocationProblem
+
+    br = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", stop_at=0.3, ntst=12, ncol=4,
+                      max_steps=100)
+    c = br.points[-1]
+    orbit = c.orbit
+    prob = CollocationProblem(system=HOPF_NF, ipar=0, p0=orbit.p, mesh=orbit.mesh, m=4,
+                              scale=np.asarray(HOPF_NF.state_scale), T_scale=orbit.period,
+                              lam_scale=0.1)
+    Y = prob.pack(orbit.states, orbit.period, c.value)
+    row = np.zeros(prob.size)
+    row[-1] = 1.0
+    phase = prob.phase_row(orbit.states)
+    r, A, _ = prob.evaluate(Y, phase, orbit.states, row, c.value / 0.1)
+    assert np.max(np.abs(r)) < 1e-9  # a converged point
+    assert A.shape == (prob.size, prob.size)
+    # dF/dmu is the lambda column of the Jacobian (scaled by the lambda scale) ...
+    # (except the last row, the fixed-parameter condition, which has no p in it)
+    col = A[:, -1].toarray().ravel() / 0.1
+    dmu = prob.param_derivative(Y, "mu")
+    np.testing.assert_allclose(dmu[:-1], col[:-1], atol=1e-12)
+    assert dmu[-1] == 0.0
+    # ... and dF/dl1 agrees with a central difference of the residual in l1
+    d = 1e-6
+    rs = []
+    for sgn in (1, -1):
+        prob.p0 = HOPF_NF.params_with(orbit.p, l1=-1.0 + sgn * d)
+        rs.append(prob.evaluate(Y, phase, orbit.states, row, c.value / 0.1)[0])
+    prob.p0 = orbit.p
+    np.testing.assert_allclose(prob.param_derivative(Y, "l1"), (rs[0] - rs[1]) / (2 * d),
+                               atol=1e-7)
+    # the profile at a time and its (exactly linear) derivative in Y
+    for s in (0.0, 0.137, 0.5, 0.999):
+        u, D = prob.profile_at(Y, s)
+        np.testing.assert_allclose(u, orbit.evaluate([s])[0], atol=1e-14)
+        np.testing.assert_allclose(D @ Y, u, atol=1e-14)
