@@ -23,6 +23,14 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
+from maglev_match.dynamics.continuation import (
+    BranchPoint,
+    ContinuationOptions,
+    Correction,
+    SpecialPointKind,
+    StopReason,
+    continuation,
+)
 from maglev_match.dynamics.hopf import (
     HopfPoint,
     _defining_kernels,
@@ -231,66 +239,38 @@ class _HopfCurveSolver:
                 return k
         return -1
 
-    # --- one direction ---
+    # --- one direction, by the package's one continuation driver ---
     def run(self, z0: np.ndarray, c0: np.ndarray, t0: np.ndarray, h0: float, h_max: float,
             h_min: float, max_steps: int, progress) -> _Branch:
-        n = self.n
         br = _Branch(zs=[z0], cs=[c0], info=[self.point_info(z0)[:4]])
-        u, c, t, h = z0 / self.S, c0, t0, h0
-        u_start = u.copy()
-        inv = np.ones_like(t)
-        inv[n : 3 * n] = 0.0  # orientation uses only the normalisation-free components
-        for step in range(max_steps):
-            u_pred = u + h * t
-            u_new, its = self.correct(u_pred, c, t, t @ u_pred)
-            if u_new is not None:
-                jump = np.linalg.norm((u_new - u) * inv)
-                if jump > 3.0 * h:  # jumped to another branch
-                    u_new = None
-            if u_new is None:
-                h *= 0.5
-                if h < h_min:
-                    br.ok = False
-                    br.message = (f"step size fell below {h_min:g} at "
-                                  f"{self._where(u * self.S)} (corrector failed)")
-                    break
-                continue
-            z_new = u_new * self.S
-            k_out = self.in_bounds(z_new)
-            if k_out >= 0:
-                z_b = self.land_on_bound(u, u_new, c, k_out)
-                if z_b is not None:
-                    self.accept(br, z_b, c)
-                br.message = f"reached the bound of {self.params[k_out]}"
-                break
-            om = z_new[3 * n]
-            if om <= 1e-6 * abs(self.S[3 * n]):
-                br.bt = True
-                br.message = "frequency fell to zero (Bogdanov-Takens or neutral saddle)"
-                self.accept(br, z_new, c)
-                break
-            A_last = self.last_jacobian
-            c_new = self.accept(br, z_new, c)
-            u_prev, u = u, br.zs[-1] / self.S
-            # the corrector's last Jacobian serves for the tangent unless the eigenvector
-            # normalisation was renewed
-            t = self.tangent(u, c_new, t * inv, None if c_new is not c else A_last)
-            c = c_new
-            if its <= 3:
-                h = min(h * 1.5, h_max)
-            elif its >= 6:
-                h = max(h * 0.6, h_min)
-            if step > 10 and np.linalg.norm((u - u_start) * inv) < 0.5 * h and \
-                    np.linalg.norm((u_prev - u_start) * inv) >= np.linalg.norm(
-                        (u - u_start) * inv):
-                br.closed = True
-                br.message = "the curve closed on itself"
-                break
+        prob = _HopfCurveProblem(self, br, c0, z0 / self.S)
+        opt = ContinuationOptions(ds=h0, ds_min=h_min, ds_max=h_max, max_steps=max_steps,
+                                  newton_tol=self.tol, newton_max_iter=10)
+
+        def notify(step, pt):
             if progress is not None:
                 progress(len(br.zs))
-        else:
+
+        res = continuation(prob, z0 / self.S, t0, opt, progress=notify)
+        if res.stop_reason == StopReason.EVENT:
+            ev = next(e for e in res.events if e.terminal)
+            k = int(ev.name[1])
+            a_pt = res.points[-2] if len(res.points) > 1 else res.points[-1]
+            z_b = None
+            if ev.point is not None:
+                z_b = self.land_on_bound(a_pt.u, ev.point.u, prob.c, k)
+            if z_b is not None:
+                self.accept(br, z_b, prob.c)
+            br.message = f"reached the bound of {self.params[k]}"
+        elif res.stop_reason == StopReason.PROBLEM:
+            br.message = res.message
+        elif res.stop_reason == StopReason.MAX_STEPS:
             br.ok = False
             br.message = f"stopped after max_steps = {max_steps}"
+        elif res.stop_reason in (StopReason.STEP_TOO_SMALL, StopReason.NEWTON_FAILED):
+            br.ok = False
+            br.message = (f"step size fell below {h_min:g} at "
+                          f"{self._where(br.zs[-1])} (corrector failed)")
         return br
 
     def accept(self, br: _Branch, z: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -358,6 +338,88 @@ class _HopfCurveSolver:
             return None, np.nan
         z = point(theta)
         return z, abs(g(theta))
+
+
+class _HopfCurveProblem:
+    """The Hopf defining system in two parameters as a problem for
+    :func:`~maglev_match.dynamics.continuation.continuation`: scaled unknowns, Euclidean
+    arclength; the eigenvector normalisation <c, v1> = 1, <c, v2> = 0 is renewed on
+    acceptance when the eigenvector drifts; the bounds of both parameters are terminal
+    test functions; the branch stops at a Bogdanov-Takens point (omega -> 0) or when it
+    closes on itself."""
+
+    def __init__(self, solver: _HopfCurveSolver, br: _Branch, c0: np.ndarray,
+                 u_start: np.ndarray):
+        self.solver = solver
+        self.br = br
+        self.c = c0
+        n = solver.n
+        self.weights = np.ones_like(u_start)
+        self.inv = np.ones_like(u_start)
+        self.inv[n : 3 * n] = 0.0  # jumps and closure use the normalisation-free parts
+        self.u_start = u_start.copy()
+        self.accepted = 0
+
+    def correct(self, u_pred, row, target, max_iter):
+        u, its = self.solver.correct(u_pred, self.c, row, target, max_iter)
+        if u is None:
+            return None
+        M = np.vstack([self.solver.last_jacobian, row[None, :]])
+        try:
+            lu = scipy.linalg.lu_factor(M)
+        except (np.linalg.LinAlgError, ValueError):
+            return None
+        return Correction(u=u, iterations=its, residual=0.0,
+                          solve=lambda b, lu=lu: scipy.linalg.lu_solve(lu, b))
+
+    def parameter(self, u) -> float:
+        return float((u * self.solver.S)[3 * self.solver.n + 1])
+
+    def test_functions(self, pt: BranchPoint) -> dict[str, float]:
+        al = (pt.u * self.solver.S)[3 * self.solver.n + 1 :]
+        out = {}
+        for k, (a, b) in enumerate(self.solver.bounds):
+            lo, hi = min(a, b), max(a, b)
+            out[f"B{k}lo"] = float(al[k] - lo)
+            out[f"B{k}hi"] = float(hi - al[k])
+        return out
+
+    def event_kind(self, name: str) -> str:
+        return SpecialPointKind.BOUND
+
+    def terminal(self, name: str) -> bool:
+        return True
+
+    def admissible(self, a: BranchPoint, u_new: np.ndarray, s: float) -> bool:
+        return float(np.linalg.norm((u_new - a.u) * self.inv)) <= 3.0 * s
+
+    def after_accept(self, pt: BranchPoint) -> BranchPoint:
+        solver = self.solver
+        A_last = solver.last_jacobian
+        c_new = solver.accept(self.br, pt.u * solver.S, self.c)
+        u = self.br.zs[-1] / solver.S
+        # the corrector's last Jacobian serves for the tangent unless the eigenvector
+        # normalisation was renewed
+        t = solver.tangent(u, c_new, pt.t * self.inv, None if c_new is not self.c else A_last)
+        self.c = c_new
+        self.accepted += 1
+        return BranchPoint(u=u, t=t, value=pt.value, correction=pt.correction,
+                           tests=pt.tests, kind=pt.kind, info=pt.info)
+
+    def stop(self, pt: BranchPoint) -> str | None:
+        solver, n = self.solver, self.solver.n
+        z = self.br.zs[-1]
+        if z[3 * n] <= 1e-6 * abs(solver.S[3 * n]):
+            self.br.bt = True
+            return "frequency fell to zero (Bogdanov-Takens or neutral saddle)"
+        if self.accepted > 11 and len(self.br.zs) >= 2:
+            u, u_prev = z / solver.S, self.br.zs[-2] / solver.S
+            h = float(np.linalg.norm(u - u_prev))
+            d = float(np.linalg.norm((u - self.u_start) * self.inv))
+            if d < 0.5 * h and float(np.linalg.norm((u_prev - self.u_start) * self.inv)) >= d:
+                self.br.closed = True
+                return "the curve closed on itself"
+        return None
 
 
 def hopf_curve(
