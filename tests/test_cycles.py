@@ -363,3 +363,31 @@ def test_collocation_problem_exposes_residual_jacobian_and_parameter_derivative(
         u, D = prob.profile_at(Y, s)
         np.testing.assert_allclose(u, orbit.evaluate([s])[0], atol=1e-14)
         np.testing.assert_allclose(D @ Y, u, atol=1e-14)
+
+
+def test_saved_branch_restart_reproduces_the_next_points(tmp_path):
+    from maglev_match.dynamics.cycles import load_restart
+
+    kw = dict(ntst=20, ncol=4, ds_max=0.5, adapt_every=3, lam_scale=0.5)
+    full = cycle_branch(FOLD_NF, _start(FOLD_NF, 2.0), "mu", max_steps=30, **kw)
+    assert len(full.points) == 30 and [s.type for s in full.special_points] == ["LPC"]
+    first = cycle_branch(FOLD_NF, _start(FOLD_NF, 2.0), "mu", max_steps=7, **kw)
+    ds = first.to_xarray(FOLD_NF, param_unit="1", state_units=["1"] * 5)
+    for name, var in ds.data_vars.items():
+        assert "units" in var.attrs and var.attrs.get("long_name"), name
+    path = tmp_path / "branch.nc"
+    ds.to_netcdf(path, engine="h5netcdf")
+    start, state, param = load_restart(path, "P6")  # the last point of the short run
+    assert param == "mu"
+    rest = cycle_branch(FOLD_NF, start, "mu", max_steps=23, restart=state, **kw)
+    assert len(rest.points) == 23
+    for a, b in zip(full.points[7:], rest.points, strict=True):
+        assert b.value == pytest.approx(a.value, abs=1e-8)
+        assert b.period == pytest.approx(a.period, rel=1e-8)
+        np.testing.assert_allclose(b.orbit.states, a.orbit.states, atol=1e-7)
+    # the fold is found again by the restarted run, at the same place
+    assert [s.type for s in rest.special_points] == ["LPC"]
+    assert rest.special_points[0].value == pytest.approx(full.special_points[0].value,
+                                                         abs=1e-10)
+    with pytest.raises(KeyError, match="not in the saved branch"):
+        load_restart(path, "nope")

@@ -411,6 +411,7 @@ def continuation(
             s = min(s * opt.grow, opt.ds_max)
         elif its >= opt.slow_iterations:
             s = max(s * opt.slow_factor, opt.ds_min)
+        b.info["ds_next"] = s  # the step that follows this point (for a restart)
         a = b
     return ContinuationResult(points=points, events=events, stop_reason=reason,
                               message=message, rejected=rejected)
