@@ -236,6 +236,24 @@ def test_cli_cycles_json_shape(capsys, tmp_path):
                    last["current_min"] / 26.68) == pytest.approx(0.0, abs=1e-6)
     assert (tmp_path / "cycles_unit_sigma.png").exists()
     assert (tmp_path / "cycles_unit_sigma.csv").read_text().startswith("branch,hopf,sigma")
+    # the full branch as netCDF, and a restart from its third point
+    import xarray as xr
+
+    nc = tmp_path / "cycles_unit_sigma.nc"
+    saved = xr.load_dataset(nc, engine="h5netcdf")
+    np.testing.assert_allclose(saved["value"].values, [r["sigma"] for r in doc["branch"]])
+    assert saved["period"].attrs["units"] == "s" and saved["value"].attrs["units"] == "1/kg"
+    code, out, _ = _run(capsys, "cycles", "--param", "sigma", "--at", "omega1=100",
+                        "--preset", "alpha1", "--from", "5e-4", "--to", "2e-3",
+                        "--scan", "15", "--ntst", "30", "--json", "--restart", str(nc),
+                        "--label", "P2", "--max-steps", "2")
+    assert code == 0
+    again = json.loads(out)
+    assert [r["sigma"] for r in again["branch"]] == pytest.approx(
+        [r["sigma"] for r in doc["branch"][3:5]], rel=1e-8)
+    code, _, err = _run(capsys, "cycles", "--param", "sigma", "--at", "omega1=100",
+                        "--preset", "alpha1", "--restart", str(nc), "--label", "Q7")
+    assert code == 2 and "--label Q7" in err
 
 
 def test_cli_cycles_user_errors(capsys):

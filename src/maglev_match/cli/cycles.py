@@ -89,6 +89,33 @@ def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
     return rows
 
 
+def _load_restart(path: Path | None, label: str | None, param: str):
+    """The restart state and a Hopf-point record of a saved branch (user errors named)."""
+    from types import SimpleNamespace
+
+    from maglev_match.dynamics.cycles import load_restart
+
+    if path is None or label is None:
+        raise UserError("--restart FILE and --label LABEL go together")
+    if not path.is_file():
+        raise UserError(f"--restart {path}: no such file")
+    try:
+        start, state, saved_param = load_restart(path, label)
+    except KeyError as exc:
+        raise UserError(f"--label {label}: {str(exc).strip(chr(34) + chr(39))}") from None
+    except (OSError, ValueError) as exc:
+        raise UserError(f"--restart {path}: not a saved branch ({exc})") from None
+    if saved_param != param:
+        raise UserError(f"--restart {path}: the branch was continued in '{saved_param}', "
+                        f"not --param {param}")
+    l1 = float("nan") if start.l1 is None else start.l1
+    kind = "subcritical" if l1 > 0 else "supercritical" if l1 < 0 else "unknown"
+    rec = SimpleNamespace(param=start.param, value=start.value, x=start.x, p=start.p,
+                          frequency=start.frequency, q=start.q, l1=l1, kind=kind,
+                          crossing_speed=float("nan"), others_stable=None, converged=True)
+    return state, rec
+
+
 def _hopf_json(h: HopfPoint, param: str) -> dict[str, Any]:
     return {param: h.value, "l1": h.l1, "kind": h.kind, "frequency": h.frequency,
             "period": 2 * np.pi / h.frequency, "crossing_speed": h.crossing_speed,
@@ -130,6 +157,12 @@ def cycles_command(
     model: ModelOpt = "unit",
     json_out: JsonOpt = False,
     out: OutOpt = None,
+    restart: Annotated[Path | None, typer.Option(
+        "--restart", help="Continue from a point of a branch saved by --out (netCDF), "
+        "instead of from a Hopf point; give the same --at/--set as for that run.")] = None,
+    label: Annotated[str | None, typer.Option(
+        "--label", help="With --restart: the point to continue from, P<k> for the k-th "
+        "branch point or a special point's label (LPC1, PD1, ...).")] = None,
 ) -> None:
     """Cycles born at Hopf points, continued in --param until a physical limit (Fig. 5)."""
     check_model(model)
@@ -158,6 +191,10 @@ def cycles_command(
                         f"[{a:.6g}, {b:.6g}]; widen --from/--to")
     hopfs.sort(key=lambda h: abs(h.value - design))
     chosen = hopfs if all_hopf else hopfs[:1]
+    restart_state = None
+    if restart is not None or label is not None:
+        restart_state, start = _load_restart(restart, label, param)
+        chosen = [start]
     limits = cycle_limit_margins(params, include_current=not ignore_current)
     branches: list[CycleBranch] = []
     for h in chosen:
@@ -172,7 +209,7 @@ def cycles_command(
                     f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm"))
 
             br = cycle_branch(system, h, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
-                              limits=limits, progress=report)
+                              limits=limits, progress=report, restart=restart_state)
         branches.append(br)
         console_err.print(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
                           f"stopped: {br.stopped_reason}")
@@ -227,6 +264,17 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     _write_csv(folder / f"{stem}.csv", rows)
     _write_csv(folder / f"{stem}_special_points.csv", specials)
     files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
+    # the full branches (profiles, multipliers, special points, restart data) as netCDF
+    from maglev_match.cli.common import unit_of
+    from maglev_match.models import build_system
+
+    system = build_system(params, model)
+    for k, br in enumerate(branches):
+        if not br.points:
+            continue
+        nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
+        br.to_xarray(system, param_unit=unit_of(param)).to_netcdf(nc, engine="h5netcdf")
+        files.append(nc)
     lo = min([scan.scan_values[0]] + [float(np.min(b.values)) for b in branches if b.points])
     hi = max([scan.scan_values[-1]] + [float(np.max(b.values)) for b in branches if b.points])
     sel = (scan.scan_values >= lo) & (scan.scan_values <= hi)
