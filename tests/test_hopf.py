@@ -258,6 +258,13 @@ def test_cli_hopf_curve_json_and_figure(capsys, tmp_path):
     assert doc["special_points"] == []
     for f in doc["figures"]:
         assert (tmp_path / f.split("/")[-1]).exists()
+    import xarray as xr
+
+    saved = xr.load_dataset(doc["netcdf"][0], engine="h5netcdf")
+    n0 = sum(p["branch"] == 0 for p in pts)
+    np.testing.assert_allclose(saved["sigma"].values, s[:n0])
+    assert saved["sigma"].attrs["units"] == "1/kg" and saved["l1"].attrs["units"] == "1/s"
+    assert all("long_name" in v.attrs for v in saved.data_vars.values())
 
 
 def test_cli_hopf_curve_rejects_unknown_parameter(capsys):

@@ -284,6 +284,12 @@ def hopf_curve_command(
     fig = hopf_curve_figure(curves, names, (unit_of(names[0]), unit_of(names[1])), grid_data,
                             title=title)
     figs = save_figure(fig, folder / stem)
+    nc_files = []
+    for k, c in enumerate(curves):
+        nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
+        c.to_xarray((unit_of(names[0]), unit_of(names[1])), system.state_names).to_netcdf(
+            nc, engine="h5netcdf")
+        nc_files.append(str(nc))
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]
     if json_out:
@@ -291,7 +297,7 @@ def hopf_curve_command(
                    "bounds": {n: list(bounds[n]) for n in names}, "points": points,
                    "special_points": special, "branches": branches, "csv": str(csv_path),
                    "special_csv": str(sp_path), "figures": [str(f) for f in figs],
-                   "warnings": warnings})
+                   "netcdf": nc_files, "warnings": warnings})
         return
     console.print(f"Hopf curve in ({names[0]}, {names[1]}), model {model}: "
                   f"{len(curves)} branch(es), {len(points)} points")
@@ -309,7 +315,8 @@ def hopf_curve_command(
         console.print(table)
     else:
         console.print("  no codimension-two points inside the bounds")
-    console.print(f"wrote {csv_path}, {sp_path} and {', '.join(str(f) for f in figs)}")
+    console.print(f"wrote {csv_path}, {sp_path}, {', '.join(nc_files)} and "
+                  f"{', '.join(str(f) for f in figs)}")
     print_warnings(warnings + [w for c in curves for w in c.warnings])
 
 

@@ -109,6 +109,69 @@ class HopfCurve:
     def frequency(self) -> np.ndarray:
         return np.array([pt.frequency for pt in self.points])
 
+    def labels(self) -> list[str]:
+        """Labels of the codimension-two points along the branch (GH1, HH1, ...)."""
+        counts: dict[str, int] = {}
+        out = []
+        for sp in self.special_points:
+            counts[sp.type] = counts.get(sp.type, 0) + 1
+            out.append(f"{sp.type}{counts[sp.type]}")
+        return out
+
+    def to_xarray(self, units: tuple[str, str] = ("", ""),
+                  state_names: tuple[str, ...] | None = None):
+        """The branch as an :class:`xarray.Dataset`: both parameters, frequency, l1,
+        equilibrium states and stability of the other eigenvalues per point; the
+        codimension-two points with their labels. ``units`` of the two parameters.
+        Every variable has ``units`` and ``long_name``."""
+        import xarray as xr
+
+        p1, p2 = self.params
+        v = self.values()
+        n = self.points[0].x.size if self.points else 0
+        names = list(state_names) if state_names else [f"x{k}" for k in range(n)]
+        data = {
+            p1: (("point",), v[:, 0], {"units": units[0], "long_name": f"{p1} on the curve"}),
+            p2: (("point",), v[:, 1], {"units": units[1], "long_name": f"{p2} on the curve"}),
+            "frequency": (("point",), self.frequency(),
+                          {"units": "rad/s", "long_name": "Hopf frequency omega"}),
+            "l1": (("point",), self.l1(), {"units": "1/s", "long_name": "first Lyapunov "
+                                           "coefficient (<q,q> = 1, <p,q> = 1)"}),
+            "others_stable": (("point",), np.array([pt.others_stable for pt in self.points],
+                                                   np.int8),
+                              {"units": "1", "long_name": "1 if every other eigenvalue has "
+                               "Re < 0"}),
+            "equilibrium": (("point", "state"),
+                            np.array([pt.x for pt in self.points]).reshape(-1, n),
+                            {"units": "state units", "long_name": "equilibrium state"}),
+        }
+        sps = self.special_points
+        coords = {"state": ("state", names, {"units": "1", "long_name": "state name"}),
+                  "special_label": ("special", self.labels(),
+                                    {"units": "1", "long_name": "special point label"})}
+        nan = float("nan")
+        data.update({
+            "special_type": (("special",), np.array([sp.type for sp in sps], object),
+                             {"units": "1", "long_name": "GH, BT, ZH or HH"}),
+            f"special_{p1}": (("special",), np.array([sp.values[0] for sp in sps], float),
+                              {"units": units[0], "long_name": f"{p1} at the point"}),
+            f"special_{p2}": (("special",), np.array([sp.values[1] for sp in sps], float),
+                              {"units": units[1], "long_name": f"{p2} at the point"}),
+            "special_frequency": (("special",), np.array([sp.frequency for sp in sps], float),
+                                  {"units": "rad/s", "long_name": "Hopf frequency there"}),
+            "special_l2": (("special",), np.array([nan if sp.l2 is None else sp.l2
+                                                   for sp in sps], float),
+                           {"units": "1/s", "long_name": "second Lyapunov coefficient (GH)"}),
+            "special_located": (("special",), np.array(["solved" if sp.converged else
+                                                        (sp.note or "not solved")
+                                                        for sp in sps], object),
+                                {"units": "1", "long_name": "how it was located"}),
+        })
+        return xr.Dataset(data, coords=coords, attrs={
+            "params": f"{p1},{p2}", "converged": int(self.converged),
+            "message": self.message, "closed": int(self.closed),
+            "title": f"Hopf curve in ({p1}, {p2})"})
+
 
 @dataclass
 class _Branch:
