@@ -14,14 +14,13 @@ solving; Bogdanov-Takens (BT) when the frequency falls to zero.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
-import scipy.optimize
 
 from maglev_match.dynamics.continuation import (
     BranchPoint,
@@ -184,18 +183,11 @@ class _Branch:
     ok: bool = True
     closed: bool = False
     bt: bool = False
+    events: list = field(default_factory=list)  # codimension-two events of the driver
 
 
-def _reference_c(v1: np.ndarray) -> np.ndarray:
-    return v1 / float(v1 @ v1)
 
 
-def _renormalise(z: np.ndarray, n: int, c: np.ndarray) -> np.ndarray:
-    """Re-express the eigenvector part of z for the normalisation <c, v1> = 1, <c, v2> = 0."""
-    x, v1, v2, om, al = _unpack(z, n)
-    q = v1 + 1j * v2
-    q = q / (c @ q)
-    return _pack(x, q.real, q.imag, om, al)
 
 
 class _HopfCurveSolver:
@@ -304,9 +296,9 @@ class _HopfCurveSolver:
 
     # --- one direction, by the package's one continuation driver ---
     def run(self, z0: np.ndarray, c0: np.ndarray, t0: np.ndarray, h0: float, h_max: float,
-            h_min: float, max_steps: int, progress) -> _Branch:
+            h_min: float, max_steps: int, progress, detect: bool = True) -> _Branch:
         br = _Branch(zs=[z0], cs=[c0], info=[self.point_info(z0)[:4]])
-        prob = _HopfCurveProblem(self, br, c0, z0 / self.S)
+        prob = _HopfCurveProblem(self, br, c0, z0 / self.S, detect)
         opt = ContinuationOptions(ds=h0, ds_min=h_min, ds_max=h_max, max_steps=max_steps,
                                   newton_tol=self.tol, newton_max_iter=10)
 
@@ -315,6 +307,7 @@ class _HopfCurveSolver:
                 progress(len(br.zs))
 
         res = continuation(prob, z0 / self.S, t0, opt, progress=notify)
+        br.events = [e for e in res.events if not e.name.startswith("B")]
         if res.stop_reason == StopReason.EVENT:
             ev = next(e for e in res.events if e.terminal)
             k = int(ev.name[1])
@@ -336,7 +329,7 @@ class _HopfCurveSolver:
                           f"{self._where(br.zs[-1])} (corrector failed)")
         return br
 
-    def accept(self, br: _Branch, z: np.ndarray, c: np.ndarray) -> np.ndarray:
+    def accept(self, br: _Branch, z: np.ndarray, c: np.ndarray, info=None) -> np.ndarray:
         """Store a point; renew the normalisation <c, v1> = 1, <c, v2> = 0 when the
         eigenvector has drifted far from c (returns the c in force, ``c`` itself if kept)."""
         n = self.n
@@ -347,7 +340,8 @@ class _HopfCurveSolver:
             c_new = v1.copy()
         br.zs.append(_pack(x, v1, v2, om, al))
         br.cs.append(c_new)
-        br.info.append(self.point_info(br.zs[-1])[:4])
+        # l1 and the other eigenvalues do not depend on the eigenvector normalisation
+        br.info.append((info or self.point_info(br.zs[-1]))[:4])
         return c_new
 
     def land_on_bound(self, u_a, u_b, c, k) -> np.ndarray | None:
@@ -367,40 +361,22 @@ class _HopfCurveSolver:
         al = z[3 * self.n + 1 :]
         return ", ".join(f"{k} = {v:.6g}" for k, v in zip(self.params, al, strict=True))
 
-    # --- codimension-two points between two accepted points ---
-    def locate(self, za, ca, zb, fn) -> tuple[np.ndarray | None, float]:
-        """Solve fn(z(theta)) = 0 on the curve between za and zb (theta in [0, 1])."""
-        n = self.n
-        zb = _renormalise(zb, n, ca)
-        ua, ub = za / self.S, zb / self.S
-        d = ub - ua
-        dn = d / np.linalg.norm(d)
-        cache: dict[float, np.ndarray] = {}
+@cache
+def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.triu_indices(n, 1)
 
-        def point(theta: float) -> np.ndarray | None:
-            if theta in cache:
-                return cache[theta]
-            u_pred = ua + theta * d
-            u, _ = self.correct(u_pred, ca, dn, dn @ u_pred, max_iter=20)
-            z = None if u is None else u * self.S
-            cache[theta] = z
-            return z
 
-        def g(theta: float) -> float:
-            z = point(theta)
-            if z is None:
-                raise RuntimeError("corrector failed")
-            return fn(z)
-
-        try:
-            ga, gb = g(0.0), g(1.0)
-            if not (np.isfinite(ga) and np.isfinite(gb)) or ga * gb > 0:
-                return None, np.nan
-            theta = scipy.optimize.brentq(g, 0.0, 1.0, xtol=1e-14, rtol=1e-14, maxiter=200)
-        except (RuntimeError, ValueError):
-            return None, np.nan
-        z = point(theta)
-        return z, abs(g(theta))
+def _signed_mean(r: np.ndarray) -> float:
+    """Sign of prod r (real: non-real factors come in conjugate pairs) times the geometric
+    mean of |r|."""
+    if r.size == 0:
+        return 1.0
+    a = np.abs(r)
+    if np.any(a == 0):
+        return 0.0
+    real = np.abs(r.imag) <= 1e-9 * a
+    sign = float(np.prod(np.sign(r.real[real]))) if np.any(real) else 1.0
+    return sign * float(np.exp(np.mean(np.log(a))))
 
 
 class _HopfCurveProblem:
@@ -412,7 +388,8 @@ class _HopfCurveProblem:
     closes on itself."""
 
     def __init__(self, solver: _HopfCurveSolver, br: _Branch, c0: np.ndarray,
-                 u_start: np.ndarray):
+                 u_start: np.ndarray, detect: bool = True):
+        self.detect = detect
         self.solver = solver
         self.br = br
         self.c = c0
@@ -439,19 +416,48 @@ class _HopfCurveProblem:
         return float((u * self.solver.S)[3 * self.solver.n + 1])
 
     def test_functions(self, pt: BranchPoint) -> dict[str, float]:
-        al = (pt.u * self.solver.S)[3 * self.solver.n + 1 :]
+        """Bounds of both parameters (terminal), and the codimension-two tests (Kuznetsov
+        2004, sec. 10.3.1): GH = l1; ZH = the product of the other eigenvalues (zero when
+        a real one passes 0); HH = the bialternate product of the other eigenvalues,
+        prod_{i<j} (l_i + l_j) (zero when another pair reaches the imaginary axis, or on a
+        real pair +-a, which the classifier drops)."""
+        z = pt.u * self.solver.S
+        al = z[3 * self.solver.n + 1 :]
         out = {}
         for k, (a, b) in enumerate(self.solver.bounds):
             lo, hi = min(a, b), max(a, b)
             out[f"B{k}lo"] = float(al[k] - lo)
             out[f"B{k}hi"] = float(hi - al[k])
+        pinfo = self.solver.point_info(z)
+        pt.info["pinfo"] = pinfo
+        if self.detect:
+            l1, _, _, _, others = pinfo
+            pt.info["others"] = others
+            out["GH"] = l1
+            out["ZH"] = _signed_mean(others / (1.0 + np.abs(others)))
+            i, j = _pairs(others.size)
+            sums = others[i] + others[j]
+            out["HH"] = _signed_mean(sums / (np.abs(others[i]) + np.abs(others[j])
+                                             + 1e-300))
         return out
 
     def event_kind(self, name: str) -> str:
-        return SpecialPointKind.BOUND
+        return name if name in ("GH", "ZH", "HH") else SpecialPointKind.BOUND
 
     def terminal(self, name: str) -> bool:
-        return True
+        return name.startswith("B")
+
+    def classify(self, name: str, pt: BranchPoint, a, b):
+        if name.startswith("B"):
+            return SpecialPointKind.BOUND
+        if name == "HH":
+            others = pt.info["others"]
+            i, j = np.triu_indices(others.size, 1)
+            k = int(np.argmin(np.abs(others[i] + others[j])))
+            om2 = abs(others[i[k]].imag)
+            if om2 <= 1e-6 * max(1.0, abs(float((pt.u * self.solver.S)[3 * self.solver.n]))):
+                return None  # a real pair +-a of the other eigenvalues: no bifurcation
+        return getattr(SpecialPointKind, name)
 
     def admissible(self, a: BranchPoint, u_new: np.ndarray, s: float) -> bool:
         return float(np.linalg.norm((u_new - a.u) * self.inv)) <= 3.0 * s
@@ -459,7 +465,7 @@ class _HopfCurveProblem:
     def after_accept(self, pt: BranchPoint) -> BranchPoint:
         solver = self.solver
         A_last = solver.last_jacobian
-        c_new = solver.accept(self.br, pt.u * solver.S, self.c)
+        c_new = solver.accept(self.br, pt.u * solver.S, self.c, pt.info.get("pinfo"))
         u = self.br.zs[-1] / solver.S
         # the corrector's last Jacobian serves for the tangent unless the eigenvector
         # normalisation was renewed
@@ -548,10 +554,10 @@ def hopf_curve(
                          message="the start point lies outside the bounds", steps=0)
     t0 = solver.tangent(z0 / solver.S, c0, None)
     branches = [solver.run(z0, c0, t0, initial_step, max_step, min_step, max_steps,
-                           progress)]
+                           progress, detect_special_points)]
     if both_directions and not branches[0].closed:
         branches.append(solver.run(z0, c0, -t0, initial_step, max_step, min_step,
-                                   max_steps, progress))
+                                   max_steps, progress, detect_special_points))
     # assemble in order: reversed second direction, then the first
     zs, cs, info = list(branches[0].zs), list(branches[0].cs), list(branches[0].info)
     if len(branches) > 1:
@@ -560,8 +566,9 @@ def hopf_curve(
         cs = b.cs[:0:-1] + cs
         info = b.info[:0:-1] + info
     special: list[CodimTwoPoint] = []
-    if detect_special_points:
-        special = _special_points(solver, zs, cs, info, warnings)
+    events = (branches[1].events[::-1] if len(branches) > 1 else []) + branches[0].events
+    for ev in events:
+        special.extend(_codim_two(solver, ev, warnings))
     for br in branches:
         if br.bt:
             z = br.zs[-1]
@@ -582,51 +589,35 @@ def hopf_curve(
                      closed=any(br.closed for br in branches), warnings=tuple(warnings))
 
 
-def _special_points(solver: _HopfCurveSolver, zs, cs, info, warnings) -> list[CodimTwoPoint]:
+def _codim_two(solver: _HopfCurveSolver, ev, warnings: list[str]) -> list[CodimTwoPoint]:
+    """The codimension-two point of a located event of the Hopf curve (GH with l2)."""
     n = solver.n
-    out: list[CodimTwoPoint] = []
-    for j in range(len(zs) - 1):
-        (la, ra, ca_, _), (lb, rb, cb, _) = info[j], info[j + 1]
-        za, zb = zs[j], zs[j + 1]
-        if np.isfinite(la) and np.isfinite(lb) and la * lb < 0:
-            z, res = solver.locate(za, cs[j], zb, lambda z: solver.point_info(z)[0])
-            if z is None:
-                warnings.append(f"could not locate the l1 = 0 point between steps {j} and "
-                                f"{j + 1}")
-                z, res = za if abs(la) < abs(lb) else zb, np.nan
-                conv = False
-            else:
-                conv = True
-            x, _, _, om, al = _unpack(z, n)
-            try:
-                _, l2 = second_lyapunov_coefficient(solver.system, x, solver.full_p(al), om)
-            except np.linalg.LinAlgError:
-                l2 = float("nan")
-            out.append(CodimTwoPoint(type="GH", values=(float(al[0]), float(al[1])),
-                                     frequency=om, l2=l2, converged=conv,
-                                     residual=float(res)))
-        ka, kb = ra + ca_, rb + cb
-        if ka != kb:
-            k = min(ka, kb)
-
-            def crossing(z, k=k):
-                return float(solver.point_info(z)[4][k].real)
-
-            z, res = solver.locate(za, cs[j], zb, crossing)
-            conv = z is not None
-            if z is None:
-                warnings.append(f"could not locate the eigenvalue crossing between steps {j}"
-                                f" and {j + 1}")
-                z = za
-            x, _, _, om, al = _unpack(z, n)
-            ev = solver.point_info(z)[4][k]
-            imag_tol = 1e-6 * max(1.0, om)
-            kind = "ZH" if abs(ev.imag) <= imag_tol or (ra != rb and ca_ == cb) else "HH"
-            out.append(CodimTwoPoint(
-                type=kind, values=(float(al[0]), float(al[1])), frequency=om,
-                other_frequency=float(abs(ev.imag)) if kind == "HH" else None,
-                converged=conv, residual=float(res) if conv else float("nan")))
-    return out
+    if ev.point is None:
+        warnings.append(f"could not locate the {ev.kind} point after step {ev.step}: "
+                        f"{ev.located}")
+        return []
+    z = ev.point.u * solver.S
+    x, _, _, om, al = _unpack(z, n)
+    conv = ev.located == "solved"
+    if not conv:
+        warnings.append(f"{ev.kind} point after step {ev.step}: {ev.located}")
+    res = abs(ev.value)
+    if ev.kind == "GH":
+        try:
+            _, l2 = second_lyapunov_coefficient(solver.system, x, solver.full_p(al), om)
+        except np.linalg.LinAlgError:
+            l2 = float("nan")
+        return [CodimTwoPoint(type="GH", values=(float(al[0]), float(al[1])), frequency=om,
+                              l2=l2, converged=conv, residual=float(res))]
+    other = None
+    if ev.kind == "HH":
+        others = ev.point.info["others"]
+        i, j = np.triu_indices(others.size, 1)
+        k = int(np.argmin(np.abs(others[i] + others[j])))
+        other = float(abs(others[i[k]].imag))
+    return [CodimTwoPoint(type=str(ev.kind), values=(float(al[0]), float(al[1])),
+                          frequency=om, other_frequency=other, converged=conv,
+                          residual=float(res))]
 
 
 @cache
