@@ -144,7 +144,8 @@ def cycles_command(
         "--all", help="Continue from every Hopf point in the range (default: the one "
         "nearest the design value).")] = False,
     n_scan: Annotated[int, typer.Option(
-        "--scan", help="Grid points of the eigenvalue scan that brackets Hopf points.")] = 100,
+        "--scan", help="Sampling of the equilibrium branch searched for Hopf points (steps "
+        "at most 1/scan of the range).")] = 100,
     ntst: Annotated[int, typer.Option("--ntst", help="Mesh intervals.")] = 80,
     ncol: Annotated[int, typer.Option("--ncol", help="Collocation points (2-7).")] = 4,
     max_steps: Annotated[int, typer.Option("--max-steps", help="Continuation steps.")] = 300,

@@ -68,7 +68,8 @@ def hopf_command(
     param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
     start: Annotated[float, typer.Option("--from", help="First value.")] = 30.0,
     stop: Annotated[float, typer.Option("--to", help="Last value.")] = 300.0,
-    steps: Annotated[int, typer.Option("--steps", help="Values of the bracketing scan.")] = 200,
+    steps: Annotated[int, typer.Option("--steps", help="Sampling of the equilibrium branch: "
+                                       "its steps are at most 1/steps of the range.")] = 200,
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
     set_: SetOpt = None,
@@ -180,7 +181,8 @@ def hopf_curve_command(
                      "defaults omega1=30:400, sigma=1e-4:8e-4, others 0.5x..2x the value."),
     ] = None,
     scan_steps: Annotated[int, typer.Option("--scan-steps",
-                                            help="Values of each bracketing scan.")] = 100,
+                                            help="Sampling of each equilibrium branch "
+                                            "searched for Hopf points.")] = 100,
     grid: Annotated[int, typer.Option("--grid", help="Stability grid points per axis for "
                                       "shading S/U (0: no grid).")] = 60,
     max_step: Annotated[float, typer.Option("--max-step", help="Largest continuation step, "
