@@ -729,8 +729,8 @@ def cycle_branch(
     if not trivial_tol > 0:
         raise ValueError(f"trivial_tol = {trivial_tol!r}: must be > 0")
     options = ContinuationOptions(
-        ds=ds, ds_min=ds_min, ds_max=ds_max, max_steps=max_steps, newton_tol=tol,
-        newton_max_iter=max_newton,
+        ds=min(max(ds, ds_min), ds_max), ds_min=ds_min, ds_max=ds_max, max_steps=max_steps,
+        newton_tol=tol, newton_max_iter=max_newton,
         param_bounds=None if param_bounds is None else tuple(map(float, param_bounds)))
     prob = _Problem(system=system, ipar=ipar, p0=np.array(start.p, float),
                     mesh=np.linspace(0.0, 1.0, ntst + 1), m=m,

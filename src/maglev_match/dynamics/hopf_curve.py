@@ -299,7 +299,8 @@ class _HopfCurveSolver:
             h_min: float, max_steps: int, progress, detect: bool = True) -> _Branch:
         br = _Branch(zs=[z0], cs=[c0], info=[self.point_info(z0)[:4]])
         prob = _HopfCurveProblem(self, br, c0, z0 / self.S, detect)
-        opt = ContinuationOptions(ds=h0, ds_min=h_min, ds_max=h_max, max_steps=max_steps,
+        opt = ContinuationOptions(ds=min(max(h0, h_min), h_max), ds_min=h_min, ds_max=h_max,
+                                  max_steps=max_steps,
                                   newton_tol=self.tol, newton_max_iter=10)
 
         def notify(step, pt):
