@@ -499,6 +499,7 @@ class CycleProblem:
         self.accepted = 0
         self.warnings: list[str] = []
         self.restarting = False
+        self.detect = True
 
     # --- corrector and read-outs ---
     def correct(self, u_pred, row, target, max_iter):
@@ -547,8 +548,8 @@ class CycleProblem:
             return out
         c = self.cycle_point(pt)
         pt.info["cycle"] = c
-        out = {"LPC": float(pt.t[-1])}
-        if c.reliable:
+        out = {"LPC": float(pt.t[-1])} if self.detect else {}
+        if c.reliable and self.detect:
             out.update(multiplier_tests(np.asarray(c.multipliers)))
         if self.limits is not None:
             out["LIMIT"], pt.info["limit"] = _margin(self.limits, self.prob.system, c.orbit)
@@ -663,6 +664,7 @@ def cycle_branch(
     max_period_factor: float = 50.0,
     trivial_tol: float = 1e-4,
     restart: RestartState | None = None,
+    detect_special_points: bool = True,
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
 
@@ -707,6 +709,8 @@ def cycle_branch(
     trivial_tol : largest accepted |mu_trivial - 1| for reliable multipliers.
     restart : continue from this saved point (:func:`load_restart`) instead of the Hopf
         point (``hopf`` still gives the scales); the new branch holds the points after it.
+    detect_special_points : locate LPC, BP, PD, NS (False: only the limit contact and the
+        stop value, which end the branch; saves the solves when only the branch matters).
 
     Returns
     -------
@@ -749,6 +753,7 @@ def cycle_branch(
                                 p=prob.params(lam0))
     cyc = CycleProblem(prob, names, limits, stop_at, trivial_tol, max_period_factor * T0,
                        adapt_every, tol, start_orbit)
+    cyc.detect = bool(detect_special_points)
     first = Correction(u=Yh, iterations=0, residual=0.0, solve=lambda e: tY, data=None)
     if restart is not None:
         prob.mesh = np.array(restart.mesh, float)
