@@ -327,6 +327,14 @@ def test_lorenz_branch_to_the_homoclinic_end_has_no_pd_or_ns():
     short = [c for c in br.points if c.period < 2.0]
     assert short and all(c.reliable and c.n_unstable == 1 for c in short)
     assert all(abs(c.trivial_multiplier - 1) < 1e-4 for c in short)
+    # far up the homoclinic approach (period 180 s): no error, no special point from
+    # multipliers whose trivial one has drifted (those points are marked unreliable)
+    long = cycle_branch(system, hp, "rho", ntst=60, ncol=4, max_steps=120,
+                        max_period_factor=1000, lam_scale=1.0)
+    assert long.stopped_reason == "max_steps" and long.points[-1].period > 100
+    assert not [s for s in long.special_points if s.type in ("PD", "NS", "BP")]
+    for c in long.points:
+        assert c.reliable == (abs(c.trivial_multiplier - 1) <= 1e-4)
 
 
 @pytest.mark.xfail(strict=True, reason="the monodromy product loses the trivial multiplier "
