@@ -259,7 +259,8 @@ def hopf_curve_command(
                     and abs(r[names[1]] - sp.values[1]) <= 1e-6 * span1 for r in special):
                 continue  # the same double-Hopf point seen from the crossing branch
             rec = {"type": sp.type, names[0]: sp.values[0], names[1]: sp.values[1],
-                   "frequency": sp.frequency, "branch": k, "converged": sp.converged}
+                   "frequency": sp.frequency, "branch": k, "converged": sp.converged,
+                   "located": sp.located, "label": f"{sp.label}" + (f"/{k}" if k else "")}
             if sp.type == "GH":
                 rec["l2"] = sp.l2
             if sp.type == "HH":

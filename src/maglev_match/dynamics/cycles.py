@@ -863,7 +863,7 @@ def cycle_branch(
                 detail = f"multiplier {mult[k].real:.6g}{mult[k].imag:+.6g}j"
             if located != SOLVED:
                 warnings.append(f"{label} at {param} = {c.value:.8g}: {located}")
-        specials.append(SpecialPoint(type=str(kind), value=c.value, period=c.period,
+        specials.append(SpecialPoint(type=kind, value=c.value, period=c.period,
                                      extrema=c.extrema, step=ev.step - 1, located=located,
                                      detail=detail, label=label, point=c))
     if not stopped:

@@ -13,6 +13,7 @@ solving; Bogdanov-Takens (BT) when the frequency falls to zero.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
@@ -75,7 +76,7 @@ class CodimTwoPoint:
     'ZH' (zero-Hopf, a real eigenvalue at 0), 'HH' (double Hopf, a second imaginary pair).
     """
 
-    type: str
+    type: SpecialPointKind
     values: tuple[float, float]
     frequency: float
     l2: float | None = None  # second Lyapunov coefficient (GH only)
@@ -83,6 +84,12 @@ class CodimTwoPoint:
     converged: bool = True
     residual: float = 0.0
     note: str = ""
+    label: str = ""  # unique along the curve: GH1, HH2, ...
+
+    @property
+    def located(self) -> str:
+        """'solved', or why not (the note)."""
+        return "solved" if self.converged else (self.note or "not solved")
 
 
 @dataclass(frozen=True)
@@ -110,12 +117,7 @@ class HopfCurve:
 
     def labels(self) -> list[str]:
         """Labels of the codimension-two points along the branch (GH1, HH1, ...)."""
-        counts: dict[str, int] = {}
-        out = []
-        for sp in self.special_points:
-            counts[sp.type] = counts.get(sp.type, 0) + 1
-            out.append(f"{sp.type}{counts[sp.type]}")
-        return out
+        return [sp.label for sp in self.special_points]
 
     def to_xarray(self, units: tuple[str, str] = ("", ""),
                   state_names: tuple[str, ...] | None = None):
@@ -161,9 +163,7 @@ class HopfCurve:
             "special_l2": (("special",), np.array([nan if sp.l2 is None else sp.l2
                                                    for sp in sps], float),
                            {"units": "1/s", "long_name": "second Lyapunov coefficient (GH)"}),
-            "special_located": (("special",), np.array(["solved" if sp.converged else
-                                                        (sp.note or "not solved")
-                                                        for sp in sps], object),
+            "special_located": (("special",), np.array([sp.located for sp in sps], object),
                                 {"units": "1", "long_name": "how it was located"}),
         })
         return xr.Dataset(data, coords=coords, attrs={
@@ -575,8 +575,13 @@ def hopf_curve(
             z = br.zs[-1]
             al = z[3 * n + 1 :]
             special.append(CodimTwoPoint(
-                type="BT", values=(float(al[0]), float(al[1])), frequency=float(z[3 * n]),
-                converged=False, note="frequency fell to zero; located to the last step"))
+                type=SpecialPointKind.BT, values=(float(al[0]), float(al[1])),
+                frequency=float(z[3 * n]), converged=False,
+                note="frequency fell to zero; the last solved point of the curve"))
+    counts: dict[str, int] = {}
+    for k, sp in enumerate(special):
+        counts[sp.type] = counts.get(sp.type, 0) + 1
+        special[k] = dataclasses.replace(sp, label=f"{sp.type}{counts[sp.type]}")
     pts = []
     for z, inf in zip(zs, info, strict=True):
         x, _, _, om, al = _unpack(z, n)
@@ -608,15 +613,15 @@ def _codim_two(solver: _HopfCurveSolver, ev, warnings: list[str]) -> list[CodimT
             _, l2 = second_lyapunov_coefficient(solver.system, x, solver.full_p(al), om)
         except np.linalg.LinAlgError:
             l2 = float("nan")
-        return [CodimTwoPoint(type="GH", values=(float(al[0]), float(al[1])), frequency=om,
-                              l2=l2, converged=conv, residual=float(res))]
+        return [CodimTwoPoint(type=SpecialPointKind.GH, values=(float(al[0]), float(al[1])),
+                              frequency=om, l2=l2, converged=conv, residual=float(res))]
     other = None
     if ev.kind == "HH":
         others = ev.point.info["others"]
         i, j = np.triu_indices(others.size, 1)
         k = int(np.argmin(np.abs(others[i] + others[j])))
         other = float(abs(others[i[k]].imag))
-    return [CodimTwoPoint(type=str(ev.kind), values=(float(al[0]), float(al[1])),
+    return [CodimTwoPoint(type=SpecialPointKind(ev.kind), values=(float(al[0]), float(al[1])),
                           frequency=om, other_frequency=other, converged=conv,
                           residual=float(res))]
 
