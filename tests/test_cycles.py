@@ -417,3 +417,21 @@ def test_saved_branch_restart_reproduces_the_next_points(tmp_path):
                                                          abs=1e-10)
     with pytest.raises(KeyError, match="not in the saved branch"):
         load_restart(path, "nope")
+
+
+def test_restart_in_a_second_parameter():
+    from maglev_match.dynamics.cycles import load_restart
+
+    br = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", stop_at=0.3, ntst=16, ncol=4,
+                      max_steps=100)
+    label = f"P{len(br.points) - 2}"  # the last regular step before the stop value
+    start, state, saved = load_restart(br.to_xarray(HOPF_NF), label)
+    mu = state.value
+    # continue that cycle in l1 (mu fixed): radius^2 = -mu / l1 along the new branch
+    new = cycle_branch(HOPF_NF, start, "l1", restart=state, restart_param=saved,
+                       stop_at=-0.5, ntst=16, ncol=4, max_steps=100, lam_scale=0.1)
+    assert new.stopped_reason == "reached stop_at"
+    assert new.points[-1].value == pytest.approx(-0.5, abs=1e-12)
+    for c in new.points:
+        assert c.orbit.p[0] == pytest.approx(mu, abs=0)
+        assert c.max("radius") == pytest.approx(math.sqrt(-mu / c.value), rel=1e-6)

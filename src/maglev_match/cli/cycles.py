@@ -105,15 +105,12 @@ def _load_restart(path: Path | None, label: str | None, param: str):
         raise UserError(f"--label {label}: {str(exc).strip(chr(34) + chr(39))}") from None
     except (OSError, ValueError) as exc:
         raise UserError(f"--restart {path}: not a saved branch ({exc})") from None
-    if saved_param != param:
-        raise UserError(f"--restart {path}: the branch was continued in '{saved_param}', "
-                        f"not --param {param}")
     l1 = float("nan") if start.l1 is None else start.l1
     kind = "subcritical" if l1 > 0 else "supercritical" if l1 < 0 else "unknown"
     rec = SimpleNamespace(param=start.param, value=start.value, x=start.x, p=start.p,
                           frequency=start.frequency, q=start.q, l1=l1, kind=kind,
                           crossing_speed=float("nan"), others_stable=None, converged=True)
-    return state, rec
+    return state, rec, saved_param
 
 
 def _hopf_json(h: HopfPoint, param: str) -> dict[str, Any]:
@@ -160,7 +157,8 @@ def cycles_command(
     out: OutOpt = None,
     restart: Annotated[Path | None, typer.Option(
         "--restart", help="Continue from a point of a branch saved by --out (netCDF), "
-        "instead of from a Hopf point; give the same --at/--set as for that run.")] = None,
+        "instead of from a Hopf point; give the same --at/--set as for that run. With "
+        "another --param the saved cycle is continued in that parameter.")] = None,
     label: Annotated[str | None, typer.Option(
         "--label", help="With --restart: the point to continue from, P<k> for the k-th "
         "branch point or a special point's label (LPC1, PD1, ...).")] = None,
@@ -192,9 +190,9 @@ def cycles_command(
                         f"[{a:.6g}, {b:.6g}]; widen --from/--to")
     hopfs.sort(key=lambda h: abs(h.value - design))
     chosen = hopfs if all_hopf else hopfs[:1]
-    restart_state = None
+    restart_state, restart_param = None, None
     if restart is not None or label is not None:
-        restart_state, start = _load_restart(restart, label, param)
+        restart_state, start, restart_param = _load_restart(restart, label, param)
         chosen = [start]
     limits = cycle_limit_margins(params, include_current=not ignore_current)
     branches: list[CycleBranch] = []
@@ -210,7 +208,8 @@ def cycles_command(
                     f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm"))
 
             br = cycle_branch(system, h, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
-                              limits=limits, progress=report, restart=restart_state)
+                              limits=limits, progress=report, restart=restart_state,
+                              restart_param=restart_param)
         branches.append(br)
         console_err.print(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
                           f"stopped: {br.stopped_reason}")

@@ -665,6 +665,7 @@ def cycle_branch(
     trivial_tol: float = 1e-4,
     restart: RestartState | None = None,
     detect_special_points: bool = True,
+    restart_param: str | None = None,
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
 
@@ -709,6 +710,9 @@ def cycle_branch(
     trivial_tol : largest accepted |mu_trivial - 1| for reliable multipliers.
     restart : continue from this saved point (:func:`load_restart`) instead of the Hopf
         point (``hopf`` still gives the scales); the new branch holds the points after it.
+    restart_param : the parameter the restart state was continued in; when it differs
+        from ``param`` the saved cycle is continued in ``param`` (a second parameter),
+        towards larger values, the other parameters fixed at the saved point.
     detect_special_points : locate LPC, BP, PD, NS (False: only the limit contact and the
         stop value, which end the branch; saves the solves when only the branch matters).
 
@@ -719,6 +723,11 @@ def cycle_branch(
     """
     start = _as_start(system, hopf, param)
     ipar = system.param_index(param)
+    new_param = restart is not None and restart_param is not None and restart_param != param
+    if new_param:  # continue the saved cycle in another parameter
+        p_r = np.array(start.p, float)
+        p_r[system.param_index(restart_param)] = restart.value
+        start = dataclasses.replace(start, param=param, value=float(p_r[ipar]), p=p_r)
     names = tuple(system.observables) if observables is None else tuple(observables)
     T0 = 2.0 * math.pi / start.frequency
     lam0 = start.value
@@ -755,7 +764,24 @@ def cycle_branch(
                        adapt_every, tol, start_orbit)
     cyc.detect = bool(detect_special_points)
     first = Correction(u=Yh, iterations=0, residual=0.0, solve=lambda e: tY, data=None)
-    if restart is not None:
+    if new_param:
+        prob.mesh = np.array(restart.mesh, float)
+        Yh = prob.pack(restart.states, restart.period, lam0)
+        fixed = _fixed_param(prob, Yh, lam0, tol, max_newton + 4)
+        if fixed is None:
+            return CycleBranch(param=param, hopf=start, points=(), special_points=(),
+                               stopped_reason=CycleStop.NEWTON_FAILED,
+                               warnings=("the restart point does not converge",), ntst=ntst,
+                               ncol=m)
+        # the tangent in the new parameter: [A; e_lambda] t = e_last, towards larger values
+        e_last = np.zeros(prob.size)
+        e_last[-1] = 1.0
+        tY = fixed.correction.solve(e_last)
+        tY /= math.sqrt(float(np.sum(W * tY * tY)))
+        cyc.restarting = True
+        first = fixed.correction
+        Yh = fixed.u
+    elif restart is not None:
         prob.mesh = np.array(restart.mesh, float)
         Yh = prob.pack(restart.states, restart.period, restart.value)
         tY = prob.pack(restart.t_states, restart.t_period, restart.t_value)
