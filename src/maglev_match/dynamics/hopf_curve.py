@@ -465,12 +465,12 @@ class _HopfCurveProblem:
 
     def after_accept(self, pt: BranchPoint) -> BranchPoint:
         solver = self.solver
-        A_last = solver.last_jacobian
         c_new = solver.accept(self.br, pt.u * solver.S, self.c, pt.info.get("pinfo"))
         u = self.br.zs[-1] / solver.S
-        # the corrector's last Jacobian serves for the tangent unless the eigenvector
-        # normalisation was renewed
-        t = solver.tangent(u, c_new, pt.t * self.inv, None if c_new is not self.c else A_last)
+        # the driver's tangent (from this point's own corrector) holds unless the
+        # eigenvector normalisation was renewed (an event solve in between may have left
+        # another Jacobian in the solver, so it is not reused)
+        t = pt.t if c_new is self.c else solver.tangent(u, c_new, pt.t * self.inv, None)
         self.c = c_new
         self.accepted += 1
         return BranchPoint(u=u, t=t, value=pt.value, correction=pt.correction,
