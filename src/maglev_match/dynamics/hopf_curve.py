@@ -21,7 +21,6 @@ from functools import cache
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.linalg
 
 from maglev_match.dynamics.continuation import (
     BranchPoint,
@@ -406,12 +405,8 @@ class _HopfCurveProblem:
         if u is None:
             return None
         M = np.vstack([self.solver.last_jacobian, row[None, :]])
-        try:
-            lu = scipy.linalg.lu_factor(M)
-        except (np.linalg.LinAlgError, ValueError):
-            return None
         return Correction(u=u, iterations=its, residual=0.0,
-                          solve=lambda b, lu=lu: scipy.linalg.lu_solve(lu, b))
+                          solve=lambda b, M=M: np.linalg.solve(M, b))
 
     def parameter(self, u) -> float:
         return float((u * self.solver.S)[3 * self.solver.n + 1])
