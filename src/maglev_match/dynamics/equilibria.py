@@ -297,6 +297,17 @@ def _sorted_eigs(w: np.ndarray) -> np.ndarray:
     return w[np.lexsort((-np.abs(w.imag), -w.real))]
 
 
+def _pair_crossings(wa: np.ndarray, wb: np.ndarray) -> int:
+    """Number of complex eigenvalues (Im > 0) of wa whose nearest eigenvalue in wb has a
+    real part of the other sign: complex pairs that crossed the imaginary axis."""
+    k = 0
+    for lam in wa[wa.imag > 1e-9]:
+        mu = wb[int(np.argmin(np.abs(wb - lam)))]
+        if mu.imag > 1e-9 and (lam.real > 0) != (mu.real > 0):
+            k += 1
+    return k
+
+
 @cache
 def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.triu_indices(n, 1)
@@ -338,6 +349,7 @@ class EquilibriumProblem:
         self.rs = system.residual_scale(J0 * 1.0)
         self.weights = np.concatenate([np.full(n, 1.0 / n), [1.0]])
         self.tol = tol
+        self.min_split = 0.0  # smallest step that admissible() may still reject
         self._kernel = _branch_kernel(system.rhs)
         self._e = np.zeros(self.base.size)
         self._e[self.k] = 1.0
@@ -395,9 +407,17 @@ class EquilibriumProblem:
         return SpecialPointKind.HOPF
 
     def admissible(self, a: BranchPoint, u_new: np.ndarray, s: float) -> bool:
-        # reject a jump to another branch: the corrected point must stay near the predictor
+        """Reject a jump to another branch (the corrected point must stay near the
+        predictor), and a step in which two or more complex pairs cross the imaginary
+        axis (their signs would cancel in the Hopf test): the step is then halved until
+        each crossing has a step of its own (down to ``min_split``)."""
         d = u_new - a.u
-        return float(np.sqrt(np.sum(self.weights * d * d))) <= 3.0 * s
+        if float(np.sqrt(np.sum(self.weights * d * d))) > 3.0 * s:
+            return False
+        wa = a.info.get("eigenvalues")
+        if wa is None or s <= self.min_split:
+            return True
+        return _pair_crossings(wa, self.eigenvalues(u_new)) <= 1
 
 
 def equilibrium_branch(
@@ -446,6 +466,7 @@ def equilibrium_branch(
                                          ds_max=ds_max, max_steps=50 * int(n_points),
                                          newton_tol=1e-10, param_bounds=(lo, hi))
     prob = EquilibriumProblem(system, param, base, eq.x, width, opt.newton_tol)
+    prob.min_split = 1e3 * opt.ds_min
     u0 = prob.pack(eq.x, float(start))
     t0 = np.zeros_like(u0)
     t0[-1] = 1.0 if stop >= start else -1.0
