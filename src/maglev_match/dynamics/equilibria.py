@@ -350,6 +350,7 @@ class EquilibriumProblem:
         self.weights = np.concatenate([np.full(n, 1.0 / n), [1.0]])
         self.tol = tol
         self.min_split = 0.0  # smallest step that admissible() may still reject
+        self._last = None  # the last correction
         self._kernel = _branch_kernel(system.rhs)
         self._e = np.zeros(self.base.size)
         self._e[self.k] = 1.0
@@ -374,7 +375,8 @@ class EquilibriumProblem:
         return fx / self.rs, A
 
     def correct(self, u_pred, row, target, max_iter):
-        return dense_bordered_newton(self.fun, u_pred, row, target, self.tol, max_iter)
+        self._last = dense_bordered_newton(self.fun, u_pred, row, target, self.tol, max_iter)
+        return self._last
 
     def eigenvalues(self, u: np.ndarray) -> np.ndarray:
         x, p = self.unpack(u)
@@ -417,7 +419,15 @@ class EquilibriumProblem:
         wa = a.info.get("eigenvalues")
         if wa is None or s <= self.min_split:
             return True
-        return _pair_crossings(wa, self.eigenvalues(u_new)) <= 1
+        return _pair_crossings(wa, self._eigs_of_correction(u_new)) <= 1
+
+    def _eigs_of_correction(self, u: np.ndarray) -> np.ndarray:
+        """Eigenvalues of J at a corrected point, from the corrector's last Jacobian."""
+        corr = self._last
+        if corr is None or corr.u is not u:
+            return self.eigenvalues(u)
+        _, A = corr.data
+        return np.linalg.eigvals(A[:, :-1] * self.rs[:, None] / self.xs[None, :])
 
 
 def equilibrium_branch(
