@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import scipy.optimize
+from systems import DIM, OMEGA, bautin_system
 
 from maglev_match.dynamics.hopf import (
     first_lyapunov_coefficient,
@@ -22,62 +23,6 @@ from maglev_match.dynamics.hopf import (
     stability_grid,
 )
 from maglev_match.dynamics.system import System
-
-OMEGA = 1.7
-GAMMA = 0.8  # Im of the cubic coefficient (frequency shift), must not change l1 or l2
-DELTA = -0.3  # Im of the quintic coefficient
-DIM = 6
-
-
-def _orthogonal(n: int, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    q, r = np.linalg.qr(rng.standard_normal((n, n)))
-    return q * np.sign(np.diag(r))
-
-
-def bautin_system(deform: bool = True, seed: int = 3) -> System:
-    """z' = (beta1 + i OMEGA) z + (beta2 + i GAMMA) z|z|^2 + (s + i DELTA) z|z|^4 in
-    (y1, y2) = (Re z, Im z), four stable coordinates driven by the centre coordinates,
-    then deformed by an explicit, invertible change of coordinates w = phi(y) with
-    quadratic and cubic terms, and rotated: x = R w. Parameters (beta1, beta2, s).
-
-    With <q, q> = 1 the expected coefficients are l1 = 2 beta2 / OMEGA and, at beta2 = 0,
-    l2 = 4 s / OMEGA (the centre coordinate is z = sqrt(2) w in the normal-form variable w).
-    """
-    import jax
-
-    R = jnp.asarray(_orthogonal(DIM, seed))
-    A_s = jnp.array([[-1.0, 2.0, 0.0, 0.0], [-2.0, -1.0, 0.5, 0.0],
-                     [0.0, 0.0, -3.0, 1.0], [0.0, 0.0, 0.0, -0.5]])
-    k = 0.4 if deform else 0.0
-
-    def g(y, p):
-        b1, b2, s = p[0], p[1], p[2]
-        y1, y2 = y[0], y[1]
-        r2 = y1**2 + y2**2
-        re = b1 * y1 - OMEGA * y2 + (b2 * y1 - GAMMA * y2) * r2 + (s * y1 - DELTA * y2) * r2**2
-        im = b1 * y2 + OMEGA * y1 + (b2 * y2 + GAMMA * y1) * r2 + (s * y2 + DELTA * y1) * r2**2
-        ys = y[2:]
-        drive = jnp.array([y1**2, y1 * y2, y2**3, y1 * y2**2])
-        return jnp.concatenate([jnp.stack([re, im]), A_s @ ys + drive])
-
-    def hs(y0, y1):
-        return jnp.stack([y0 * y1, y1**2 - y0**3, y0**2 * y1, y0 * y1**2])
-
-    def phi(y):  # w1 depends on y0 only and w_s on (y0, y1) only: explicitly invertible
-        w1 = y[1] + k * (y[0] ** 2 - 0.5 * y[0] ** 3)
-        return jnp.concatenate([y[:1], jnp.stack([w1]), y[2:] + k * hs(y[0], y[1])])
-
-    def phi_inv(w):
-        y1 = w[1] - k * (w[0] ** 2 - 0.5 * w[0] ** 3)
-        return jnp.concatenate([w[:1], jnp.stack([y1]), w[2:] - k * hs(w[0], y1)])
-
-    def rhs(x, p):
-        y = phi_inv(R.T @ x)
-        return R @ jax.jvp(phi, (y,), (g(y, p),))[1]
-
-    return System(rhs=rhs, p=np.array([0.0, 0.0, 0.45]), param_names=("beta1", "beta2", "s"),
-                  state_names=tuple(f"x{j}" for j in range(DIM)), name="bautin")
 
 
 @pytest.fixture(scope="module")
@@ -291,6 +236,9 @@ def test_cli_hopf_json(capsys, unit_scan):
     ref = unit_scan.points[0]  # same Hopf point found from a different scan
     assert rec["omega1"] == pytest.approx(ref.value, rel=1e-9)
     assert rec["l1"] == pytest.approx(ref.l1, rel=1e-6)
+    hs = [sp for sp in doc["special_points"] if sp["type"] == "H"]
+    assert len(hs) == 1 and hs[0]["label"] == "H1" and hs[0]["located"] == "solved"
+    assert hs[0]["omega1"] == pytest.approx(rec["omega1"], rel=1e-8)  # before refinement
 
 
 def test_cli_hopf_curve_json_and_figure(capsys, tmp_path):
@@ -310,6 +258,13 @@ def test_cli_hopf_curve_json_and_figure(capsys, tmp_path):
     assert doc["special_points"] == []
     for f in doc["figures"]:
         assert (tmp_path / f.split("/")[-1]).exists()
+    import xarray as xr
+
+    saved = xr.load_dataset(doc["netcdf"][0], engine="h5netcdf")
+    n0 = sum(p["branch"] == 0 for p in pts)
+    np.testing.assert_allclose(saved["sigma"].values, s[:n0])
+    assert saved["sigma"].attrs["units"] == "1/kg" and saved["l1"].attrs["units"] == "1/s"
+    assert all("long_name" in v.attrs for v in saved.data_vars.values())
 
 
 def test_cli_hopf_curve_rejects_unknown_parameter(capsys):

@@ -81,6 +81,8 @@ def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
             "unstable_multipliers": c.n_unstable,
             "max_abs_multiplier": float(np.max(np.abs(c.multipliers))),
             "kind": c.kind,
+            "trivial_multiplier_error": float(abs(c.trivial_multiplier - 1.0)),
+            "stability_reliable": c.reliable,
         })
     return rows
 
@@ -92,8 +94,32 @@ def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
         rows.append({"type": s.type, param: s.value, "period": s.period, "gap_max": gmax,
                      "gap_min": gmin, "current_min": s.extrema["current"][1],
                      "limit": s.detail if s.type == "LIMIT" else "",
-                     "detail": s.detail, "located": s.located})
+                     "detail": s.detail, "located": s.located, "label": s.label})
     return rows
+
+
+def _load_restart(path: Path | None, label: str | None, param: str):
+    """The restart state and a Hopf-point record of a saved branch (user errors named)."""
+    from types import SimpleNamespace
+
+    from maglev_match.dynamics.cycles import load_restart
+
+    if path is None or label is None:
+        raise UserError("--restart FILE and --label LABEL go together")
+    if not path.is_file():
+        raise UserError(f"--restart {path}: no such file")
+    try:
+        start, state, saved_param = load_restart(path, label)
+    except KeyError as exc:
+        raise UserError(f"--label {label}: {str(exc).strip(chr(34) + chr(39))}") from None
+    except (OSError, ValueError) as exc:
+        raise UserError(f"--restart {path}: not a saved branch ({exc})") from None
+    l1 = float("nan") if start.l1 is None else start.l1
+    kind = "subcritical" if l1 > 0 else "supercritical" if l1 < 0 else "unknown"
+    rec = SimpleNamespace(param=start.param, value=start.value, x=start.x, p=start.p,
+                          frequency=start.frequency, q=start.q, l1=l1, kind=kind,
+                          crossing_speed=float("nan"), others_stable=None, converged=True)
+    return state, rec, saved_param
 
 
 def _hopf_json(h: HopfPoint, param: str) -> dict[str, Any]:
@@ -126,8 +152,8 @@ def cycles_command(
         "--all", help="Continue from every Hopf point in the range (default: the one "
         "nearest the design value).")] = False,
     n_scan: Annotated[int, typer.Option(
-        "--scan", help="Grid points of the eigenvalue scan that brackets Hopf points.",
-        callback=bounded(3, SCAN_MAX, integer=True))] = 100,
+        "--scan", help="Sampling of the equilibrium branch searched for Hopf points (steps "
+        "at most 1/scan of the range).", callback=bounded(3, SCAN_MAX, integer=True))] = 100,
     ntst: Annotated[int, typer.Option("--ntst", help="Mesh intervals.",
                                       callback=ntst_option)] = 80,
     ncol: Annotated[int, typer.Option("--ncol", help="Collocation points (2-7).",
@@ -143,6 +169,13 @@ def cycles_command(
     model: ModelOpt = "unit",
     json_out: JsonOpt = False,
     out: OutOpt = None,
+    restart: Annotated[Path | None, typer.Option(
+        "--restart", help="Continue from a point of a branch saved by --out (netCDF), "
+        "instead of from a Hopf point; give the same --at/--set as for that run. With "
+        "another --param the saved cycle is continued in that parameter.")] = None,
+    label: Annotated[str | None, typer.Option(
+        "--label", help="With --restart: the point to continue from, P<k> for the k-th "
+        "branch point or a special point's label (LPC1, PD1, ...).")] = None,
 ) -> None:
     """Cycles born at Hopf points, continued in --param until a physical limit (Fig. 5)."""
     check_output_path(out)
@@ -175,6 +208,10 @@ def cycles_command(
                         f"[{a:.6g}, {b:.6g}]; widen --from/--to")
     hopfs.sort(key=lambda h: abs(h.value - design))
     chosen = hopfs if all_hopf else hopfs[:1]
+    restart_state, restart_param = None, None
+    if restart is not None or label is not None:
+        restart_state, start, restart_param = _load_restart(restart, label, param)
+        chosen = [start]
     limits = cycle_limit_margins(params, include_current=not ignore_current)
     branches: list[CycleBranch] = []
     for h in chosen:
@@ -189,7 +226,8 @@ def cycles_command(
                     f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm"))
 
             br = cycle_branch(system, h, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
-                              limits=limits, progress=report)
+                              limits=limits, progress=report, restart=restart_state,
+                              restart_param=restart_param)
         branches.append(br)
         console_err.print(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
                           f"stopped: {br.stopped_reason}")
@@ -246,6 +284,17 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     _write_csv(folder / f"{stem}.csv", rows)
     _write_csv(folder / f"{stem}_special_points.csv", specials)
     files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
+    # the full branches (profiles, multipliers, special points, restart data) as netCDF
+    from maglev_match.cli.common import unit_of
+    from maglev_match.models import build_system
+
+    system = build_system(params, model)
+    for k, br in enumerate(branches):
+        if not br.points:
+            continue
+        nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
+        br.to_xarray(system, param_unit=unit_of(param)).to_netcdf(nc, engine="h5netcdf")
+        files.append(nc)
     lo = min([scan.scan_values[0]] + [float(np.min(b.values)) for b in branches if b.points])
     hi = max([scan.scan_values[-1]] + [float(np.max(b.values)) for b in branches if b.points])
     sel = (scan.scan_values >= lo) & (scan.scan_values <= hi)
@@ -274,11 +323,18 @@ def _print_summary(result, branches, chosen, param, files) -> None:
             table.add_row(f"{c.value:.7g}", f"{c.period:.5f}",
                           f"{c.extrema['gap_deviation'][0] * 1e3:.4f}",
                           f"{c.extrema['gap_deviation'][1] * 1e3:.4f}",
-                          f"{c.extrema['current'][1]:.3f}", "yes" if c.stable else "no",
-                          str(c.n_unstable))
+                          f"{c.extrema['current'][1]:.3f}",
+                          ("yes" if c.stable else "no") + ("" if c.reliable else "?"),
+                          str(c.n_unstable) + ("" if c.reliable else "?"))
         console.print(table)
+        unreliable = [c for c in pts if not c.reliable]
+        if unreliable:
+            console.print(f"  [yellow]{len(unreliable)} of {len(pts)} cycles have unreliable "
+                          "multipliers (trivial multiplier away from 1, marked ?): their "
+                          "stability is not trusted and no PD/NS/BP is declared there[/]")
         for s in br.special_points:
-            console.print(f"  {s.type} at {param} = {s.value:.8g} ({s.located})"
+            console.print(f"  {s.label or s.type}: {s.type} at {param} = {s.value:.8g} "
+                          f"({s.located})"
                           f"{': ' + s.detail if s.detail else ''}, gap max "
                           f"{s.extrema['gap_deviation'][0] * 1e3:.4f} mm, min "
                           f"{s.extrema['gap_deviation'][1] * 1e3:.4f} mm")

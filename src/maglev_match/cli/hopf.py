@@ -72,7 +72,8 @@ def hopf_command(
     param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
     start: Annotated[float, typer.Option("--from", help="First value.", callback=finite)] = 30.0,
     stop: Annotated[float, typer.Option("--to", help="Last value.", callback=finite)] = 300.0,
-    steps: Annotated[int, typer.Option("--steps", help="Values of the bracketing scan.",
+    steps: Annotated[int, typer.Option("--steps", help="Sampling of the equilibrium branch: "
+                                       "its steps are at most 1/steps of the range.",
                                        callback=scan_option)] = 200,
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
@@ -95,9 +96,13 @@ def hopf_command(
     scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
     names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
     records = [_point_record(hp, system, names) for hp in scan.points]
+    specials = [{"type": str(sp.type), param: sp.value, "located": sp.located,
+                 "label": sp.label, "frequency": sp.frequency}
+                for sp in scan.special_points]
     if json_out:
         emit_json({"param": param, "model": model, "from": start, "to": stop,
-                   "points": records, "warnings": list(scan.warnings)})
+                   "points": records, "special_points": specials,
+                   "warnings": list(scan.warnings)})
         return
     unit = "" if rm.is_user else unit_of(param)
     console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit}, "
@@ -112,6 +117,10 @@ def hopf_command(
         console.print(table)
         console.print("l1 with <q,q> = 1, <p,q> = 1 (paper eq. 24): > 0 subcritical "
                       "(unstable cycle), < 0 supercritical (stable cycle)")
+    folds = [sp for sp in specials if sp["type"] != "H"]
+    for sp in folds:
+        console.print(f"  {sp['label']}: {sp['type']} of the equilibrium at {param} = "
+                      f"{sp[param]:.8g} ({sp['located']})")
     print_warnings(list(scan.warnings) + [w for hp in scan.points for w in hp.warnings])
 
 
@@ -178,7 +187,8 @@ def hopf_curve_command(
                      "defaults omega1=30:400, sigma=1e-4:8e-4, others 0.5x..2x the value."),
     ] = None,
     scan_steps: Annotated[int, typer.Option("--scan-steps", callback=scan_option,
-                                            help="Values of each bracketing scan.")] = 100,
+                                            help="Sampling of each equilibrium branch "
+                                            "searched for Hopf points.")] = 100,
     grid: Annotated[int, typer.Option("--grid", callback=grid_option, help="Stability grid "
                                       "points per axis for shading S/U (0: no grid).")] = 60,
     max_step: Annotated[float, typer.Option("--max-step", callback=fraction_option,
@@ -260,7 +270,8 @@ def hopf_curve_command(
                     and abs(r[names[1]] - sp.values[1]) <= 1e-6 * span1 for r in special):
                 continue  # the same double-Hopf point seen from the crossing branch
             rec = {"type": sp.type, names[0]: sp.values[0], names[1]: sp.values[1],
-                   "frequency": sp.frequency, "branch": k, "converged": sp.converged}
+                   "frequency": sp.frequency, "branch": k, "converged": sp.converged,
+                   "located": sp.located, "label": f"{sp.label}" + (f"/{k}" if k else "")}
             if sp.type == "GH":
                 rec["l2"] = sp.l2
             if sp.type == "HH":
@@ -289,6 +300,12 @@ def hopf_curve_command(
     fig = hopf_curve_figure(curves, names, units, grid_data, title=title,
                             design_point=(system.param(names[0]), system.param(names[1])))
     figs = save_figure(fig, folder / stem)
+    nc_files = []
+    for k, c in enumerate(curves):
+        nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
+        c.to_xarray((unit_of(names[0]), unit_of(names[1])), system.state_names).to_netcdf(
+            nc, engine="h5netcdf")
+        nc_files.append(str(nc))
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]
     if json_out:
@@ -296,7 +313,7 @@ def hopf_curve_command(
                    "bounds": {n: list(bounds[n]) for n in names}, "points": points,
                    "special_points": special, "branches": branches, "csv": str(csv_path),
                    "special_csv": str(sp_path), "figures": [str(f) for f in figs],
-                   "warnings": warnings})
+                   "netcdf": nc_files, "warnings": warnings})
         return
     console.print(f"Hopf curve in ({names[0]}, {names[1]}), model {model}: "
                   f"{len(curves)} branch(es), {len(points)} points")
@@ -314,7 +331,8 @@ def hopf_curve_command(
         console.print(table)
     else:
         console.print("  no codimension-two points inside the bounds")
-    console.print(f"wrote {csv_path}, {sp_path} and {', '.join(str(f) for f in figs)}")
+    console.print(f"wrote {csv_path}, {sp_path}, {', '.join(nc_files)} and "
+                  f"{', '.join(str(f) for f in figs)}")
     print_warnings(warnings + [w for c in curves for w in c.warnings])
 
 

@@ -24,19 +24,38 @@ of the variational equation. The mesh is adapted by equidistributing |u^(NCOL+1)
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import cache, lru_cache
+from enum import StrEnum
+from functools import cache
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import scipy.sparse
-import scipy.sparse.linalg
 
-from maglev_match.dynamics.collocation import _lagrange, _tables
+from maglev_match.dynamics.collocation import (
+    _adapt_mesh,
+    _evaluate_profile,
+    _interval_index,
+    _kernel,
+    _lagrange,
+    _newton,
+    _node_times,
+    _Problem,
+    _remesh,
+)
+from maglev_match.dynamics.continuation import (
+    SOLVED,
+    BranchPoint,
+    ContinuationOptions,
+    Correction,
+    SpecialPointKind,
+    StopReason,
+    continuation,
+)
 from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 from maglev_match.dynamics.system import System
 
@@ -47,6 +66,12 @@ __all__ = [
     "SpecialPoint",
     "CycleBranch",
     "CorrectionResult",
+    "CycleStop",
+    "RestartState",
+    "branch_to_xarray",
+    "load_restart",
+    "CycleProblem",
+    "multiplier_tests",
     "hopf_start",
     "cycle_branch",
     "correct_cycle",
@@ -118,6 +143,24 @@ class PeriodicOrbit:
 
 
 @dataclass(frozen=True)
+class RestartState:
+    """What a continuation needs to go on from a cycle: the profile on its mesh, period,
+    parameter, the tangent (same layout, physical units: d profile, d T, d lambda per unit
+    of scaled arclength), the next step size and the count of accepted steps (for the mesh
+    adaptation schedule)."""
+
+    mesh: np.ndarray
+    states: np.ndarray
+    period: float
+    value: float
+    t_states: np.ndarray
+    t_period: float
+    t_value: float
+    ds: float
+    accepted: int
+
+
+@dataclass(frozen=True)
 class CyclePoint:
     """One converged cycle on a branch with its Floquet multipliers and read-outs."""
 
@@ -132,7 +175,9 @@ class CyclePoint:
     converged: bool
     iterations: int
     residual: float
-    kind: str = "step"  # "step", "stop_at", "limit", "LPC"
+    kind: str = "step"  # "step", "stop_at", "limit", "bound", or a special-point type
+    reliable: bool = True  # |trivial multiplier - 1| within tolerance: stability trusted
+    restart: RestartState | None = None  # to continue from this point (saved branches)
 
     def max(self, name: str) -> float:
         return self.extrema[name][0]
@@ -143,15 +188,22 @@ class CyclePoint:
 
 @dataclass(frozen=True)
 class SpecialPoint:
-    """A detected bifurcation of cycles (LPC, PD, NS) or a physical-limit contact (LIMIT)."""
+    """A bifurcation of cycles (LPC, BP, PD, NS) or a physical-limit contact (LIMIT),
+    located by solving its test function inside the step where it changed sign.
+
+    ``type`` is a :class:`~maglev_match.dynamics.continuation.SpecialPointKind` value;
+    ``located`` is "solved" or the reason it could not be solved; ``label`` is unique
+    along the branch (PD1, LPC2, ...); ``point`` is the solved cycle there."""
 
     type: str
     value: float
     period: float
     extrema: Mapping[str, tuple[float, float]]
     step: int  # index of the branch point just before it
-    located: str  # "solved" (located by a corrector) or "interpolated"
+    located: str  # "solved" or the reason it was not
     detail: str = ""
+    label: str = ""
+    point: CyclePoint | None = None
 
 
 @dataclass(frozen=True)
@@ -199,6 +251,11 @@ class CycleBranch:
     def last(self) -> CyclePoint | None:
         return self.points[-1] if self.points else None
 
+    def to_xarray(self, system: System | None = None, param_unit: str = "",
+                  state_units: Sequence[str] | None = None):
+        """The full branch as an xarray Dataset (see :func:`branch_to_xarray`)."""
+        return branch_to_xarray(self, system, param_unit, state_units)
+
 
 @dataclass(frozen=True)
 class CorrectionResult:
@@ -213,48 +270,12 @@ class CorrectionResult:
 # ---------------------------------------------------------------------------------------
 # collocation tables and JAX kernels
 # ---------------------------------------------------------------------------------------
-def _node_times(mesh: np.ndarray, m: int) -> np.ndarray:
-    h = np.diff(mesh)
-    t = (mesh[:-1, None] + h[:, None] * (np.arange(m) / m)[None, :]).ravel()
-    return np.append(t, mesh[-1])
 
 
-def _interval_index(ntst: int, m: int) -> np.ndarray:
-    return np.arange(ntst)[:, None] * m + np.arange(m + 1)[None, :]
 
 
-def _evaluate_profile(mesh: np.ndarray, m: int, U: np.ndarray, s: np.ndarray) -> np.ndarray:
-    ntst = mesh.size - 1
-    j = np.clip(np.searchsorted(mesh, s, side="right") - 1, 0, ntst - 1)
-    loc = (s - mesh[j]) / (mesh[j + 1] - mesh[j])
-    c = np.linspace(0.0, 1.0, m + 1)
-    L, _ = _lagrange(c, loc)  # (len(s), m+1)
-    nodes = U[_interval_index(ntst, m)[j]]  # (len(s), m+1, dim)
-    return np.einsum("sk,skn->sn", L, nodes)
 
 
-@cache
-def _kernel(rhs: Callable, m: int) -> Callable:
-    """Jitted collocation kernel for one right-hand side and NCOL (cached)."""
-    _, _, _, L, D = _tables(m)
-    Lj, Dj = jnp.asarray(L), jnp.asarray(D)
-    jac = jax.jacfwd(rhs, argnums=0)
-
-    def f_dir(x, p, e):
-        return jax.jvp(lambda q: rhs(x, q), (p,), (e,))[1]
-
-    f2 = jax.vmap(jax.vmap(rhs, (0, None)), (0, None))
-    j2 = jax.vmap(jax.vmap(jac, (0, None)), (0, None))
-    fp2 = jax.vmap(jax.vmap(f_dir, (0, None, None)), (0, None, None))
-
-    def kernel(Ui, h, T, p, e):
-        # Ui (ntst, m+1, n) node values per interval; h (ntst,) interval lengths
-        Uc = jnp.einsum("lk,jkn->jln", Lj, Ui)
-        dU = jnp.einsum("lk,jkn->jln", Dj, Ui) / h[:, None, None]
-        F = f2(Uc, p)
-        return dU - T * F, F, j2(Uc, p), fp2(Uc, p, e)
-
-    return jax.jit(kernel)
 
 
 @cache
@@ -262,184 +283,15 @@ def _observable_batch(g: Callable) -> Callable:
     return jax.jit(jax.vmap(g, (0, None)))
 
 
-@lru_cache(maxsize=32)
-def _pattern(ntst: int, m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column indices of the collocation blocks (ntst, m, m+1, n, n)."""
-    j = np.arange(ntst)[:, None, None, None, None]
-    l_ = np.arange(m)[None, :, None, None, None]
-    k = np.arange(m + 1)[None, None, :, None, None]
-    a = np.arange(n)[None, None, None, :, None]
-    b = np.arange(n)[None, None, None, None, :]
-    shape = (ntst, m, m + 1, n, n)
-    rows = np.broadcast_to((j * m + l_) * n + a, shape).ravel()
-    cols = np.broadcast_to((j * m + k) * n + b, shape).ravel()
-    return rows, cols
 
 
 # ---------------------------------------------------------------------------------------
 # the discretised boundary-value problem
 # ---------------------------------------------------------------------------------------
-@dataclass
-class _Problem:
-    """Scaled unknowns Y = X / S with X = (profile nodes (N*n), T, lambda)."""
-
-    system: System
-    ipar: int
-    p0: np.ndarray
-    mesh: np.ndarray
-    m: int
-    scale: np.ndarray  # state scale (n,)
-    T_scale: float
-    lam_scale: float
-
-    @property
-    def n(self) -> int:
-        return self.system.dim
-
-    @property
-    def N(self) -> int:
-        return (self.mesh.size - 1) * self.m + 1
-
-    @property
-    def size(self) -> int:
-        return self.N * self.n + 2
-
-    def S(self) -> np.ndarray:
-        return np.concatenate([np.tile(self.scale, self.N), [self.T_scale, self.lam_scale]])
-
-    def W(self) -> np.ndarray:
-        """Weights of the arclength inner product (RMS over nodes for the profile)."""
-        return np.concatenate([np.full(self.N * self.n, 1.0 / self.N), [1.0, 1.0]])
-
-    def unpack(self, Y: np.ndarray) -> tuple[np.ndarray, float, float]:
-        X = Y * self.S()
-        return X[:-2].reshape(self.N, self.n), float(X[-2]), float(X[-1])
-
-    def pack(self, U: np.ndarray, T: float, lam: float) -> np.ndarray:
-        return np.concatenate([np.ravel(U), [T, lam]]) / self.S()
-
-    def params(self, lam: float) -> np.ndarray:
-        p = np.array(self.p0, float)
-        p[self.ipar] = lam
-        return p
-
-    def phase_row(self, Uref: np.ndarray) -> np.ndarray:
-        """Coefficients c (N, n) with int <u, u_ref'> dt = sum c * U."""
-        ntst, m = self.mesh.size - 1, self.m
-        _, _, w, L, D = _tables(m)
-        idx = _interval_index(ntst, m)
-        Ui = Uref[idx]  # (ntst, m+1, n)
-        dref = np.einsum("lk,jkn->jln", D, Ui)  # h_j u_ref' at Gauss points (h cancels)
-        coef = np.einsum("l,lk,jln->jkn", w, L, dref)
-        row = np.zeros((self.N, self.n))
-        np.add.at(row, idx, coef)
-        return row
-
-    def evaluate(
-        self,
-        Y: np.ndarray,
-        phase: np.ndarray,
-        Uref: np.ndarray,
-        last_row: np.ndarray,
-        last_rhs: float,
-    ) -> tuple[np.ndarray, scipy.sparse.csc_matrix, tuple]:
-        """Residual and sparse Jacobian (in scaled unknowns) of the bordered system.
-        ``last_row`` is the linear condition appended last (arclength or fixed parameter):
-        last_row . Y = last_rhs."""
-        ntst, m, n, N = self.mesh.size - 1, self.m, self.n, self.N
-        U, T, lam = self.unpack(Y)
-        p = self.params(lam)
-        h = np.diff(self.mesh)
-        e = np.zeros_like(p)
-        e[self.ipar] = 1.0
-        idx = _interval_index(ntst, m)
-        res, F, J, Fp = _kernel(self.system.rhs, m)(
-            jnp.asarray(U[idx]), jnp.asarray(h), T, jnp.asarray(p), jnp.asarray(e)
-        )
-        res, F, J, Fp = (np.asarray(a) for a in (res, F, J, Fp))
-        sc = self.scale
-        _, _, _, L, D = _tables(m)
-        # collocation blocks, rows scaled by h_j / scale_a, columns by scale_b
-        blk = (D[None, :, :, None, None] * np.eye(n)[None, None, None]
-               - (T * h)[:, None, None, None, None] * L[None, :, :, None, None]
-               * J[:, :, None, :, :])
-        blk = blk * (sc[None, None, None, None, :] / sc[None, None, None, :, None])
-        rows, cols = _pattern(ntst, m, n)
-        nc = ntst * m * n
-        r_col = (res * h[:, None, None] / sc).ravel()
-        colT = (-F * h[:, None, None] / sc).ravel() * self.T_scale
-        colL = (-T * Fp * h[:, None, None] / sc).ravel() * self.lam_scale
-        per_rows = nc + np.arange(n)
-        ph_row = nc + n
-        last = nc + n + 1
-        size = self.size
-        pv = (phase * sc).ravel()  # d/dY of the phase integral
-        pnorm = np.max(np.abs(pv)) or 1.0
-        ar = np.arange(nc)
-        all_rows = np.concatenate([
-            rows, per_rows, per_rows, np.full(N * n, ph_row), ar, ar,
-            np.full(size, last),
-        ])
-        all_cols = np.concatenate([
-            cols, (N - 1) * n + np.arange(n), np.arange(n), np.arange(N * n),
-            np.full(nc, size - 2), np.full(nc, size - 1), np.arange(size),
-        ])
-        vals = np.concatenate([
-            blk.ravel(), np.ones(n), -np.ones(n), pv / pnorm, colT, colL, last_row,
-        ])
-        A = scipy.sparse.csc_matrix((vals, (all_rows, all_cols)), shape=(size, size))
-        resid = np.concatenate([
-            r_col,
-            (U[-1] - U[0]) / sc,
-            [np.sum(phase * (U - Uref)) / pnorm],
-            [float(last_row @ Y) - last_rhs],
-        ])
-        return resid, A, (J, T, h)
 
 
-def _factorize(A: scipy.sparse.csc_matrix):
-    """Sparse LU. The minimum-degree ordering on A^T + A keeps the fill of the staircase
-    collocation structure small (measured ~3x faster than COLAMD here); threshold
-    partial pivoting 0.1 as usual for sparse LU."""
-    return scipy.sparse.linalg.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1)
 
 
-def _newton(
-    prob: _Problem,
-    Y0: np.ndarray,
-    Uref: np.ndarray,
-    last_row: np.ndarray,
-    last_rhs: float,
-    tol: float,
-    max_iter: int,
-) -> tuple[np.ndarray, bool, int, float, Any, tuple]:
-    """Newton's method on the bordered collocation system; returns (Y, converged, its,
-    residual, LU of the last Jacobian, blocks at the solution)."""
-    phase = prob.phase_row(Uref)
-    Y = np.array(Y0, float)
-    lu = None
-    blocks: tuple = ()
-    rnorm = np.inf
-    for it in range(1, max_iter + 1):
-        r, A, blocks = prob.evaluate(Y, phase, Uref, last_row, last_rhs)
-        rnorm = float(np.max(np.abs(r)))
-        if not np.isfinite(rnorm):
-            return Y, False, it, rnorm, None, blocks
-        try:
-            lu = _factorize(A)
-        except RuntimeError:  # exactly singular
-            return Y, False, it, rnorm, None, blocks
-        dY = lu.solve(-r)
-        if not np.all(np.isfinite(dY)):
-            return Y, False, it, rnorm, None, blocks
-        Y = Y + dY
-        if np.max(np.abs(dY)) < tol:
-            # the Jacobian of this last iteration (at most tol away from the solution) serves
-            # for the tangent and the Floquet multipliers; the residual is bounded by it too
-            return Y, True, it, rnorm, lu, blocks
-        if np.max(np.abs(dY)) > 1e3:
-            break
-    return Y, False, max_iter, rnorm, lu, blocks
 
 
 # ---------------------------------------------------------------------------------------
@@ -499,31 +351,8 @@ def orbit_extrema(
     return out
 
 
-def _adapt_mesh(mesh: np.ndarray, m: int, U: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """A new mesh (same NTST) equidistributing |u^(m+1)|^(1/(m+1)) (de Boor)."""
-    ntst = mesh.size - 1
-    h = np.diff(mesh)
-    idx = _interval_index(ntst, m)
-    Ui = U[idx] / scale  # (ntst, m+1, n)
-    # m-th derivative of each interval's polynomial: m-th finite difference / (h/m)^m
-    dm = np.diff(Ui, n=m, axis=1)[:, 0, :] / (h[:, None] / m) ** m
-    # (m+1)-th derivative between neighbours (periodic)
-    nxt = np.roll(dm, -1, axis=0)
-    hn = np.roll(h, -1)
-    dm1 = np.linalg.norm(2.0 * (nxt - dm) / (h + hn)[:, None], axis=1)
-    dens = 0.5 * (dm1 + np.roll(dm1, 1))
-    phi = dens ** (1.0 / (m + 1))
-    phi = phi + 0.05 * np.mean(phi) + 1e-300  # keep some points everywhere
-    cum = np.concatenate([[0.0], np.cumsum(phi * h)])
-    cum /= cum[-1]
-    new = np.interp(np.linspace(0.0, 1.0, ntst + 1), cum, mesh)
-    new[0], new[-1] = 0.0, 1.0
-    # limit the ratio of neighbouring intervals for stability of the corrector
-    return new
 
 
-def _remesh(mesh_old, m, U, mesh_new) -> np.ndarray:
-    return _evaluate_profile(mesh_old, m, U, _node_times(mesh_new, m) % 1.0 * (1 - 1e-15))
 
 
 # ---------------------------------------------------------------------------------------
@@ -580,6 +409,238 @@ def _margin(limits: LimitFn | None, system: System, orbit: PeriodicOrbit) -> tup
     return float(out), "limit"
 
 
+class CycleStop(StrEnum):
+    """Why a cycle branch stopped (same strings as before in JSON)."""
+
+    STOP_AT = "reached stop_at"
+    LIMIT = "limit"
+    BOUND = "left parameter range"
+    PERIOD = "period too large (homoclinic?)"
+    STEP_TOO_SMALL = "step too small"
+    NEWTON_FAILED = "newton failed"
+    MAX_STEPS = "max_steps"
+
+
+# multiplier test functions and the kinds they detect
+_MULTIPLIER_TESTS = {"PD": SpecialPointKind.PD, "NS": SpecialPointKind.NS,
+                     "BP": SpecialPointKind.BP}
+
+
+def _signed_geometric_mean(r: np.ndarray) -> float:
+    """A real number with the sign of prod r (r complex; non-real factors come in
+    conjugate pairs) and magnitude the geometric mean of |r| (no under/overflow)."""
+    if r.size == 0:
+        return 1.0
+    a = np.abs(r)
+    if np.any(a == 0):
+        return 0.0
+    real = np.abs(r.imag) <= 1e-9 * a
+    sign = float(np.prod(np.sign(r.real[real]))) if np.any(real) else 1.0
+    return sign * float(np.exp(np.mean(np.log(a))))
+
+
+def multiplier_tests(mult: np.ndarray) -> dict[str, float]:
+    """Test functions of the nontrivial multipliers mu_i (Kuznetsov 2004, sec. 10.3.2):
+
+    * PD: prod (mu_i + 1) / (1 + |mu_i|)          zero when a real mu passes -1;
+    * NS: prod_{i<j} (mu_i mu_j - 1) / (1 + |mu_i mu_j|)   zero on a complex pair with
+      |mu| = 1 (and on a real pair mu, 1/mu, which is no bifurcation: see the classifier);
+    * BP: prod (mu_i - 1) / (1 + |mu_i|)          zero when a real mu passes +1 (also at a
+      fold, where the LPC test changes sign too).
+
+    Each is returned as a signed geometric mean of its factors (same sign as the product)."""
+    mult = np.asarray(mult, complex)
+    i, j = np.triu_indices(mult.size, 1)
+    prod = mult[i] * mult[j]
+    return {
+        "PD": _signed_geometric_mean((mult + 1.0) / (1.0 + np.abs(mult))),
+        "NS": _signed_geometric_mean((prod - 1.0) / (1.0 + np.abs(prod))),
+        "BP": _signed_geometric_mean((mult - 1.0) / (1.0 + np.abs(mult))),
+    }
+
+
+def _n_complex_outside(mult) -> int:
+    """Number of non-real multipliers with |mu| > 1."""
+    mult = np.asarray(mult, complex)
+    return int(np.sum((np.abs(mult.imag) > 1e-6 * np.maximum(1.0, np.abs(mult)))
+                      & (np.abs(mult) > 1.0)))
+
+
+def _ns_pair_real(mult) -> bool:
+    """Whether the pair of multipliers with mu_i mu_j nearest 1 is real."""
+    mult = np.asarray(mult, complex)
+    if mult.size < 2:
+        return True
+    i, j = np.triu_indices(mult.size, 1)
+    k = int(np.argmin(np.abs(mult[i] * mult[j] - 1.0)))
+    return bool(abs(mult[i[k]].imag) <= 1e-6 * max(1.0, abs(mult[i[k]]))
+                and abs(mult[j[k]].imag) <= 1e-6 * max(1.0, abs(mult[j[k]])))
+
+
+class CycleProblem:
+    """The collocation BVP of periodic orbits in one parameter as a problem for
+    :func:`~maglev_match.dynamics.continuation.continuation`: corrector (sparse Newton on
+    the bordered system), weights, read-outs (a :class:`CyclePoint` per point) and test
+    functions (LPC from the tangent, PD / NS / BP from the multipliers, the limit margin,
+    the stop value)."""
+
+    def __init__(self, prob: _Problem, names, limits, stop_at, trivial_tol: float,
+                 max_period: float, adapt_every: int, tol: float, start_orbit):
+        self.prob = prob
+        self.names = names
+        self.limits = limits
+        self.stop_at = stop_at
+        self.trivial_tol = trivial_tol
+        self.max_period = max_period
+        self.adapt_every = adapt_every
+        self.tol = tol
+        self.weights = prob.W()
+        self.start_orbit = start_orbit
+        self.accepted = 0
+        self.warnings: list[str] = []
+        self.restarting = False
+        self.detect = True
+
+    # --- corrector and read-outs ---
+    def correct(self, u_pred, row, target, max_iter):
+        Uref, _, _ = self.prob.unpack(u_pred)
+        Y, ok, its, res, lu, blocks = _newton(self.prob, u_pred, Uref, row, target,
+                                              self.tol, max_iter)
+        if not ok:
+            return None
+        return Correction(u=Y, iterations=its, residual=res, solve=lu.solve,
+                          data=(blocks, self.prob.mesh.copy()))
+
+    def parameter(self, u) -> float:
+        return self.prob.unpack(u)[2]
+
+    def admissible(self, a, u_new, s) -> bool:
+        """A positive period, and no jump to another branch: the corrected point stays
+        within 3 s of the point before (the arclength constraint fixes only the tangent
+        component)."""
+        if not self.prob.unpack(u_new)[1] > 0:
+            return False
+        d = u_new - a.u
+        return float(np.sqrt(np.sum(self.weights * d * d))) <= 3.0 * s
+
+    def cycle_point(self, pt: BranchPoint, kind: str = "step") -> CyclePoint:
+        prob = self.prob
+        (J, Tb, h), mesh = pt.correction.data
+        U, T, lam = prob.unpack(pt.u)
+        triv, mult = _split_trivial(floquet_multipliers_from_blocks(J, Tb, h, prob.m))
+        nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
+        reliable = bool(abs(triv - 1.0) <= self.trivial_tol)
+        orbit = PeriodicOrbit(mesh=mesh, ncol=prob.m, states=U, period=T, p=prob.params(lam))
+        return CyclePoint(value=lam, period=T, orbit=orbit, multipliers=mult,
+                          trivial_multiplier=triv, n_unstable=nun, stable=nun == 0,
+                          extrema=orbit_extrema(prob.system, orbit, self.names),
+                          converged=True, iterations=pt.correction.iterations,
+                          residual=pt.correction.residual, kind=kind, reliable=reliable)
+
+    # --- test functions ---
+    def test_functions(self, pt: BranchPoint) -> dict[str, float]:
+        if pt.kind == "start" and not self.restarting:  # the Hopf point: no multipliers
+            out = {}
+            if self.limits is not None:
+                out["LIMIT"] = _margin(self.limits, self.prob.system, self.start_orbit)[0]
+            if self.stop_at is not None:
+                out["STOP"] = pt.value - self.stop_at
+            return out
+        c = self.cycle_point(pt)
+        pt.info["cycle"] = c
+        out = {"LPC": float(pt.t[-1])} if self.detect else {}
+        if c.reliable and self.detect:
+            out.update(multiplier_tests(np.asarray(c.multipliers)))
+        if self.limits is not None:
+            out["LIMIT"], pt.info["limit"] = _margin(self.limits, self.prob.system, c.orbit)
+        if self.stop_at is not None:
+            out["STOP"] = c.value - self.stop_at
+        return out
+
+    def event_kind(self, name: str) -> str:
+        return {"LPC": SpecialPointKind.LPC, "LIMIT": SpecialPointKind.LIMIT,
+                "STOP": "STOP", **_MULTIPLIER_TESTS}[name]
+
+    def terminal(self, name: str) -> bool:
+        return name in ("LIMIT", "STOP")
+
+    def worth_locating(self, name: str, a: BranchPoint, b: BranchPoint) -> bool:
+        """Skip sign changes that the end points show are no special point: BP in a step
+        where the tangent turns (the fold's multiplier +1), NS when the number of
+        non-real multipliers outside the unit circle is the same at both ends (the NS test
+        then changed sign on a real pair mu, 1/mu)."""
+        if name == "BP":
+            return a.tests.get("LPC", 0.0) * b.tests.get("LPC", 0.0) >= 0
+        if name == "NS":
+            return _n_complex_outside(a.info["cycle"].multipliers) != \
+                _n_complex_outside(b.info["cycle"].multipliers)
+        return True
+
+    def classify(self, name: str, pt: BranchPoint, a: BranchPoint, b: BranchPoint):
+        if name not in _MULTIPLIER_TESTS:
+            return self.event_kind(name)
+        c = pt.info.get("cycle")
+        if c is None or not c.reliable:
+            self.warnings.append(f"{name} test changed sign between {a.value:.8g} and "
+                                 f"{b.value:.8g}, but the multipliers there are unreliable "
+                                 "(trivial multiplier away from 1): not reported")
+            return None
+        mult = np.asarray(c.multipliers)
+        if name == "BP":
+            # a multiplier through +1 is a fold when the tangent turns in the same step
+            if a.tests.get("LPC", 0.0) * b.tests.get("LPC", 0.0) < 0:
+                return None
+            return SpecialPointKind.BP
+        if name == "PD":
+            k = int(np.argmin(np.abs(mult + 1.0)))
+            return SpecialPointKind.PD if abs(mult[k] + 1.0) < 1e-3 else None
+        # NS: the pair with mu_i mu_j = 1 must be complex (a real pair mu, 1/mu is a
+        # neutral saddle cycle, no bifurcation)
+        i, j = np.triu_indices(mult.size, 1)
+        k = int(np.argmin(np.abs(mult[i] * mult[j] - 1.0)))
+        mu = mult[i[k]]
+        if _ns_pair_real(mult) or abs(abs(mu) - 1.0) > 1e-3:
+            return None
+        return SpecialPointKind.NS
+
+    # --- hooks ---
+    def restart_state(self, u: np.ndarray, t: np.ndarray, mesh: np.ndarray, ds: float
+                      ) -> RestartState:
+        prob = self.prob
+        U, T, lam = prob.unpack(u)
+        tU, tT, tl = prob.unpack(t)
+        return RestartState(mesh=np.array(mesh), states=U, period=T, value=lam, t_states=tU,
+                            t_period=tT, t_value=tl, ds=float(ds), accepted=self.accepted)
+
+    def after_accept(self, pt: BranchPoint) -> BranchPoint:
+        self.accepted += 1
+        pt = self._adapt(pt)
+        pt.info["state"] = (pt.u, pt.t, self.prob.mesh.copy(), self.accepted)
+        return pt
+
+    def _adapt(self, pt: BranchPoint) -> BranchPoint:
+        if not (self.adapt_every and self.accepted % self.adapt_every == 0):
+            return pt
+        prob = self.prob
+        U, T, lam = prob.unpack(pt.u)
+        Ut, Tt, lt = prob.unpack(pt.t)
+        new_mesh = _adapt_mesh(prob.mesh, prob.m, U, prob.scale)
+        U2 = _remesh(prob.mesh, prob.m, U, new_mesh)
+        Ut2 = _remesh(prob.mesh, prob.m, Ut, new_mesh)
+        prob.mesh = new_mesh
+        t = prob.pack(Ut2, Tt, lt)
+        t /= math.sqrt(float(np.sum(self.weights * t * t)))
+        return BranchPoint(u=prob.pack(U2, T, lam), t=t, value=pt.value,
+                           correction=pt.correction, tests=pt.tests, kind=pt.kind,
+                           info=pt.info)
+
+    def stop(self, pt: BranchPoint) -> str | None:
+        c = pt.info["cycle"]
+        if c.period > self.max_period:
+            return CycleStop.PERIOD
+        return None
+
+
 def cycle_branch(
     system: System,
     hopf: Any,
@@ -601,8 +662,27 @@ def cycle_branch(
     adapt_every: int = 3,
     lam_scale: float | None = None,
     max_period_factor: float = 50.0,
+    trivial_tol: float = 1e-4,
+    restart: RestartState | None = None,
+    detect_special_points: bool = True,
+    restart_param: str | None = None,
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
+
+    The branch is followed by the package's one pseudo-arclength driver
+    (:func:`~maglev_match.dynamics.continuation.continuation`) on the collocation problem
+    (:class:`CycleProblem`). Special points are zeros of test functions located by solving
+    inside the step where they change sign (each a converged periodic orbit):
+
+    * LPC (fold of cycles): the parameter component of the tangent;
+    * PD / NS / BP: products over the nontrivial multipliers (:func:`multiplier_tests`);
+      NS only for a complex pair on the unit circle, BP only without a fold in the step;
+    * LIMIT: the smallest limit margin (terminal: the branch ends on the contact);
+    * the stop value ``stop_at`` (terminal; the last point is then solved at exactly it).
+
+    The trivial multiplier is checked at every point: when |mu_trivial - 1| exceeds
+    ``trivial_tol`` the point's stability is marked unreliable (``CyclePoint.reliable``)
+    and no PD / NS / BP is declared from it.
 
     Parameters
     ----------
@@ -615,26 +695,39 @@ def cycle_branch(
     max_steps : maximum accepted continuation steps.
     limits : ``limits(system, orbit)`` -> mapping of limit name -> margin (positive
         inside, in any unit) or the name of the touched limit (None if none). The branch
-        stops at the first contact, located by secant on the margin (kind "limit").
+        stops at the first contact, a solved orbit on the limit (kind "limit").
     progress : called as progress(step, point) after each accepted step.
     observables : names of the system's observables to read out (default: all).
     ds, ds_min, ds_max : initial, smallest and largest arclength step (scaled units: the
         profile in units of ``system.state_scale`` RMS over the mesh, the period in units
         of the Hopf period, the parameter in units of ``lam_scale``).
-    param_bounds : stop when the parameter leaves this interval.
+    param_bounds : stop when the parameter reaches a bound of this interval (solved there).
     tol : Newton tolerance on the scaled update.
     adapt_every : adapt the mesh every this many steps (0: never).
     lam_scale : unit of the parameter in the arclength norm (default 5 % of |value|).
     max_period_factor : stop when the period exceeds this multiple of the Hopf period
         (approach to a homoclinic orbit).
+    trivial_tol : largest accepted |mu_trivial - 1| for reliable multipliers.
+    restart : continue from this saved point (:func:`load_restart`) instead of the Hopf
+        point (``hopf`` still gives the scales); the new branch holds the points after it.
+    restart_param : the parameter the restart state was continued in; when it differs
+        from ``param`` the saved cycle is continued in ``param`` (a second parameter),
+        towards larger values, the other parameters fixed at the saved point.
+    detect_special_points : locate LPC, BP, PD, NS (False: only the limit contact and the
+        stop value, which end the branch; saves the solves when only the branch matters).
 
     Returns
     -------
-    CycleBranch with the accepted points, special points (LPC, PD, NS, LIMIT), the reason
-    the continuation stopped and warnings. Failure is reported, never raised.
+    CycleBranch with the accepted points, special points (LPC, BP, PD, NS, LIMIT), the
+    reason the continuation stopped and warnings. Failure is reported, never raised.
     """
     start = _as_start(system, hopf, param)
     ipar = system.param_index(param)
+    new_param = restart is not None and restart_param is not None and restart_param != param
+    if new_param:  # continue the saved cycle in another parameter
+        p_r = np.array(start.p, float)
+        p_r[system.param_index(restart_param)] = restart.value
+        start = dataclasses.replace(start, param=param, value=float(p_r[ipar]), p=p_r)
     names = tuple(system.observables) if observables is None else tuple(observables)
     T0 = 2.0 * math.pi / start.frequency
     lam0 = start.value
@@ -643,28 +736,21 @@ def cycle_branch(
     m = int(ncol)
     if not 2 <= m <= 7:
         raise ValueError("ncol must be between 2 and 7")
+    if not (math.isfinite(max_period_factor) and max_period_factor > 1):
+        raise ValueError(f"max_period_factor = {max_period_factor!r}: must be a finite "
+                         "number > 1")
+    if not trivial_tol > 0:
+        raise ValueError(f"trivial_tol = {trivial_tol!r}: must be > 0")
+    options = ContinuationOptions(
+        ds=min(max(ds, ds_min), ds_max), ds_min=ds_min, ds_max=ds_max, max_steps=max_steps,
+        newton_tol=tol, newton_max_iter=max_newton,
+        param_bounds=None if param_bounds is None else tuple(map(float, param_bounds)))
     prob = _Problem(system=system, ipar=ipar, p0=np.array(start.p, float),
                     mesh=np.linspace(0.0, 1.0, ntst + 1), m=m,
                     scale=np.asarray(system.state_scale, float), T_scale=T0,
                     lam_scale=float(lam_scale))
-    warnings: list[str] = []
     W = prob.W()
-
-    def make_point(Y, lu_blocks, its, resid, kind="step") -> CyclePoint:
-        U, T, lam = prob.unpack(Y)
-        J, Tb, h = lu_blocks
-        mult_all = floquet_multipliers_from_blocks(J, Tb, h, m)
-        triv, mult = _split_trivial(mult_all)
-        nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
-        orbit = PeriodicOrbit(mesh=prob.mesh.copy(), ncol=m, states=U, period=T,
-                              p=prob.params(lam))
-        ext = orbit_extrema(system, orbit, names)
-        return CyclePoint(value=lam, period=T, orbit=orbit, multipliers=mult,
-                          trivial_multiplier=triv, n_unstable=nun, stable=nun == 0,
-                          extrema=ext, converged=True, iterations=its, residual=resid,
-                          kind=kind)
-
-    # --- initial tangent: the Hopf eigenvector profile -------------------------------
+    # --- the start: the Hopf point as a constant profile, tangent = eigenvector profile
     s_nodes = _node_times(prob.mesh, m)
     qv = np.asarray(start.q, complex)
     V = np.real(qv[None, :] * np.exp(2j * math.pi * s_nodes)[:, None])
@@ -672,238 +758,161 @@ def cycle_branch(
     Yh = prob.pack(Ueq, T0, lam0)
     tY = np.concatenate([(V / prob.scale).ravel(), [0.0, 0.0]])
     tY /= math.sqrt(float(np.sum(W * tY * tY)))
-    Yprev = Yh
-    h_step = ds
+    start_orbit = PeriodicOrbit(mesh=prob.mesh.copy(), ncol=m, states=Ueq, period=T0,
+                                p=prob.params(lam0))
+    cyc = CycleProblem(prob, names, limits, stop_at, trivial_tol, max_period_factor * T0,
+                       adapt_every, tol, start_orbit)
+    cyc.detect = bool(detect_special_points)
+    first = Correction(u=Yh, iterations=0, residual=0.0, solve=lambda e: tY, data=None)
+    if new_param:
+        prob.mesh = np.array(restart.mesh, float)
+        Yh = prob.pack(restart.states, restart.period, lam0)
+        fixed = _fixed_param(prob, Yh, lam0, tol, max_newton + 4)
+        if fixed is None:
+            return CycleBranch(param=param, hopf=start, points=(), special_points=(),
+                               stopped_reason=CycleStop.NEWTON_FAILED,
+                               warnings=("the restart point does not converge",), ntst=ntst,
+                               ncol=m)
+        # the tangent in the new parameter: [A; e_lambda] t = e_last, towards larger values
+        e_last = np.zeros(prob.size)
+        e_last[-1] = 1.0
+        tY = fixed.correction.solve(e_last)
+        tY /= math.sqrt(float(np.sum(W * tY * tY)))
+        cyc.restarting = True
+        first = fixed.correction
+        Yh = fixed.u
+    elif restart is not None:
+        prob.mesh = np.array(restart.mesh, float)
+        Yh = prob.pack(restart.states, restart.period, restart.value)
+        tY = prob.pack(restart.t_states, restart.t_period, restart.t_value)
+        tY /= math.sqrt(float(np.sum(W * tY * tY)))
+        cyc.accepted = int(restart.accepted)
+        cyc.restarting = True
+        options = dataclasses.replace(options, ds=float(np.clip(restart.ds, ds_min, ds_max)))
+        row = W * tY
+        first = cyc.correct(Yh, row, float(row @ Yh), max_newton)
+        if first is None:
+            return CycleBranch(param=param, hopf=start, points=(), special_points=(),
+                               stopped_reason=CycleStop.NEWTON_FAILED,
+                               warnings=("the restart point does not converge",), ntst=ntst,
+                               ncol=m)
+
+    def notify(step, pt):
+        if progress is not None and "cycle" in pt.info:
+            progress(step, pt.info["cycle"])
+
+    res = continuation(cyc, Yh, tY, options, progress=notify, first=first)
+    warnings = list(cyc.warnings)
     points: list[CyclePoint] = []
-    specials: list[SpecialPoint] = []
-    stopped = "max_steps"
-    rejected = 0
-    step = 0
-    prev_tlam = None
-
-    def corrector(Ybase, tbase, s, iters=max_newton):
-        Ypred = Ybase + s * tbase
-        Uref, _, _ = prob.unpack(Ypred)
-        row = W * tbase
-        rhs_val = float(row @ Ybase) + s
-        return _newton(prob, Ypred, Uref, row, rhs_val, tol, iters)
-
-    def tangent_from(lu, t_old):
-        t = lu.solve(np.concatenate([np.zeros(prob.size - 1), [1.0]]))
-        t /= math.sqrt(float(np.sum(W * t * t)))
-        if float(np.sum(W * t * t_old)) < 0:
-            t = -t
-        return t
-
-    def fixed_param_solve(Yguess, value):
-        row = np.zeros(prob.size)
-        row[-1] = 1.0
-        Uref, _, _ = prob.unpack(Yguess)
-        return _newton(prob, Yguess, Uref, row, value / prob.lam_scale, tol, max_newton + 4)
-
-    def secant_locate(Ybase, tbase, s1, fun, f0, f1, inside=False):
-        """Find s in (0, s1) with fun(solution at step s) = 0 (Illinois regula falsi).
-        Returns the evaluated point with the smallest |fun| (with ``inside``: among those
-        with fun >= 0, if any)."""
-        a, fa, b, fb = 0.0, f0, s1, f1
-        cands = []
-        side = 0
-        s_last = None
-        for _ in range(30):
-            s = (a * fb - b * fa) / (fb - fa) if fb != fa else 0.5 * (a + b)
-            if not (min(a, b) < s < max(a, b)):
-                s = 0.5 * (a + b)
-            Y, ok, its, res, lu, blocks = corrector(Ybase, tbase, s, 3 * max_newton)
-            if not ok:
-                break
-            fs = fun(Y, lu)
-            cands.append((fs, (Y, its, res, lu, blocks, s)))
-            if fs == 0 or (s_last is not None and abs(s - s_last) < 1e-10 * abs(s1)):
-                break
-            s_last = s
-            if (fs > 0) == (fb > 0):
-                b, fb = s, fs
-                if side == -1:
-                    fa *= 0.5
-                side = -1
-            else:
-                a, fa = s, fs
-                if side == 1:
-                    fb *= 0.5
-                side = 1
-        if not cands:
-            return None
-        pool = [c for c in cands if c[0] >= 0] if inside else []
-        return min(pool or cands, key=lambda c: abs(c[0]))[1]
-
-    while step < max_steps:
-        Y, ok, its, resid, lu, blocks = corrector(Yprev, tY, h_step)
-        if ok and points:
-            # reject a step whose parameter or period jumps too far (branch jumping)
-            _, Tn, _ = prob.unpack(Y)
-            if Tn <= 0:
-                ok = False
-        if not ok:
-            rejected += 1
-            h_step *= 0.5
-            if h_step < ds_min:
-                stopped = "step too small" if points else "newton failed"
-                warnings.append(f"continuation stopped: no convergence at step {step + 1} "
-                                f"with the smallest step {ds_min:g} (residual {resid:.2e})")
-                break
+    for pt in res.points[1:]:
+        if "cycle" not in pt.info:
             continue
-        step += 1
-        t_new = tangent_from(lu, tY)
-        pt = make_point(Y, blocks, its, resid)
-        # --- stop_at crossing ------------------------------------------------------
-        if stop_at is not None and points or stop_at is not None and step == 1:
-            lam_a = prob.unpack(Yprev)[2] if points else lam0
-            lam_b = pt.value
-            if (lam_a - stop_at) * (lam_b - stop_at) <= 0 and lam_b != lam_a:
-                frac = (stop_at - lam_a) / (lam_b - lam_a)
-                Yg = Yprev + frac * (Y - Yprev) if points else Y
-                Ys, oks, itss, ress, _, blks = fixed_param_solve(Yg, stop_at)
-                if oks:
-                    cand = make_point(Ys, blks, itss, ress, kind="stop_at")
-                    mg, _ = _margin(limits, system, cand.orbit)
-                    if mg >= 0:
-                        points.append(cand)
-                        stopped = "reached stop_at"
-                        _notify(progress, step, cand)
-                        break
-                else:
-                    warnings.append(f"could not solve the cycle at {param} = {stop_at:g}")
-        # --- physical limits -------------------------------------------------------
-        mg_new, lname = _margin(limits, system, pt.orbit)
-        if mg_new < 0:
-            if points:
-                mg_old, _ = _margin(limits, system, points[-1].orbit)
+        c = pt.info["cycle"]
+        if "state" in pt.info:
+            u, t, mesh, acc = pt.info["state"]
+            U, T, lam = prob.unpack(u)
+            tU, tT, tl = prob.unpack(t)
+            c = dataclasses.replace(c, restart=RestartState(
+                mesh=mesh, states=U, period=T, value=lam, t_states=tU, t_period=tT,
+                t_value=tl, ds=float(pt.info.get("ds_next", ds)), accepted=acc))
+            pt.info["cycle"] = c
+        points.append(c)
+    specials: list[SpecialPoint] = []
+    counts: dict[str, int] = {}
+    stopped: str = {StopReason.MAX_STEPS: CycleStop.MAX_STEPS,
+                    StopReason.BOUND: CycleStop.BOUND,
+                    StopReason.PROBLEM: CycleStop.PERIOD}.get(res.stop_reason, "")
+    if res.stop_reason in (StopReason.STEP_TOO_SMALL, StopReason.NEWTON_FAILED):
+        stopped = CycleStop.STEP_TOO_SMALL if points else CycleStop.NEWTON_FAILED
+        warnings.append(f"continuation stopped: no convergence after step {len(points)} "
+                        f"with the smallest step {ds_min:g} ({res.message})")
+    if stopped == CycleStop.PERIOD:
+        warnings.append(f"period {points[-1].period:.3g} s exceeds {max_period_factor} x "
+                        "the Hopf period")
+    for ev in res.events:
+        if ev.kind == SpecialPointKind.BOUND:
+            if ev.point is not None and "cycle" in ev.point.info:
+                points[-1] = dataclasses.replace(points[-1], kind="bound")
+            continue
+        if ev.kind == "STOP":
+            if ev.point is None:
+                warnings.append(f"could not solve the cycle at {param} = {stop_at:g}")
+                continue
+            # the located point is refined at exactly the stop value
+            fixed = _fixed_param(prob, ev.point.u, float(stop_at), tol, max_newton + 4)
+            c = cyc.cycle_point(fixed, kind="stop_at") if fixed is not None else \
+                dataclasses.replace(ev.point.info["cycle"], kind="stop_at")
+            if points and points[-1] is ev.point.info.get("cycle"):
+                points[-1] = c
             else:
-                mg_old = 1.0
-            found = None
-            if limits is not None and points and np.isfinite(mg_old):
-                def fmargin(Yc, _lu):
-                    U, T, lam = prob.unpack(Yc)
-                    orb = PeriodicOrbit(prob.mesh.copy(), m, U, T, prob.params(lam))
-                    return _margin(limits, system, orb)[0]
-
-                found = secant_locate(Yprev, tY, h_step, fmargin, mg_old, mg_new,
-                                      inside=True)
-            if found is not None:
-                Yl, itl, resl, _, blkl, _ = found
-                lim_pt = make_point(Yl, blkl, itl, resl, kind="limit")
+                points.append(c)
+            stopped = CycleStop.STOP_AT
+            continue
+        kind = SpecialPointKind(ev.kind)
+        counts[kind] = counts.get(kind, 0) + 1
+        label = f"{kind}{counts[kind]}"
+        if ev.point is None or "cycle" not in ev.point.info:
+            warnings.append(f"{kind} between steps {ev.step} and {ev.step + 1} not located: "
+                            f"{ev.located}")
+            if kind == SpecialPointKind.LIMIT:
+                stopped = CycleStop.LIMIT
+            continue
+        c = ev.point.info["cycle"]
+        detail, located = "", ev.located
+        if kind == SpecialPointKind.LIMIT:
+            mg_c, lname = _margin(limits, system, c.orbit)
+            detail = lname
+            located = SOLVED if abs(mg_c) <= 1e-6 else f"bracketed (margin {mg_c:.2e})"
+            if located != SOLVED:
+                warnings.append(f"limit contact '{lname}' bracketed, not solved: the "
+                                f"corrector failed closer to it (margin {mg_c:.2e})")
+            c = dataclasses.replace(c, kind="limit")
+            if points and points[-1] is ev.point.info["cycle"]:
+                points[-1] = c
             else:
-                lim_pt = dataclass_replace_kind(pt, "limit")
-                warnings.append("limit contact not located accurately (first point past it)")
-            located = "interpolated"
-            if found is not None:  # name the limit closest at the contact point
-                mg_c, lname_c = _margin(limits, system, lim_pt.orbit)
-                lname = lname_c or lname
-                located = "solved" if abs(mg_c) <= 1e-6 else f"bracketed (margin {mg_c:.2e})"
-                if located != "solved":
-                    warnings.append(f"limit contact '{lname}' bracketed, not solved: the "
-                                    f"corrector failed closer to it (margin {mg_c:.2e})")
-            points.append(lim_pt)
-            specials.append(SpecialPoint(type="LIMIT", value=lim_pt.value,
-                                         period=lim_pt.period, extrema=lim_pt.extrema,
-                                         step=len(points) - 2,
-                                         located=located, detail=lname))
-            stopped = "limit"
-            _notify(progress, step, lim_pt)
-            break
-        # --- cycle bifurcations between the previous point and this one -------------
-        tlam = float(t_new[-1])
-        if points:
-            prev = points[-1]
-            if prev_tlam is not None and tlam * prev_tlam < 0:
-                def ftl(Yc, luc, t_ref=tY):
-                    return float(tangent_from(luc, t_ref)[-1])
-
-                found = secant_locate(Yprev, tY, h_step, ftl, prev_tlam, tlam)
-                if found is not None:
-                    lpc = make_point(found[0], found[4], found[1], found[2], kind="LPC")
-                    specials.append(SpecialPoint("LPC", lpc.value, lpc.period, lpc.extrema,
-                                                 len(points) - 1, "solved"))
+                points.append(c)
+            stopped = CycleStop.LIMIT
+        else:
+            mesh = ev.point.correction.data[1]
+            U, T, lam = prob.unpack(ev.point.u)
+            tU, tT, tl = prob.unpack(ev.point.t)
+            c = dataclasses.replace(c, kind=str(kind), restart=RestartState(
+                mesh=mesh, states=U, period=T, value=lam, t_states=tU, t_period=tT,
+                t_value=tl, ds=float(ds), accepted=0))
+            if kind in (SpecialPointKind.PD, SpecialPointKind.NS, SpecialPointKind.BP):
+                mult = np.asarray(c.multipliers)
+                target = {SpecialPointKind.PD: -1.0, SpecialPointKind.BP: 1.0}.get(kind)
+                if target is None:
+                    k = int(np.argmin(np.abs(np.abs(mult) - 1.0) + (np.abs(mult.imag) < 1e-9)))
                 else:
-                    specials.append(_interp_special("LPC", prev, pt, prev_tlam, tlam,
-                                                    len(points) - 1))
-            specials.extend(_multiplier_crossings(prev, pt, len(points) - 1))
-        points.append(pt)
-        prev_tlam = tlam
-        _notify(progress, step, pt)
-        # --- other stops -----------------------------------------------------------
-        if param_bounds is not None and not param_bounds[0] <= pt.value <= param_bounds[1]:
-            stopped = "left parameter range"
-            break
-        if pt.period > max_period_factor * T0:
-            stopped = "period too large (homoclinic?)"
-            warnings.append(f"period {pt.period:.3g} s exceeds {max_period_factor} x the "
-                            "Hopf period")
-            break
-        # --- mesh adaptation and step control ------------------------------------
-        if adapt_every and step % adapt_every == 0:
-            U, T, lam = prob.unpack(Y)
-            Ut, Tt, lt = prob.unpack(t_new)
-            new_mesh = _adapt_mesh(prob.mesh, m, U, prob.scale)
-            U2 = _remesh(prob.mesh, m, U, new_mesh)
-            Ut2 = _remesh(prob.mesh, m, Ut, new_mesh)
-            prob.mesh = new_mesh
-            Y = prob.pack(U2, T, lam)
-            t_new = prob.pack(Ut2, Tt, lt)
-            t_new /= math.sqrt(float(np.sum(W * t_new * t_new)))
-        Yprev, tY = Y, t_new
-        if its <= 3:
-            h_step = min(h_step * 1.5, ds_max)
-        elif its >= 6:
-            h_step = max(h_step * 0.6, ds_min)
+                    k = int(np.argmin(np.abs(mult - target)))
+                detail = f"multiplier {mult[k].real:.6g}{mult[k].imag:+.6g}j"
+            if located != SOLVED:
+                warnings.append(f"{label} at {param} = {c.value:.8g}: {located}")
+        specials.append(SpecialPoint(type=kind, value=c.value, period=c.period,
+                                     extrema=c.extrema, step=ev.step - 1, located=located,
+                                     detail=detail, label=label, point=c))
+    if not stopped:
+        stopped = str(res.stop_reason)
     return CycleBranch(param=param, hopf=start, points=tuple(points),
                        special_points=tuple(specials), stopped_reason=stopped,
-                       warnings=tuple(warnings), ntst=ntst, ncol=m, steps=step,
-                       rejected_steps=rejected)
+                       warnings=tuple(warnings), ntst=ntst, ncol=m,
+                       steps=max(len(res.points) - 1, 0), rejected_steps=res.rejected)
 
 
-def dataclass_replace_kind(pt: CyclePoint, kind: str) -> CyclePoint:
-    import dataclasses
-
-    return dataclasses.replace(pt, kind=kind)
-
-
-def _notify(progress, step, pt) -> None:
-    if progress is not None:
-        progress(step, pt)
-
-
-def _interp_special(kind, a: CyclePoint, b: CyclePoint, fa: float, fb: float,
-                    step: int, detail: str = "") -> SpecialPoint:
-    w = fa / (fa - fb) if fa != fb else 0.5
-    ext = {k: (a.extrema[k][0] + w * (b.extrema[k][0] - a.extrema[k][0]),
-               a.extrema[k][1] + w * (b.extrema[k][1] - a.extrema[k][1])) for k in a.extrema}
-    return SpecialPoint(kind, a.value + w * (b.value - a.value),
-                        a.period + w * (b.period - a.period), ext, step, "interpolated", detail)
-
-
-def _multiplier_crossings(a: CyclePoint, b: CyclePoint, step: int) -> list[SpecialPoint]:
-    """PD / NS between two points: a multiplier crossing the unit circle at -1 or off the
-    real axis (crossings at +1 are folds, detected from the tangent)."""
-    out = []
-    if a.n_unstable == b.n_unstable:
-        return out
-    # the multiplier of b nearest the unit circle decides the type
-    mb = b.multipliers
-    ma = a.multipliers
-    k = int(np.argmin(np.abs(np.abs(mb) - 1.0)))
-    mu = mb[k]
-    ka = int(np.argmin(np.abs(ma - mu)))
-    fa, fb = math.log(abs(ma[ka])), math.log(abs(mu))
-    if abs(mu.imag) > 1e-6 * max(1.0, abs(mu)):
-        kind = "NS"
-    elif mu.real < 0:
-        kind = "PD"
-    else:
-        return out  # a real multiplier through +1: a fold (LPC) or branch point
-    detail = f"multiplier {mu.real:.4g}{mu.imag:+.4g}j"
-    out.append(_interp_special(kind, a, b, fa, fb, step, detail))
-    return out
+def _fixed_param(prob: _Problem, Y: np.ndarray, value: float, tol: float, max_iter: int
+                 ) -> BranchPoint | None:
+    """The cycle at ``param`` = value exactly, from a nearby point Y (Newton)."""
+    row = np.zeros(prob.size)
+    row[-1] = 1.0
+    Uref, _, _ = prob.unpack(Y)
+    Yv, ok, its, res, lu, blocks = _newton(prob, Y, Uref, row, value / prob.lam_scale, tol,
+                                           max_iter)
+    if not ok:
+        return None
+    corr = Correction(u=Yv, iterations=its, residual=res, solve=lu.solve,
+                      data=(blocks, prob.mesh.copy()))
+    return BranchPoint(u=Yv, t=np.zeros_like(Yv), value=value, correction=corr)
 
 
 def correct_cycle(
@@ -942,3 +951,173 @@ def correct_cycle(
                     iterations=its, residual=res, kind="stop_at")
     return CorrectionResult(pt, True, its)
 
+
+
+# ---------------------------------------------------------------------------------------
+# saved branches (netCDF through xarray)
+# ---------------------------------------------------------------------------------------
+def _point_labels(branch: CycleBranch) -> list[str]:
+    return [f"P{k}" for k in range(len(branch.points))]
+
+
+def branch_to_xarray(branch: CycleBranch, system: System | None = None,
+                     param_unit: str = "", state_units: Sequence[str] | None = None):
+    """The full branch as an :class:`xarray.Dataset`: parameter values, periods, profiles on
+    each point's mesh, multipliers, stability, the continuation state needed to restart
+    (tangent, next step, accepted steps), the special points with their labels and solved
+    orbits, and the Hopf start. Every variable has ``units`` and ``long_name``."""
+    import xarray as xr
+
+    pts = list(branch.points)
+    sps = [sp for sp in branch.special_points if sp.point is not None]
+    n = len(branch.hopf.x)
+    N = pts[0].orbit.states.shape[0] if pts else (sps[0].point.orbit.states.shape[0]
+                                                    if sps else 1)
+    names = list(system.state_names) if system is not None else [f"x{k}" for k in range(n)]
+    su = list(state_units) if state_units is not None else [""] * n
+    unit_of_states = ", ".join(f"{a} [{b}]" for a, b in zip(names, su, strict=True))
+    pname = branch.param
+
+    def cyc_arrays(cs: list[CyclePoint]):
+        k = len(cs)
+        nm = n - 1
+        rs = [c.restart for c in cs]
+        mult = np.full((k, nm), np.nan, complex)
+        for i, c in enumerate(cs):
+            mu = np.asarray(c.multipliers, complex)
+            mult[i, : mu.size] = mu
+        def rv(attr, shape):
+            out = np.full((k, *shape), np.nan)
+            for i, r in enumerate(rs):
+                if r is not None:
+                    out[i] = getattr(r, attr)
+            return out
+        return {
+            "value": np.array([c.value for c in cs]),
+            "period": np.array([c.period for c in cs]),
+            "profile": np.array([c.orbit.states for c in cs]).reshape(k, N, n),
+            "mesh": np.array([c.orbit.mesh for c in cs]).reshape(k, -1),
+            "mult_re": mult.real, "mult_im": mult.imag,
+            "triv_re": np.array([complex(c.trivial_multiplier).real for c in cs]),
+            "triv_im": np.array([complex(c.trivial_multiplier).imag for c in cs]),
+            "stable": np.array([c.stable for c in cs], np.int8),
+            "reliable": np.array([c.reliable for c in cs], np.int8),
+            "n_unstable": np.array([c.n_unstable for c in cs], np.int32),
+            "kind": np.array([c.kind for c in cs], object),
+            "r_mesh": rv("mesh", (branch.ntst + 1,)),
+            "r_states": rv("states", (N, n)), "r_period": rv("period", ()),
+            "r_value": rv("value", ()), "r_t_states": rv("t_states", (N, n)),
+            "r_t_period": rv("t_period", ()), "r_t_value": rv("t_value", ()),
+            "r_ds": rv("ds", ()), "r_accepted": rv("accepted", ()),
+        }
+
+    def add(ds_vars, prefix, dim, arr):
+        pr = f"{prefix}_" if prefix else ""
+        what = "special point" if prefix else "branch point"
+        spec = [
+            ("value", (dim,), param_unit, f"{pname} at the {what}"),
+            ("period", (dim,), "s", "period of the cycle"),
+            ("profile", (dim, "node", "state"), "state units",
+             f"cycle states at the collocation nodes ({unit_of_states})"),
+            ("mesh", (dim, "mesh_node"), "1", "mesh in normalised time t / T"),
+            ("mult_re", (dim, "multiplier"), "1", "nontrivial Floquet multipliers, real part"),
+            ("mult_im", (dim, "multiplier"), "1", "nontrivial Floquet multipliers, imag part"),
+            ("triv_re", (dim,), "1", "trivial Floquet multiplier (should be 1), real part"),
+            ("triv_im", (dim,), "1", "trivial Floquet multiplier, imaginary part"),
+            ("stable", (dim,), "1", "1 if no multiplier lies outside the unit circle"),
+            ("reliable", (dim,), "1", "1 if the trivial multiplier is within tolerance of 1"),
+            ("n_unstable", (dim,), "1", "number of multipliers outside the unit circle"),
+            ("kind", (dim,), "1", "kind of point (step, stop_at, limit, LPC, PD, ...)"),
+            ("r_mesh", (dim, "mesh_node"), "1", "restart: mesh the continuation went on with"),
+            ("r_states", (dim, "node", "state"), "state units",
+             "restart: profile on the restart mesh"),
+            ("r_period", (dim,), "s", "restart: period"),
+            ("r_value", (dim,), param_unit, f"restart: {pname}"),
+            ("r_t_states", (dim, "node", "state"), "state units per unit arclength",
+             "restart: tangent of the profile"),
+            ("r_t_period", (dim,), "s per unit arclength", "restart: tangent of the period"),
+            ("r_t_value", (dim,), f"{param_unit} per unit arclength".strip(),
+             f"restart: tangent of {pname}"),
+            ("r_ds", (dim,), "1", "restart: next arclength step (scaled units)"),
+            ("r_accepted", (dim,), "1", "restart: accepted steps so far (mesh schedule)"),
+        ]
+        for key, dims, units, long in spec:
+            ds_vars[pr + key] = (dims, arr[key], {"units": units, "long_name": long})
+
+    data: dict[str, Any] = {}
+    coords: dict[str, Any] = {"state": ("state", names, {"long_name": "state name",
+                                                          "units": "1"})}
+    if pts:
+        add(data, "", "point", cyc_arrays(pts))
+        coords["label"] = ("point", _point_labels(branch), {"long_name": "point label",
+                                                              "units": "1"})
+    if sps:
+        add(data, "special", "special", cyc_arrays([sp.point for sp in sps]))
+        coords["special_label"] = ("special", [sp.label for sp in sps],
+                                   {"long_name": "special point label", "units": "1"})
+        for key, vals, long in (("special_type", [sp.type for sp in sps], "type (LPC, BP, "
+                                 "PD, NS, LIMIT)"),
+                                ("special_located", [sp.located for sp in sps], "how it was "
+                                 "located: solved, or why not"),
+                                ("special_detail", [sp.detail for sp in sps], "detail")):
+            data[key] = (("special",), np.array(vals, object), {"units": "1",
+                                                                 "long_name": long})
+        data["special_step"] = (("special",), np.array([sp.step for sp in sps], np.int32),
+                                {"units": "1", "long_name": "index of the point before it"})
+    h = branch.hopf
+    data["hopf_x"] = (("state",), np.asarray(h.x, float),
+                      {"units": "state units", "long_name": "equilibrium at the Hopf point"})
+    data["hopf_q_re"] = (("state",), np.real(h.q), {"units": "1", "long_name":
+                                                   "critical eigenvector, real part"})
+    data["hopf_q_im"] = (("state",), np.imag(h.q), {"units": "1", "long_name":
+                                                   "critical eigenvector, imaginary part"})
+    pnames = list(system.param_names) if system is not None else \
+        [f"p{k}" for k in range(len(h.p))]
+    coords["parameter"] = ("parameter", pnames, {"long_name": "parameter name", "units": "1"})
+    data["hopf_p"] = (("parameter",), np.asarray(h.p, float),
+                      {"units": "parameter units", "long_name": "parameters at the Hopf point"})
+    attrs = {"param": pname, "param_unit": param_unit, "ntst": branch.ntst,
+             "ncol": branch.ncol, "stopped_reason": str(branch.stopped_reason),
+             "hopf_value": h.value, "hopf_frequency": h.frequency,
+             "hopf_l1": np.nan if h.l1 is None else h.l1,
+             "title": f"branch of periodic orbits in {pname} from a Hopf point"}
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def load_restart(path_or_dataset, label: str) -> tuple[HopfStart, RestartState, str]:
+    """The Hopf start and the restart state of the point ``label`` (P<k> for a branch
+    point, or a special point's label such as LPC1) of a saved branch; also the parameter
+    name. Raises KeyError naming the labels on offer when ``label`` is not there."""
+    import xarray as xr
+
+    ds = path_or_dataset if isinstance(path_or_dataset, xr.Dataset) else \
+        xr.load_dataset(path_or_dataset, engine="h5netcdf")
+    labels = [str(v) for v in ds["label"].values] if "label" in ds.coords else []
+    specials = [str(v) for v in ds["special_label"].values] if "special_label" in ds.coords \
+        else []
+    if label in labels:
+        k, pre = labels.index(label), ""
+    elif label in specials:
+        k, pre = specials.index(label), "special_"
+    else:
+        raise KeyError(f"label '{label}' is not in the saved branch; it has: "
+                       + ", ".join(labels[:3] + (["..."] if len(labels) > 4 else [])
+                                   + labels[-1:] + specials))
+
+    def v(name):
+        return np.asarray(ds[pre + name].values[k])
+
+    if not np.isfinite(float(v("r_period"))):
+        raise KeyError(f"point '{label}' has no restart data (a located end point)")
+    state = RestartState(mesh=v("r_mesh"), states=v("r_states"), period=float(v("r_period")),
+                         value=float(v("r_value")), t_states=v("r_t_states"),
+                         t_period=float(v("r_t_period")), t_value=float(v("r_t_value")),
+                         ds=float(v("r_ds")), accepted=int(v("r_accepted")))
+    l1 = float(ds.attrs["hopf_l1"])
+    start = HopfStart(param=str(ds.attrs["param"]), value=float(ds.attrs["hopf_value"]),
+                      x=np.asarray(ds["hopf_x"].values), p=np.asarray(ds["hopf_p"].values),
+                      frequency=float(ds.attrs["hopf_frequency"]),
+                      q=np.asarray(ds["hopf_q_re"].values) + 1j * np.asarray(
+                          ds["hopf_q_im"].values),
+                      l1=None if not np.isfinite(l1) else l1)
+    return start, state, str(ds.attrs["param"])

@@ -1,16 +1,42 @@
-"""Equilibria of x' = f(x, p): Newton's method, eigenvalues, stability and root locus.
+"""Equilibria of x' = f(x, p): Newton's method, eigenvalues, stability, root locus, and
+branches of equilibria in one parameter by pseudo-arclength continuation with their special
+points (fold LP, branch point BP, Hopf H) located by solving.
 
 Model-agnostic: works on any :class:`~maglev_match.dynamics.system.System`.
+
+Branches (Kuznetsov 2004, sec. 10.2 and 10.4; Govaerts 2000). Unknowns u = (x / x_s,
+alpha / alpha_s) with x_s the system's state scale and alpha_s the width of the search
+interval; H(u) = f(x, alpha) / r_s with a fixed residual scale r_s. Test functions,
+evaluated at every accepted point by :func:`~maglev_match.dynamics.continuation.continuation`:
+
+* LP: the parameter component of the tangent, t_alpha (changes sign at a fold);
+* BP: det [H_u; (W t)^T], the determinant of the bordered matrix (regular at a fold,
+  singular at a branch point, where it changes sign; Govaerts 2000, sec. 4.2);
+* H:  the bialternate-product test prod_{i<j} (lambda_i + lambda_j), normalised as the
+  geometric mean of (lambda_i + lambda_j) / (|lambda_i| + |lambda_j|) with its sign; it
+  vanishes at Hopf points and at neutral saddles (a real pair +-a); a located zero is a Hopf
+  point only when the pair with lambda_i + lambda_j ~ 0 is complex.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cache
 
+import jax
 import numpy as np
 import scipy.linalg
 
+from maglev_match.dynamics.continuation import (
+    SOLVED,
+    BranchPoint,
+    ContinuationOptions,
+    SpecialPointKind,
+    StopReason,
+    continuation,
+    dense_bordered_newton,
+)
 from maglev_match.dynamics.system import System
 
 __all__ = [
@@ -21,6 +47,9 @@ __all__ = [
     "eigenvalue_analysis",
     "stability",
     "root_locus",
+    "EquilibriumSpecialPoint",
+    "EquilibriumBranch",
+    "equilibrium_branch",
 ]
 
 # An eigenvalue whose condition number exceeds this is reported as ill-conditioned.
@@ -201,3 +230,291 @@ def root_locus(
         equilibria=np.array(eqs),
         warnings=tuple(warnings),
     )
+
+
+# ----------------------------------------------------------------------------------------
+# branches of equilibria by pseudo-arclength continuation
+# ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class EquilibriumSpecialPoint:
+    """A special point of an equilibrium branch, located by solving inside its step.
+
+    type : LP (fold), BP (branch point) or H (Hopf).
+    value : the parameter there (its own unit); x the equilibrium; eigenvalues of J there.
+    frequency : omega of the critical pair for H (rad/s), else 0.
+    step : index of the branch point before it; located: "solved" or the reason it was not.
+    label : a short unique label along the branch (LP1, H2, ...).
+    """
+
+    type: SpecialPointKind
+    value: float
+    x: np.ndarray
+    eigenvalues: np.ndarray
+    frequency: float
+    step: int
+    located: str
+    label: str
+
+
+@dataclass(frozen=True)
+class EquilibriumBranch:
+    """A branch of equilibria in one parameter (points in order along the arclength)."""
+
+    param: str
+    values: np.ndarray  # parameter at each point (its unit)
+    states: np.ndarray  # (n_points, dim) equilibria
+    eigenvalues: np.ndarray  # (n_points, dim), each row sorted by real part desc
+    special_points: tuple[EquilibriumSpecialPoint, ...]
+    stop_reason: StopReason
+    message: str
+    p: np.ndarray  # parameter vector (the continued entry is replaced along the branch)
+    steps: int = 0
+    rejected_steps: int = 0
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def max_real_part(self) -> np.ndarray:
+        return self.eigenvalues.real.max(axis=1)
+
+    @property
+    def stable(self) -> np.ndarray:
+        return self.max_real_part < 0
+
+
+@cache
+def _branch_kernel(rhs):
+    """(f, f_x, f_p e) at (x, p) in one jitted call (cached per right-hand side)."""
+    jac = jax.jacfwd(rhs, argnums=0)
+
+    def kernel(x, p, e):
+        fx, fe = jax.jvp(lambda q: rhs(x, q), (p,), (e,))
+        return fx, jac(x, p), fe
+
+    return jax.jit(kernel)
+
+
+def _sorted_eigs(w: np.ndarray) -> np.ndarray:
+    return w[np.lexsort((-np.abs(w.imag), -w.real))]
+
+
+def _pair_crossings(wa: np.ndarray, wb: np.ndarray) -> int:
+    """Number of complex eigenvalues (Im > 0) of wa whose nearest eigenvalue in wb has a
+    real part of the other sign: complex pairs that crossed the imaginary axis."""
+    k = 0
+    for lam in wa[wa.imag > 1e-9]:
+        mu = wb[int(np.argmin(np.abs(wb - lam)))]
+        if mu.imag > 1e-9 and (lam.real > 0) != (mu.real > 0):
+            k += 1
+    return k
+
+
+@cache
+def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    return np.triu_indices(n, 1)
+
+
+def _hopf_test(w: np.ndarray) -> tuple[float, int, int]:
+    """Signed geometric mean of (l_i + l_j) / (|l_i| + |l_j|), i < j (real number), and the
+    pair (i, j) with the smallest normalised |l_i + l_j|."""
+    n = w.size
+    if n < 2:
+        return 1.0, 0, 0
+    i, j = _pairs(n)
+    s = w[i] + w[j]
+    den = np.abs(w[i]) + np.abs(w[j])
+    r = np.where(den > 0, s / np.where(den > 0, den, 1.0), 0.0)
+    k = int(np.argmin(np.abs(r)))
+    if np.any(np.abs(r) == 0):
+        return 0.0, int(i[k]), int(j[k])
+    g = float(np.exp(np.mean(np.log(np.abs(r)))))
+    # the product is real: non-real sums come with their conjugates (product |.|^2 > 0),
+    # so its sign is the product of the signs of the real sums
+    real_r = np.abs(r.imag) <= 1e-12 * np.abs(r)
+    sign = float(np.prod(np.sign(r.real[real_r]))) if np.any(real_r) else 1.0
+    return sign * g, int(i[k]), int(j[k])
+
+
+class EquilibriumProblem:
+    """f(x, alpha) = 0 in scaled unknowns, for :func:`continuation`."""
+
+    def __init__(self, system: System, param: str, base: np.ndarray, x0: np.ndarray,
+                 alpha_scale: float, tol: float):
+        self.system = system
+        self.k = system.param_index(param)
+        self.base = np.array(base, float)
+        self.xs = np.asarray(system.state_scale, float)
+        self.alpha_scale = float(alpha_scale)
+        n = system.dim
+        _, J0 = system.f_and_jacobian(x0, self.base)
+        self.rs = system.residual_scale(J0 * 1.0)
+        self.weights = np.concatenate([np.full(n, 1.0 / n), [1.0]])
+        self.tol = tol
+        self.min_split = 0.0  # smallest step that admissible() may still reject
+        self._last = None  # the last correction
+        self._kernel = _branch_kernel(system.rhs)
+        self._e = np.zeros(self.base.size)
+        self._e[self.k] = 1.0
+
+    def unpack(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = self.system.dim
+        p = self.base.copy()
+        p[self.k] = u[n] * self.alpha_scale
+        return u[:n] * self.xs, p
+
+    def pack(self, x: np.ndarray, alpha: float) -> np.ndarray:
+        return np.concatenate([np.asarray(x, float) / self.xs, [alpha / self.alpha_scale]])
+
+    def parameter(self, u: np.ndarray) -> float:
+        return float(u[-1] * self.alpha_scale)
+
+    def fun(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """H(u) and H_u(u) = [f_x X_s, f_alpha alpha_s] / r_s (one compiled call)."""
+        x, p = self.unpack(u)
+        fx, J, fa = (np.asarray(a) for a in self._kernel(x, p, self._e))
+        A = np.column_stack([J * self.xs[None, :], fa * self.alpha_scale]) / self.rs[:, None]
+        return fx / self.rs, A
+
+    def correct(self, u_pred, row, target, max_iter):
+        self._last = dense_bordered_newton(self.fun, u_pred, row, target, self.tol, max_iter)
+        return self._last
+
+    def eigenvalues(self, u: np.ndarray) -> np.ndarray:
+        x, p = self.unpack(u)
+        return _sorted_eigs(np.linalg.eigvals(self.system.jacobian(x, p)))
+
+    def test_functions(self, pt: BranchPoint) -> dict[str, float]:
+        # the Jacobian of the corrector's last iterate (within the Newton tolerance of
+        # the solution) serves for the eigenvalues and the bordered determinant
+        _, A = pt.correction.data
+        J = A[:, :-1] * self.rs[:, None] / self.xs[None, :]
+        w = _sorted_eigs(np.linalg.eigvals(J))
+        pt.info["eigenvalues"] = w
+        M = np.vstack([A, (self.weights * pt.t)[None, :]])
+        h, _, _ = _hopf_test(w)
+        return {"LP": float(pt.t[-1]), "BP": float(np.linalg.det(M)), "H": h}
+
+    def event_kind(self, name: str) -> SpecialPointKind:
+        return {"LP": SpecialPointKind.LP, "BP": SpecialPointKind.BP,
+                "H": SpecialPointKind.HOPF}[name]
+
+    def classify(self, name, pt: BranchPoint, a, b):
+        if name != "H":
+            return self.event_kind(name)
+        w = self.eigenvalues(pt.u)
+        _, i, j = _hopf_test(w)
+        om = abs(w[i].imag)
+        # a neutral saddle (real pair +-a) also zeroes the test: not a Hopf point
+        if om <= 1e-8 * max(1.0, float(np.max(np.abs(w)))):
+            return None
+        return SpecialPointKind.HOPF
+
+    def admissible(self, a: BranchPoint, u_new: np.ndarray, s: float) -> bool:
+        """Reject a jump to another branch (the corrected point must stay near the
+        predictor), and a step in which two or more complex pairs cross the imaginary
+        axis (their signs would cancel in the Hopf test): the step is then halved until
+        each crossing has a step of its own (down to ``min_split``)."""
+        d = u_new - a.u
+        if float(np.sqrt(np.sum(self.weights * d * d))) > 3.0 * s:
+            return False
+        wa = a.info.get("eigenvalues")
+        if wa is None or s <= self.min_split:
+            return True
+        return _pair_crossings(wa, self._eigs_of_correction(u_new)) <= 1
+
+    def _eigs_of_correction(self, u: np.ndarray) -> np.ndarray:
+        """Eigenvalues of J at a corrected point, from the corrector's last Jacobian."""
+        corr = self._last
+        if corr is None or corr.u is not u:
+            return self.eigenvalues(u)
+        _, A = corr.data
+        return np.linalg.eigvals(A[:, :-1] * self.rs[:, None] / self.xs[None, :])
+
+
+def equilibrium_branch(
+    system: System,
+    param: str,
+    start: float,
+    stop: float,
+    p: np.ndarray | None = None,
+    x0: np.ndarray | None = None,
+    options: ContinuationOptions | None = None,
+    n_points: int = 200,
+    progress: Callable[[int, int], None] | None = None,
+) -> EquilibriumBranch:
+    """The branch of equilibria through the equilibrium at ``param`` = ``start``, followed by
+    pseudo-arclength continuation towards ``stop`` (through folds), with LP, BP and Hopf
+    points located by solving their test functions inside the step.
+
+    Parameters
+    ----------
+    system : the ODE system; ``p`` its parameter vector (default the system's).
+    param : the continuation parameter; ``start``, ``stop`` the search interval (its unit).
+    x0 : guess of the equilibrium at ``start`` (default the system's guess).
+    options : continuation options; by default the largest step is 1 / (n_points - 1) of
+        the interval (in the scaled arclength), so the branch is sampled at least as finely
+        as a grid of ``n_points`` values, and the bounds are the interval.
+    progress : progress(k, n_points) after each accepted point.
+
+    Returns
+    -------
+    :class:`EquilibriumBranch`; failure is a stop reason and a warning, never raised.
+    """
+    base = np.array(system.p if p is None else p, float)
+    lo, hi = sorted((float(start), float(stop)))
+    width = hi - lo if hi > lo else max(1.0, abs(lo))
+    pk = system.params_with(base, **{param: float(start)})
+    eq = find_equilibrium(system, pk, x0)
+    if not eq.converged and eq.scaled_residual > 1e-9:
+        return EquilibriumBranch(
+            param=param, values=np.array([float(start)]), states=eq.x[None, :],
+            eigenvalues=_sorted_eigs(np.linalg.eigvals(system.jacobian(eq.x, pk)))[None, :],
+            special_points=(), stop_reason=StopReason.NEWTON_FAILED,
+            message=f"no equilibrium at {param} = {start:g}: {eq.message}", p=base,
+            warnings=(f"{param} = {start:g}: equilibrium not found ({eq.message})",))
+    ds_max = 1.0 / max(int(n_points) - 1, 1)
+    opt = options or ContinuationOptions(ds=0.25 * ds_max, ds_min=1e-7 * ds_max,
+                                         ds_max=ds_max, max_steps=50 * int(n_points),
+                                         newton_tol=1e-10, param_bounds=(lo, hi))
+    prob = EquilibriumProblem(system, param, base, eq.x, width, opt.newton_tol)
+    prob.min_split = 1e3 * opt.ds_min
+    u0 = prob.pack(eq.x, float(start))
+    t0 = np.zeros_like(u0)
+    t0[-1] = 1.0 if stop >= start else -1.0
+
+    def notify(step, pt):
+        if progress is not None:
+            progress(min(step + 1, n_points), n_points)
+
+    res = continuation(prob, u0, t0, opt, progress=notify)
+    warnings: list[str] = []
+    if res.stop_reason in (StopReason.STEP_TOO_SMALL, StopReason.NEWTON_FAILED,
+                           StopReason.MAX_STEPS):
+        warnings.append(f"equilibrium continuation stopped: {res.message}")
+    values = np.array([pt.value for pt in res.points])
+    states = np.array([prob.unpack(pt.u)[0] for pt in res.points]).reshape(-1, system.dim)
+    eigs = np.array([pt.info["eigenvalues"] for pt in res.points])
+    specials = []
+    counts: dict[str, int] = {}
+    for ev in res.events:
+        if ev.kind == SpecialPointKind.BOUND:
+            continue
+        kind = SpecialPointKind(ev.kind)
+        counts[kind] = counts.get(kind, 0) + 1
+        label = f"{kind}{counts[kind]}"
+        if ev.point is None:
+            warnings.append(f"{kind} between steps {ev.step} and {ev.step + 1}: {ev.located}")
+            continue
+        w = ev.point.info["eigenvalues"]
+        om = 0.0
+        if kind == SpecialPointKind.HOPF:
+            _, i, _ = _hopf_test(w)
+            om = float(abs(w[i].imag))
+        if ev.located != SOLVED:
+            warnings.append(f"{label} at {param} = {ev.point.value:.8g}: {ev.located}")
+        specials.append(EquilibriumSpecialPoint(
+            type=kind, value=ev.point.value, x=prob.unpack(ev.point.u)[0], eigenvalues=w,
+            frequency=om, step=ev.step, located=ev.located, label=label))
+    return EquilibriumBranch(param=param, values=values, states=states, eigenvalues=eigs,
+                             special_points=tuple(specials), stop_reason=res.stop_reason,
+                             message=res.message, p=base, steps=max(len(res.points) - 1, 0),
+                             rejected_steps=res.rejected, warnings=tuple(warnings))

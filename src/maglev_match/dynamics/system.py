@@ -106,6 +106,8 @@ class System:
     state_scale : typical magnitude of each state (for scaled residuals and norms).
     observables : named functions ``g(x, p)`` (scalar or 1-D) for read-outs.
     name : a label for reports.
+    param_ranges : optional valid range (lo, hi) of some parameters (e.g. a frequency
+        must be positive); solvers reject solutions outside them.
     """
 
     rhs: RHS
@@ -116,6 +118,7 @@ class System:
     state_scale: np.ndarray | None = None
     observables: Mapping[str, Callable[[Array, Array], Array]] = field(default_factory=dict)
     name: str = ""
+    param_ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         p = np.asarray(self.p, dtype=float).ravel()

@@ -1,0 +1,230 @@
+"""Textbook test systems with known answers, defined once for every test module.
+
+* :func:`bautin_system` - the Hopf/Bautin normal form embedded in a stable 6-D system,
+  deformed by an invertible nonlinear change of coordinates and rotated.
+* :data:`HOPF_NF`, :data:`FOLD_NF` - planar radial normal forms r' = r g(mu, r^2),
+  theta' = omega, plus a stable linear 3-block, rotated (Hopf; fold of cycles at mu = -1).
+* :func:`pd_system` - a planar Hopf cycle with a transverse "Moebius" block whose
+  Floquet multipliers are known in closed form: a period doubling at nu = (ALPHA/BETA)^2.
+* :func:`planar_system` - a planar system (PD and NS impossible).
+* :func:`saddle_node`, :func:`pitchfork`, :func:`s_shaped_hopf` - equilibria with a fold,
+  a symmetric pitchfork, and an S-shaped curve with a Hopf point on each outer branch.
+* :func:`lorenz` - the Lorenz system (sigma = 10, beta = 8/3), Hopf of C+ at
+  rho = sigma (sigma + beta + 3) / (sigma - beta - 1), subcritical.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from maglev_match.dynamics.system import System
+
+
+def _orthogonal(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    q, r = np.linalg.qr(rng.standard_normal((n, n)))
+    return q * np.sign(np.diag(r))
+
+
+# ----------------------------------------------------------------------- Bautin normal form
+OMEGA = 1.7
+GAMMA = 0.8  # Im of the cubic coefficient (frequency shift), must not change l1 or l2
+DELTA = -0.3  # Im of the quintic coefficient
+DIM = 6
+
+
+def bautin_system(deform: bool = True, seed: int = 3) -> System:
+    """z' = (beta1 + i OMEGA) z + (beta2 + i GAMMA) z|z|^2 + (s + i DELTA) z|z|^4 in
+    (y1, y2) = (Re z, Im z), four stable coordinates driven by the centre coordinates,
+    then deformed by an explicit, invertible change of coordinates w = phi(y) with
+    quadratic and cubic terms, and rotated: x = R w. Parameters (beta1, beta2, s).
+
+    With <q, q> = 1 the expected coefficients are l1 = 2 beta2 / OMEGA and, at beta2 = 0,
+    l2 = 4 s / OMEGA (the centre coordinate is z = sqrt(2) w in the normal-form variable w).
+    """
+    R = jnp.asarray(_orthogonal(DIM, seed))
+    A_s = jnp.array([[-1.0, 2.0, 0.0, 0.0], [-2.0, -1.0, 0.5, 0.0],
+                     [0.0, 0.0, -3.0, 1.0], [0.0, 0.0, 0.0, -0.5]])
+    k = 0.4 if deform else 0.0
+
+    def g(y, p):
+        b1, b2, s = p[0], p[1], p[2]
+        y1, y2 = y[0], y[1]
+        r2 = y1**2 + y2**2
+        re = b1 * y1 - OMEGA * y2 + (b2 * y1 - GAMMA * y2) * r2 + (s * y1 - DELTA * y2) * r2**2
+        im = b1 * y2 + OMEGA * y1 + (b2 * y2 + GAMMA * y1) * r2 + (s * y2 + DELTA * y1) * r2**2
+        ys = y[2:]
+        drive = jnp.array([y1**2, y1 * y2, y2**3, y1 * y2**2])
+        return jnp.concatenate([jnp.stack([re, im]), A_s @ ys + drive])
+
+    def hs(y0, y1):
+        return jnp.stack([y0 * y1, y1**2 - y0**3, y0**2 * y1, y0 * y1**2])
+
+    def phi(y):  # w1 depends on y0 only and w_s on (y0, y1) only: explicitly invertible
+        w1 = y[1] + k * (y[0] ** 2 - 0.5 * y[0] ** 3)
+        return jnp.concatenate([y[:1], jnp.stack([w1]), y[2:] + k * hs(y[0], y[1])])
+
+    def phi_inv(w):
+        y1 = w[1] - k * (w[0] ** 2 - 0.5 * w[0] ** 3)
+        return jnp.concatenate([w[:1], jnp.stack([y1]), w[2:] - k * hs(w[0], y1)])
+
+    def rhs(x, p):
+        y = phi_inv(R.T @ x)
+        return R @ jax.jvp(phi, (y,), (g(y, p),))[1]
+
+    return System(rhs=rhs, p=np.array([0.0, 0.0, 0.45]), param_names=("beta1", "beta2", "s"),
+                  state_names=tuple(f"x{j}" for j in range(DIM)), name="bautin")
+
+
+# ------------------------------------------------------------- radial normal forms of cycles
+CYCLE_OMEGA = 2.0
+LINEAR_PART = np.array([[-1.0, 0.0, 0.0], [0.0, -2.0, 1.0], [0.0, -1.0, -3.0]])
+Q5, _ = np.linalg.qr(np.random.default_rng(7).normal(size=(5, 5)))
+_QJ = jnp.asarray(Q5)
+
+
+def embedded(radial) -> System:
+    """Planar system r' = r g(mu, r^2), theta' = omega, plus a stable linear 3-block,
+    rotated by a fixed orthogonal matrix (so no coordinate is special)."""
+
+    def rhs(x, p):
+        mu, om, l1 = p[0], p[1], p[2]
+        z = _QJ.T @ x
+        a, b = z[0], z[1]
+        g = radial(mu, l1, a * a + b * b)
+        w = jnp.asarray(LINEAR_PART) @ z[2:]
+        dz = jnp.concatenate([jnp.stack([g * a - om * b, om * a + g * b]), w])
+        return _QJ @ dz
+
+    return System(
+        rhs=rhs, p=np.array([0.0, CYCLE_OMEGA, -1.0]), param_names=("mu", "omega", "l1"),
+        state_names=tuple(f"x{i}" for i in range(5)),
+        observables={
+            "radius": lambda x, p: jnp.sqrt(jnp.sum((_QJ.T @ x)[:2] ** 2)),
+            "x0": lambda x, p: x[0],
+        },
+    )
+
+
+HOPF_NF = embedded(lambda mu, l1, r2: mu + l1 * r2)
+FOLD_NF = embedded(lambda mu, l1, r2: mu + 2.0 * r2 - r2 * r2)
+Q_CRIT = Q5 @ np.array([1.0, -1.0j, 0, 0, 0]) / math.sqrt(2.0)
+
+
+# ------------------------------------------------------------------------ period doubling
+PD_OMEGA = 2.0 * math.pi  # period 1
+PD_ALPHA = 0.5
+PD_BETA = 1.0
+PD_NU = (PD_ALPHA / PD_BETA) ** 2  # the period doubling
+
+
+def pd_system() -> System:
+    """x1' = nu x1 - w x2 - x1 r^2, x2' = w x1 + nu x2 - x2 r^2 (cycle r = sqrt(nu),
+    period 2 pi / w), and a transverse block y = (u, v):
+
+        y' = (w/2) J y - ALPHA y + BETA [[x1, x2], [x2, -x1]] y,     J = [[0, -1], [1, 0]].
+
+    On the cycle x = sqrt(nu) (cos w t, sin w t) the coefficient of BETA is
+    sqrt(nu) R(w t/2) diag(1, -1) R(-w t/2), so in the frame rotating by w t / 2 the block
+    is diagonal and the monodromy of y is R(pi) diag(e^{(-ALPHA +- BETA sqrt(nu)) T}):
+    multipliers -exp((-ALPHA + BETA sqrt(nu)) T), -exp((-ALPHA - BETA sqrt(nu)) T), and
+    exp(-2 nu T), 1 from the planar part. A period doubling (multiplier -1) at
+    nu = (ALPHA / BETA)^2, exactly; the Hopf point is nu = 0."""
+
+    def rhs(x, p):
+        nu = p[0]
+        x1, x2, u, v = x[0], x[1], x[2], x[3]
+        r2 = x1 * x1 + x2 * x2
+        w = PD_OMEGA
+        du = -0.5 * w * v - PD_ALPHA * u + PD_BETA * (x1 * u + x2 * v)
+        dv = 0.5 * w * u - PD_ALPHA * v + PD_BETA * (x2 * u - x1 * v)
+        return jnp.stack([nu * x1 - w * x2 - x1 * r2, w * x1 + nu * x2 - x2 * r2, du, dv])
+
+    return System(rhs=rhs, p=np.array([0.0]), param_names=("nu",),
+                  state_names=("x1", "x2", "u", "v"),
+                  observables={"radius": lambda x, p: jnp.sqrt(x[0] ** 2 + x[1] ** 2)},
+                  name="period doubling")
+
+
+def pd_multipliers(nu: float) -> np.ndarray:
+    """The closed-form Floquet multipliers of :func:`pd_system`'s cycle at nu > 0."""
+    T = 2.0 * math.pi / PD_OMEGA
+    s = math.sqrt(nu)
+    return np.array([1.0, math.exp(-2 * nu * T), -math.exp((-PD_ALPHA + PD_BETA * s) * T),
+                     -math.exp((-PD_ALPHA - PD_BETA * s) * T)])
+
+
+def planar_system() -> System:
+    """A planar Hopf normal form with a frequency that depends on the amplitude (PD and NS
+    are impossible in the plane): r' = r (mu - r^2), theta' = 1 + r^2."""
+
+    def rhs(x, p):
+        mu = p[0]
+        r2 = x[0] ** 2 + x[1] ** 2
+        om = 1.0 + r2
+        return jnp.stack([mu * x[0] - om * x[1] - x[0] * r2,
+                          om * x[0] + mu * x[1] - x[1] * r2])
+
+    return System(rhs=rhs, p=np.array([0.0]), param_names=("mu",), state_names=("x", "y"),
+                  observables={"radius": lambda x, p: jnp.sqrt(x[0] ** 2 + x[1] ** 2)},
+                  name="planar")
+
+
+# -------------------------------------------------------------------------------- equilibria
+def saddle_node() -> System:
+    """x' = mu - x^2, y' = -y + x^2: a fold at mu = 0, x = 0."""
+    return System(rhs=lambda x, p: jnp.stack([p[0] - x[0] ** 2, -x[1] + x[0] ** 2]),
+                  p=np.array([1.0]), param_names=("mu",), state_names=("x", "y"),
+                  x_guess=np.array([1.0, 1.0]), name="saddle-node")
+
+
+def pitchfork() -> System:
+    """x' = mu x - x^3, y' = -y: the trivial branch x = 0 has a branch point at mu = 0."""
+    return System(rhs=lambda x, p: jnp.stack([p[0] * x[0] - x[0] ** 3, -x[1]]),
+                  p=np.array([-1.0]), param_names=("mu",), state_names=("x", "y"),
+                  name="pitchfork")
+
+
+S_HOPF_X = (-1.2, 0.8)  # x at the two Hopf points of s_shaped_hopf
+
+
+def s_shaped_hopf() -> System:
+    """x' = y, y' = mu - x^3 + x + (x - 0.8)(x + 1.2) y: equilibria (x, 0) with
+    mu = x^3 - x (S-shaped, folds at x = +-1/sqrt 3), Jacobian [[0, 1], [1 - 3x^2, tr]],
+    tr = (x - 0.8)(x + 1.2). Hopf points where tr = 0 and det = 3x^2 - 1 > 0: x = -1.2 on
+    the lower branch (mu = -0.528) and x = 0.8 on the upper branch between the folds
+    (mu = -0.288), frequencies sqrt(3x^2 - 1)."""
+
+    def rhs(x, p):
+        tr = (x[0] - S_HOPF_X[1]) * (x[0] - S_HOPF_X[0])
+        return jnp.stack([x[1], p[0] - x[0] ** 3 + x[0] + tr * x[1]])
+
+    return System(rhs=rhs, p=np.array([-1.0]), param_names=("mu",), state_names=("x", "y"),
+                  x_guess=np.array([-1.3, 0.0]), name="S-shaped")
+
+
+# ------------------------------------------------------------------------------------ Lorenz
+LORENZ_SIGMA = 10.0
+LORENZ_BETA = 8.0 / 3.0
+LORENZ_RHO_H = LORENZ_SIGMA * (LORENZ_SIGMA + LORENZ_BETA + 3) / (LORENZ_SIGMA - LORENZ_BETA - 1)
+
+
+def lorenz() -> System:
+    """x' = sigma (y - x), y' = x (rho - z) - y, z' = x y - beta z; parameters (sigma,
+    rho, beta); the equilibrium guess is C+ = (sqrt(beta (rho - 1)), same, rho - 1)."""
+
+    def rhs(x, p):
+        s, r, b = p[0], p[1], p[2]
+        return jnp.stack([s * (x[1] - x[0]), x[0] * (r - x[2]) - x[1], x[0] * x[1] - b * x[2]])
+
+    rho = 20.0
+    c = math.sqrt(LORENZ_BETA * (rho - 1))
+    return System(rhs=rhs, p=np.array([LORENZ_SIGMA, rho, LORENZ_BETA]),
+                  param_names=("sigma", "rho", "beta"), state_names=("x", "y", "z"),
+                  x_guess=np.array([c, c, rho - 1]), state_scale=np.array([10.0, 10.0, 20.0]),
+                  observables={"x": lambda x, p: x[0], "z": lambda x, p: x[2]},
+                  name="Lorenz")
