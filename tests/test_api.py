@@ -3,7 +3,6 @@ each function gives what the library (and the command line) gives."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -41,8 +40,6 @@ def test_import_is_light_and_every_public_name_resolves():
         mm.nonsense  # noqa: B018
 
 
-@pytest.mark.skipif(importlib.util.find_spec("maglev_match.models.user") is None,
-                    reason="user-model loader not merged yet")
 def test_load_model_exported():
     from maglev_match.models.user import load_model
 

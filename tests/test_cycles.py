@@ -337,9 +337,6 @@ def test_lorenz_branch_to_the_homoclinic_end_has_no_pd_or_ns():
         assert c.reliable == (abs(c.trivial_multiplier - 1) <= 1e-4)
 
 
-@pytest.mark.xfail(strict=True, reason="the monodromy product loses the trivial multiplier "
-                   "at long periods; fixed by the periodic-Schur Floquet method (i11f): "
-                   "remove this mark when it lands")
 def test_lorenz_trivial_multiplier_stays_at_one_up_to_the_homoclinic_end():
     from systems import lorenz
 

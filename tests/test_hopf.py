@@ -1,4 +1,4 @@
-"""Hopf points, Hopf curve, Lyapunov coefficients (SPEC.md 6.2-6.3).
+"""Hopf points, Hopf curve, Lyapunov coefficients.
 
 Known answers: the Hopf and Bautin normal forms embedded in a larger stable system,
 rotated by a random orthogonal matrix and deformed by a nonlinear change of coordinates;

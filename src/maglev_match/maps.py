@@ -1,4 +1,4 @@
-"""Maps of stability, h, w0 and chi over two-parameter design grids (SPEC.md section 6.7).
+"""Maps of stability, h, w0 and chi over two-parameter design grids.
 
 A grid is two swept parameters of a :class:`~maglev_match.params.Params`: model-A
 parameters (omega1, sigma, kP, kD, ke, ...) or engineering quantities (L, EI, mbar, l, k)

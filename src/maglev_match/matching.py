@@ -1,4 +1,4 @@
-"""The vehicle-track beam matching index chi = h / w0 (SPEC.md section 6.6).
+"""The vehicle-track beam matching index chi = h / w0 (Chen, Ma, Luo & Zou 2019).
 
 h, the size of the equilibrium's basin along the gap, is decided by one of three cases:
 
@@ -302,7 +302,7 @@ def index_of_system(
     sigma: float = float("nan"),
 ) -> MatchingIndex:
     """The index for any System with observables "gap_deviation" and "current": h from the
-    stability of the equilibrium and the bounding cycle (SPEC.md 6.6), chi = h / w0.
+    stability of the equilibrium and the bounding cycle, chi = h / w0.
 
     ``h_max`` is h when no unstable cycle bounds the basin within the limits (m);
     ``search`` gives the parameter ranges in which Hopf points are looked for. The result

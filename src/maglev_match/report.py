@@ -1,4 +1,4 @@
-"""Self-contained HTML study reports (SPEC.md section 7: one HTML report per study).
+"""Self-contained HTML study reports: one HTML file per study.
 
 A report is a list of *sections*. Each section is produced by a small function
 ``section(params, ctx) -> (html_fragment, figure_files, data)``; :func:`run_section` calls it

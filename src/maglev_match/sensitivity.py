@@ -134,19 +134,24 @@ def _collocation_system(system: System, orbit: PeriodicOrbit) -> _Collocation:
     The bordered unknown lambda does not move (last row), so dF/dp carries the direct
     parameter derivative, -T h_j f_p(u(z), p) / scale, in the collocation rows only.
 
-    This is the ONLY function that uses collocation internals (``_Problem``,
-    ``_interval_index``, ``_factorize`` of :mod:`maglev_match.dynamics.cycles`; ``_tables``
-    and ``_lagrange`` of :mod:`maglev_match.dynamics.collocation`): re-point it when they
-    move.
+    This is the ONLY function that uses the collocation problem
+    (:class:`~maglev_match.dynamics.collocation.CollocationProblem`, the same bordered system
+    the continuation solves, and its sparse LU).
     """
-    from maglev_match.dynamics.collocation import _lagrange, _tables
-    from maglev_match.dynamics.cycles import _factorize, _interval_index, _Problem
+    from maglev_match.dynamics.collocation import (
+        CollocationProblem,
+        _factorize,
+        _interval_index,
+        _lagrange,
+        _tables,
+    )
 
     p = np.asarray(orbit.p, float)
     m, ntst, n = orbit.ncol, orbit.ntst, system.dim
-    prob = _Problem(system=system, ipar=0, p0=p.copy(), mesh=np.asarray(orbit.mesh, float),
-                    m=m, scale=np.asarray(system.state_scale, float), T_scale=orbit.period,
-                    lam_scale=abs(p[0]) if p[0] != 0 else 1.0)
+    prob = CollocationProblem(system=system, ipar=0, p0=p.copy(),
+                              mesh=np.asarray(orbit.mesh, float), m=m,
+                              scale=np.asarray(system.state_scale, float),
+                              T_scale=orbit.period, lam_scale=abs(p[0]) if p[0] != 0 else 1.0)
     Y = prob.pack(orbit.states, orbit.period, p[0])
     last_row = np.zeros(prob.size)
     last_row[-1] = 1.0

@@ -1,4 +1,4 @@
-"""Time simulation of the maglev models with the physical limits (SPEC.md sections 5, 6.5).
+"""Time simulation of the maglev models with the physical limits.
 
 Glue between the models and the model-agnostic integrator
 :mod:`maglev_match.dynamics.simulate`:
@@ -6,8 +6,8 @@ Glue between the models and the model-agnostic integrator
 * the gap-limit events of model A (one levitation point) and model B (six points):
   ``g = (gap - gap_min, gap_max - gap)`` per point, a negative entry is a collision;
 * named initial conditions: the equilibrium, a beam-deflection disturbance ``x5(0)``
-  (model A, paper Figs. 6-8), the vehicle "pressed onto the free beam" (model B, SPEC
-  section 4) and an absolute modal coordinate ``q1(0)`` (model B, paper Fig. 13b);
+  (model A, paper Figs. 6-8), the vehicle "pressed onto the free beam" (model B, paper
+  Section 5) and an absolute modal coordinate ``q1(0)`` (model B, paper Fig. 13b);
 * the outcome of a run in the domain's words (collision time, lower/upper limit,
   levitation point), time histories as an :class:`xarray.Dataset` (CSV / netCDF);
 * :func:`critical_disturbance`: the beam-deflection disturbance of model A that separates
@@ -90,7 +90,7 @@ def _gap_function(model: str, n_modes: int):
 
 @cache
 def gap_limit_events(model: str, n_modes: int, gap_min: float, gap_max: float):
-    """Event function ``g(x, p)`` of the gap limits (SPEC.md section 5), cached so the
+    """Event function ``g(x, p)`` of the gap limits, cached so the
     compiled integrator is reused: entries ``2(j-1)`` and ``2(j-1)+1`` are
     ``gap_j - gap_min`` and ``gap_max - gap_j`` (m) of levitation point j; negative means
     the gap left [gap_min, gap_max]."""
@@ -140,7 +140,7 @@ def initial_state(
     ----------
     initial : 'equilibrium' (both models) or 'pressed' (model B: vehicle pressed onto the
         free beam, i.e. every vehicle and controller state at equilibrium and q_n = 0,
-        q_n' = 0; SPEC.md section 4).
+        q_n' = 0).
     x5 : model A only: beam deflection x5(0) (m) added to the base state (the paper's
         Figs. 6-8 use x5(0) = -1.5, -2.2, -0.1, -4 mm; x5 < 0 opens the gap).
     q1 : model B only: the first modal coordinate q1(0) (m), *absolute* (undeflected
@@ -251,7 +251,7 @@ def simulate_maglev(
 ) -> MaglevSimulation:
     """Simulate model A ('unit') or B ('vehicle') from ``x0`` over [0, t_end] (s).
 
-    With ``limited`` (default) the current clamp of SPEC.md section 5 is in the vector field
+    With ``limited`` (default) the current clamp (no current reversal) is in the vector field
     and leaving the gap range [gap_min, gap_max] ends the run as a collision; without it
     the smooth model runs with no events. ``converged`` means the state stayed within
     ``options.converge_tol`` (scaled by the model's state scales: 1 mm, 1 cm/s, 1 A) of the
@@ -441,8 +441,8 @@ def critical_disturbance(
     max_rounds: int = 12,
     options: SimulationOptions | None = None,
 ) -> CriticalDisturbance:
-    """Critical beam-deflection disturbance of model A with the limits on (SPEC.md 6.6's
-    cross-check of h): the size d such that x5(0) = direction * d returns to the
+    """Critical beam-deflection disturbance of model A with the limits on (the
+    simulation cross-check of h): the size d such that x5(0) = direction * d returns to the
     equilibrium for smaller d and collides for larger d.
 
     The runs use the limited model: the coil current is clamped at zero (the force uses

@@ -1,5 +1,5 @@
 """Periodic orbits of x' = f(x, p): orthogonal collocation, pseudo-arclength continuation
-from a Hopf point, Floquet multipliers and cycle bifurcations (SPEC.md section 6.4).
+from a Hopf point, Floquet multipliers and cycle bifurcations.
 
 Model-agnostic: works on any :class:`~maglev_match.dynamics.system.System`; observables
 (read-outs) and physical limits come in as names and callables.

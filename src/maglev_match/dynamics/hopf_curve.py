@@ -502,7 +502,7 @@ def hopf_curve(
     detect_special_points: bool = True,
     progress: Callable[[int], None] | None = None,
 ) -> HopfCurve:
-    """Continue a Hopf point in two parameters: the Hopf curve (SPEC.md 6.2, paper Fig. 4).
+    """Continue a Hopf point in two parameters: the Hopf curve (paper Fig. 4).
 
     Pseudo-arclength continuation of the standard defining system
     f(x, alpha) = 0, J v1 + omega v2 = 0, J v2 - omega v1 = 0, <c, v1> = 1, <c, v2> = 0
