@@ -228,3 +228,53 @@ def lorenz() -> System:
                   x_guess=np.array([c, c, rho - 1]), state_scale=np.array([10.0, 10.0, 20.0]),
                   observables={"x": lambda x, p: x[0], "z": lambda x, p: x[2]},
                   name="Lorenz")
+
+
+# ---------------------------------------------------------------------------------------
+# Closed-form unstable cycle for the sensitivity and design tests.
+#
+# The subcritical Hopf normal form in polar form r' = (mu - a) r + l1 r^3, theta' = omega,
+# with a stable third direction driven by r^2, embedded by a fixed invertible linear map:
+# for a > mu and l1 > 0 the equilibrium is stable and surrounded by the unstable cycle of
+# radius h = sqrt((a - mu) / l1) (Kuznetsov 2004, sec. 3.4), read out as the first normal-form
+# coordinate ("gap_deviation"). The Hopf point along a is a_H = mu.
+# ---------------------------------------------------------------------------------------
+_NF_M = np.array([[1.0, 0.3, -0.2], [-0.4, 1.2, 0.1], [0.25, 0.5, 0.9]])
+_NF_MINV = np.linalg.inv(_NF_M)
+NF_NAMES = ("mu", "a", "omega", "l1", "b")
+NF_DESIGN = {"mu": 1.0, "a": 1.5, "omega": 2.0, "l1": 2.0, "b": 0.7}
+
+
+def _nf_xi(x):
+    return jnp.asarray(_NF_MINV) @ x
+
+
+def _nf_rhs(x, p):
+    mu, a, om, l1, b = p[0], p[1], p[2], p[3], p[4]
+    u, v, w = _nf_xi(x)
+    r2 = u * u + v * v
+    du = (mu - a) * u - om * v + l1 * u * r2
+    dv = om * u + (mu - a) * v + l1 * v * r2
+    dw = -w + b * r2
+    return jnp.asarray(_NF_M) @ jnp.stack([du, dv, dw])
+
+
+def _nf_gap(x, p):
+    return _nf_xi(x)[0]
+
+
+def _nf_current(x, p):
+    return _nf_xi(x)[1]
+
+
+def normal_form_system(**values: float) -> System:
+    """The embedded normal form at NF_DESIGN updated by ``values``."""
+    d = dict(NF_DESIGN, **values)
+    return System(rhs=_nf_rhs, p=np.array([d[n] for n in NF_NAMES]), param_names=NF_NAMES,
+                  state_names=("x1", "x2", "x3"),
+                  observables={"gap_deviation": _nf_gap, "current": _nf_current}, name="hopf-nf")
+
+
+def nf_amplitude(mu: float, a: float, l1: float) -> float:
+    """Closed-form radius of the unstable cycle."""
+    return math.sqrt((a - mu) / l1)

@@ -8,7 +8,8 @@ import math
 
 import numpy as np
 import pytest
-from hopf_systems import DESIGN, normal_form_system
+from systems import NF_DESIGN as DESIGN
+from systems import normal_form_system
 
 from maglev_match.cli import main
 from maglev_match.design import (

@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 import pytest
-from hopf_systems import amplitude, normal_form_system
+from systems import nf_amplitude as amplitude
+from systems import normal_form_system
 
 from maglev_match.dynamics.cycles import orbit_extrema
 from maglev_match.dynamics.equilibria import stability
