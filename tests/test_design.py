@@ -120,3 +120,16 @@ def test_cli_sensitivity_json(capsys, tmp_path):
                                                  rel=1e-12)
     assert all((tmp_path / f"tornado.{s}").exists() for s in ("png", "svg"))
     assert np.isfinite([r["dchi"] for r in rows]).all()
+
+
+def test_cli_design_without_a_feasible_design_exits_3(capsys, tmp_path):
+    """No candidate can reach chi >= 1000 (chi is at most (gap_max - c0) / w0 ~ 12 here):
+    the best design is printed and the exit code says 'no feasible design' (3), distinct
+    from a usage error (2) or a failure (1)."""
+    from maglev_match.cli.design import NO_FEASIBLE_DESIGN
+
+    code = main(["design", "--vary", "kD=120:180", "--maximize", "chi", "--require",
+                 "chi>=1000", "--grid", "3", "--starts", "1", "--json", "--out", str(tmp_path)])
+    assert code == NO_FEASIBLE_DESIGN == 3
+    data = json.loads(capsys.readouterr().out)
+    assert data["status"] != "feasible" and data["index"]["chi"] < 1000

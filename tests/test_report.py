@@ -300,7 +300,7 @@ def test_report_command_renders_every_section(tmp_path, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert {k: v["reason"] for k, v in summary["sections"].items() if not v["available"]} == {}
     assert {"parameters", "stability", "root-locus", "hopf-curve", "cycles", "time-history",
-            "matching"} <= set(summary["sections"])
+            "matching", "sensitivity"} <= set(summary["sections"])
     for f in summary["figures"]:
         assert Path(f).stat().st_size > 0
     dom = _assert_self_contained(out.read_text())

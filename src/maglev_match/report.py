@@ -768,6 +768,45 @@ def section_matching(params: Params, ctx: ReportContext) -> tuple[str, list[Path
     return "".join(parts), [], data
 
 
+def sensitivity_rows(sens: Any, top: int = 12) -> list[tuple[Any, ...]]:
+    """(parameter, value, d chi/dp, elasticity, d margin/dp, stability boundary) rows of an
+    :class:`~maglev_match.sensitivity.IndexSensitivity`, largest |elasticity| first."""
+    rows = []
+    for r in sens.sorted_rows()[:top]:
+        unit = f" {r.unit}" if r.unit else ""
+        bound = (None if r.boundary is None
+                 else f"{r.boundary:.4g}{unit} ({r.boundary_relative:+.1%})")
+        rows.append((r.name, f"{r.value:.5g}{unit}", r.dchi, r.elasticity, r.dmargin, bound))
+    return rows
+
+
+def section_sensitivity(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
+    """Exact d chi / d p (implicit differentiation of the bounding cycle), the elasticities,
+    the margin's sensitivities and the nearest stability boundary per parameter."""
+    from maglev_match.matching import matching_index
+    from maglev_match.plots.design import tornado_figure
+    from maglev_match.sensitivity import index_sensitivity
+
+    mi = ctx.cache.get("matching")
+    if mi is None:
+        mi = matching_index(params, simulate=not ctx.settings.quick)
+        ctx.cache["matching"] = mi
+    sens = index_sensitivity(params, index=mi, boundaries=not ctx.settings.quick)
+    parts = [f"<p>Status of the derivative: <b>{esc(sens.status)}</b> (case {esc(mi.case)}). "
+             "Elasticity = (p / chi) d chi / d p: the % change of chi per % change of p.</p>",
+             table_html(["parameter", "value", "d chi / d p", "elasticity",
+                         "d margin / d p (1/s per unit)", "stability lost at"],
+                        sensitivity_rows(sens), "sensitivity")]
+    if sens.limit_boundary_note:
+        parts.append(note_html(sens.limit_boundary_note))
+    for w in sens.warnings:
+        parts.append(note_html(w, "warning"))
+    html, files = save_and_embed(tornado_figure(sens), ctx, "sensitivity_tornado",
+                                 "Elasticities of chi and of the stability margin")
+    parts.append(html)
+    return "".join(parts), files, sens.as_json()
+
+
 # ---------------------------------------------------------------------------------------
 # Hopf curve in the (omega1, sigma) plane
 # ---------------------------------------------------------------------------------------
@@ -912,6 +951,7 @@ def study_sections() -> list[tuple[str, str, SectionFn]]:
          section_bifurcation_diagrams),
         ("time-history", "Time history after the typical disturbance", section_time_history),
         ("matching", "Matching index h, w0, chi", section_matching),
+        ("sensitivity", "Sensitivities of the index", section_sensitivity),
     ]
 
 

@@ -29,6 +29,10 @@ from maglev_match.cli.common import (
 )
 from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
 
+# `design` exits with this code when no candidate meets the requirements (the best one found
+# is still printed): distinct from 1 (a failure or a bug) and 2 (a usage error).
+NO_FEASIBLE_DESIGN = 3
+
 ScatterOpt = Annotated[
     list[str] | None,
     typer.Option("--scatter", help="NAME=PCT: relative standard deviation of a parameter "
@@ -295,6 +299,8 @@ def design_command(
             mc.as_json(), fraction_below_requirement=None if chi_req is None
             else mc.fraction_below(chi_req))
         emit_json(data)
+        if res.status != DesignStatus.FEASIBLE:
+            raise typer.Exit(NO_FEASIBLE_DESIGN)
         return
     idx = res.index
     console.print(f"[bold]maglev-match design[/] — preset {preset}: {goal} {problem.objective}"
@@ -333,7 +339,7 @@ def design_command(
     console.print(f"  figure: {', '.join(str(f) for f in figs)}")
     print_warnings(res.warnings + idx.warnings)
     if not ok:
-        raise typer.Exit(1)
+        raise typer.Exit(NO_FEASIBLE_DESIGN)
 
 
-__all__ = ["sensitivity_command", "design_command", "parse_scatter"]
+__all__ = ["NO_FEASIBLE_DESIGN", "sensitivity_command", "design_command", "parse_scatter"]
