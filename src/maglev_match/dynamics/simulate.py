@@ -17,9 +17,18 @@ through the solver's dense interpolant:
   point each round) to about 1e-15 of the step length.
 * **Convergence.** With a reference state ``x_ref`` (an equilibrium), the scaled distance
   ``d(t) = max_i |x_i - x_ref_i| / scale_i`` is checked at the end of every accepted step.
-  The run counts as *converged* once ``d <= converge_tol`` has held without interruption
-  for ``hold_time`` seconds; ``converged_time`` is when that last uninterrupted stretch
-  began. With ``stop_on_converged`` the run stops there (for basin bisection).
+  Being close is not enough: near an unstable equilibrium a small disturbance stays small
+  for a long time while it grows. So the run counts as *converged* only when ``d <=
+  converge_tol`` has held without interruption for ``hold_time`` seconds **and** the
+  disturbance decays: the stretch is cut into halves of the hold time, the peak of ``d`` in
+  each half is taken over the step ends and the interpolant samples of the event search,
+  and the peak of the latest complete half must be at most ``decay_ratio`` times the peak
+  of the half before (or below ``decay_floor``, the integrator's noise level). This is the
+  envelope test for a decaying oscillation (a stable focus decays by ``exp(Re(lambda)
+  hold_time / 2)`` per half; Kuznetsov 2004, sec. 2.1). ``converged_time`` is when the last
+  uninterrupted stretch began; ``decay_ratio`` of the result is the latest peak ratio. With
+  ``stop_on_converged`` the run stops as soon as it has converged (for basin bisection).
+  A run that stays close but does not decay ends as ``running`` with a warning saying so.
 * **Outcomes.** ``collision`` (an event fired: time, entry index, state), ``converged``,
   ``running`` (neither by the horizon), ``failed`` (non-finite state or ``max_steps``
   exhausted; never silently reported as one of the others).
@@ -36,6 +45,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from functools import lru_cache
 from typing import Any
 
@@ -53,6 +63,7 @@ EventFn = Callable[[Array, Array], Array]
 
 __all__ = [
     "OUTCOMES",
+    "Outcome",
     "SimulationOptions",
     "SimulationResult",
     "BatchSimulation",
@@ -60,9 +71,18 @@ __all__ = [
     "simulate_batch",
 ]
 
+class Outcome(StrEnum):
+    """How a run ended (compares equal to its string value)."""
+
+    RUNNING = "running"  # neither collided nor converged by the horizon (incl. not decaying)
+    COLLISION = "collision"  # an event entry went negative
+    CONVERGED = "converged"  # close to the reference state and decaying (module docstring)
+    FAILED = "failed"  # non-finite state or max_steps exhausted
+
+
 # outcome codes used inside the kernel
 RUNNING, COLLISION, CONVERGED, FAILED = 0, 1, 2, 3
-OUTCOMES = ("running", "collision", "converged", "failed")
+OUTCOMES = (Outcome.RUNNING, Outcome.COLLISION, Outcome.CONVERGED, Outcome.FAILED)
 
 _SOLVERS = {
     "dopri8": diffrax.Dopri8,
@@ -80,6 +100,11 @@ class SimulationOptions:
     samples : interpolant samples per step for the event search (>= 2).
     converge_tol : scaled distance to ``x_ref`` that counts as "at the reference state".
     hold_time : how long (s) the distance must stay below ``converge_tol``.
+    decay_ratio : the peak scaled distance over the latest half of the hold time must be at
+        most this times the peak over the half before, for the run to count as converged
+        (< 1: the disturbance must be seen to decay, by more than sampling noise).
+    decay_floor : a peak scaled distance below this counts as decayed (the integrator's
+        noise level; an exactly steady state is converged).
     stop_on_converged : end a run as soon as it has converged.
     max_steps : bound on attempted steps per run (reported as 'failed' when hit).
     dt0 : initial step (s); None lets diffrax choose.
@@ -91,6 +116,8 @@ class SimulationOptions:
     samples: int = 8
     converge_tol: float = 0.05
     hold_time: float = 1.0
+    decay_ratio: float = 0.99
+    decay_floor: float = 1e-6
     stop_on_converged: bool = False
     max_steps: int = 200_000
     dt0: float | None = None
@@ -107,7 +134,10 @@ class SimulationResult:
         or None; event_state : state at the collision or None.
     final_time, final_state : where the run ended (the collision point for a collision).
     converged_time : start (s) of the final uninterrupted stretch within ``converge_tol``
-        of the reference state, or None.
+        of the reference state, or None (set only for a converged run).
+    decay_ratio : peak scaled distance to the reference state over the latest complete
+        half of the hold time divided by the peak over the half before (NaN when the run
+        did not stay within ``converge_tol`` for a whole hold time at its end).
     min_event_value : smallest value of each entry of g seen over the run (sampled inside
         steps), shape (m,).
     steps, accepted, rejected : step counts. warnings : messages.
@@ -127,6 +157,7 @@ class SimulationResult:
     accepted: int
     rejected: int
     warnings: tuple[str, ...] = field(default=())
+    decay_ratio: float = float("nan")
 
     @property
     def collided(self) -> bool:
@@ -139,6 +170,7 @@ class BatchSimulation:
 
     outcome : array of strings; outcome_code : 0 running, 1 collision, 2 converged, 3 failed.
     event_time : NaN where no collision; event_index : -1 where no collision.
+    decay_ratio : as in :class:`SimulationResult`, per run.
     t, x : saved times (n_save,) and histories (batch, n_save, dim) (x is None when no
         history was requested).
     """
@@ -156,6 +188,7 @@ class BatchSimulation:
     x: np.ndarray | None
     accepted: np.ndarray | None = None
     rejected: np.ndarray | None = None
+    decay_ratio: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.outcome)
@@ -179,6 +212,8 @@ class BatchSimulation:
             steps=int(self.steps[k]),
             accepted=int(self.accepted[k]) if self.accepted is not None else -1,
             rejected=int(self.rejected[k]) if self.rejected is not None else -1,
+            decay_ratio=(float(self.decay_ratio[k]) if self.decay_ratio is not None
+                         else float("nan")),
         )
 
 
@@ -197,7 +232,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
     eps = float(np.finfo(float).eps)
 
     def kernel(x0, p, scale, x_ref, t_end, ts_save, rtol, atol, converge_tol, hold_time,
-               max_steps, dt0):
+               max_steps, dt0, decay_ratio, decay_floor):
         term = diffrax.ODETerm(lambda t, z, args: rhs(z * scale, args) / scale)
         controller = diffrax.PIDController(rtol=rtol, atol=atol)
         order = solver.error_order(term)
@@ -214,13 +249,19 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
         tnext = jnp.where(dt0 > 0, t0 + dt0, tnext)
         tnext = jnp.minimum(tnext, t_end)
         dim = z0.shape[0]
+        d0 = jnp.max(jnp.abs(z0 - zref))
+        inside0 = d0 <= converge_tol
+        half = 0.5 * hold_time
 
         carry = dict(
             t=t0, tnext=tnext, z=z0, sstate=sstate, cstate=cstate,
             made_jump=jnp.asarray(False),
             status=jnp.asarray(RUNNING), t_event=jnp.asarray(jnp.nan),
             i_event=jnp.asarray(-1), z_event=jnp.full((dim,), jnp.nan),
-            conv_since=jnp.where(jnp.max(jnp.abs(z0 - zref)) <= converge_tol, t0, jnp.inf),
+            conv_since=jnp.where(inside0, t0, jnp.inf),
+            # decay test: peak of d in the current and the previous half of the hold time
+            n_half=jnp.asarray(0), peak_cur=d0, peak_prev=jnp.asarray(jnp.inf),
+            ratio=jnp.asarray(jnp.nan), settled=jnp.asarray(False),
             ys=jnp.full((n_save, dim), jnp.nan), save_idx=jnp.asarray(0),
             steps=jnp.asarray(0), accepted=jnp.asarray(0), rejected=jnp.asarray(0),
             gmin=g_of_z(z0) if m else jnp.zeros((0,)),
@@ -235,17 +276,18 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             carry["z_event"] = jnp.where(bad0, z0, jnp.nan)
 
         def cond(c):
-            conv_done = (c["t"] - c["conv_since"]) >= hold_time
             go = (c["status"] == RUNNING) & (c["t"] < t_end) & (c["steps"] < max_steps)
             if stop_on_converged:
-                go = go & ~conv_done
+                go = go & ~c["settled"]
             return go
 
         def locate_event(interp, ta, tb, active):
             """First time in [ta, tb] at which an entry of g is negative (inf if none),
             the entry, and the smallest value of each entry seen in the step."""
             s = ta + (tb - ta) * jnp.linspace(0.0, 1.0, samples + 1)
-            G = jax.vmap(lambda tt: g_of_z(interp.evaluate(tt)))(s)  # (samples+1, m)
+            zs = jax.vmap(interp.evaluate)(s)  # (samples+1, dim)
+            G = jax.vmap(g_of_z)(zs)  # (samples+1, m)
+            d_seen = jnp.max(jnp.abs(zs - zref))
             neg = G < 0
             any_neg = jnp.any(neg, axis=0)
             first = jnp.argmax(neg, axis=0)  # first negative sample per entry
@@ -320,7 +362,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             t_cross = jax.lax.cond(eqxi.unvmap_any(any_hit), bisect, lambda: jnp.inf)
             t_cross = jnp.where(any_hit, t_cross, jnp.inf)
             g_seen = g_lo.at[j_r].set(jnp.minimum(g_lo[j_r], g_min))
-            return t_cross, j_hit, g_seen
+            return t_cross, j_hit, g_seen, d_seen
 
         def save_until(c, interp, t_stop):
             def scond(sc):
@@ -350,13 +392,14 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             interp = interp_cls(t0=t, t1=tn, **dense)
 
             if m:
-                t_hit, j_hit, gmin_step = locate_event(interp, t, tn, cond(c) & keep)
+                t_hit, j_hit, gmin_step, d_seen = locate_event(interp, t, tn, cond(c) & keep)
                 collide = keep & jnp.isfinite(t_hit)
                 # values past a collision inside the step are not part of the run
                 gmin_step = jnp.where(collide, jnp.maximum(gmin_step, 0.0), gmin_step)
                 gmin = jnp.where(keep, jnp.minimum(c["gmin"], gmin_step), c["gmin"])
             else:
                 t_hit, j_hit, collide, gmin = jnp.inf, -1, jnp.asarray(False), c["gmin"]
+                d_seen = jnp.asarray(0.0)
 
             t_stop = jnp.where(collide, t_hit, tn)
             if n_save:
@@ -369,9 +412,32 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             z_new = jnp.where(keep, z1, c["z"])
             z_hit = interp.evaluate(jnp.where(collide, t_hit, tn))
             d = jnp.max(jnp.abs(z_new - zref))
+            inside = d <= converge_tol
+            was_inside = jnp.isfinite(c["conv_since"])
             conv_since = jnp.where(
-                keep, jnp.where(d <= converge_tol, jnp.minimum(c["conv_since"], tn), jnp.inf),
+                keep, jnp.where(inside, jnp.minimum(c["conv_since"], tn), jnp.inf),
                 c["conv_since"])
+            # decay test over halves of the hold time, aligned at the stretch's start
+            peak = jnp.where(was_inside, jnp.maximum(c["peak_cur"], jnp.maximum(d, d_seen)), d)
+            n_half = jnp.where(was_inside, c["n_half"], 0)
+            peak_prev = jnp.where(was_inside, c["peak_prev"], jnp.inf)
+            closes = was_inside & (tn >= conv_since + (n_half + 1) * half)
+            ratio_new = peak / peak_prev
+            decays = (peak <= decay_ratio * peak_prev) | (peak <= decay_floor)
+            settled_new = jnp.where(closes, (n_half >= 1) & decays,
+                                    was_inside & c["settled"])
+            # (a rejected step changes nothing; an accepted step outside ends the stretch)
+            upd = keep & inside
+            second = closes & (n_half >= 1)  # a half closes and there is one before it
+            ratio = jnp.where(upd, jnp.where(second, ratio_new,
+                                             jnp.where(was_inside, c["ratio"], jnp.nan)),
+                              jnp.where(keep, jnp.nan, c["ratio"]))
+            n_half = jnp.where(keep, jnp.where(inside, n_half + closes.astype(int), 0),
+                               c["n_half"])
+            peak_cur = jnp.where(upd, jnp.where(closes, d, peak), c["peak_cur"])
+            peak_prev = jnp.where(keep, jnp.where(inside, jnp.where(closes, peak, peak_prev),
+                                                  jnp.inf), c["peak_prev"])
+            settled = jnp.where(keep, upd & settled_new, c["settled"])
             status = jnp.where(collide, COLLISION, c["status"])
             steps = c["steps"] + 1
             return dict(
@@ -387,6 +453,8 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                 i_event=jnp.where(collide, j_hit, c["i_event"]),
                 z_event=jnp.where(collide, z_hit, c["z_event"]),
                 conv_since=conv_since,
+                n_half=n_half, peak_cur=peak_cur, peak_prev=peak_prev, ratio=ratio,
+                settled=settled,
                 ys=ys, save_idx=save_idx, steps=steps,
                 accepted=c["accepted"] + keep.astype(int),
                 rejected=c["rejected"] + (~keep).astype(int),
@@ -394,7 +462,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             )
 
         c = jax.lax.while_loop(cond, body, carry)
-        conv_done = (c["t"] - c["conv_since"]) >= hold_time
+        conv_done = c["settled"]
         finite = jnp.all(jnp.isfinite(c["z"]))
         incomplete = (c["status"] == RUNNING) & (c["t"] < t_end) & ~conv_done
         status = jnp.where(c["status"] == COLLISION, COLLISION,
@@ -405,7 +473,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             t_final=c["t"], x_final=c["z"] * scale,
             conv_since=jnp.where(conv_done, c["conv_since"], jnp.inf),
             ys=c["ys"], gmin=c["gmin"], steps=c["steps"], accepted=c["accepted"],
-            rejected=c["rejected"],
+            rejected=c["rejected"], decay_ratio=c["ratio"],
         )
 
     return kernel
@@ -416,7 +484,7 @@ def _compiled_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                      stop_on_converged: bool, batch_x: bool, batch_p: bool):
     kernel = _make_kernel(rhs, event_fn, solver_name, samples, n_save, stop_on_converged)
     if batch_x or batch_p:
-        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 10
+        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 12
         kernel = jax.vmap(kernel, in_axes=axes)
     return jax.jit(kernel)
 
@@ -437,6 +505,10 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
         raise ValueError(f"unknown solver '{opts.solver}'; choose from {', '.join(_SOLVERS)}")
     if not t_end > 0:
         raise ValueError(f"t_end must be > 0, got {t_end}")
+    if not 0 < opts.decay_ratio <= 1:
+        raise ValueError(f"decay_ratio must be in (0, 1], got {opts.decay_ratio}")
+    if not opts.decay_floor >= 0:
+        raise ValueError(f"decay_floor must be >= 0, got {opts.decay_floor}")
     ts = _save_times(float(t_end), n_save, t_save)
     ev = event_fn if event_fn is not None else _no_events
     fn = _compiled_kernel(system.rhs, ev, opts.solver, int(max(opts.samples, 2)), ts.size,
@@ -448,8 +520,18 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
         jnp.asarray(float(t_end)), jnp.asarray(ts), jnp.asarray(opts.rtol),
         jnp.asarray(opts.atol), jnp.asarray(opts.converge_tol), jnp.asarray(opts.hold_time),
         jnp.asarray(opts.max_steps), jnp.asarray(opts.dt0 or 0.0),
+        jnp.asarray(opts.decay_ratio), jnp.asarray(opts.decay_floor),
     )
     return ts, {k: np.asarray(v) for k, v in out.items()}
+
+
+def _not_decaying_message(ratio: float, opts: SimulationOptions) -> str:
+    trend = "growing" if ratio > 1 else "not decaying clearly"
+    return (f"not converged: the state stayed within converge_tol = {opts.converge_tol:g} "
+            f"(scaled) of the reference state but the disturbance is {trend} (peak over the "
+            f"last {opts.hold_time / 2:g} s = {ratio:.6g} x the half before; at most "
+            f"{opts.decay_ratio:g} counts as decaying): the reference state may be unstable "
+            "or too weakly damped to tell within the horizon")
 
 
 def simulate(
@@ -496,6 +578,9 @@ def simulate(
         else:
             warnings.append(f"stopped after max_steps = {int(o['steps'])} steps at "
                             f"t = {float(o['t_final']):.6g} s before the horizon")
+    ratio = float(o["decay_ratio"])
+    if code == RUNNING and np.isfinite(ratio):
+        warnings.append(_not_decaying_message(ratio, options or SimulationOptions()))
     return SimulationResult(
         t=ts,
         x=o["ys"],
@@ -511,6 +596,7 @@ def simulate(
         accepted=int(o["accepted"]),
         rejected=int(o["rejected"]),
         warnings=tuple(warnings),
+        decay_ratio=ratio,
     )
 
 
@@ -556,4 +642,5 @@ def simulate_batch(
         x=o["ys"] if ts.size else None,
         accepted=o["accepted"],
         rejected=o["rejected"],
+        decay_ratio=o["decay_ratio"],
     )
