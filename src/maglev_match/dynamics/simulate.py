@@ -18,17 +18,20 @@ through the solver's dense interpolant:
 * **Convergence.** With a reference state ``x_ref`` (an equilibrium), the scaled distance
   ``d(t) = max_i |x_i - x_ref_i| / scale_i`` is checked at the end of every accepted step.
   Being close is not enough: near an unstable equilibrium a small disturbance stays small
-  for a long time while it grows. So the run counts as *converged* only when ``d <=
-  converge_tol`` has held without interruption for ``hold_time`` seconds **and** the
-  disturbance decays: the stretch is cut into halves of the hold time, the peak of ``d`` in
-  each half is taken over the step ends and the interpolant samples of the event search,
-  and the peak of the latest complete half must be at most ``decay_ratio`` times the peak
-  of the half before (or below ``decay_floor``, the integrator's noise level). This is the
-  envelope test for a decaying oscillation (a stable focus decays by ``exp(Re(lambda)
-  hold_time / 2)`` per half; Kuznetsov 2004, sec. 2.1). ``converged_time`` is when the last
-  uninterrupted stretch began; ``decay_ratio`` of the result is the latest peak ratio. With
-  ``stop_on_converged`` the run stops as soon as it has converged (for basin bisection).
-  A run that stays close but does not decay ends as ``running`` with a warning saying so.
+  for a long time while it grows (slowly, just past a Hopf point). So the run counts as
+  *converged* only when ``d <= converge_tol`` has held without interruption for
+  ``hold_time`` seconds **and** the disturbance must decay: the reference state is a
+  linearly stable equilibrium, i.e. its residual ``max_i |f_i(x_ref)| / scale_i`` is below
+  ``converge_tol / hold_time`` (it would not drift out of the tolerance within the hold
+  time) and every eigenvalue of the Jacobian there has a negative real part (Lyapunov's
+  first method: a hyperbolic equilibrium with Re(lambda) < 0 attracts every nearby
+  solution exponentially, Kuznetsov 2004, Theorem 2.1 and sec. 2.1). A state that stayed
+  within ``decay_floor`` of the reference state over the whole hold time (an exactly
+  steady run) is converged as well. ``converged_time`` is when the last uninterrupted
+  stretch began; ``reference_max_real`` of the result is the largest real part of the
+  eigenvalues (1/s). With ``stop_on_converged`` the run stops as soon as it has converged
+  (for basin bisection). A run that stays close to an unstable (or non-hyperbolic, or
+  non-stationary) reference state ends as ``running`` with a warning saying so.
 * **Outcomes.** ``collision`` (an event fired: time, entry index, state), ``converged``,
   ``running`` (neither by the horizon), ``failed`` (non-finite state or ``max_steps``
   exhausted; never silently reported as one of the others).
@@ -100,11 +103,9 @@ class SimulationOptions:
     samples : interpolant samples per step for the event search (>= 2).
     converge_tol : scaled distance to ``x_ref`` that counts as "at the reference state".
     hold_time : how long (s) the distance must stay below ``converge_tol``.
-    decay_ratio : the peak scaled distance over the latest half of the hold time must be at
-        most this times the peak over the half before, for the run to count as converged
-        (< 1: the disturbance must be seen to decay, by more than sampling noise).
-    decay_floor : a peak scaled distance below this counts as decayed (the integrator's
-        noise level; an exactly steady state is converged).
+    decay_floor : a run whose scaled distance to the reference state stayed below this over
+        the whole hold time is converged even if the reference state is not a stable
+        equilibrium (an exactly steady run; the integrator's noise level).
     stop_on_converged : end a run as soon as it has converged.
     max_steps : bound on attempted steps per run (reported as 'failed' when hit).
     dt0 : initial step (s); None lets diffrax choose.
@@ -116,7 +117,6 @@ class SimulationOptions:
     samples: int = 8
     converge_tol: float = 0.05
     hold_time: float = 1.0
-    decay_ratio: float = 0.99
     decay_floor: float = 1e-6
     stop_on_converged: bool = False
     max_steps: int = 200_000
@@ -135,9 +135,10 @@ class SimulationResult:
     final_time, final_state : where the run ended (the collision point for a collision).
     converged_time : start (s) of the final uninterrupted stretch within ``converge_tol``
         of the reference state, or None (set only for a converged run).
-    decay_ratio : peak scaled distance to the reference state over the latest complete
-        half of the hold time divided by the peak over the half before (NaN when the run
-        did not stay within ``converge_tol`` for a whole hold time at its end).
+    reference_max_real : largest real part (1/s) of the eigenvalues of the Jacobian at the
+        reference state (negative: a disturbance decays; module docstring).
+    reference_residual : max_i |f_i(x_ref)| / scale_i (1/s): how far the reference state is
+        from being an equilibrium.
     min_event_value : smallest value of each entry of g seen over the run (sampled inside
         steps), shape (m,).
     steps, accepted, rejected : step counts. warnings : messages.
@@ -157,7 +158,8 @@ class SimulationResult:
     accepted: int
     rejected: int
     warnings: tuple[str, ...] = field(default=())
-    decay_ratio: float = float("nan")
+    reference_max_real: float = float("nan")
+    reference_residual: float = float("nan")
 
     @property
     def collided(self) -> bool:
@@ -170,7 +172,7 @@ class BatchSimulation:
 
     outcome : array of strings; outcome_code : 0 running, 1 collision, 2 converged, 3 failed.
     event_time : NaN where no collision; event_index : -1 where no collision.
-    decay_ratio : as in :class:`SimulationResult`, per run.
+    reference_max_real, reference_residual : as in :class:`SimulationResult`, per run.
     t, x : saved times (n_save,) and histories (batch, n_save, dim) (x is None when no
         history was requested).
     """
@@ -188,7 +190,8 @@ class BatchSimulation:
     x: np.ndarray | None
     accepted: np.ndarray | None = None
     rejected: np.ndarray | None = None
-    decay_ratio: np.ndarray | None = None
+    reference_max_real: np.ndarray | None = None
+    reference_residual: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.outcome)
@@ -212,8 +215,10 @@ class BatchSimulation:
             steps=int(self.steps[k]),
             accepted=int(self.accepted[k]) if self.accepted is not None else -1,
             rejected=int(self.rejected[k]) if self.rejected is not None else -1,
-            decay_ratio=(float(self.decay_ratio[k]) if self.decay_ratio is not None
-                         else float("nan")),
+            reference_max_real=(float(self.reference_max_real[k])
+                                if self.reference_max_real is not None else float("nan")),
+            reference_residual=(float(self.reference_residual[k])
+                                if self.reference_residual is not None else float("nan")),
         )
 
 
@@ -232,7 +237,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
     eps = float(np.finfo(float).eps)
 
     def kernel(x0, p, scale, x_ref, t_end, ts_save, rtol, atol, converge_tol, hold_time,
-               max_steps, dt0, decay_ratio, decay_floor):
+               max_steps, dt0, decay_floor):
         term = diffrax.ODETerm(lambda t, z, args: rhs(z * scale, args) / scale)
         controller = diffrax.PIDController(rtol=rtol, atol=atol)
         order = solver.error_order(term)
@@ -251,7 +256,19 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
         dim = z0.shape[0]
         d0 = jnp.max(jnp.abs(z0 - zref))
         inside0 = d0 <= converge_tol
-        half = 0.5 * hold_time
+
+        # is the reference state an attracting equilibrium? (scaled coordinates: same
+        # eigenvalues as the original ones)
+        def f_z(z):
+            return rhs(z * scale, p) / scale
+
+        ref_residual = jnp.max(jnp.abs(f_z(zref)))
+        ref_max_real = jnp.max(jnp.real(jnp.linalg.eigvals(jax.jacfwd(f_z)(zref))))
+        attracting = (ref_max_real < 0) & (ref_residual * hold_time <= converge_tol)
+
+        def settled_of(c):
+            held = (c["t"] - c["conv_since"]) >= hold_time
+            return held & (attracting | (c["peak"] <= decay_floor))
 
         carry = dict(
             t=t0, tnext=tnext, z=z0, sstate=sstate, cstate=cstate,
@@ -259,9 +276,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             status=jnp.asarray(RUNNING), t_event=jnp.asarray(jnp.nan),
             i_event=jnp.asarray(-1), z_event=jnp.full((dim,), jnp.nan),
             conv_since=jnp.where(inside0, t0, jnp.inf),
-            # decay test: peak of d in the current and the previous half of the hold time
-            n_half=jnp.asarray(0), peak_cur=d0, peak_prev=jnp.asarray(jnp.inf),
-            ratio=jnp.asarray(jnp.nan), settled=jnp.asarray(False),
+            peak=d0,  # largest d seen since conv_since (steps' ends and event samples)
             ys=jnp.full((n_save, dim), jnp.nan), save_idx=jnp.asarray(0),
             steps=jnp.asarray(0), accepted=jnp.asarray(0), rejected=jnp.asarray(0),
             gmin=g_of_z(z0) if m else jnp.zeros((0,)),
@@ -278,7 +293,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
         def cond(c):
             go = (c["status"] == RUNNING) & (c["t"] < t_end) & (c["steps"] < max_steps)
             if stop_on_converged:
-                go = go & ~c["settled"]
+                go = go & ~settled_of(c)
             return go
 
         def locate_event(interp, ta, tb, active):
@@ -417,27 +432,10 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             conv_since = jnp.where(
                 keep, jnp.where(inside, jnp.minimum(c["conv_since"], tn), jnp.inf),
                 c["conv_since"])
-            # decay test over halves of the hold time, aligned at the stretch's start
-            peak = jnp.where(was_inside, jnp.maximum(c["peak_cur"], jnp.maximum(d, d_seen)), d)
-            n_half = jnp.where(was_inside, c["n_half"], 0)
-            peak_prev = jnp.where(was_inside, c["peak_prev"], jnp.inf)
-            closes = was_inside & (tn >= conv_since + (n_half + 1) * half)
-            ratio_new = peak / peak_prev
-            decays = (peak <= decay_ratio * peak_prev) | (peak <= decay_floor)
-            settled_new = jnp.where(closes, (n_half >= 1) & decays,
-                                    was_inside & c["settled"])
-            # (a rejected step changes nothing; an accepted step outside ends the stretch)
-            upd = keep & inside
-            second = closes & (n_half >= 1)  # a half closes and there is one before it
-            ratio = jnp.where(upd, jnp.where(second, ratio_new,
-                                             jnp.where(was_inside, c["ratio"], jnp.nan)),
-                              jnp.where(keep, jnp.nan, c["ratio"]))
-            n_half = jnp.where(keep, jnp.where(inside, n_half + closes.astype(int), 0),
-                               c["n_half"])
-            peak_cur = jnp.where(upd, jnp.where(closes, d, peak), c["peak_cur"])
-            peak_prev = jnp.where(keep, jnp.where(inside, jnp.where(closes, peak, peak_prev),
-                                                  jnp.inf), c["peak_prev"])
-            settled = jnp.where(keep, upd & settled_new, c["settled"])
+            was_inside = jnp.isfinite(c["conv_since"])
+            peak = jnp.where(keep, jnp.where(
+                inside, jnp.where(was_inside, jnp.maximum(c["peak"], jnp.maximum(d, d_seen)), d),
+                jnp.inf), c["peak"])
             status = jnp.where(collide, COLLISION, c["status"])
             steps = c["steps"] + 1
             return dict(
@@ -453,8 +451,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                 i_event=jnp.where(collide, j_hit, c["i_event"]),
                 z_event=jnp.where(collide, z_hit, c["z_event"]),
                 conv_since=conv_since,
-                n_half=n_half, peak_cur=peak_cur, peak_prev=peak_prev, ratio=ratio,
-                settled=settled,
+                peak=peak,
                 ys=ys, save_idx=save_idx, steps=steps,
                 accepted=c["accepted"] + keep.astype(int),
                 rejected=c["rejected"] + (~keep).astype(int),
@@ -462,7 +459,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             )
 
         c = jax.lax.while_loop(cond, body, carry)
-        conv_done = c["settled"]
+        conv_done = settled_of(c)
         finite = jnp.all(jnp.isfinite(c["z"]))
         incomplete = (c["status"] == RUNNING) & (c["t"] < t_end) & ~conv_done
         status = jnp.where(c["status"] == COLLISION, COLLISION,
@@ -473,7 +470,8 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             t_final=c["t"], x_final=c["z"] * scale,
             conv_since=jnp.where(conv_done, c["conv_since"], jnp.inf),
             ys=c["ys"], gmin=c["gmin"], steps=c["steps"], accepted=c["accepted"],
-            rejected=c["rejected"], decay_ratio=c["ratio"],
+            rejected=c["rejected"], ref_max_real=ref_max_real, ref_residual=ref_residual,
+            near=jnp.isfinite(c["conv_since"]) & ((c["t"] - c["conv_since"]) >= hold_time),
         )
 
     return kernel
@@ -484,7 +482,7 @@ def _compiled_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                      stop_on_converged: bool, batch_x: bool, batch_p: bool):
     kernel = _make_kernel(rhs, event_fn, solver_name, samples, n_save, stop_on_converged)
     if batch_x or batch_p:
-        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 12
+        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 11
         kernel = jax.vmap(kernel, in_axes=axes)
     return jax.jit(kernel)
 
@@ -505,8 +503,6 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
         raise ValueError(f"unknown solver '{opts.solver}'; choose from {', '.join(_SOLVERS)}")
     if not t_end > 0:
         raise ValueError(f"t_end must be > 0, got {t_end}")
-    if not 0 < opts.decay_ratio <= 1:
-        raise ValueError(f"decay_ratio must be in (0, 1], got {opts.decay_ratio}")
     if not opts.decay_floor >= 0:
         raise ValueError(f"decay_floor must be >= 0, got {opts.decay_floor}")
     ts = _save_times(float(t_end), n_save, t_save)
@@ -520,18 +516,24 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
         jnp.asarray(float(t_end)), jnp.asarray(ts), jnp.asarray(opts.rtol),
         jnp.asarray(opts.atol), jnp.asarray(opts.converge_tol), jnp.asarray(opts.hold_time),
         jnp.asarray(opts.max_steps), jnp.asarray(opts.dt0 or 0.0),
-        jnp.asarray(opts.decay_ratio), jnp.asarray(opts.decay_floor),
+        jnp.asarray(opts.decay_floor),
     )
     return ts, {k: np.asarray(v) for k, v in out.items()}
 
 
-def _not_decaying_message(ratio: float, opts: SimulationOptions) -> str:
-    trend = "growing" if ratio > 1 else "not decaying clearly"
+def _not_decaying_message(max_real: float, residual: float,
+                          opts: SimulationOptions) -> str:
+    if not residual * opts.hold_time <= opts.converge_tol:
+        why = (f"the reference state is not an equilibrium (residual {residual:.3g} scaled "
+               "units per second)")
+    elif max_real > 0:
+        why = (f"the reference state is an unstable equilibrium (largest eigenvalue real "
+               f"part {max_real:.4g} 1/s): the disturbance grows")
+    else:
+        why = (f"the reference state is not an attracting equilibrium (largest eigenvalue "
+               f"real part {max_real:.4g} 1/s): the disturbance need not decay")
     return (f"not converged: the state stayed within converge_tol = {opts.converge_tol:g} "
-            f"(scaled) of the reference state but the disturbance is {trend} (peak over the "
-            f"last {opts.hold_time / 2:g} s = {ratio:.6g} x the half before; at most "
-            f"{opts.decay_ratio:g} counts as decaying): the reference state may be unstable "
-            "or too weakly damped to tell within the horizon")
+            f"(scaled) of the reference state for over {opts.hold_time:g} s, but {why}")
 
 
 def simulate(
@@ -578,9 +580,10 @@ def simulate(
         else:
             warnings.append(f"stopped after max_steps = {int(o['steps'])} steps at "
                             f"t = {float(o['t_final']):.6g} s before the horizon")
-    ratio = float(o["decay_ratio"])
-    if code == RUNNING and np.isfinite(ratio):
-        warnings.append(_not_decaying_message(ratio, options or SimulationOptions()))
+    if code == RUNNING and bool(o["near"]):
+        warnings.append(_not_decaying_message(float(o["ref_max_real"]),
+                                              float(o["ref_residual"]),
+                                              options or SimulationOptions()))
     return SimulationResult(
         t=ts,
         x=o["ys"],
@@ -596,7 +599,8 @@ def simulate(
         accepted=int(o["accepted"]),
         rejected=int(o["rejected"]),
         warnings=tuple(warnings),
-        decay_ratio=ratio,
+        reference_max_real=float(o["ref_max_real"]),
+        reference_residual=float(o["ref_residual"]),
     )
 
 
@@ -642,5 +646,6 @@ def simulate_batch(
         x=o["ys"] if ts.size else None,
         accepted=o["accepted"],
         rejected=o["rejected"],
-        decay_ratio=o["decay_ratio"],
+        reference_max_real=o["ref_max_real"],
+        reference_residual=o["ref_residual"],
     )
