@@ -52,8 +52,6 @@ from enum import StrEnum
 from functools import lru_cache
 from typing import Any
 
-import diffrax
-import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -90,10 +88,12 @@ OUTCOMES = (Outcome.RUNNING, Outcome.COLLISION, Outcome.CONVERGED, Outcome.FAILE
 UNROLL_MAX_DIM = 16  # systems up to this many states get the written-out RK stages
 SAVE_BLOCK = 8  # saved times written per vectorised interpolant evaluation
 
+# solver name -> diffrax class name (diffrax is imported when a kernel is first built, so
+# commands that never simulate do not pay its import, ~0.3 s)
 _SOLVERS = {
-    "dopri8": diffrax.Dopri8,
-    "dopri5": diffrax.Dopri5,
-    "tsit5": diffrax.Tsit5,
+    "dopri8": "Dopri8",
+    "dopri5": "Dopri5",
+    "tsit5": "Tsit5",
 }
 
 
@@ -277,7 +277,10 @@ def _unrolled_fsal_step(solver):
 def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                  stop_on_converged: bool, unroll_stages: bool | None = None):
     """Build the (unjitted) single-run kernel. All array inputs are traced."""
-    solver = _SOLVERS[solver_name]()
+    import diffrax
+    import equinox.internal as eqxi
+
+    solver = getattr(diffrax, _SOLVERS[solver_name])()
     unrolled0 = _unrolled_fsal_step(solver) if unroll_stages is not False else None
     interp_cls = solver.interpolation_cls
     eps = float(np.finfo(float).eps)
