@@ -5,9 +5,13 @@ Cases: 5 s of model A (alpha1, x5(0) = -1.5 mm), 5 s of model B (turnout-soft, p
 onto the free beam), and a batch of 256 model-A runs (x5(0) from -0.5 to -8 mm).
 Both sides stop at a gap-limit collision (SciPy: terminal events). Prints medians, ratios
 and the first-call (compile) time. ``--quick``: fewer repeats, SciPy batch on 32 runs
-scaled to 256.
+scaled to 256. The old path (diffrax's loop over the Runge-Kutta stages,
+``unroll_stages=False``) is timed too, for model A and the batch.
 
-    .venv/bin/python bench/bench_simulate.py [--quick]
+The process runs as the command line does (``MAGLEV_MATCH_THREADS=1``: one thread, pinned
+to its core); ``--auto-threads`` leaves threads and affinity to the libraries.
+
+    .venv/bin/python bench/bench_simulate.py [--quick] [--auto-threads]
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import sys
 import time
 
 os.environ.setdefault("MAGLEV_MATCH_CACHE", "")  # measure real compile times
+os.environ.setdefault("MAGLEV_MATCH_THREADS", "auto" if "--auto-threads" in sys.argv else "1")
 
 import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
@@ -132,19 +137,31 @@ def scipy_run(f, gap, P, x0, t_end, scale):
                      events=events)
 
 
-def timed(fn, repeats):
-    out, ts = None, []
+CPU: dict[str, float] = {}
+
+
+def timed(fn, repeats, key=None):
+    """Median wall time (s) of ``repeats`` calls and the last result; the median CPU time
+    of the process goes to CPU[key]."""
+    out, ts, cs = None, [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         out = fn()
         ts.append(time.perf_counter() - t0)
+        cs.append(time.process_time() - c0)
+    if key:
+        CPU[key] = float(np.median(cs))
     return float(np.median(ts)), out
 
 
 def main(quick: bool) -> None:
     rep = 3 if quick else 7
     opts = SimulationOptions(rtol=RTOL, atol=ATOL)
-    print(f"# bench_simulate  rtol={RTOL} atol={ATOL}*state_scale  quick={quick}")
+    from maglev_match import jax_setup
+
+    print(f"# bench_simulate  rtol={RTOL} atol={ATOL}*state_scale  quick={quick}  "
+          f"pinned to cpu {jax_setup.PINNED_CPU}  load {os.getloadavg()[0]:.2f}")
+    old = SimulationOptions(rtol=RTOL, atol=ATOL, unroll_stages=False)
 
     # ---------------- model A, 5 s
     PA = load_preset("alpha1")
@@ -159,13 +176,21 @@ def main(quick: bool) -> None:
     simulate(SA, xA, 5.0, event_fn=evA, options=opts, n_save=2001)
     compile_A = time.perf_counter() - t0
     ours_A, rA = timed(lambda: simulate(SA, xA, 5.0, event_fn=evA, options=opts, n_save=2001),
-                       rep)
-    sp_A, sA = timed(lambda: scipy_run(fA, gA, PA, xA, 5.0, SA.state_scale), rep)
+                       rep, "A")
+    simulate(SA, xA, 5.0, event_fn=evA, options=old, n_save=2001)
+    old_A, oA = timed(lambda: simulate(SA, xA, 5.0, event_fn=evA, options=old, n_save=2001),
+                      rep, "A old")
+    assert np.array_equal(oA.x, rA.x, equal_nan=True)  # the same numbers, bit for bit
+    sp_A, sA = timed(lambda: scipy_run(fA, gA, PA, xA, 5.0, SA.state_scale), rep, "A scipy")
     print(f"model A 5 s: ours {ours_A * 1e3:.1f} ms ({rA.accepted} steps, {rA.outcome}), "
           f"SciPy DOP853 {sp_A * 1e3:.1f} ms ({sA.t.size - 1} steps), ratio "
           f"{sp_A / ours_A:.1f}x; first call (compile) {compile_A:.2f} s; "
           f"final-state diff {np.max(np.abs(rA.final_state - sA.y[:, -1]) / SA.state_scale):.1e}"
           " (scaled)")
+    print(f"  model A old path (diffrax stage loop) {old_A * 1e3:.1f} ms: new/old "
+          f"{old_A / ours_A:.2f}x; CPU ours {CPU['A'] * 1e3:.1f} ms, old "
+          f"{CPU['A old'] * 1e3:.1f} ms, SciPy {CPU['A scipy'] * 1e3:.1f} ms "
+          f"(CPU ratio {CPU['A scipy'] / CPU['A']:.1f}x)")
 
     # ---------------- model B, 5 s
     PB = load_preset("turnout-soft")
@@ -179,7 +204,7 @@ def main(quick: bool) -> None:
     simulate(SB, xB, 5.0, event_fn=evB, options=opts, n_save=2001)
     compile_B = time.perf_counter() - t0
     ours_B, rB = timed(lambda: simulate(SB, xB, 5.0, event_fn=evB, options=opts, n_save=2001),
-                       rep)
+                       rep, "B")
     sp_B, sB = timed(lambda: scipy_run(fB, gB, PB, xB, 5.0, SB.state_scale),
                      1 if quick else 3)
     print(f"model B 5 s: ours {ours_B * 1e3:.1f} ms ({rB.accepted} steps, {rB.outcome}), "
@@ -196,7 +221,11 @@ def main(quick: bool) -> None:
     simulate_batch(SA, x0, 5.0, event_fn=evA, options=opts)
     compile_batch = time.perf_counter() - t0
     ours_b, bb = timed(lambda: simulate_batch(SA, x0, 5.0, event_fn=evA, options=opts),
-                       max(rep // 2, 1))
+                       max(rep // 2, 1), "batch")
+    simulate_batch(SA, x0, 5.0, event_fn=evA, options=old)
+    old_b, ob = timed(lambda: simulate_batch(SA, x0, 5.0, event_fn=evA, options=old),
+                      max(rep // 2, 1), "batch old")
+    assert np.array_equal(ob.event_time, bb.event_time, equal_nan=True)
     n_sp = 32 if quick else nb
     idx = np.linspace(0, nb - 1, n_sp).astype(int)
     t0 = time.perf_counter()
@@ -209,6 +238,9 @@ def main(quick: bool) -> None:
           f"first call (compile) {compile_batch:.2f} s; outcomes: "
           f"{int(np.sum(bb.outcome == 'collision'))} collisions; collision yes/no agrees with "
           f"SciPy in {agree}/{n_sp}")
+    print(f"  batch old path {old_b:.3f} s: new/old {old_b / ours_b:.2f}x; CPU ours "
+          f"{CPU['batch']:.3f} s, old {CPU['batch old']:.3f} s")
+    print(f"# load at the end {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -322,3 +322,82 @@ def test_cli_json_shape(capsys, tmp_path):
     assert data["final_gap_deviation"] == pytest.approx(-8e-3)
     assert out.is_file()
     assert main(["simulate", "--model", "unit", "--initial", "pressed"]) == 2
+
+
+# ---------------------------------------------------------------------------------------
+# the convergence verdict: close to the reference state is not enough, it must decay
+# ---------------------------------------------------------------------------------------
+def focus_rhs(x, p):
+    # x' = a x - w y, y' = w x + a y: a focus with eigenvalues a +- i w (p = [a, w])
+    return jnp.stack([p[0] * x[0] - p[1] * x[1], p[1] * x[0] + p[0] * x[1]])
+
+
+FOCUS = System(rhs=focus_rhs, p=np.array([-0.2, 10.0]), param_names=("a", "w"),
+               state_names=("x", "y"), name="focus")
+
+
+@pytest.mark.parametrize("a, expected", [(-0.2, "converged"), (0.01, "running"),
+                                         (0.0, "running")])
+def test_converged_only_when_the_disturbance_decays(a, expected):
+    """A focus with a tiny disturbance (1e-3 of the scale, 50x inside converge_tol) stays
+    close to the origin for the whole run whatever its stability; only the stable one
+    (a < 0) may be reported converged. The growing one (a = 0.01) and the centre (a = 0)
+    end as 'running' with a warning saying why; the eigenvalues' largest real part is a."""
+    x0 = np.array([1e-3, 0.0])
+    res = simulate(FOCUS, x0, 10.0, p=np.array([a, 10.0]), x_ref=np.zeros(2),
+                   options=SimulationOptions(rtol=1e-10, atol=1e-12), n_save=201)
+    r = np.hypot(res.x[:, 0], res.x[:, 1])
+    assert np.max(r) < 0.05  # the old "stayed within tolerance" test would pass for all three
+    assert np.allclose(r, 1e-3 * np.exp(a * res.t), rtol=1e-8)  # a real focus, r0 e^(a t)
+    assert res.outcome == expected
+    assert res.reference_max_real == pytest.approx(a, abs=1e-12)
+    assert res.reference_residual == 0.0
+    if expected == "converged":
+        assert res.converged_time == 0.0 and not res.warnings
+    else:
+        assert res.converged_time is None
+        assert len(res.warnings) == 1 and "not converged" in res.warnings[0]
+        assert ("unstable" in res.warnings[0]) == (a > 0)
+
+
+def test_verdict_batch_matches_single_and_stops_when_converged():
+    """Batched runs give the same verdicts as single runs; with stop_on_converged a stable
+    run stops right after the hold time, an unstable one runs to the horizon; an exactly
+    steady state at an unstable equilibrium is converged (it stays there); a reference
+    state that is not an equilibrium never is."""
+    p = np.array([[-0.2, 10.0], [0.01, 10.0], [0.3, 10.0], [0.3, 10.0], [-0.2, 10.0]])
+    x0 = np.array([[1e-3, 0.0], [1e-3, 0.0], [1e-3, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    x_ref = np.zeros(2)
+    opts = SimulationOptions(rtol=1e-10, atol=1e-12, stop_on_converged=True)
+    b = simulate_batch(FOCUS, x0, 6.0, p=p, x_ref=x_ref, options=opts)
+    assert list(b.outcome) == ["converged", "running", "running", "converged", "converged"]
+    assert np.allclose(b.reference_max_real, p[:, 0], rtol=0, atol=1e-12)
+    for k in range(5):
+        s = simulate(FOCUS, x0[k], 6.0, p=p[k], x_ref=x_ref, options=opts, n_save=0)
+        assert s.outcome == b.outcome[k]
+        # (vmapped and single kernels round the step sizes differently: ~1e-9)
+        assert s.final_time == pytest.approx(float(b.final_time[k]), rel=1e-6)
+    assert 1.0 <= b.final_time[0] < 1.1  # stopped at the end of the hold time
+    assert b.final_time[1] == 6.0
+    assert np.hypot(*b.final_state[2]) < 0.05  # grew, yet still within the tolerance
+    # a reference state off the equilibrium (its drift, 0.2 / s, leaves the tolerance)
+    off = simulate(FOCUS, np.array([0.01, 0.0]), 3.0, p=np.array([-0.2, 10.0]),
+                   x_ref=np.array([0.0, 0.02]), options=opts, n_save=0)
+    assert off.reference_residual == pytest.approx(0.2)
+    assert off.outcome == "running"
+
+
+def test_cli_unstable_equilibrium_is_not_converged(capsys):
+    """The issue's case: alpha1 moved just past its Hopf point (omega1 = 159.6 rad/s,
+    sigma = 4.92e-5 1/kg) with a 1 um beam disturbance: the oscillation grows slowly and
+    stays far inside the convergence tolerance for 30 s; it must not be 'converged'."""
+    import json
+
+    from maglev_match.cli import main
+
+    rc = main(["simulate", "--preset", "alpha1", "--set", "omega1=159.6",
+               "--set", "sigma=4.92e-5", "--x5", "-1e-6", "--t", "30", "--json"])
+    assert rc == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["outcome"] == "running"
+    assert "unstable equilibrium" in " ".join(captured.err.split())  # (Rich wraps lines)

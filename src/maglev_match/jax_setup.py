@@ -1,16 +1,98 @@
-"""JAX configuration shared by the whole package: float64 everywhere and a persistent
-compilation cache, so the command line does not recompile the models on every run.
+"""JAX configuration shared by the whole package: float64 everywhere, a persistent
+compilation cache for every compilation, and one thread for the small problems of a
+command-line process.
 
-Set ``MAGLEV_MATCH_CACHE`` to choose the cache folder (default ``~/.cache/maglev-match/jax``),
-or to an empty string to switch the persistent cache off.
+Imported first by ``maglev_match/__init__.py``, so the settings below are in place before
+JAX (and, through it, NumPy's BLAS) is loaded, unless the caller imported them earlier.
+
+* **Compilation cache.** Every compiled kernel is written to the cache (no minimum compile
+  time, no minimum size), so a second process loads its executables instead of compiling
+  them. Set ``MAGLEV_MATCH_CACHE`` to choose the folder (default
+  ``~/.cache/maglev-match/jax``), or to an empty string to switch the cache off. The key is
+  JAX's: the lowered program, the argument shapes/dtypes and the compiler version. Model
+  parameters are traced arguments of the kernels, so a new parameter value finds the same
+  entry; only a new shape, a new model function or a new option that is a compile-time
+  constant compiles again.
+* **Threads.** The models are small (9 to 39 states): XLA's and BLAS's thread pools cost
+  more than they give on them, and the handing-over between cores of a compiled while loop
+  dominates a simulation (model B, 5 s: 0.22 s on two cores, 0.11 s pinned to one, measured
+  2026-11-25 on the 2-core test machine). So, unless ``MAGLEV_MATCH_THREADS`` says
+  otherwise, the thread pools are set to one thread (``OMP_NUM_THREADS``,
+  ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS``, ``XLA_FLAGS``; values the user set are
+  kept) and a command-line process (``maglev-match ...`` or ``python -m maglev_match.cli``)
+  is pinned to the core it started on. Child processes (Dask workers of a map) get their
+  parent's full CPU set back and manage their own threads.
+  ``MAGLEV_MATCH_THREADS=auto`` leaves threads and affinity to the libraries;
+  ``MAGLEV_MATCH_THREADS=1`` also pins library users' processes.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
-import jax
+_THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_XLA_SINGLE = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+_PINNED_ENV = "_MAGLEV_MATCH_PINNED_FROM"  # the CPU set before pinning, for child processes
+PINNED_CPU: int | None = None  # the core this process was pinned to (None: not pinned)
+
+
+def _is_cli_process() -> bool:
+    """True for the ``maglev-match`` console script and ``python -m maglev_match.cli``,
+    never for a child process (multiprocessing copies the parent's ``sys.argv``)."""
+    import multiprocessing
+
+    if (multiprocessing.parent_process() is not None
+            or "--multiprocessing-fork" in getattr(sys, "orig_argv", ())):
+        return False  # (a spawned child imports this before its parent_process is set)
+    argv = list(getattr(sys, "orig_argv", sys.argv))
+    if "-m" in argv[:-1]:  # python -m maglev_match.cli: sys.argv[0] is still "-m" here
+        return argv[argv.index("-m") + 1] in ("maglev_match", "maglev_match.cli")
+    return bool(sys.argv) and Path(sys.argv[0]).name in ("maglev-match", "maglev-match.exe")
+
+
+def _current_cpu() -> int | None:
+    """The core this process is running on now (field 39 of /proc/self/stat), or None."""
+    try:
+        stat = Path("/proc/self/stat").read_text()
+        return int(stat[stat.rindex(")") + 2:].split()[36])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _configure_threads() -> None:
+    global PINNED_CPU
+    mode = os.environ.get("MAGLEV_MATCH_THREADS", "").strip().lower()
+    if mode == "auto":
+        return
+    for name in _THREAD_ENV:
+        os.environ.setdefault(name, "1")
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "intra_op_parallelism_threads" not in flags and "multi_thread_eigen" not in flags:
+        os.environ["XLA_FLAGS"] = (flags + " " + _XLA_SINGLE).strip()
+    if not hasattr(os, "sched_setaffinity"):
+        return
+    inherited = os.environ.get(_PINNED_ENV)
+    try:
+        if inherited and not _is_cli_process():
+            # a child of a pinned command (e.g. a Dask worker): give it the full set back
+            os.sched_setaffinity(0, {int(c) for c in inherited.split(",")})
+            return
+        allowed = os.sched_getaffinity(0)
+        if len(allowed) > 1 and (mode == "1" or _is_cli_process()):
+            cpu = _current_cpu()
+            cpu = cpu if cpu in allowed else min(allowed)
+            os.environ[_PINNED_ENV] = ",".join(str(c) for c in sorted(allowed))
+            os.sched_setaffinity(0, {cpu})
+            PINNED_CPU = cpu
+    except (OSError, ValueError):  # affinity not permitted here: threads stay as they are
+        pass
+
+
+_configure_threads()
+
+import jax  # noqa: E402  (after the thread settings above)
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_platforms", os.environ.get("JAX_PLATFORMS", "cpu") or "cpu")
@@ -20,7 +102,9 @@ if _cache:
     try:
         Path(_cache).mkdir(parents=True, exist_ok=True)
         jax.config.update("jax_compilation_cache_dir", _cache)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+        # cache every compilation: most of the package's kernels compile in 0.01-0.2 s,
+        # which a threshold would leave to be redone in every process
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     except OSError:  # read-only home: run without the persistent cache
         pass

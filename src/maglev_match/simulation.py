@@ -346,7 +346,7 @@ def history_dataset(sim: MaglevSimulation):
     ds.attrs.update({
         "model": sim.model,
         "limits": int(sim.limited),
-        "outcome": sim.outcome,
+        "outcome": str(sim.outcome),  # (a StrEnum: netCDF attributes take plain str)
         "collision_time": -1.0 if sim.collision_time is None else sim.collision_time,
         "collision_limit": sim.limit or "",
         "collision_point": -1 if sim.point is None else sim.point,

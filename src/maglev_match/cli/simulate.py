@@ -147,6 +147,7 @@ def simulate_command(
                       f"t = {res.converged_time:.3f} s on")
     elif sim.outcome == "running":
         console.print(f"[bold yellow]running[/]: neither collided nor settled by {t:g} s")
+        print_warnings(sim.warnings)  # e.g. close to the equilibrium but not decaying
     else:
         console.print(f"[bold red]failed[/]: {'; '.join(sim.warnings)}")
     gd = np.atleast_1d(sim.final_gap_deviation)
