@@ -19,11 +19,12 @@ JAX (and, through it, NumPy's BLAS) is loaded, unless the caller imported them e
   2026-11-25 on the 2-core test machine). So, unless ``MAGLEV_MATCH_THREADS`` says
   otherwise, the thread pools are set to one thread (``OMP_NUM_THREADS``,
   ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS``, ``XLA_FLAGS``; values the user set are
-  kept) and a command-line process (``maglev-match ...`` or ``python -m maglev_match.cli``)
-  is pinned to the core it started on. Child processes (Dask workers of a map) get their
-  parent's full CPU set back and manage their own threads.
-  ``MAGLEV_MATCH_THREADS=auto`` leaves threads and affinity to the libraries;
-  ``MAGLEV_MATCH_THREADS=1`` also pins library users' processes.
+  kept). ``MAGLEV_MATCH_THREADS=auto`` leaves the thread pools to the libraries;
+  ``MAGLEV_MATCH_THREADS=1`` also pins the process to the core it started on, which halves a
+  model-B simulation on a quiet machine but is NOT the default: a pinned process cannot move
+  to the free core when the machine is busy (an empty-cache ``index`` took 62.6 s pinned
+  against 11.0 s unpinned at load ~7, 2026-11-25). Child processes of a pinned process
+  (Dask workers of a map) get their parent's full CPU set back.
 """
 
 from __future__ import annotations
@@ -80,7 +81,7 @@ def _configure_threads() -> None:
             os.sched_setaffinity(0, {int(c) for c in inherited.split(",")})
             return
         allowed = os.sched_getaffinity(0)
-        if len(allowed) > 1 and (mode == "1" or _is_cli_process()):
+        if len(allowed) > 1 and mode == "1":  # pinning only on request (see above)
             cpu = _current_cpu()
             cpu = cpu if cpu in allowed else min(allowed)
             os.environ[_PINNED_ENV] = ",".join(str(c) for c in sorted(allowed))

@@ -255,7 +255,9 @@ def simulate_maglev(
     and leaving the gap range [gap_min, gap_max] ends the run as a collision; without it
     the smooth model runs with no events. ``converged`` means the state stayed within
     ``options.converge_tol`` (scaled by the model's state scales: 1 mm, 1 cm/s, 1 A) of the
-    equilibrium for ``options.hold_time`` seconds.
+    equilibrium for ``options.hold_time`` seconds AND the equilibrium attracts (every
+    eigenvalue of its Jacobian has a negative real part); a run that stays near an unstable
+    equilibrium is ``running``, with a warning saying why.
     """
     system = _system(params, model, limited)
     x_start = equilibrium_state(params, model) if x0 is None else np.asarray(x0, float)
