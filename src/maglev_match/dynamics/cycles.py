@@ -267,6 +267,10 @@ class CorrectionResult:
     message: str = ""
 
 
+# parameter values this close to zero are zero to rounding (a located root at 0)
+LAM_ZERO = 1e-12
+
+
 # ---------------------------------------------------------------------------------------
 # collocation tables and JAX kernels
 # ---------------------------------------------------------------------------------------
@@ -704,7 +708,8 @@ def cycle_branch(
     param_bounds : stop when the parameter reaches a bound of this interval (solved there).
     tol : Newton tolerance on the scaled update.
     adapt_every : adapt the mesh every this many steps (0: never).
-    lam_scale : unit of the parameter in the arclength norm (default 5 % of |value|).
+    lam_scale : unit of the parameter in the arclength norm (default 5 % of |value|, or
+        0.05 when |value| <= ``LAM_ZERO``).
     max_period_factor : stop when the period exceeds this multiple of the Hopf period
         (approach to a homoclinic orbit).
     trivial_tol : largest accepted |mu_trivial - 1| for reliable multipliers.
@@ -732,7 +737,9 @@ def cycle_branch(
     T0 = 2.0 * math.pi / start.frequency
     lam0 = start.value
     if lam_scale is None:
-        lam_scale = 0.05 * abs(lam0) if lam0 != 0 else 0.05
+        # 5 % of the parameter's size; a Hopf point located at a parameter value that is
+        # zero to rounding (e.g. -3e-30 for a root at 0) has no size of its own: unit scale
+        lam_scale = 0.05 * abs(lam0) if abs(lam0) > LAM_ZERO else 0.05
     m = int(ncol)
     if not 2 <= m <= 7:
         raise ValueError("ncol must be between 2 and 7")
