@@ -381,7 +381,7 @@ def locate_hopf_points(
     (:func:`refine_hopf_point`). ``scan_values`` and ``max_real_part`` are the branch's
     parameter values and largest real parts, in branch order.
     """
-    from maglev_match.dynamics.continuation import SpecialPointKind
+    from maglev_match.dynamics.continuation import SpecialPointKind, StopReason
     from maglev_match.dynamics.equilibria import equilibrium_branch
 
     base = system.p if p is None else np.asarray(p, float)
@@ -389,8 +389,27 @@ def locate_hopf_points(
                                 progress=progress)
     warnings = list(branch.warnings)
     lo, hi = sorted((float(start), float(stop)))
+    specials = list(branch.special_points)
+    values, max_re = branch.values, branch.max_real_part
+    design = float(base[system.param_index(param)])
+    reached = abs(float(branch.values[-1]) - float(stop)) <= 1e-9 * max(1.0, hi - lo)
+    if (branch.stop_reason in (StopReason.NEWTON_FAILED, StopReason.STEP_TOO_SMALL)
+            and not reached and lo < design < hi):
+        # The equilibrium was lost on the way (or not found at the interval's end, far from
+        # the system's guess): follow it again from the design value, where the guess is
+        # an equilibrium, towards both ends of the interval.
+        parts = [equilibrium_branch(system, param, design, end, p=base,
+                                    n_points=max(int(n_scan) // 2, 3)) for end in (start, stop)]
+        warnings = [f"the equilibrium was lost ({'; '.join(branch.warnings) or branch.message})"
+                    f"; followed again from the design value {param} = {design:.6g} towards "
+                    "both ends"]
+        for b in parts:
+            warnings.extend(b.warnings)
+            specials.extend(b.special_points)
+        values = np.concatenate([parts[0].values[::-1], parts[1].values[1:]])
+        max_re = np.concatenate([parts[0].max_real_part[::-1], parts[1].max_real_part[1:]])
     points: list[HopfPoint] = []
-    for sp in branch.special_points:
+    for sp in specials:
         if sp.type != SpecialPointKind.HOPF:
             continue
         hp = refine_hopf_point(system, param, sp.value, sp.x, sp.frequency, p=base,
@@ -403,8 +422,8 @@ def locate_hopf_points(
         points.append(hp)
     points.sort(key=lambda h: h.value)
     return HopfScan(param=param, start=float(start), stop=float(stop), points=points,
-                    scan_values=branch.values, max_real_part=branch.max_real_part,
-                    warnings=tuple(warnings), special_points=branch.special_points)
+                    scan_values=values, max_real_part=max_re,
+                    warnings=tuple(warnings), special_points=tuple(specials))
 
 
 def _with_warning(hp: HopfPoint, msg: str) -> HopfPoint:
