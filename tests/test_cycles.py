@@ -337,18 +337,6 @@ def test_lorenz_branch_to_the_homoclinic_end_has_no_pd_or_ns():
         assert c.reliable == (abs(c.trivial_multiplier - 1) <= 1e-4)
 
 
-def test_lorenz_trivial_multiplier_stays_at_one_up_to_the_homoclinic_end():
-    from systems import lorenz
-
-    from maglev_match.dynamics.hopf import locate_hopf_points
-
-    system = lorenz()
-    hp = locate_hopf_points(system, "rho", 20.0, 30.0, n_scan=50).points[0]
-    br = cycle_branch(system, hp, "rho", ntst=60, ncol=4, max_steps=300,
-                      max_period_factor=30, lam_scale=1.0)
-    assert all(c.reliable for c in br.points)
-
-
 def test_collocation_problem_exposes_residual_jacobian_and_parameter_derivative():
     from maglev_match.dynamics.collocation import CollocationProblem
 

@@ -47,6 +47,7 @@ LONG_NAMES: dict[str, str] = {
     "sigma_point": "force gain coefficient at the grid point",
     "current_reverses": "coil current on the deciding cycle would reverse (1) or not (0)",
     "resolved": "point resolved (1) or continuation failed (0)",
+    "reason": "why the point is unresolved (0: resolved; codes in the reason_codes attribute)",
     # simulation
     "time": "time",
     "point": "levitation point number (1-based)",

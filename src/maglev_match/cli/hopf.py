@@ -300,11 +300,14 @@ def hopf_curve_command(
     fig = hopf_curve_figure(curves, names, units, grid_data, title=title,
                             design_point=(system.param(names[0]), system.param(names[1])))
     figs = save_figure(fig, folder / stem)
+    from maglev_match.datasets import annotate
+    from maglev_match.io import atomic_write
+
     nc_files = []
     for k, c in enumerate(curves):
         nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
-        c.to_xarray((unit_of(names[0]), unit_of(names[1])), system.state_names).to_netcdf(
-            nc, engine="h5netcdf")
+        ds = annotate(c.to_xarray(units, system.state_names), params)
+        atomic_write(nc, lambda tmp, ds=ds: ds.to_netcdf(tmp, engine="h5netcdf"))
         nc_files.append(str(nc))
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]
