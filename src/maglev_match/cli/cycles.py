@@ -11,7 +11,6 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 from rich import box
-from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from maglev_match.cli import app
@@ -29,12 +28,12 @@ from maglev_match.cli.common import (
     check_model,
     check_output_path,
     console,
-    console_err,
     emit_json,
     finite,
     ncol_option,
     ntst_option,
-    output_path,
+    output_target,
+    progress_report,
     steps_option,
 )
 from maglev_match.cli.common import params_from_options as _params
@@ -165,34 +164,32 @@ def cycles_command(
     if not (np.isfinite(a) and np.isfinite(b)) or a == b:
         raise UserError(f"--from/--to: empty search range [{a}, {b}]")
     t0 = time.perf_counter()
-    console_err.print(f"searching Hopf points along {param} in [{a:.6g}, {b:.6g}] ...")
     if n_scan < 3:
         raise ParameterError("--scan", n_scan, "must be at least 3")
-    scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
-    hopfs = [h for h in scan.points if h.converged]
-    if not hopfs:
-        raise UserError(f"no Hopf point of the equilibrium along {param} in "
-                        f"[{a:.6g}, {b:.6g}]; widen --from/--to")
-    hopfs.sort(key=lambda h: abs(h.value - design))
-    chosen = hopfs if all_hopf else hopfs[:1]
-    limits = cycle_limit_margins(params, include_current=not ignore_current)
-    branches: list[CycleBranch] = []
-    for h in chosen:
-        with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
-                      console=console_err, transient=True) as prog:
-            task = prog.add_task(f"cycles from Hopf at {param} = {h.value:.6g}", total=None)
+    with progress_report("cycles") as prog:
+        prog.stage(f"searching Hopf points along {param} in [{a:.6g}, {b:.6g}] ...")
+        scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+        hopfs = [h for h in scan.points if h.converged]
+        if not hopfs:
+            raise UserError(f"no Hopf point of the equilibrium along {param} in "
+                            f"[{a:.6g}, {b:.6g}]; widen --from/--to")
+        hopfs.sort(key=lambda h: abs(h.value - design))
+        chosen = hopfs if all_hopf else hopfs[:1]
+        limits = cycle_limit_margins(params, include_current=not ignore_current)
+        branches: list[CycleBranch] = []
+        for h in chosen:
+            prog.stage(f"continuing cycles from the Hopf point {param} = {h.value:.6g} ...")
 
-            def report(step, pt, task=task, prog=prog, h=h):
-                prog.update(task, description=(
-                    f"cycles from Hopf at {param} = {h.value:.6g}: step {step}, "
-                    f"{param} = {pt.value:.6g}, max gap dev "
-                    f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm"))
+            def report(step, pt, h=h):
+                prog.update(f"cycles from Hopf at {param} = {h.value:.6g}: step {step}, "
+                            f"{param} = {pt.value:.6g}, max gap dev "
+                            f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm")
 
             br = cycle_branch(system, h, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
                               limits=limits, progress=report)
-        branches.append(br)
-        console_err.print(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
-                          f"stopped: {br.stopped_reason}")
+            branches.append(br)
+            prog.stage(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
+                       f"stopped: {br.stopped_reason}")
     elapsed = time.perf_counter() - t0
 
     main_branch, h0 = branches[0], chosen[0]
@@ -233,9 +230,7 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     from maglev_match.plots import save_figure
     from maglev_match.plots.cycles import branch_label, cycle_diagram
 
-    base = output_path(out, f"cycles-{model}-{param}")
-    folder = base if base.suffix == "" else base.parent
-    stem = f"cycles_{model}_{param}"
+    folder, stem = output_target(out, "cycles", f"cycles_{model}_{param}")
     files = []
     rows, specials = [], []
     for k, br in enumerate(branches):

@@ -23,14 +23,14 @@ from maglev_match.cli.common import (
     check_output_path,
     check_param,
     console,
-    console_err,
     emit_json,
     finite,
     fraction_option,
     grid_option,
-    output_path,
+    output_target,
     parse_range,
     print_warnings,
+    progress_report,
     scan_option,
     unit_of,
     validate_value,
@@ -227,13 +227,13 @@ def hopf_curve_command(
     a, b = bounds[names[1]]
     scan_values = [a + f * (b - a) for f in (0.5, 0.1, 0.9)]
 
-    def progress(msg: str) -> None:
-        if not json_out:
-            console_err.print(msg)
-
-    curves, warnings = compute_hopf_curves(system, names, bounds, scan_values,
-                                           n_scan=scan_steps, max_step=max_step,
-                                           progress=progress)
+    with progress_report("hopf-curve") as prog:
+        prog.stage(f"scanning {names[0]} at {len(scan_values)} values of {names[1]} ...")
+        curves, warnings = compute_hopf_curves(system, names, bounds, scan_values,
+                                               n_scan=scan_steps, max_step=max_step,
+                                               progress=prog.stage)
+        if grid > 0:
+            prog.stage(f"stability grid {grid} x {grid} ...")
     grid_data = None
     if grid > 0:
         g1 = np.linspace(*bounds[names[0]], grid)
@@ -242,9 +242,8 @@ def hopf_curve_command(
         if not ok.all():
             warnings.append(f"equilibrium not found at {int((~ok).sum())} grid points")
         grid_data = (g1, g2, mr)
-    folder = output_path(out, f"hopf-curve-{model}-{names[0]}-{names[1]}")
-    folder = folder if folder.suffix == "" else folder.parent
-    stem = f"hopf_curve_{model}_{names[0]}_{names[1]}"
+    folder, stem = output_target(out, "hopf-curve",
+                                 f"hopf_curve_{model}_{names[0]}_{names[1]}")
     csv_path = folder / f"{stem}.csv"
     points, special = [], []
     span0 = bounds[names[0]][1] - bounds[names[0]][0]

@@ -24,7 +24,7 @@ from maglev_match.cli.common import (
     console,
     emit_json,
     finite,
-    output_path,
+    output_target,
     print_warnings,
     scan_option,
     unit_of,
@@ -112,9 +112,7 @@ def root_locus_command(
             validate_value(params, param, v)
     values = np.linspace(start, stop, steps)
     res = root_locus(system, param, values)
-    base = output_path(out, f"root-locus-{model}-{param}")
-    folder = base if base.suffix == "" else base.parent
-    stem = f"root_locus_{model}_{param}"
+    folder, stem = output_target(out, "root-locus", f"root_locus_{model}_{param}")
     csv_path = folder / f"{stem}.csv"
     with atomic_open(csv_path, "w", newline="") as fh:
         w = csv.writer(fh)
