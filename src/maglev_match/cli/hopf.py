@@ -43,6 +43,7 @@ from maglev_match.dynamics.hopf import (
     locate_hopf_points,
     stability_grid,
 )
+from maglev_match.engineering import engineering_hopf_points, is_engineering
 from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError
 
@@ -88,13 +89,23 @@ def hopf_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
-    check_param(system, model, param, "--param")
+    engineering = params is not None and is_engineering(param)
+    if not engineering:
+        check_param(system, model, param, "--param")
     for v in (start, stop):
         if params is not None:
             validate_value(params, param, v)
-    scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
-    names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
-    records = [_point_record(hp, system, names) for hp in scan.points]
+    if engineering:  # a beam/vehicle quantity: omega1, sigma (model B: geometry) follow it
+        scan, system = engineering_hopf_points(params, model, param, start, stop, steps)
+        names = tuple(dict.fromkeys(DEFAULT_PLANE.get(model, ()) + ("sigma",)))
+        names = tuple(n for n in names if n in system.param_names)
+        records = [{param: hp.value, **_point_record(hp, system, names)}
+                   for hp in scan.points]
+        names = (param, *names)
+    else:
+        scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
+        names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
+        records = [_point_record(hp, system, names) for hp in scan.points]
     if json_out:
         emit_json({"param": param, "model": model, "from": start, "to": stop,
                    "points": records, "warnings": list(scan.warnings)})
