@@ -28,7 +28,7 @@ from maglev_match.params import (
     load_params,
 )
 
-console = Console()
+console = Console(soft_wrap=True)  # text lines are not hard-wrapped (pipes, logs)
 console_err = Console(stderr=True)
 
 

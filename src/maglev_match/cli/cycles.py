@@ -43,7 +43,7 @@ from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
 from maglev_match.io import atomic_open, atomic_write_text
 from maglev_match.limits_check import cycle_limit_margins
 from maglev_match.models import build_system
-from maglev_match.params import ParameterError, Params
+from maglev_match.params import ParameterError, Params, warn_overridden
 
 AtOpt = Annotated[
     list[str] | None,
@@ -64,9 +64,11 @@ def apply_at(params: Params, at: list[str] | None) -> Params:
         except ValueError:
             raise ParameterError(name.strip(), text, "must be a number") from None
     try:
-        return params.replace(**values) if values else params
+        new = params.replace(**values) if values else params
     except TypeError as exc:
         raise UserError(f"--at: unknown parameter ({exc})") from None
+    warn_overridden(new, set(values))  # e.g. --at L=20 while omega1 is set explicitly
+    return new
 
 
 def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
