@@ -30,12 +30,16 @@ from maglev_match.dynamics.paths import PATH_PARAM, path_system
 from maglev_match.dynamics.system import System
 from maglev_match.params import ParameterError, Params
 
-__all__ = ["ENGINEERING_PARAMS", "is_engineering", "engineering_nodes",
+__all__ = ["ENGINEERING_PARAMS", "PARAM_HELP", "is_engineering", "engineering_nodes",
            "engineering_hopf_points"]
 
 #: Beam and vehicle quantities from which the model parameters omega1, sigma (and model B's
 #: geometry) derive; each may be the varied parameter of hopf, root-locus and cycles.
 ENGINEERING_PARAMS = ("L", "EI", "mbar", "l", "k", "s", "s0")
+
+#: Help text of a ``--param`` option that accepts them.
+PARAM_HELP = ("Parameter to vary: a model parameter (omega1, sigma, kD ...) or beam/vehicle "
+              "data L, EI, mbar, l, k, s, s0 (omega1 and sigma follow).")
 
 # Relative length of the last chord of the refinement (see the module docstring).
 CHORD_RTOL = 1e-7

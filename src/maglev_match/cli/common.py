@@ -44,7 +44,10 @@ ConfigOpt = Annotated[
 ]
 SetOpt = Annotated[
     list[str] | None,
-    typer.Option("--set", help="Override one value, NAME=VALUE (repeatable), e.g. --set kD=120."),
+    typer.Option("--set", metavar="NAME=VALUE",
+                 help="Override one value (repeatable), e.g. --set kD=120 or --set L=20 "
+                 "(beam and vehicle data L, EI, mbar, l, k, s, s0 re-derive omega1 and sigma "
+                 "unless those are set explicitly)."),
 ]
 ModelOpt = Annotated[
     str, typer.Option("--model", help="'unit' (model A, 9 states), 'vehicle' (model B) or a "

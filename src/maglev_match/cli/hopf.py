@@ -43,7 +43,7 @@ from maglev_match.dynamics.hopf import (
     locate_hopf_points,
     stability_grid,
 )
-from maglev_match.engineering import engineering_hopf_points, is_engineering
+from maglev_match.engineering import PARAM_HELP, engineering_hopf_points, is_engineering
 from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError
 
@@ -70,7 +70,7 @@ def _point_record(hp: HopfPoint, system, names: tuple[str, ...]) -> dict:
 
 @app.command("hopf")
 def hopf_command(
-    param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
+    param: Annotated[str, typer.Option("--param", help=PARAM_HELP)] = "omega1",
     start: Annotated[float, typer.Option("--from", help="First value.", callback=finite)] = 30.0,
     stop: Annotated[float, typer.Option("--to", help="Last value.", callback=finite)] = 300.0,
     steps: Annotated[int, typer.Option("--steps", help="Values of the bracketing scan.",

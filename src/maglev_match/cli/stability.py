@@ -33,7 +33,7 @@ from maglev_match.cli.common import (
 )
 from maglev_match.cli.models import resolve_model
 from maglev_match.dynamics.equilibria import root_locus, stability
-from maglev_match.engineering import is_engineering
+from maglev_match.engineering import PARAM_HELP, is_engineering
 from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError, available_presets, load_preset, preset_info
 
@@ -107,7 +107,7 @@ def stability_command(
 
 @app.command("root-locus")
 def root_locus_command(
-    param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
+    param: Annotated[str, typer.Option("--param", help=PARAM_HELP)] = "omega1",
     start: Annotated[float, typer.Option("--from", help="First value.", callback=finite)] = 40.0,
     stop: Annotated[float, typer.Option("--to", help="Last value.", callback=finite)] = 190.0,
     steps: Annotated[int, typer.Option("--steps", help="Number of values.",
