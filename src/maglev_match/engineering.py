@@ -22,16 +22,18 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from functools import cache
 
+import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.dynamics.hopf import HopfPoint, HopfScan, locate_hopf_points
-from maglev_match.dynamics.paths import PATH_PARAM, path_system
+from maglev_match.dynamics.paths import PATH_PARAM, _interpolate, path_system
 from maglev_match.dynamics.system import System
 from maglev_match.params import ParameterError, Params
 
 __all__ = ["ENGINEERING_PARAMS", "PARAM_HELP", "is_engineering", "engineering_nodes",
-           "engineering_hopf_points"]
+           "engineering_hopf_points", "engineering_system"]
 
 #: Beam and vehicle quantities from which the model parameters omega1, sigma (and model B's
 #: geometry) derive; each may be the varied parameter of hopf, root-locus and cycles.
@@ -143,3 +145,46 @@ def engineering_hopf_points(params: Params, model: str, name: str, start: float,
     out = HopfScan(param=name, start=start, stop=stop, points=points, scan_values=values,
                    max_real_part=scan.max_real_part, warnings=tuple(warnings))
     return out, system
+
+
+@cache
+def _quantity_rhs(rhs, n_nodes: int, n_params: int):
+    def quantity_rhs(x, q):
+        t = (q[0] - q[1]) / q[2]
+        return rhs(x, _interpolate(jnp.concatenate([t[None], q[3:]]), n_nodes, n_params))
+
+    return quantity_rhs
+
+
+def engineering_system(params: Params, model: str, name: str, start: float, stop: float,
+                       n_nodes: int = 201) -> System:
+    """The model with the engineering quantity ``name`` as its first parameter.
+
+    The parameter vector is [E, E_start, dE, P_0, ..., P_{n-1}] with P_j the model's
+    parameter vector at E_j = E_start + j dE (``n_nodes`` equally spaced values over
+    [start, stop]); the vector field at E is the model's at the piecewise-linear
+    interpolation of the P_j (exact at the nodes, chord error O(dE^2) between them; beyond
+    [start, stop] the end chords are extended linearly). Every one-parameter tool
+    (``locate_hopf_points``, ``cycle_branch``) then works in E directly, with E's value
+    at the parameter set's own value of ``name`` (clipped into [start, stop]).
+    """
+    from maglev_match.models import build_system
+
+    system = build_system(params, model)
+    values = np.linspace(start, stop, int(n_nodes))
+    nodes = engineering_nodes(params, model, name, values)
+    n, m = nodes.shape
+    names = (name, f"{name}_start", f"{name}_step") + tuple(
+        f"node{k}_{p}" for k in range(n) for p in system.param_names)
+    e0 = float(np.clip(float(getattr(params, name)), min(start, stop), max(start, stop)))
+    p = np.concatenate([[e0, values[0], values[1] - values[0]], nodes.ravel()])
+    return System(
+        rhs=_quantity_rhs(system.rhs, n, m),
+        p=p,
+        param_names=names,
+        state_names=system.state_names,
+        x_guess=system.x_guess,
+        state_scale=system.state_scale,
+        observables={k: _quantity_rhs(g, n, m) for k, g in system.observables.items()},
+        name=f"{system.name} along {name}",
+    )

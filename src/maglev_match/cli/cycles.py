@@ -40,6 +40,7 @@ from maglev_match.cli.common import params_from_options as _params
 from maglev_match.cli.models import is_model_file, user_cycles
 from maglev_match.dynamics.cycles import CycleBranch, cycle_branch
 from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
+from maglev_match.engineering import PARAM_HELP, engineering_system, is_engineering
 from maglev_match.io import atomic_open, atomic_write_text
 from maglev_match.limits_check import cycle_limit_margins
 from maglev_match.models import build_system
@@ -115,7 +116,7 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 
 @app.command("cycles")
 def cycles_command(
-    param: Annotated[str, typer.Option("--param", help="Continuation parameter.")] = "omega1",
+    param: Annotated[str, typer.Option("--param", help=PARAM_HELP)] = "omega1",
     at: AtOpt = None,
     start: Annotated[float | None, typer.Option(
         "--from", help="Search Hopf points from this value (default: design value / 4).",
@@ -158,11 +159,15 @@ def cycles_command(
     params = apply_at(_params(preset, config, set_), at)
     system = build_system(params, model)
     try:
-        design = system.param(param)
+        design = getattr(params, param) if is_engineering(param) else system.param(param)
     except KeyError as exc:
         raise UserError(str(exc).strip("'\"")) from None
     a = design / 4 if start is None else start
     b = design * 4 if stop is None else stop
+    if is_engineering(param):  # beam/vehicle data: omega1, sigma (geometry) follow it
+        if start is None or stop is None:
+            raise UserError(f"--param {param}: give the range with --from and --to")
+        system = engineering_system(params, model, param, min(a, b), max(a, b))
     if not (np.isfinite(a) and np.isfinite(b)) or a == b:
         raise UserError(f"--from/--to: empty search range [{a}, {b}]")
     t0 = time.perf_counter()
