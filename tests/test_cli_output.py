@@ -210,3 +210,11 @@ def test_command_help_is_unwrapped_inside_paragraphs():
     for info in app.registered_commands:
         for paragraph in (info.help or "").split("\n\n"):
             assert "\n" not in paragraph, info.name
+
+
+def test_progress_report_on_a_terminal_prints_no_plain_lines(capsys):
+    with progress_report("map", tty=True) as prog:
+        prog.stage("map omega1 x sigma: 3 tiles ...")
+        prog.tiles(1, 3)
+    err = capsys.readouterr().err
+    assert not any(PROGRESS_LINE.match(line) for line in err.splitlines())

@@ -21,7 +21,6 @@ from maglev_match.cli.common import (
     SetOpt,
     check_model,
     console,
-    console_err,
     emit_json,
     output_target,
     params_from_options,
@@ -163,7 +162,8 @@ def sensitivity_command(
     _need_unit(model)
     params = params_from_options(preset, config, set_)
     sc = parse_scatter(scatter)
-    with console_err.status("computing the index and its sensitivities ..."):
+    with progress_report("sensitivity") as prog:
+        prog.stage("computing the index and its sensitivities ...")
         sens = index_sensitivity(params, boundaries=boundaries)
     spread = _spread(sens, sc)
     folder, stem = output_target(out, "sensitivity", "tornado")
