@@ -218,3 +218,32 @@ def test_progress_report_on_a_terminal_prints_no_plain_lines(capsys):
         prog.tiles(1, 3)
     err = capsys.readouterr().err
     assert not any(PROGRESS_LINE.match(line) for line in err.splitlines())
+
+
+def test_engineering_param_outside_the_model_is_refused(capsys):
+    # the unit spacing s belongs to model B only
+    code, _, err = run(capsys, "root-locus", "--param", "s", "--from", "0.5", "--to", "1.5",
+                       "--steps", "3")
+    assert code == 2
+    assert "does not enter this model" in err
+
+
+def test_at_warns_when_an_explicit_omega1_overrides_the_span():
+    from maglev_match.cli.cycles import apply_at
+    from maglev_match.params import ParameterWarning
+
+    with pytest.warns(ParameterWarning, match=r"omega1 = 100 .*L = 20"):
+        p = apply_at(load_preset("alpha1"), ["L=20"])
+    assert p.omega1 == 100.0 and p.L == 20.0
+
+
+def test_map_out_folder_gets_the_default_name(capsys, tmp_path):
+    code, out, err = run(capsys, "map", "--x", "omega1=120:140:2", "--y", "sigma=3e-4:4e-4:2",
+                         "--workers", "0", "--out", str(tmp_path / "maps"), "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["netcdf"] == str(tmp_path / "maps" / "map_omega1_sigma.nc")
+    assert (tmp_path / "maps" / "map_omega1_sigma.nc").is_file()
+    assert (tmp_path / "maps" / "map_omega1_sigma.png").is_file()
+    tiles = [m.group(2) for m in map(PROGRESS_LINE.match, err.splitlines()) if m]
+    assert tiles[-1] == "1/1 tiles done"

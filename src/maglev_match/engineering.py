@@ -70,11 +70,14 @@ def engineering_nodes(params: Params, model: str, name: str,
     no model parameter (e.g. L while omega1 and sigma are set explicitly in the preset)."""
     nodes = np.array([_model_vector(params, model, name, v) for v in values])
     if np.all(nodes == nodes[0]):
-        fixed = ", ".join(sorted(params.explicit & {"omega1", "sigma", "s", "s0"})) or "none"
-        raise ParameterError(
-            option, name,
-            f"changes no parameter of model '{model}' (values set explicitly: {fixed}); "
-            "use a preset that derives omega1 and sigma from the beam, e.g. turnout-soft")
+        fixed = sorted(params.explicit & {"omega1", "sigma", "s", "s0"})
+        if fixed:
+            why = (f"{', '.join(fixed)} set explicitly override it; use a preset that "
+                   "derives them from the beam, e.g. turnout-soft")
+        else:
+            why = "it does not enter this model"
+        raise ParameterError(option, name,
+                             f"changes no parameter of model '{model}': {why}")
     return nodes
 
 
