@@ -243,16 +243,15 @@ def hopf_curve_command(
         curves, warnings = compute_hopf_curves(system, names, bounds, scan_values,
                                                n_scan=scan_steps, max_step=max_step,
                                                progress=prog.stage)
+        grid_data = None
         if grid > 0:
             prog.stage(f"stability grid {grid} x {grid} ...")
-    grid_data = None
-    if grid > 0:
-        g1 = np.linspace(*bounds[names[0]], grid)
-        g2 = np.linspace(*bounds[names[1]], grid)
-        mr, ok = stability_grid(system, names, g1, g2)
-        if not ok.all():
-            warnings.append(f"equilibrium not found at {int((~ok).sum())} grid points")
-        grid_data = (g1, g2, mr)
+            g1 = np.linspace(*bounds[names[0]], grid)
+            g2 = np.linspace(*bounds[names[1]], grid)
+            mr, ok = stability_grid(system, names, g1, g2)
+            if not ok.all():
+                warnings.append(f"equilibrium not found at {int((~ok).sum())} grid points")
+            grid_data = (g1, g2, mr)
     folder, stem = output_target(out, "hopf-curve",
                                  f"hopf_curve_{model}_{names[0]}_{names[1]}")
     csv_path = folder / f"{stem}.csv"
