@@ -232,8 +232,11 @@ def test_at_warns_when_an_explicit_omega1_overrides_the_span():
     from maglev_match.cli.cycles import apply_at
     from maglev_match.params import ParameterWarning
 
-    with pytest.warns(ParameterWarning, match=r"omega1 = 100 .*L = 20"):
+    with pytest.warns(ParameterWarning) as caught:
         p = apply_at(load_preset("alpha1"), ["L=20"])
+    texts = [str(w.message) for w in caught]
+    assert any(re.search(r"omega1 = 100 .*L = 20", t) for t in texts)
+    assert any(re.search(r"sigma = 0.0004 .*L = 20", t) for t in texts)
     assert p.omega1 == 100.0 and p.L == 20.0
 
 
