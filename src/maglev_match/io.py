@@ -9,7 +9,7 @@ failure is seen in-process.
 
 Usage::
 
-    atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png"))
     with atomic_open(path, "w", newline="") as fh:
         csv.writer(fh).writerow(...)
     atomic_write_text(path, text)

@@ -39,7 +39,7 @@ __all__ = [
 
 DEFAULT_PRESET = "turnout-soft"
 SECTIONS = ("unit", "controller", "beam", "vehicle", "limits")
-META_KEYS = ("name", "description")
+META_KEYS = ("name", "description", "base")
 # Values that are derived from geometry unless set explicitly.
 DERIVABLE = ("omega1", "sigma", "s", "s0")
 INTEGER_FIELDS = ("k", "n_modes")
@@ -452,6 +452,42 @@ def _preset_values(name: str) -> dict[str, Any]:
                              + ", ".join(available_presets()))
     text = (resources.files("maglev_match") / "presets" / f"{name}.toml").read_text()
     return _flatten(tomllib.loads(text), f"preset '{name}'")
+
+
+@dataclass(frozen=True)
+class PresetInfo:
+    """What a shipped preset is: its description, the preset it derives from (``base``,
+    None for a root preset) and the values it changes relative to that base, as
+    name -> (base value, this preset's value); derived values (omega1, sigma, w0) compare
+    as computed."""
+
+    name: str
+    description: str
+    base: str | None
+    changes: dict[str, tuple[float, float]]
+
+
+def preset_info(name: str) -> PresetInfo:
+    """The :class:`PresetInfo` of a shipped preset (its TOML keys ``description`` and
+    ``base``)."""
+    if name not in available_presets():
+        raise ParameterError("preset", name, "no such preset; available: "
+                             + ", ".join(available_presets()))
+    doc = tomllib.loads((resources.files("maglev_match") / "presets" / f"{name}.toml")
+                        .read_text())
+    base = doc.get("base")
+    changes: dict[str, tuple[float, float]] = {}
+    if base is not None:
+        a, b = load_preset(base), load_preset(name)
+        for key in [*FIELD_NAMES, "w0"]:
+            if key == "explicit":
+                continue
+            va, vb = getattr(a, key), getattr(b, key)
+            if isinstance(va, int | float) and isinstance(vb, int | float) and not (
+                    math.isclose(float(va), float(vb), rel_tol=1e-12, abs_tol=0.0)):
+                changes[key] = (float(va), float(vb))
+    return PresetInfo(name=name, description=str(doc.get("description", "")),
+                      base=base, changes=changes)
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:

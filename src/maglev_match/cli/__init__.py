@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import inspect
 import os
 import sys
 import warnings
@@ -68,11 +69,47 @@ def _root(
     """Stability, Hopf bifurcations, limit cycles and the matching index chi = h / w0."""
 
 
+def _flags_without_type() -> None:
+    """Help tables list a flag (``--json``, ``--help``, ``--limits/--no-limits``) without a
+    value type: typer >= 0.26 shows ``<bool>`` beside flags, which take no value. The
+    option class's type display is wrapped once to return nothing for flags."""
+    try:
+        from typer.core import TyperOption
+    except ImportError:  # pragma: no cover - typer without its own option class
+        return
+    original = getattr(TyperOption, "display_type_rich", None)
+    if original is None or getattr(original, "_maglev_flags", False):
+        return
+
+    def display_type_rich(self, ctx):
+        if getattr(self, "is_flag", False):
+            return None
+        return original(self, ctx)
+
+    display_type_rich._maglev_flags = True  # type: ignore[attr-defined]
+    TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]
+
+
+_flags_without_type()
+
 COMMAND_MODULES = ("stability", "hopf", "cycles", "simulate", "index", "report", "design")
 _here = Path(__file__).parent
 for _name in COMMAND_MODULES:
     if (_here / f"{_name}.py").exists():
         importlib.import_module(f"maglev_match.cli.{_name}")
+
+
+def _unwrap_help(text: str) -> str:
+    """A docstring as help text: paragraphs kept, the line breaks inside a paragraph (where
+    the source was wrapped) joined, so help tables wrap at the terminal's width only."""
+    paragraphs = inspect.cleandoc(text).split("\n\n")
+    return "\n\n".join(" ".join(p.split()) for p in paragraphs)
+
+
+for _info in app.registered_commands:
+    _doc = _info.help or (_info.callback.__doc__ if _info.callback else None)
+    if _doc:
+        _info.help = _unwrap_help(_doc)
 
 
 def _click_exception_types() -> tuple[type[BaseException], ...]:

@@ -28,7 +28,7 @@ from maglev_match.params import (
     load_params,
 )
 
-console = Console()
+console = Console(soft_wrap=True)  # text lines are not hard-wrapped (pipes, logs)
 console_err = Console(stderr=True)
 
 
@@ -44,7 +44,10 @@ ConfigOpt = Annotated[
 ]
 SetOpt = Annotated[
     list[str] | None,
-    typer.Option("--set", help="Override one value, NAME=VALUE (repeatable), e.g. --set kD=120."),
+    typer.Option("--set", metavar="NAME=VALUE",
+                 help="Override one value (repeatable), e.g. --set kD=120 or --set L=20 "
+                 "(beam and vehicle data L, EI, mbar, l, k, s, s0 re-derive omega1 and sigma "
+                 "unless those are set explicitly)."),
 ]
 ModelOpt = Annotated[
     str, typer.Option("--model", help="'unit' (model A, 9 states), 'vehicle' (model B) or a "
@@ -148,6 +151,30 @@ def parse_range(text: str, name: str = "range") -> tuple[float, float]:
     except ValueError:
         raise UserError(f"{name} '{text}': expected FROM:TO, e.g. 1e-4:8e-4") from None
     return a, b
+
+
+#: The one folder every command writes to by default, one subfolder per command
+#: (``maglev-match-out/root-locus/``, ``maglev-match-out/map/`` ...); ignored by git.
+OUTPUT_ROOT = "maglev-match-out"
+
+
+def default_output(command: str) -> Path:
+    """The default output folder of ``command``: ``maglev-match-out/<command>``."""
+    return Path(OUTPUT_ROOT) / command
+
+
+def output_target(out: Path | None, command: str, stem: str) -> tuple[Path, str]:
+    """Where a command writes, the same way in every command: ``(folder, stem)``.
+
+    ``--out`` absent: the folder ``maglev-match-out/<command>/`` and the command's own
+    ``stem``. A name without a suffix is a folder (created) holding ``stem.*``. A name with a
+    suffix is a file: its folder (created) and its stem name the outputs, so
+    ``--out results/rl.csv`` writes ``results/rl.csv`` beside ``results/rl.png``.
+    """
+    path = output_path(out, str(default_output(command)))
+    if path.suffix == "":
+        return path, stem
+    return path.parent, path.stem
 
 
 def output_path(out: Path | None, default: str) -> Path:
@@ -312,3 +339,98 @@ def check_output_path(path: Path | str | None, option: str = "--out", *,
                              f"{exc.strerror or exc}") from None
     if len(absolute.name.encode()) > 255:
         raise ParameterError(option, text, "the file name is longer than 255 bytes")
+
+
+# ----- progress --------------------------------------------------------------------------
+class ProgressReport:
+    """Progress of a long command on stderr (stdout stays clean for ``--json``).
+
+    On a terminal a Rich spinner (stages) or bar (tiles) is shown and replaced as work
+    advances; off a terminal (a log file, a pipe, CI) each stage or finished tile is one
+    plain line ``maglev-match <command> [  12.3 s] <message>``, flushed at once, so a log
+    shows what a long run is doing. Use as a context manager::
+
+        with progress_report("cycles") as prog:
+            prog.stage("searching Hopf points ...")
+            prog.tiles(done, total)
+
+    Parameters
+    ----------
+    command : the command name printed at the start of each plain line.
+    tty : force terminal (True) or plain-line (False) output; None detects stderr.
+    """
+
+    def __init__(self, command: str, tty: bool | None = None) -> None:
+        self.command = command
+        self.tty = console_err.is_terminal if tty is None else tty
+        self.t0 = 0.0
+        self._rich: Any = None
+        self._task: Any = None
+        self._last_done = -1
+
+    def __enter__(self) -> ProgressReport:
+        import time
+
+        self.t0 = time.perf_counter()
+        if self.tty:
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                SpinnerColumn,
+                TextColumn,
+                TimeElapsedColumn,
+            )
+
+            self._rich = Progress(SpinnerColumn(), TextColumn("{task.description}"),
+                                  BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                                  console=console_err, transient=True)
+            self._rich.__enter__()
+            self._task = self._rich.add_task(self.command, total=None)
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self._rich is not None:
+            self._rich.__exit__(*exc)
+            self._rich = None
+
+    @property
+    def elapsed(self) -> float:
+        """Seconds since the report started."""
+        import time
+
+        return time.perf_counter() - self.t0
+
+    def _line(self, message: str) -> None:
+        import sys
+
+        sys.stderr.write(f"maglev-match {self.command} [{self.elapsed:7.1f} s] {message}\n")
+        sys.stderr.flush()
+
+    def stage(self, message: str) -> None:
+        """A new stage of the work (one line off a terminal)."""
+        if self._rich is not None:
+            self._rich.update(self._task, description=message)
+        else:
+            self._line(message)
+
+    def update(self, message: str) -> None:
+        """Fine-grained news (e.g. each continuation step): shown on a terminal only, so a
+        log gets one line per stage, not per step."""
+        if self._rich is not None:
+            self._rich.update(self._task, description=message)
+
+    def tiles(self, done: int, total: int, what: str = "tiles") -> None:
+        """``done`` of ``total`` units finished (one line per finished unit off a
+        terminal)."""
+        if self._rich is not None:
+            self._rich.update(self._task, completed=done, total=total,
+                              description=f"{self.command}: {what}")
+        elif done != self._last_done:
+            self._line(f"{done}/{total} {what} done")
+        self._last_done = done
+
+
+def progress_report(command: str, tty: bool | None = None) -> ProgressReport:
+    """A :class:`ProgressReport` for ``command`` (see there)."""
+    return ProgressReport(command, tty)

@@ -11,7 +11,6 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 from rich import box
-from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from maglev_match.cli import app
@@ -29,22 +28,23 @@ from maglev_match.cli.common import (
     check_model,
     check_output_path,
     console,
-    console_err,
     emit_json,
     finite,
     ncol_option,
     ntst_option,
-    output_path,
+    output_target,
+    progress_report,
     steps_option,
 )
 from maglev_match.cli.common import params_from_options as _params
 from maglev_match.cli.models import is_model_file, user_cycles
 from maglev_match.dynamics.cycles import CycleBranch, cycle_branch
 from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
+from maglev_match.engineering import PARAM_HELP, engineering_system, is_engineering
 from maglev_match.io import atomic_open, atomic_write_text
 from maglev_match.limits_check import cycle_limit_margins
 from maglev_match.models import build_system
-from maglev_match.params import ParameterError, Params
+from maglev_match.params import ParameterError, Params, warn_overridden
 
 AtOpt = Annotated[
     list[str] | None,
@@ -65,9 +65,11 @@ def apply_at(params: Params, at: list[str] | None) -> Params:
         except ValueError:
             raise ParameterError(name.strip(), text, "must be a number") from None
     try:
-        return params.replace(**values) if values else params
+        new = params.replace(**values) if values else params
     except TypeError as exc:
         raise UserError(f"--at: unknown parameter ({exc})") from None
+    warn_overridden(new, set(values))  # e.g. --at L=20 while omega1 is set explicitly
+    return new
 
 
 def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
@@ -140,7 +142,7 @@ def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
 
 @app.command("cycles")
 def cycles_command(
-    param: Annotated[str, typer.Option("--param", help="Continuation parameter.")] = "omega1",
+    param: Annotated[str, typer.Option("--param", help=PARAM_HELP)] = "omega1",
     at: AtOpt = None,
     start: Annotated[float | None, typer.Option(
         "--from", help="Search Hopf points from this value (default: design value / 4).",
@@ -190,47 +192,49 @@ def cycles_command(
     params = apply_at(_params(preset, config, set_), at)
     system = build_system(params, model)
     try:
-        design = system.param(param)
+        design = getattr(params, param) if is_engineering(param) else system.param(param)
     except KeyError as exc:
         raise UserError(str(exc).strip("'\"")) from None
     a = design / 4 if start is None else start
     b = design * 4 if stop is None else stop
+    if is_engineering(param):  # beam/vehicle data: omega1, sigma (geometry) follow it
+        if start is None or stop is None:
+            raise UserError(f"--param {param}: give the range with --from and --to")
+        system = engineering_system(params, model, param, min(a, b), max(a, b))
     if not (np.isfinite(a) and np.isfinite(b)) or a == b:
         raise UserError(f"--from/--to: empty search range [{a}, {b}]")
     t0 = time.perf_counter()
-    console_err.print(f"searching Hopf points along {param} in [{a:.6g}, {b:.6g}] ...")
     if n_scan < 3:
         raise ParameterError("--scan", n_scan, "must be at least 3")
-    scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
-    hopfs = [h for h in scan.points if h.converged]
-    if not hopfs:
-        raise UserError(f"no Hopf point of the equilibrium along {param} in "
-                        f"[{a:.6g}, {b:.6g}]; widen --from/--to")
-    hopfs.sort(key=lambda h: abs(h.value - design))
-    chosen = hopfs if all_hopf else hopfs[:1]
-    restart_state, restart_param = None, None
-    if restart is not None or label is not None:
-        restart_state, start, restart_param = _load_restart(restart, label, param)
-        chosen = [start]
-    limits = cycle_limit_margins(params, include_current=not ignore_current)
-    branches: list[CycleBranch] = []
-    for h in chosen:
-        with Progress(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
-                      console=console_err, transient=True) as prog:
-            task = prog.add_task(f"cycles from Hopf at {param} = {h.value:.6g}", total=None)
+    with progress_report("cycles") as prog:
+        prog.stage(f"searching Hopf points along {param} in [{a:.6g}, {b:.6g}] ...")
+        scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+        hopfs = [h for h in scan.points if h.converged]
+        if not hopfs:
+            raise UserError(f"no Hopf point of the equilibrium along {param} in "
+                            f"[{a:.6g}, {b:.6g}]; widen --from/--to")
+        hopfs.sort(key=lambda h: abs(h.value - design))
+        chosen = hopfs if all_hopf else hopfs[:1]
+        restart_state, restart_param = None, None
+        if restart is not None or label is not None:
+            restart_state, start, restart_param = _load_restart(restart, label, param)
+            chosen = [start]
+        limits = cycle_limit_margins(params, include_current=not ignore_current)
+        branches: list[CycleBranch] = []
+        for h in chosen:
+            prog.stage(f"continuing cycles from the Hopf point {param} = {h.value:.6g} ...")
 
-            def report(step, pt, task=task, prog=prog, h=h):
-                prog.update(task, description=(
-                    f"cycles from Hopf at {param} = {h.value:.6g}: step {step}, "
-                    f"{param} = {pt.value:.6g}, max gap dev "
-                    f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm"))
+            def report(step, pt, h=h):
+                prog.update(f"cycles from Hopf at {param} = {h.value:.6g}: step {step}, "
+                            f"{param} = {pt.value:.6g}, max gap dev "
+                            f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm")
 
             br = cycle_branch(system, h, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
                               limits=limits, progress=report, restart=restart_state,
                               restart_param=restart_param)
-        branches.append(br)
-        console_err.print(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
-                          f"stopped: {br.stopped_reason}")
+            branches.append(br)
+            prog.stage(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
+                       f"stopped: {br.stopped_reason}")
     elapsed = time.perf_counter() - t0
 
     main_branch, h0 = branches[0], chosen[0]
@@ -271,9 +275,7 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     from maglev_match.plots import save_figure
     from maglev_match.plots.cycles import branch_label, cycle_diagram
 
-    base = output_path(out, f"cycles-{model}-{param}")
-    folder = base if base.suffix == "" else base.parent
-    stem = f"cycles_{model}_{param}"
+    folder, stem = output_target(out, "cycles", f"cycles_{model}_{param}")
     files = []
     rows, specials = [], []
     for k, br in enumerate(branches):

@@ -21,11 +21,11 @@ from maglev_match.cli.common import (
     SetOpt,
     check_model,
     console,
-    console_err,
     emit_json,
-    output_path,
+    output_target,
     params_from_options,
     print_warnings,
+    progress_report,
 )
 from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
 
@@ -59,17 +59,13 @@ def _monte_carlo(params, scatter: dict[str, float], n: int | None, spread: dict 
         return None
     if not scatter:
         raise ParameterError("--monte-carlo", n, "needs at least one --scatter NAME=PCT")
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
     from maglev_match.sensitivity import sampled_spread
 
-    with Progress("[progress.description]{task.description}", BarColumn(),
-                  MofNCompleteColumn(), TimeElapsedColumn(), console=console_err,
-                  transient=True) as prog:
-        task = prog.add_task(f"Monte Carlo, {n} samples", total=None)
+    with progress_report("design") as prog:
+        prog.stage(f"Monte Carlo, {n} samples ...")
         return sampled_spread(params, scatter, n, folder / "monte-carlo", seed=seed,
                               resume=resume, workers=workers, linearised=spread,
-                              progress=lambda d, t: prog.update(task, completed=d, total=t))
+                              progress=lambda d, t: prog.tiles(d, t, "chunks"))
 
 
 def _print_sampled(mc, bound: float | None = None) -> None:
@@ -170,11 +166,12 @@ def sensitivity_command(
     _need_unit(model)
     params = params_from_options(preset, config, set_)
     sc = parse_scatter(scatter)
-    with console_err.status("computing the index and its sensitivities ..."):
+    with progress_report("sensitivity") as prog:
+        prog.stage("computing the index and its sensitivities ...")
         sens = index_sensitivity(params, boundaries=boundaries)
     spread = _spread(sens, sc)
-    folder = output_path(out, f"sensitivity-{preset}")
-    figs = save_figure(tornado_figure(sens), folder / "tornado")
+    folder, stem = output_target(out, "sensitivity", "tornado")
+    figs = save_figure(tornado_figure(sens), folder / stem)
     mc = _monte_carlo(params, sc, monte_carlo, spread, folder, workers, resume, seed)
     if json_out:
         data = sens.as_json()
@@ -278,17 +275,18 @@ def design_command(
         base.replace(**{var.name: var.hi})
     sc = parse_scatter(scatter)
     evaluator = MaglevEvaluator(base, problem.names)
-    with console_err.status("searching ...") as st:
+    with progress_report("design") as prog:
+        prog.stage("searching ...")
         res = optimise_design(problem, evaluator, grid=grid, starts=starts,
-                              progress=lambda s: st.update(s))
+                              progress=prog.stage)
     spread = None
     design_params = evaluator.params([res.values[n] for n in problem.names])
     if sc:
         from maglev_match.sensitivity import index_sensitivity
 
         spread = _spread(index_sensitivity(design_params, res.index, boundaries=False), sc)
-    folder = output_path(out, "design-" + "-".join(problem.names))
-    figs = save_figure(design_path_figure(res), folder / "design-path")
+    folder, stem = output_target(out, "design", "design-path")
+    figs = save_figure(design_path_figure(res), folder / stem)
     mc = _monte_carlo(design_params, sc, monte_carlo, spread, folder, workers, resume, seed)
     chi_req = next((r.bound for r in reqs if r.quantity == "chi"), None)
     if json_out:

@@ -23,14 +23,14 @@ from maglev_match.cli.common import (
     check_output_path,
     check_param,
     console,
-    console_err,
     emit_json,
     finite,
     fraction_option,
     grid_option,
-    output_path,
+    output_target,
     parse_range,
     print_warnings,
+    progress_report,
     scan_option,
     unit_of,
     validate_value,
@@ -43,6 +43,7 @@ from maglev_match.dynamics.hopf import (
     locate_hopf_points,
     stability_grid,
 )
+from maglev_match.engineering import PARAM_HELP, engineering_hopf_points, is_engineering
 from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError
 
@@ -69,7 +70,7 @@ def _point_record(hp: HopfPoint, system, names: tuple[str, ...]) -> dict:
 
 @app.command("hopf")
 def hopf_command(
-    param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
+    param: Annotated[str, typer.Option("--param", help=PARAM_HELP)] = "omega1",
     start: Annotated[float, typer.Option("--from", help="First value.", callback=finite)] = 30.0,
     stop: Annotated[float, typer.Option("--to", help="Last value.", callback=finite)] = 300.0,
     steps: Annotated[int, typer.Option("--steps", help="Sampling of the equilibrium branch: "
@@ -89,13 +90,23 @@ def hopf_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
-    check_param(system, model, param, "--param")
+    engineering = params is not None and is_engineering(param)
+    if not engineering:
+        check_param(system, model, param, "--param")
     for v in (start, stop):
         if params is not None:
             validate_value(params, param, v)
-    scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
-    names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
-    records = [_point_record(hp, system, names) for hp in scan.points]
+    if engineering:  # a beam/vehicle quantity: omega1, sigma (model B: geometry) follow it
+        scan, system = engineering_hopf_points(params, model, param, start, stop, steps)
+        names = tuple(dict.fromkeys(DEFAULT_PLANE.get(model, ()) + ("sigma",)))
+        names = tuple(n for n in names if n in system.param_names)
+        records = [{param: hp.value, **_point_record(hp, system, names)}
+                   for hp in scan.points]
+        names = (param, *names)
+    else:
+        scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
+        names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
+        records = [_point_record(hp, system, names) for hp in scan.points]
     specials = [{"type": str(sp.type), param: sp.value, "located": sp.located,
                  "label": sp.label, "frequency": sp.frequency}
                 for sp in scan.special_points]
@@ -237,24 +248,22 @@ def hopf_curve_command(
     a, b = bounds[names[1]]
     scan_values = [a + f * (b - a) for f in (0.5, 0.1, 0.9)]
 
-    def progress(msg: str) -> None:
-        if not json_out:
-            console_err.print(msg)
-
-    curves, warnings = compute_hopf_curves(system, names, bounds, scan_values,
-                                           n_scan=scan_steps, max_step=max_step,
-                                           progress=progress)
-    grid_data = None
-    if grid > 0:
-        g1 = np.linspace(*bounds[names[0]], grid)
-        g2 = np.linspace(*bounds[names[1]], grid)
-        mr, ok = stability_grid(system, names, g1, g2)
-        if not ok.all():
-            warnings.append(f"equilibrium not found at {int((~ok).sum())} grid points")
-        grid_data = (g1, g2, mr)
-    folder = output_path(out, f"hopf-curve-{model}-{names[0]}-{names[1]}")
-    folder = folder if folder.suffix == "" else folder.parent
-    stem = f"hopf_curve_{model}_{names[0]}_{names[1]}"
+    with progress_report("hopf-curve") as prog:
+        prog.stage(f"scanning {names[0]} at {len(scan_values)} values of {names[1]} ...")
+        curves, warnings = compute_hopf_curves(system, names, bounds, scan_values,
+                                               n_scan=scan_steps, max_step=max_step,
+                                               progress=prog.stage)
+        grid_data = None
+        if grid > 0:
+            prog.stage(f"stability grid {grid} x {grid} ...")
+            g1 = np.linspace(*bounds[names[0]], grid)
+            g2 = np.linspace(*bounds[names[1]], grid)
+            mr, ok = stability_grid(system, names, g1, g2)
+            if not ok.all():
+                warnings.append(f"equilibrium not found at {int((~ok).sum())} grid points")
+            grid_data = (g1, g2, mr)
+    folder, stem = output_target(out, "hopf-curve",
+                                 f"hopf_curve_{model}_{names[0]}_{names[1]}")
     csv_path = folder / f"{stem}.csv"
     points, special = [], []
     span0 = bounds[names[0]][1] - bounds[names[0]][0]

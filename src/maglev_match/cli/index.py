@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
 from maglev_match.cli import app
 from maglev_match.cli.common import (
@@ -21,10 +20,11 @@ from maglev_match.cli.common import (
     check_model,
     check_output_path,
     console,
-    console_err,
     emit_json,
     ntst_option,
+    output_target,
     params_from_options,
+    progress_report,
     rows_per_tile_option,
     scheduler_option,
     workers_option,
@@ -60,7 +60,8 @@ def index_command(
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
-    with console_err.status("computing the matching index ..."):
+    with progress_report("index") as prog:
+        prog.stage("computing the matching index ...")
         res = matching_index(params, model=model, simulate=not no_simulation)
     if json_out:
         emit_json(res.as_json())
@@ -134,7 +135,9 @@ def map_command(
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
     set_: SetOpt = None,
-    out: Annotated[Path, typer.Option("--out", help="netCDF file to write.")] = Path("map.nc"),
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="netCDF file to write, or a folder for map_X_Y.nc (default: "
+        "maglev-match-out/map/).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Reuse finished tiles.")] = False,
     scheduler: Annotated[
         str | None, typer.Option("--scheduler", help="Existing Dask scheduler, tcp://host:port.",
@@ -159,29 +162,25 @@ def map_command(
     from maglev_match.plots import save_figure
     from maglev_match.plots.maps import map_figure
 
-    check_output_path(out, kind="file")
+    check_output_path(out)
     base = params_from_options(preset, config, set_)
     ax, ay = parse_axis(x, "--x"), parse_axis(y, "--y")
+    folder, stem = output_target(out, "map", f"map_{ax.name}_{ay.name}")
     if rows_per_tile < 1:
         raise ParameterError("--rows-per-tile", rows_per_tile, "must be at least 1")
     spec = MapSpec(base=base.as_input_dict(), x=ax, y=ay, rows_per_tile=rows_per_tile,
                    ntst=ntst)
     spec.validate()  # every grid point, before any work starts
-    out = Path(out)
+    out = folder / f"{stem}.nc"
     checkpoint = out.with_name(out.name + ".tiles")
-    with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=console_err, transient=json_out) as prog:
-        task = prog.add_task(f"map {ax.name} x {ay.name}", total=len(spec.tiles))
-
-        def progress(done: int, total: int) -> None:
-            prog.update(task, completed=done, total=total)
-
+    with progress_report("map") as prog:
+        prog.stage(f"map {ax.name} x {ay.name}: {len(spec.tiles)} tiles ...")
         started = time.perf_counter()
         data = run_map(spec, checkpoint, resume=resume, scheduler=scheduler, workers=workers,
-                       progress=progress)
+                       progress=prog.tiles)
         elapsed = time.perf_counter() - started
-    with console_err.status("spot check: recomputing sample points one by one ..."):
         # the self-check gets 10 % of the map's time (at least one point is checked)
+        prog.stage("spot check: recomputing sample points one by one ...")
         ds = map_dataset(spec, data, budget=0.1 * elapsed)
     from maglev_match.datasets import annotate_map
 

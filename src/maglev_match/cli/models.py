@@ -23,7 +23,7 @@ from maglev_match.cli.common import (
     console,
     console_err,
     emit_json,
-    output_path,
+    output_target,
     params_from_options,
     print_warnings,
 )
@@ -211,8 +211,8 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     if out is not None:
         import csv
 
-        base = output_path(out, str(out))
-        path = base if base.suffix == ".csv" else base / f"cycles_{user.name}_{param}.csv"
+        folder, stem = output_target(out, "cycles", f"cycles_{user.name}_{param}")
+        path = folder / f"{stem}.csv"
         allrows = [{"branch": k, **r} for k, br in enumerate(branches) for r in rows(br)]
         with path.open("w", newline="") as fh:
             if allrows:
@@ -261,9 +261,11 @@ def user_simulate(model: str, sets: list[str] | None, t: float, state: np.ndarra
                    n_save=n_save)
     written = []
     if out is not None:
-        if out.suffix != ".csv":
-            raise UserError(f"--out {out}: for a user model the history file must end in .csv")
-        path = output_path(out, str(out))
+        if out.suffix not in ("", ".csv"):
+            raise UserError(f"--out {out}: for a user model the history file must end in .csv "
+                            "(or give a folder)")
+        folder, stem = output_target(out, "simulate", f"simulation_{user.name}")
+        path = folder / f"{stem}.csv"
         header = ",".join(["t", *system.state_names])
         np.savetxt(path, np.column_stack([res.t, res.x]), delimiter=",", header=header,
                    comments="")

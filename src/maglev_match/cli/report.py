@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Annotated
 
@@ -22,7 +21,9 @@ from maglev_match.cli.common import (
     console_err,
     emit_json,
     horizon_option,
+    output_target,
     params_from_options,
+    progress_report,
 )
 from maglev_match.cli.models import MaglevOnlyModelOpt, refuse_model_file
 
@@ -31,9 +32,9 @@ QuickOpt = Annotated[
 ]
 
 
-def _progress(t0: float):
+def _progress(prog):
     def show(title: str) -> None:
-        console_err.print(f"[dim]{time.perf_counter() - t0:6.1f} s[/]  {title} ...")
+        prog.stage(f"{title} ...")
 
     return show
 
@@ -43,8 +44,9 @@ def report_command(
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
     set_: SetOpt = None,
-    out: Annotated[Path, typer.Option("--out", help="The HTML file to write.")] = Path(
-        "report.html"),
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="The HTML file to write, or a folder for report.html (default: "
+        "maglev-match-out/report/).")] = None,
     quick: QuickOpt = False,
     model_b: Annotated[bool, typer.Option(
         "--vehicle/--no-vehicle", help="Also analyse model B (full vehicle).")] = True,
@@ -58,18 +60,21 @@ def report_command(
     refuse_model_file(model, "report")
     from maglev_match.report import ReportSettings, study_report
 
-    if out.suffix.lower() not in (".html", ".htm"):
-        raise UserError(f"--out {out}: the report is an HTML file; give a name ending in .html")
+    if out is not None and out.suffix and out.suffix.lower() not in (".html", ".htm"):
+        raise UserError(f"--out {out}: the report is an HTML file; give a name ending in .html "
+                        "or a folder")
     if not t_end > 0:
         raise UserError(f"--t-end {t_end:g}: must be > 0")
-    check_output_path(out, kind="file")
+    check_output_path(out)
+    folder, stem = output_target(out, "report", "report")
+    out = folder / (f"{stem}{out.suffix}" if out is not None and out.suffix else f"{stem}.html")
     params = params_from_options(preset, config, set_)
     base = ReportSettings.quick_settings() if quick else ReportSettings()
     settings = ReportSettings(**{**base.as_dict(), "include_vehicle": model_b, "t_end": t_end})
     label = preset + (f" + {config}" if config else "") + (
         " + " + ", ".join(set_) if set_ else "")
-    t0 = time.perf_counter()
-    res = study_report(params, out, settings, label=label, progress=_progress(t0))
+    with progress_report("report") as prog:
+        res = study_report(params, out, settings, label=label, progress=_progress(prog))
     summary = {
         "report": str(res.path),
         "figures": [str(f) for f in res.figures],
@@ -87,7 +92,9 @@ def report_command(
 
 @app.command("reproduce")
 def reproduce_command(
-    out: Annotated[Path, typer.Option("--out", help="Output folder.")] = Path("reproduce"),
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="Output folder, or the HTML file (its folder gets the rest; default: "
+        "maglev-match-out/reproduce/).")] = None,
     quick: QuickOpt = False,
     only: Annotated[list[str] | None, typer.Option(
         "--only", help="Figure sections to include (repeatable): fig4, fig5, fig6-8, "
@@ -105,12 +112,22 @@ def reproduce_command(
     for k in only or []:
         if k not in keys:
             raise UserError(f"--only {k}: no such section; choose from {', '.join(keys)}")
-    if out.suffix:
-        raise UserError(f"--out {out}: give a folder (reproduce writes several files)")
-    check_output_path(out, kind="folder")
+    if out is not None and out.suffix and out.suffix.lower() not in (".html", ".htm"):
+        raise UserError(f"--out {out}: give a folder or an HTML file name (reproduce writes "
+                        "several files)")
+    check_output_path(out)
+    html_name = out.name if out is not None and out.suffix else None
+    out, _ = output_target(out, "reproduce", "reproduce")
     settings = ReportSettings.quick_settings() if quick else ReportSettings()
-    t0 = time.perf_counter()
-    report, claims = reproduce(out, settings, only=only or None, progress=_progress(t0))
+    with progress_report("reproduce") as prog:
+        report, claims = reproduce(out, settings, only=only or None,
+                                   progress=_progress(prog))
+    if html_name is not None and html_name != report.path.name:
+        import dataclasses
+        import os
+
+        os.replace(report.path, out / html_name)
+        report = dataclasses.replace(report, path=out / html_name)
     if json_out:
         from dataclasses import asdict
 

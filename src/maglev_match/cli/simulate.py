@@ -1,4 +1,5 @@
-"""`maglev-match simulate`: a time simulation with the physical limits."""
+"""`maglev-match simulate`: a time simulation with the physical limits (current clamp,
+gap collision)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ from maglev_match.cli.common import (
     ConfigOpt,
     JsonOpt,
     ModelOpt,
-    OutOpt,
     PresetOpt,
     SetOpt,
     UserError,
@@ -27,9 +27,10 @@ from maglev_match.cli.common import (
     emit_json,
     horizon_option,
     n_save_option,
-    output_path,
+    output_target,
     params_from_options,
     print_warnings,
+    progress_report,
     tolerance_option,
 )
 from maglev_match.cli.models import is_model_file, user_simulate
@@ -91,9 +92,12 @@ def simulate_command(
         callback=tolerance_option)] = 1e-8,
     n_save: Annotated[int, typer.Option("--n-save", help="Saved time points.",
                                         callback=n_save_option)] = 5001,
-    out: OutOpt = None,
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="History file (.nc or .csv), or a folder for simulation_MODEL.nc.")
+    ] = None,
     plot: Annotated[Path | None, typer.Option(
-        "--plot", help="Figure file (PNG; an SVG is written beside it).")] = None,
+        "--plot", help="Figure file (PNG; an SVG is written beside it), or a folder for "
+        "simulation_MODEL.png.")] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Simulate model A or B from a named or explicit initial state; report collision
@@ -103,31 +107,35 @@ def simulate_command(
     if not is_model_file(model):
         check_model(model)
     check_output_path(out, suffixes=(".csv", ".nc"))
-    check_output_path(plot, "--plot", kind="file")
+    check_output_path(plot, "--plot")
     if not t > 0:
         raise UserError(f"--t {t}: the horizon must be > 0 s")
     if n_save < 2:
         raise UserError(f"--n-save {n_save}: need at least 2 saved points")
     if not (rtol > 0 and atol > 0):
         raise UserError("--rtol and --atol must be > 0")
-    if out is not None and out.suffix not in (".csv", ".nc"):
-        raise UserError(f"--out {out}: the history file must end in .csv or .nc")
+    if out is not None and out.suffix not in ("", ".csv", ".nc"):
+        raise UserError(f"--out {out}: the history file must end in .csv or .nc (or give "
+                        "a folder)")
     state = _read_state(x0) if x0 is not None else None
     if is_model_file(model):  # a user model file: no maglev limits or initial states
         return user_simulate(model, set_, t, state, n_save, rtol, atol, json_out, out)
     params = params_from_options(preset, config, set_)
     x_init = initial_state(params, model, initial=initial, x5=x5, q1=q1, state=state)
-    console_err.print(f"simulating model {'A' if model == 'unit' else 'B'} for {t:g} s ...",
-                      highlight=False)
-    sim = simulate_maglev(params, model, x_init, t, limited=limits, n_save=n_save,
-                          options=SimulationOptions(rtol=rtol, atol=atol))
+    with progress_report("simulate") as prog:
+        prog.stage(f"simulating model {'A' if model == 'unit' else 'B'} for {t:g} s ...")
+        sim = simulate_maglev(params, model, x_init, t, limited=limits, n_save=n_save,
+                              options=SimulationOptions(rtol=rtol, atol=atol))
+        prog.stage(f"simulation done: {sim.outcome}")
     written: list[str] = []
     if out is not None:
-        written.append(str(save_history(sim, output_path(out, str(out)))))
+        folder, stem = output_target(out, "simulate", f"simulation_{model}")
+        written.append(str(save_history(sim, folder / (stem + (out.suffix or ".nc")))))
     if plot is not None:
         from maglev_match.plots.simulate import plot_simulation
 
-        written += [str(p) for p in plot_simulation(sim, output_path(plot, str(plot)))]
+        folder, stem = output_target(plot, "simulate", f"simulation_{model}")
+        written += [str(p) for p in plot_simulation(sim, folder / f"{stem}.png")]
     summary = sim.summary()
     if json_out:
         emit_json(summary)

@@ -8,6 +8,7 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from maglev_match.cli import app
 from maglev_match.cli.common import (
@@ -24,7 +25,7 @@ from maglev_match.cli.common import (
     console,
     emit_json,
     finite,
-    output_path,
+    output_target,
     print_warnings,
     scan_option,
     unit_of,
@@ -32,8 +33,29 @@ from maglev_match.cli.common import (
 )
 from maglev_match.cli.models import resolve_model
 from maglev_match.dynamics.equilibria import root_locus, stability
+from maglev_match.engineering import PARAM_HELP, is_engineering
 from maglev_match.io import atomic_open
-from maglev_match.params import ParameterError, available_presets, load_preset
+from maglev_match.params import ParameterError, available_presets, load_preset, preset_info
+
+#: Relative size below which an imaginary part is rounding noise: eigenvalues of a real
+#: matrix computed in float64 (LAPACK dgeev, backward error ~ 1e-16 ||J||) can split a real
+#: double eigenvalue into a spurious pair +-i eps; |Im| <= IMAG_RTOL max(|lambda|, 1) is real.
+IMAG_RTOL = 1e-9
+
+
+def table_eigenvalues(eigenvalues) -> list[tuple[int, complex]]:
+    """The eigenvalues to list in a stability table, as (index, lambda): each conjugate pair
+    once (its member with Im > 0) and every real eigenvalue, where an imaginary part with
+    |Im| <= IMAG_RTOL max(|lambda|, 1) is rounding noise and set to 0 (a real eigenvalue,
+    kept with its multiplicity). The real matrix's spectrum is closed under conjugation
+    (Golub & Van Loan, Matrix Computations, 7.4), so dropping Im < 0 loses nothing."""
+    rows = []
+    for k, z in enumerate(np.asarray(eigenvalues, complex)):
+        if abs(z.imag) <= IMAG_RTOL * max(abs(z), 1.0):
+            rows.append((k, complex(z.real, 0.0)))
+        elif z.imag > 0:
+            rows.append((k, complex(z)))
+    return rows
 
 
 @app.command("stability")
@@ -73,20 +95,19 @@ def stability_command(
     console.print(f"Equilibrium: {verdict}  max Re(lambda) = {res.max_real_part:.6g} 1/s "
                   f"(margin {res.margin:.6g} 1/s)")
     table = Table("#", "Re (1/s)", "Im (rad/s)", "f (Hz)", "damping ratio")
-    for k, z in enumerate(res.eigenvalues):
-        if z.imag < -1e-12:
-            continue
+    for k, z in table_eigenvalues(res.eigenvalues):
         zeta = -z.real / abs(z) if abs(z) > 0 else float("nan")
         table.add_row(str(k + 1), f"{z.real:.6g}", f"{z.imag:.6g}",
                       f"{abs(z.imag) / (2 * np.pi):.4g}", f"{zeta:.4g}")
     console.print(table)
-    console.print("(one row per conjugate pair; the rows with Im < 0 are omitted)")
+    console.print("(one row per conjugate pair, Im > 0; |Im| below "
+                  f"{IMAG_RTOL:g} |lambda| is shown as a real eigenvalue)")
     print_warnings(res.warnings)
 
 
 @app.command("root-locus")
 def root_locus_command(
-    param: Annotated[str, typer.Option("--param", help="Parameter to vary.")] = "omega1",
+    param: Annotated[str, typer.Option("--param", help=PARAM_HELP)] = "omega1",
     start: Annotated[float, typer.Option("--from", help="First value.", callback=finite)] = 40.0,
     stop: Annotated[float, typer.Option("--to", help="Last value.", callback=finite)] = 190.0,
     steps: Annotated[int, typer.Option("--steps", help="Number of values.",
@@ -106,15 +127,22 @@ def root_locus_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
-    check_param(system, model, param, "--param")
+    engineering = params is not None and is_engineering(param)
+    if not engineering:
+        check_param(system, model, param, "--param")
     for v in (start, stop):
         if params is not None:
             validate_value(params, param, v)
     values = np.linspace(start, stop, steps)
-    res = root_locus(system, param, values)
-    base = output_path(out, f"root-locus-{model}-{param}")
-    folder = base if base.suffix == "" else base.parent
-    stem = f"root_locus_{model}_{param}"
+    if engineering:  # the path through the model parameters at each value: t = k is exact
+        from maglev_match.dynamics.paths import PATH_PARAM, path_system
+        from maglev_match.engineering import engineering_nodes
+
+        path = path_system(system, engineering_nodes(params, model, param, values))
+        res = root_locus(path, PATH_PARAM, np.arange(steps, dtype=float))
+    else:
+        res = root_locus(system, param, values)
+    folder, stem = output_target(out, "root-locus", f"root_locus_{model}_{param}")
     csv_path = folder / f"{stem}.csv"
     with atomic_open(csv_path, "w", newline="") as fh:
         w = csv.writer(fh)
@@ -128,7 +156,8 @@ def root_locus_command(
     from maglev_match.plots.rootlocus import root_locus_figure
 
     unit = unit_of(param)
-    design = (system.param(param), stability(system).eigenvalues)
+    design_value = getattr(params, param) if engineering else system.param(param)
+    design = (float(design_value), stability(system).eigenvalues)
     figs = save_figure(root_locus_figure(values, res.eigenvalues, param, f"({unit})",
                                          design=design), folder / stem)
     crossings = []
@@ -165,17 +194,33 @@ def root_locus_command(
 
 @app.command("presets")
 def presets_command(json_out: JsonOpt = False) -> None:
-    """List the shipped parameter presets with their beam values."""
+    """List the shipped parameter presets: beam values, a description, and what each
+    changes relative to the preset it derives from."""
     rows = []
     for name in available_presets():
         p = load_preset(name)
+        info = preset_info(name)
         rows.append({"name": name, "omega1": p.omega1, "sigma": p.sigma, "w0": p.w0,
-                     "EI": p.EI, "L": p.L, "mbar": p.mbar})
+                     "EI": p.EI, "L": p.L, "mbar": p.mbar, "description": info.description,
+                     "base": info.base,
+                     "changes": {k: {"base": a, "value": b}
+                                 for k, (a, b) in info.changes.items()}})
     if json_out:
         emit_json({"presets": rows})
         return
     table = Table("preset", "omega1 (rad/s)", "sigma (1/kg)", "w0 (mm)", "L (m)", "EI (N m^2)")
+    table.columns[0].no_wrap = True
     for r in rows:
         table.add_row(r["name"], f"{r['omega1']:.5g}", f"{r['sigma']:.4g}",
                       f"{r['w0'] * 1e3:.4g}", f"{r['L']:g}", f"{r['EI']:.4g}")
     console.print(table)
+    for r in rows:
+        if r["base"] is None:
+            changed = "a base preset"
+        elif r["changes"]:
+            changed = f"changes vs {r['base']}: " + ", ".join(
+                f"{k} {c['base']:.6g} -> {c['value']:.6g}" for k, c in r["changes"].items())
+        else:
+            changed = f"same values as {r['base']}"
+        console.print(Text.assemble((r["name"], "bold"), f" ({changed})"), highlight=False)
+        console.print(f"    {r['description']}", highlight=False, markup=False)
