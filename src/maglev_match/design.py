@@ -39,6 +39,7 @@ import scipy.optimize
 
 from maglev_match.matching import MatchingIndex, matching_index
 from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError, Params
+from maglev_match.reprs import compact_repr
 from maglev_match.sensitivity import DerivativeStatus, index_sensitivity, system_sensitivity
 
 __all__ = [
@@ -267,6 +268,8 @@ class Candidate:
 @dataclass(frozen=True)
 class DesignResult:
     """The design, its full index, active constraints and how it was found."""
+
+    __repr__ = compact_repr
 
     problem: DesignProblem
     status: DesignStatus

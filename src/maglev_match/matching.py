@@ -49,6 +49,7 @@ from maglev_match.dynamics.system import System
 from maglev_match.limits_check import cycle_limit_margins
 from maglev_match.models.unit import unit_system
 from maglev_match.params import Params
+from maglev_match.reprs import compact_repr
 
 __all__ = ["MatchingIndex", "matching_index", "index_of_system", "reading", "reading_rank",
            "search_ranges", "CASES", "Case", "Basis", "with_simulation", "cycle_settings",
@@ -108,6 +109,8 @@ class MatchingIndex:
     smaller of the two directions); ``reading`` the words for the index named by
     ``reading_basis`` (the smaller of the two when the simulation ran).
     """
+
+    __repr__ = compact_repr
 
     chi: float
     h: float

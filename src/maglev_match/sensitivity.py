@@ -77,6 +77,7 @@ from maglev_match.matching import (
 from maglev_match.models.unit import PARAM_NAMES as MODEL_A_PARAMS
 from maglev_match.models.unit import unit_system
 from maglev_match.params import PARAMETER_DOCS, Params
+from maglev_match.reprs import compact_repr
 
 __all__ = [
     "DerivativeStatus",
@@ -247,6 +248,8 @@ class ParameterSensitivity:
 @dataclass(frozen=True)
 class IndexSensitivity:
     """Sensitivities of chi, the margin and the Hopf distance of model A at one point."""
+
+    __repr__ = compact_repr
 
     index: MatchingIndex
     status: DerivativeStatus

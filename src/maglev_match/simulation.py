@@ -44,6 +44,7 @@ from maglev_match.models import unit as unit_model
 from maglev_match.models import vehicle as vehicle_model
 from maglev_match.models.limits import gap_margins
 from maglev_match.params import ParameterError, Params
+from maglev_match.reprs import compact_repr
 
 __all__ = [
     "INITIAL_CONDITIONS",
@@ -410,6 +411,8 @@ class CriticalDisturbance:
     nonmonotone : True if some size returned above a colliding one (the basin along this
         line is not an interval); warnings : messages.
     """
+
+    __repr__ = compact_repr
 
     direction: int
     largest_return: float | None

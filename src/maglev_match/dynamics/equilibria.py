@@ -38,6 +38,7 @@ from maglev_match.dynamics.continuation import (
     dense_bordered_newton,
 )
 from maglev_match.dynamics.system import System
+from maglev_match.reprs import compact_repr
 
 __all__ = [
     "EquilibriumResult",
@@ -60,6 +61,8 @@ ILL_CONDITIONED = 1e8
 class EquilibriumResult:
     """An equilibrium found by Newton's method, with its diagnostics."""
 
+    __repr__ = compact_repr
+
     x: np.ndarray
     p: np.ndarray
     converged: bool
@@ -72,6 +75,8 @@ class EquilibriumResult:
 @dataclass(frozen=True)
 class StabilityResult:
     """Eigenvalues of the Jacobian at an equilibrium and the stability verdict."""
+
+    __repr__ = compact_repr
 
     eigenvalues: np.ndarray  # sorted by real part, largest first (1/s)
     max_real_part: float  # the stability margin is -max_real_part (1/s)
@@ -89,6 +94,8 @@ class StabilityResult:
 @dataclass(frozen=True)
 class RootLocusResult:
     """Eigenvalues of the equilibrium along one parameter."""
+
+    __repr__ = compact_repr
 
     param: str
     values: np.ndarray
@@ -259,6 +266,8 @@ class EquilibriumSpecialPoint:
 @dataclass(frozen=True)
 class EquilibriumBranch:
     """A branch of equilibria in one parameter (points in order along the arclength)."""
+
+    __repr__ = compact_repr
 
     param: str
     values: np.ndarray  # parameter at each point (its unit)

@@ -33,6 +33,7 @@ from maglev_match.dynamics.normal_forms import (
     second_lyapunov_coefficient,
 )
 from maglev_match.dynamics.system import System
+from maglev_match.reprs import compact_repr
 
 __all__ = [
     "HopfPoint",
@@ -56,6 +57,8 @@ __all__ = [
 @dataclass(frozen=True)
 class HopfPoint:
     """A Hopf point of the equilibrium along one parameter, refined on the defining system."""
+
+    __repr__ = compact_repr
 
     param: str  # the continuation parameter name
     value: float  # its value at the Hopf point (SI unit of that parameter)
@@ -81,6 +84,8 @@ class HopfPoint:
 @dataclass(frozen=True)
 class HopfScan:
     """Hopf points found along one parameter interval."""
+
+    __repr__ = compact_repr
 
     param: str
     start: float

@@ -45,6 +45,7 @@ from maglev_match.dynamics.normal_forms import (
     second_lyapunov_coefficient,
 )
 from maglev_match.dynamics.system import System
+from maglev_match.reprs import compact_repr
 
 __all__ = [
     "HopfCurvePoint",
@@ -75,6 +76,8 @@ class CodimTwoPoint:
     'ZH' (zero-Hopf, a real eigenvalue at 0), 'HH' (double Hopf, a second imaginary pair).
     """
 
+    __repr__ = compact_repr
+
     type: SpecialPointKind
     values: tuple[float, float]
     frequency: float
@@ -94,6 +97,8 @@ class CodimTwoPoint:
 @dataclass(frozen=True)
 class HopfCurve:
     """A branch of the Hopf curve in the plane of two parameters."""
+
+    __repr__ = compact_repr
 
     params: tuple[str, str]
     points: list[HopfCurvePoint]

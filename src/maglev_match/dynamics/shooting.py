@@ -24,6 +24,7 @@ import scipy.integrate
 import scipy.optimize
 
 from maglev_match.dynamics.system import System
+from maglev_match.reprs import compact_repr
 
 __all__ = ["ShootingResult", "shoot_periodic_orbit", "trajectory_extrema"]
 
@@ -31,6 +32,8 @@ __all__ = ["ShootingResult", "shoot_periodic_orbit", "trajectory_extrema"]
 @dataclass(frozen=True)
 class ShootingResult:
     """A periodic orbit found by shooting, with its diagnostics."""
+
+    __repr__ = compact_repr
 
     x0: np.ndarray  # a point on the orbit
     period: float  # s

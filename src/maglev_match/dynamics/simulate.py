@@ -58,6 +58,7 @@ import numpy as np
 
 from maglev_match import jax_setup  # noqa: F401  (float64 on)
 from maglev_match.dynamics.system import System
+from maglev_match.reprs import compact_repr
 
 Array = Any
 EventFn = Callable[[Array, Array], Array]
@@ -151,6 +152,8 @@ class SimulationResult:
     steps, accepted, rejected : step counts. warnings : messages.
     """
 
+    __repr__ = compact_repr
+
     t: np.ndarray
     x: np.ndarray
     outcome: str
@@ -183,6 +186,8 @@ class BatchSimulation:
     t, x : saved times (n_save,) and histories (batch, n_save, dim) (x is None when no
         history was requested).
     """
+
+    __repr__ = compact_repr
 
     outcome: np.ndarray
     outcome_code: np.ndarray

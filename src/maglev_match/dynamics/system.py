@@ -30,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match import jax_setup  # noqa: F401  (float64 on, compilation cache)
+from maglev_match.reprs import compact_repr
 
 Array = Any
 RHS = Callable[[Array, Array], Array]
@@ -109,6 +110,8 @@ class System:
     param_ranges : optional valid range (lo, hi) of some parameters (e.g. a frequency
         must be positive); solvers reject solutions outside them.
     """
+
+    __repr__ = compact_repr
 
     rhs: RHS
     p: np.ndarray
