@@ -108,3 +108,12 @@ def test_simulation_dataset_keeps_the_history():
                          f"outcome={sim.outcome!r}, saved_points=21)")
     np.testing.assert_array_equal(ds["w"].values, sim.result.x[:, 4])
     assert ds["gap_deviation"].values[0, 0] == pytest.approx(1e-3, rel=1e-12)
+
+
+def test_root_locus_to_xarray_is_the_annotated_dataset():
+    params = mm.load_preset("alpha1")
+    res = mm.root_locus("omega1", np.linspace(100.0, 140.0, 5), "alpha1")
+    ds = res.to_xarray(params)
+    np.testing.assert_array_equal(ds["eigenvalue_real"].values, np.real(res.eigenvalues))
+    assert ds["omega1"].attrs["units"] == "rad/s"
+    assert json.loads(ds.attrs["params"])["kD"] == params.kD

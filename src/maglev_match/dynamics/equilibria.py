@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cache
+from typing import Any
 
 import jax
 import numpy as np
@@ -104,6 +105,14 @@ class RootLocusResult:
     converged: np.ndarray  # Newton converged at each value
     equilibria: np.ndarray  # (n_values, dim)
     warnings: tuple[str, ...] = field(default=())
+
+    def to_xarray(self, params: Any = None, state_names: tuple[str, ...] | None = None):
+        """The locus as an :class:`xarray.Dataset` over (parameter value, eigenvalue index)
+        with units and long names (:func:`maglev_match.datasets.root_locus_dataset`);
+        ``params`` (a parameter set) is stored as an attribute when given."""
+        from maglev_match.datasets import root_locus_dataset
+
+        return root_locus_dataset(self, params, state_names)
 
 
 def find_equilibrium(
