@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import StrEnum
 from functools import cache, lru_cache
 from typing import Any
 
@@ -42,7 +43,7 @@ import scipy.sparse.linalg
 
 from maglev_match.dynamics.system import System
 
-__all__ = ["CollocationProblem"]
+__all__ = ["CollocationProblem", "LinearSolver"]
 
 
 @cache
@@ -136,6 +137,31 @@ def _pattern(ntst: int, m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     return rows, cols
 
 
+@dataclass(frozen=True)
+class _Parts:
+    """Residual and Jacobian blocks of the bordered system at one point (scaled).
+
+    resid : (size,) residual; blk : (NTST, m, m+1, n, n) collocation blocks [j, l, k, a, b]
+    (equation at Gauss point l, component a; node k of interval j, component b); colT, colL :
+    (NTST m n,) the T and lambda columns of the collocation rows; phase : (N n,) the phase
+    row; last : (size,) the last row; blocks : (J, T, h) for the Floquet multipliers."""
+
+    resid: np.ndarray
+    blk: np.ndarray
+    colT: np.ndarray
+    colL: np.ndarray
+    phase: np.ndarray
+    last: np.ndarray
+    blocks: tuple
+
+
+class LinearSolver(StrEnum):
+    """How the Newton corrector solves the bordered collocation system."""
+
+    CONDENSED = "condensed"  # interior nodes condensed per interval, then a small sparse LU
+    SPARSE_LU = "sparse_lu"  # sparse LU of the whole system, rebuilt from COO (the old path)
+
+
 @dataclass
 class CollocationProblem:
     """The collocation BVP in one parameter (see the module docstring for the rows).
@@ -152,6 +178,7 @@ class CollocationProblem:
     scale: np.ndarray  # state scale (n,)
     T_scale: float
     lam_scale: float
+    linear_solver: str = LinearSolver.CONDENSED
 
     @property
     def n(self) -> int:
@@ -196,18 +223,18 @@ class CollocationProblem:
         np.add.at(row, idx, coef)
         return row
 
-    def evaluate(
+    def parts(
         self,
         Y: np.ndarray,
         phase: np.ndarray,
         Uref: np.ndarray,
         last_row: np.ndarray,
         last_rhs: float,
-    ) -> tuple[np.ndarray, scipy.sparse.csc_matrix, tuple]:
-        """Residual and sparse Jacobian (in scaled unknowns) of the bordered system.
-        ``last_row`` is the linear condition appended last (arclength or fixed parameter):
-        last_row . Y = last_rhs."""
-        ntst, m, n, N = self.mesh.size - 1, self.m, self.n, self.N
+    ) -> _Parts:
+        """The residual and the nonzero blocks of the Jacobian of the bordered system (in
+        scaled unknowns), without assembling a matrix: what both linear solvers start from
+        (see :meth:`evaluate` for the row layout)."""
+        ntst, m, n = self.mesh.size - 1, self.m, self.n
         U, T, lam = self.unpack(Y)
         p = self.params(lam)
         h = np.diff(self.mesh)
@@ -225,38 +252,45 @@ class CollocationProblem:
                - (T * h)[:, None, None, None, None] * L[None, :, :, None, None]
                * J[:, :, None, :, :])
         blk = blk * (sc[None, None, None, None, :] / sc[None, None, None, :, None])
-        rows, cols = _pattern(ntst, m, n)
-        nc = ntst * m * n
         r_col = (res * h[:, None, None] / sc).ravel()
         colT = (-F * h[:, None, None] / sc).ravel() * self.T_scale
         colL = (-T * Fp * h[:, None, None] / sc).ravel() * self.lam_scale
-        per_rows = nc + np.arange(n)
-        ph_row = nc + n
-        last = nc + n + 1
-        size = self.size
         pv = (phase * sc).ravel()  # d/dY of the phase integral
         pnorm = np.max(np.abs(pv)) or 1.0
-        ar = np.arange(nc)
-        all_rows = np.concatenate([
-            rows, per_rows, per_rows, np.full(N * n, ph_row), ar, ar,
-            np.full(size, last),
-        ])
-        all_cols = np.concatenate([
-            cols, (N - 1) * n + np.arange(n), np.arange(n), np.arange(N * n),
-            np.full(nc, size - 2), np.full(nc, size - 1), np.arange(size),
-        ])
-        vals = np.concatenate([
-            blk.ravel(), np.ones(n), -np.ones(n), pv / pnorm, colT, colL, last_row,
-        ])
-        A = scipy.sparse.csc_matrix((vals, (all_rows, all_cols)), shape=(size, size))
         resid = np.concatenate([
             r_col,
             (U[-1] - U[0]) / sc,
             [np.sum(phase * (U - Uref)) / pnorm],
             [float(last_row @ Y) - last_rhs],
         ])
-        return resid, A, (J, T, h)
+        return _Parts(resid=resid, blk=blk, colT=colT, colL=colL, phase=pv / pnorm,
+                      last=np.asarray(last_row, float), blocks=(J, T, h))
 
+    def jacobian_blocks(self, Y: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+        """(J, T, h) at Y: df/dx at the Gauss points (NTST, m, n, n), the period (s) and the
+        mesh interval lengths, as :meth:`parts` returns them (for the Floquet multipliers)."""
+        ntst, m = self.mesh.size - 1, self.m
+        U, T, lam = self.unpack(Y)
+        p = self.params(lam)
+        h = np.diff(self.mesh)
+        idx = _interval_index(ntst, m)
+        _, _, J, _ = _kernel(self.system.rhs, m)(
+            jnp.asarray(U[idx]), jnp.asarray(h), T, jnp.asarray(p), jnp.zeros_like(p))
+        return np.asarray(J), T, h
+
+    def evaluate(
+        self,
+        Y: np.ndarray,
+        phase: np.ndarray,
+        Uref: np.ndarray,
+        last_row: np.ndarray,
+        last_rhs: float,
+    ) -> tuple[np.ndarray, scipy.sparse.csc_matrix, tuple]:
+        """Residual and sparse Jacobian (in scaled unknowns) of the bordered system.
+        ``last_row`` is the linear condition appended last (arclength or fixed parameter):
+        last_row . Y = last_rhs."""
+        pa = self.parts(Y, phase, Uref, last_row, last_rhs)
+        return pa.resid, _sparse_matrix(self, pa), pa.blocks
 
     def param_derivative(self, Y: np.ndarray, name: str) -> np.ndarray:
         """d F / d p_name at Y (same row layout and scaling as :meth:`evaluate`), by JAX
@@ -297,11 +331,186 @@ class CollocationProblem:
 _Problem = CollocationProblem  # the name used inside the package
 
 
+def _sparse_matrix(prob: CollocationProblem, pa: _Parts) -> scipy.sparse.csc_matrix:
+    """The whole bordered Jacobian as a sparse matrix (assembled from COO triplets)."""
+    ntst, m, n, N = prob.mesh.size - 1, prob.m, prob.n, prob.N
+    rows, cols = _pattern(ntst, m, n)
+    nc = ntst * m * n
+    per_rows = nc + np.arange(n)
+    ph_row = nc + n
+    last = nc + n + 1
+    size = prob.size
+    ar = np.arange(nc)
+    all_rows = np.concatenate([
+        rows, per_rows, per_rows, np.full(N * n, ph_row), ar, ar,
+        np.full(size, last),
+    ])
+    all_cols = np.concatenate([
+        cols, (N - 1) * n + np.arange(n), np.arange(n), np.arange(N * n),
+        np.full(nc, size - 2), np.full(nc, size - 1), np.arange(size),
+    ])
+    vals = np.concatenate([
+        pa.blk.ravel(), np.ones(n), -np.ones(n), pa.phase, pa.colT, pa.colL, pa.last,
+    ])
+    return scipy.sparse.csc_matrix((vals, (all_rows, all_cols)), shape=(size, size))
+
+
 def _factorize(A: scipy.sparse.csc_matrix):
     """Sparse LU. The minimum-degree ordering on A^T + A keeps the fill of the staircase
     collocation structure small (measured ~3x faster than COLAMD here); threshold
     partial pivoting 0.1 as usual for sparse LU."""
     return scipy.sparse.linalg.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1)
+
+
+@lru_cache(maxsize=32)
+def _reduced_pattern(ntst: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The fixed sparsity pattern of the condensed system (see :class:`CondensedLU`):
+    (perm, indices, indptr, size) such that the CSC matrix of the values ``v`` given in
+    the assembly order is ``csc_matrix((v[perm], indices, indptr))``. Computed once per
+    (NTST, n); each Newton iteration then only fills values in place."""
+    M = (ntst + 1) * n + 2
+    j = np.arange(ntst)[:, None, None]
+    a = np.arange(n)[None, :, None]
+    cc = np.concatenate([np.arange(n), n + np.arange(n), [-2, -1]])[None, None, :]
+    c_rows = np.broadcast_to(j * n + a, (ntst, n, 2 * n + 2))
+    c_cols = np.where(cc >= 0, j * n + cc, M + cc)
+    c_cols = np.broadcast_to(c_cols, (ntst, n, 2 * n + 2))
+    per = ntst * n + np.arange(n)
+    rows = np.concatenate([c_rows.ravel(), per, per, np.full(M, M - 2), np.full(M, M - 1)])
+    cols = np.concatenate([c_cols.ravel(), ntst * n + np.arange(n), np.arange(n),
+                           np.arange(M), np.arange(M)])
+    tmpl = scipy.sparse.csc_matrix((np.arange(1, rows.size + 1, dtype=float), (rows, cols)),
+                                   shape=(M, M))
+    tmpl.sort_indices()
+    if tmpl.nnz != rows.size:  # pragma: no cover - the pattern has no duplicates
+        raise AssertionError("duplicate entries in the condensed pattern")
+    perm = tmpl.data.astype(np.int64) - 1
+    return perm, tmpl.indices.copy(), tmpl.indptr.copy(), M
+
+
+class CondensedLU:
+    """Solver of the bordered collocation system by condensation of each interval's interior
+    collocation unknowns (Doedel, Keller & Kernevez 1991; AUTO-07p's "condensation of
+    parameters", Doedel's AUTO notes, ch. "the linear equations").
+
+    On mesh interval j the m n collocation rows involve the left mesh node v_j, the m - 1
+    interior nodes w_j, the right mesh node v_{j+1} and the two border unknowns (T, lambda)::
+
+        A0_j v_j + Aint_j w_j + Aend_j v_{j+1} + cT_j dT + cL_j dlambda = b_j.
+
+    A complete QR factorisation Aint_j = [Q1 Q2] [R; 0] (orthogonal, batched over j) splits
+    them into (m-1) n rows that give w_j = R^{-1} Q1^T (b_j - B_j z_j), z_j = (v_j, v_{j+1},
+    dT, dlambda), and n condensed rows Q2^T B_j z_j = Q2^T b_j free of w_j. Substituting w_j
+    into the two dense rows (phase and arclength) leaves a system in the (NTST + 1) n mesh
+    unknowns and the two borders, (NTST + 1) n + 2 equations whose sparsity pattern is fixed
+    (block bidiagonal rows, periodicity, two dense rows and columns); it is filled in place
+    and factorised by a sparse LU. Everything per interval is a batch of small dense
+    operations (NumPy over the NTST axis); the solution equals that of the full system
+    (the transformations are exact equivalences) up to rounding.
+
+    Parameters
+    ----------
+    prob : the collocation problem (for NTST, NCOL, n).
+    pa : the Jacobian blocks (:meth:`CollocationProblem.parts`).
+    """
+
+    def __init__(self, prob: CollocationProblem, pa: _Parts, b0: np.ndarray | None = None):
+        ntst, m, n = prob.mesh.size - 1, prob.m, prob.n
+        self.ntst, self.m, self.n, self.size = ntst, m, n, prob.size
+        mn, ni = m * n, (m - 1) * n
+        A = pa.blk.transpose(0, 1, 3, 2, 4).reshape(ntst, mn, (m + 1) * n)
+        B = np.concatenate([A[:, :, :n], A[:, :, m * n:], pa.colT.reshape(ntst, mn, 1),
+                            pa.colL.reshape(ntst, mn, 1)], axis=2)  # (ntst, mn, 2n+2)
+        nodes = _interval_index(ntst, m)
+        inner = nodes[:, 1:m]  # (ntst, m-1) interior node indices
+        ph = pa.phase.reshape(-1, n)
+        last = pa.last
+        lU = last[:-2].reshape(-1, n)
+        # one batched LU solve per interval: [Aint | Aend] [w; v_{j+1}] = b - A0 v_j - ...,
+        # with the right-hand side of the first solve (the Newton step) solved alongside
+        self.K = A[:, :, n:]
+        cols = [B[:, :, :n], B[:, :, 2 * n:]]
+        self._b0 = None
+        if b0 is not None:
+            self._b0 = np.array(b0, float)
+            cols.append(self._b0[:ntst * mn].reshape(ntst, mn, 1))
+        Z = np.linalg.solve(self.K, np.concatenate(cols, axis=2))
+        X = Z[:, :, :n + 2]
+        self._Sb0 = Z[:, :, n + 2] if b0 is not None else None
+        C = np.concatenate([X[:, ni:, :n], np.broadcast_to(np.eye(n), (ntst, n, n)),
+                            X[:, ni:, n:]], axis=2)  # (ntst, n, 2n+2) condensed rows
+        if m > 1:
+            self.G = np.concatenate([X[:, :ni, :n], np.zeros((ntst, ni, n)),
+                                     X[:, :ni, n:]], axis=2)  # (ntst, ni, 2n+2)
+            self.p_in = ph[inner].reshape(ntst, ni)
+            self.l_in = lU[inner].reshape(ntst, ni)
+            pG = np.einsum("ji,jic->jc", self.p_in, self.G)
+            lG = np.einsum("ji,jic->jc", self.l_in, self.G)
+        else:
+            pG = lG = np.zeros((ntst, 2 * n + 2))
+        M = (ntst + 1) * n + 2
+
+        def dense_row(coef_nodes, coef_T, coef_L, sub):
+            row = np.zeros(M)
+            row[:-2] = coef_nodes[nodes[:, 0].tolist() + [nodes[-1, -1]]].ravel()
+            row[-2], row[-1] = coef_T, coef_L
+            np.add.at(row, (np.arange(ntst)[:, None] * n + np.arange(n)[None, :]),
+                      -sub[:, :n])
+            np.add.at(row, ((np.arange(ntst)[:, None] + 1) * n + np.arange(n)[None, :]),
+                      -sub[:, n:2 * n])
+            row[-2] -= sub[:, 2 * n].sum()
+            row[-1] -= sub[:, 2 * n + 1].sum()
+            return row
+
+        prow = dense_row(ph, 0.0, 0.0, pG)
+        lrow = dense_row(lU, last[-2], last[-1], lG)
+        vals = np.concatenate([C.ravel(), np.ones(n), -np.ones(n), prow, lrow])
+        perm, indices, indptr, M = _reduced_pattern(ntst, n)
+        Ared = scipy.sparse.csc_matrix((vals[perm], indices, indptr), shape=(M, M))
+        self.lu = scipy.sparse.linalg.splu(Ared, permc_spec="MMD_AT_PLUS_A",
+                                           diag_pivot_thresh=0.1)
+        self.inner = inner
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """The solution x of J x = b (the full bordered Jacobian), b of shape (size,)."""
+        ntst, m, n = self.ntst, self.m, self.n
+        b = np.asarray(b, float)
+        mn = m * n
+        bc = b[:ntst * mn].reshape(ntst, mn)
+        ni = (m - 1) * n
+        if self._b0 is not None and np.array_equal(b, self._b0):
+            Sb = self._Sb0
+        elif not np.any(bc):  # e.g. the tangent: only the last row
+            Sb = np.zeros((ntst, mn))
+        else:
+            Sb = np.linalg.solve(self.K, bc[:, :, None])[:, :, 0]
+        rhs = np.empty((ntst + 1) * n + 2)
+        rhs[:ntst * n] = Sb[:, ni:].ravel()
+        rhs[ntst * n:(ntst + 1) * n] = b[ntst * mn:ntst * mn + n]
+        rhs[-2], rhs[-1] = b[-2], b[-1]
+        if m > 1:
+            g = Sb[:, :ni]
+            rhs[-2] -= float(np.sum(self.p_in * g))
+            rhs[-1] -= float(np.sum(self.l_in * g))
+        z = self.lu.solve(rhs)
+        x = np.empty(self.size)
+        V = z[:-2].reshape(ntst + 1, n)
+        X = x[:-2].reshape(-1, n)
+        X[0::m] = V
+        x[-2:] = z[-2:]
+        if m > 1:
+            zj = np.concatenate([V[:-1], V[1:], np.broadcast_to(z[-2:], (ntst, 2))], axis=1)
+            w = g - np.einsum("jic,jc->ji", self.G, zj)
+            X[self.inner.ravel()] = w.reshape(-1, n)
+        return x
+
+
+def _factor(prob: CollocationProblem, pa: _Parts, solver: str, b0: np.ndarray | None = None):
+    """A factorisation of the bordered Jacobian with a ``solve(b)`` method (``b0``: the
+    right-hand side of the first solve, which the condensed solver handles in its setup)."""
+    if solver == LinearSolver.CONDENSED:
+        return CondensedLU(prob, pa, b0)
+    return _factorize(_sparse_matrix(prob, pa))
 
 
 def _newton(
@@ -312,33 +521,52 @@ def _newton(
     last_rhs: float,
     tol: float,
     max_iter: int,
+    solver: str | None = None,
 ) -> tuple[np.ndarray, bool, int, float, Any, tuple]:
     """Newton's method on the bordered collocation system; returns (Y, converged, its,
-    residual, LU of the last Jacobian, blocks at the solution)."""
+    residual, factorisation of the last Jacobian, blocks at the solution).
+
+    ``solver`` (default ``prob.linear_solver``): ``"sparse_lu"`` is the original
+    iteration (a full sparse LU per iteration, converged when the update max |dY| < tol,
+    so the last iteration only confirms); ``"condensed"`` uses :class:`CondensedLU` and
+    stops one iteration earlier when the quadratic convergence of Newton's method predicts
+    the next update below tol / 10: with the contraction theta = |dY_k| / |dY_{k-1}| <= 0.1
+    the next update is about theta^2 |dY_k| (Deuflhard 2004, "Newton methods for nonlinear
+    problems", sec. 2.1), so the error of Y_{k+1} is bounded by that. The Jacobian blocks
+    returned (for the Floquet multipliers) are then re-evaluated at the returned Y."""
+    solver = prob.linear_solver if solver is None else solver
     phase = prob.phase_row(Uref)
     Y = np.array(Y0, float)
     lu = None
     blocks: tuple = ()
     rnorm = np.inf
+    prev = np.inf
     for it in range(1, max_iter + 1):
-        r, A, blocks = prob.evaluate(Y, phase, Uref, last_row, last_rhs)
+        pa = prob.parts(Y, phase, Uref, last_row, last_rhs)
+        r, blocks = pa.resid, pa.blocks
         rnorm = float(np.max(np.abs(r)))
         if not np.isfinite(rnorm):
             return Y, False, it, rnorm, None, blocks
         try:
-            lu = _factorize(A)
-        except RuntimeError:  # exactly singular
+            lu = _factor(prob, pa, solver, -r)
+        except (RuntimeError, np.linalg.LinAlgError):  # exactly singular
             return Y, False, it, rnorm, None, blocks
         dY = lu.solve(-r)
         if not np.all(np.isfinite(dY)):
             return Y, False, it, rnorm, None, blocks
         Y = Y + dY
-        if np.max(np.abs(dY)) < tol:
+        step = float(np.max(np.abs(dY)))
+        if step < tol:
             # the Jacobian of this last iteration (at most tol away from the solution) serves
             # for the tangent and the Floquet multipliers; the residual is bounded by it too
             return Y, True, it, rnorm, lu, blocks
-        if np.max(np.abs(dY)) > 1e3:
+        if solver == LinearSolver.CONDENSED and it > 1 and step <= 0.1 * prev and \
+                step ** 3 < 0.1 * tol * prev ** 2:
+            blocks = prob.jacobian_blocks(Y)
+            return Y, True, it, rnorm, lu, blocks
+        if step > 1e3:
             break
+        prev = step
     return Y, False, max_iter, rnorm, lu, blocks
 
 

@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.dynamics.collocation import (
+    LinearSolver,
     _adapt_mesh,
     _evaluate_profile,
     _interval_index,
@@ -666,6 +667,7 @@ def cycle_branch(
     restart: RestartState | None = None,
     detect_special_points: bool = True,
     restart_param: str | None = None,
+    linear_solver: str = "condensed",
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
 
@@ -715,6 +717,9 @@ def cycle_branch(
         towards larger values, the other parameters fixed at the saved point.
     detect_special_points : locate LPC, BP, PD, NS (False: only the limit contact and the
         stop value, which end the branch; saves the solves when only the branch matters).
+    linear_solver : "condensed" (default: the interior collocation unknowns condensed per
+        interval, :class:`~maglev_match.dynamics.collocation.CondensedLU`) or "sparse_lu"
+        (a sparse LU of the whole system, the earlier code path, kept as the baseline).
 
     Returns
     -------
@@ -741,6 +746,9 @@ def cycle_branch(
                          "number > 1")
     if not trivial_tol > 0:
         raise ValueError(f"trivial_tol = {trivial_tol!r}: must be > 0")
+    if linear_solver not in tuple(LinearSolver):
+        raise ValueError(f"linear_solver = {linear_solver!r}: must be one of "
+                         f"{', '.join(map(str, LinearSolver))}")
     options = ContinuationOptions(
         ds=min(max(ds, ds_min), ds_max), ds_min=ds_min, ds_max=ds_max, max_steps=max_steps,
         newton_tol=tol, newton_max_iter=max_newton,
@@ -748,7 +756,7 @@ def cycle_branch(
     prob = _Problem(system=system, ipar=ipar, p0=np.array(start.p, float),
                     mesh=np.linspace(0.0, 1.0, ntst + 1), m=m,
                     scale=np.asarray(system.state_scale, float), T_scale=T0,
-                    lam_scale=float(lam_scale))
+                    lam_scale=float(lam_scale), linear_solver=LinearSolver(linear_solver))
     W = prob.W()
     # --- the start: the Hopf point as a constant profile, tangent = eigenvector profile
     s_nodes = _node_times(prob.mesh, m)
