@@ -479,29 +479,37 @@ def transfer_matrices(J: np.ndarray, T: float, h: np.ndarray, m: int) -> np.ndar
     return np.linalg.solve(blk[:, :, n:], -blk[:, :, :n])[:, -n:, :]
 
 
-def _group(P: np.ndarray, max_cond: float) -> np.ndarray:
+def _group(P: np.ndarray, max_cond: float, chunk: int = 16) -> np.ndarray:
     """Runs of consecutive factors multiplied together while the run's 2-norm condition
     number stays <= max_cond (the same products, in the same order, as one at a time: the
-    running products of a run are formed first and their condition numbers computed in one
-    batched SVD)."""
+    running products of a run are formed ``chunk`` at a time and their condition numbers
+    computed in one batched SVD)."""
     groups = []
     K = P.shape[0]
     start = 0
     while start < K:
         G = P[start]
-        run = [G]
-        for j in range(start + 1, K):
-            G = P[j] @ G
-            if not np.all(np.isfinite(G)) or np.max(np.abs(G)) > 1e150:
+        k = 1  # factors start .. start + k - 1 are in the run, G is their product
+        while start + k < K:
+            run = []
+            H = G
+            for j in range(start + k, min(K, start + k + chunk)):
+                H = P[j] @ H
+                run.append(H)
+            R = np.stack(run)
+            with np.errstate(all="ignore"):
+                ok = np.all(np.isfinite(R), axis=(1, 2))
+                cond = np.full(len(run), np.inf)
+                if np.any(ok):
+                    sv = np.linalg.svd(R[ok], compute_uv=False)
+                    cond[ok] = sv[:, 0] / sv[:, -1]
+            bad = np.nonzero(~(cond <= max_cond))[0]
+            if bad.size:
+                if bad[0] > 0:
+                    G, k = R[bad[0] - 1], k + int(bad[0])
                 break
-            run.append(G)
-        R = np.stack(run)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            sv = np.linalg.svd(R, compute_uv=False)
-            cond = sv[:, 0] / sv[:, -1]
-        bad = np.nonzero(~(cond[1:] <= max_cond))[0]
-        k = int(bad[0]) + 1 if bad.size else len(run)  # factors start .. start + k - 1
-        groups.append(R[k - 1])
+            G, k = R[-1], k + len(run)
+        groups.append(G)
         start += k
     return np.stack(groups)
 
