@@ -513,6 +513,9 @@ def _factor(prob: CollocationProblem, pa: _Parts, solver: str, b0: np.ndarray | 
     return _factorize(_sparse_matrix(prob, pa))
 
 
+_EARLY_STOP = True  # the condensed path's predicted-convergence stop (off: for comparisons)
+
+
 def _newton(
     prob: CollocationProblem,
     Y0: np.ndarray,
@@ -533,7 +536,10 @@ def _newton(
     the next update below tol / 10: with the contraction theta = |dY_k| / |dY_{k-1}| <= 0.1
     the next update is about theta^2 |dY_k| (Deuflhard 2004, "Newton methods for nonlinear
     problems", sec. 2.1), so the error of Y_{k+1} is bounded by that. The Jacobian blocks
-    returned (for the Floquet multipliers) are then re-evaluated at the returned Y."""
+    returned (for the Floquet multipliers) are then re-evaluated at the returned Y. The
+    iteration count returned includes the confirming iteration so saved: the continuation's
+    step-size rule is calibrated on that count (counting one less grows the steps faster
+    and lets a branch jump across a fold of cycles)."""
     solver = prob.linear_solver if solver is None else solver
     phase = prob.phase_row(Uref)
     Y = np.array(Y0, float)
@@ -560,10 +566,10 @@ def _newton(
             # the Jacobian of this last iteration (at most tol away from the solution) serves
             # for the tangent and the Floquet multipliers; the residual is bounded by it too
             return Y, True, it, rnorm, lu, blocks
-        if solver == LinearSolver.CONDENSED and it > 1 and step <= 0.1 * prev and \
+        if _EARLY_STOP and solver == LinearSolver.CONDENSED and it > 1 and step <= 0.1 * prev and \
                 step ** 3 < 0.1 * tol * prev ** 2:
             blocks = prob.jacobian_blocks(Y)
-            return Y, True, it, rnorm, lu, blocks
+            return Y, True, it + 1, rnorm, lu, blocks
         if step > 1e3:
             break
         prev = step
