@@ -123,6 +123,33 @@ def _kernel(rhs: Callable, m: int) -> Callable:
     return jax.jit(kernel)
 
 
+@cache
+def _parts_kernel(rhs: Callable, m: int) -> Callable:
+    """Jitted residual and Jacobian blocks of the collocation rows, scaled as in
+    :meth:`CollocationProblem.parts`, in one XLA call (cached per right-hand side, NCOL).
+
+    Returns (r_col (NTST, m, n), colT (NTST, m, n), colL (NTST, m, n), blk (NTST, m n,
+    (m+1) n) with rows (l, a) and columns (k, b), J (NTST, m, n, n))."""
+    _, _, _, L, D = _tables(m)
+    Lj, Dj = jnp.asarray(L), jnp.asarray(D)
+    base = _kernel(rhs, m)
+
+    def parts(Ui, h, T, p, e, sc, T_scale, lam_scale):
+        res, F, J, Fp = base(Ui, h, T, p, e)
+        ntst, n = Ui.shape[0], Ui.shape[2]
+        hs = h[:, None, None] / sc
+        # [j, l, a, k, b]: D_lk delta_ab - T h_j L_lk J_ab(z_l), rows / sc_a, columns * sc_b
+        eye = jnp.eye(n)
+        blk = (Dj[None, :, None, :, None] * eye[None, None, :, None, :]
+               - (T * h)[:, None, None, None, None] * Lj[None, :, None, :, None]
+               * J[:, :, :, None, :])
+        blk = blk * (sc[None, None, None, None, :] / sc[None, None, :, None, None])
+        return (res * hs, -F * hs * T_scale, -T * Fp * hs * lam_scale,
+                blk.reshape(ntst, m * n, (m + 1) * n), J)
+
+    return jax.jit(parts)
+
+
 @lru_cache(maxsize=32)
 def _pattern(ntst: int, m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Row and column indices of the collocation blocks (ntst, m, m+1, n, n)."""
@@ -141,8 +168,9 @@ def _pattern(ntst: int, m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
 class _Parts:
     """Residual and Jacobian blocks of the bordered system at one point (scaled).
 
-    resid : (size,) residual; blk : (NTST, m, m+1, n, n) collocation blocks [j, l, k, a, b]
-    (equation at Gauss point l, component a; node k of interval j, component b); colT, colL :
+    resid : (size,) residual; blk : (NTST, m n, (m+1) n) collocation blocks, row l n + a
+    (equation at Gauss point l, component a), column k n + b (node k of interval j,
+    component b); colT, colL :
     (NTST m n,) the T and lambda columns of the collocation rows; phase : (N n,) the phase
     row; last : (size,) the last row; blocks : (J, T, h) for the Floquet multipliers."""
 
@@ -234,27 +262,18 @@ class CollocationProblem:
         """The residual and the nonzero blocks of the Jacobian of the bordered system (in
         scaled unknowns), without assembling a matrix: what both linear solvers start from
         (see :meth:`evaluate` for the row layout)."""
-        ntst, m, n = self.mesh.size - 1, self.m, self.n
+        ntst, m = self.mesh.size - 1, self.m
         U, T, lam = self.unpack(Y)
         p = self.params(lam)
         h = np.diff(self.mesh)
         e = np.zeros_like(p)
         e[self.ipar] = 1.0
         idx = _interval_index(ntst, m)
-        res, F, J, Fp = _kernel(self.system.rhs, m)(
-            jnp.asarray(U[idx]), jnp.asarray(h), T, jnp.asarray(p), jnp.asarray(e)
-        )
-        res, F, J, Fp = (np.asarray(a) for a in (res, F, J, Fp))
         sc = self.scale
-        _, _, _, L, D = _tables(m)
-        # collocation blocks, rows scaled by h_j / scale_a, columns by scale_b
-        blk = (D[None, :, :, None, None] * np.eye(n)[None, None, None]
-               - (T * h)[:, None, None, None, None] * L[None, :, :, None, None]
-               * J[:, :, None, :, :])
-        blk = blk * (sc[None, None, None, None, :] / sc[None, None, None, :, None])
-        r_col = (res * h[:, None, None] / sc).ravel()
-        colT = (-F * h[:, None, None] / sc).ravel() * self.T_scale
-        colL = (-T * Fp * h[:, None, None] / sc).ravel() * self.lam_scale
+        out = _parts_kernel(self.system.rhs, m)(
+            U[idx], h, T, p, e, sc, self.T_scale, self.lam_scale)
+        r_col, colT, colL, blk, J = (np.asarray(a) for a in out)
+        r_col, colT, colL = r_col.ravel(), colT.ravel(), colL.ravel()
         pv = (phase * sc).ravel()  # d/dY of the phase integral
         pnorm = np.max(np.abs(pv)) or 1.0
         resid = np.concatenate([
@@ -350,7 +369,8 @@ def _sparse_matrix(prob: CollocationProblem, pa: _Parts) -> scipy.sparse.csc_mat
         np.full(nc, size - 2), np.full(nc, size - 1), np.arange(size),
     ])
     vals = np.concatenate([
-        pa.blk.ravel(), np.ones(n), -np.ones(n), pa.phase, pa.colT, pa.colL, pa.last,
+        pa.blk.reshape(ntst, m, n, m + 1, n).transpose(0, 1, 3, 2, 4).ravel(), np.ones(n),
+        -np.ones(n), pa.phase, pa.colT, pa.colL, pa.last,
     ])
     return scipy.sparse.csc_matrix((vals, (all_rows, all_cols)), shape=(size, size))
 
@@ -418,7 +438,7 @@ class CondensedLU:
         ntst, m, n = prob.mesh.size - 1, prob.m, prob.n
         self.ntst, self.m, self.n, self.size = ntst, m, n, prob.size
         mn, ni = m * n, (m - 1) * n
-        A = pa.blk.transpose(0, 1, 3, 2, 4).reshape(ntst, mn, (m + 1) * n)
+        A = pa.blk
         B = np.concatenate([A[:, :, :n], A[:, :, m * n:], pa.colT.reshape(ntst, mn, 1),
                             pa.colL.reshape(ntst, mn, 1)], axis=2)  # (ntst, mn, 2n+2)
         nodes = _interval_index(ntst, m)

@@ -501,6 +501,7 @@ class CycleProblem:
         self.warnings: list[str] = []
         self.restarting = False
         self.detect = True
+        self.floquet_method = "auto"
 
     # --- corrector and read-outs ---
     def correct(self, u_pred, row, target, max_iter):
@@ -528,7 +529,8 @@ class CycleProblem:
         prob = self.prob
         (J, Tb, h), mesh = pt.correction.data
         U, T, lam = prob.unpack(pt.u)
-        triv, mult = _split_trivial(floquet_multipliers_from_blocks(J, Tb, h, prob.m))
+        triv, mult = _split_trivial(floquet_multipliers_from_blocks(
+            J, Tb, h, prob.m, method=self.floquet_method))
         nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
         reliable = bool(abs(triv - 1.0) <= self.trivial_tol)
         orbit = PeriodicOrbit(mesh=mesh, ncol=prob.m, states=U, period=T, p=prob.params(lam))
@@ -668,6 +670,7 @@ def cycle_branch(
     detect_special_points: bool = True,
     restart_param: str | None = None,
     linear_solver: str = "condensed",
+    floquet_method: str = "auto",
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
 
@@ -720,6 +723,8 @@ def cycle_branch(
     linear_solver : "condensed" (default: the interior collocation unknowns condensed per
         interval, :class:`~maglev_match.dynamics.collocation.CondensedLU`) or "sparse_lu"
         (a sparse LU of the whole system, the earlier code path, kept as the baseline).
+    floquet_method : "auto" (default), "periodic_qz" or "cyclic_qr": how the multipliers
+        are computed (:func:`~maglev_match.dynamics.floquet.floquet_analysis`).
 
     Returns
     -------
@@ -771,6 +776,10 @@ def cycle_branch(
     cyc = CycleProblem(prob, names, limits, stop_at, trivial_tol, max_period_factor * T0,
                        adapt_every, tol, start_orbit)
     cyc.detect = bool(detect_special_points)
+    if floquet_method not in ("auto", "periodic_qz", "cyclic_qr"):
+        raise ValueError(f"floquet_method = {floquet_method!r}: must be auto, periodic_qz "
+                         "or cyclic_qr")
+    cyc.floquet_method = floquet_method
     first = Correction(u=Yh, iterations=0, residual=0.0, solve=lambda e: tY, data=None)
     if new_param:
         prob.mesh = np.array(restart.mesh, float)
