@@ -525,20 +525,40 @@ class CycleProblem:
         d = u_new - a.u
         return float(np.sqrt(np.sum(self.weights * d * d))) <= 3.0 * s
 
-    def cycle_point(self, pt: BranchPoint, kind: str = "step") -> CyclePoint:
-        prob = self.prob
-        (J, Tb, h), mesh = pt.correction.data
-        U, T, lam = prob.unpack(pt.u)
+    def _floquet_fields(self, pt: BranchPoint) -> dict[str, Any]:
+        (J, Tb, h), _ = pt.correction.data
         triv, mult = _split_trivial(floquet_multipliers_from_blocks(
-            J, Tb, h, prob.m, method=self.floquet_method))
+            J, Tb, h, self.prob.m, method=self.floquet_method))
         nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
-        reliable = bool(abs(triv - 1.0) <= self.trivial_tol)
+        return {"multipliers": mult, "trivial_multiplier": triv, "n_unstable": nun,
+                "stable": nun == 0,
+                "reliable": bool(abs(triv - 1.0) <= self.trivial_tol)}
+
+    def cycle_point(self, pt: BranchPoint, kind: str = "step", floquet: bool = True
+                    ) -> CyclePoint:
+        """The read-out of a branch point. ``floquet`` False leaves the multipliers out
+        (placeholders, marked in ``pt.info["lazy"]``) for :meth:`complete` to fill in."""
+        prob = self.prob
+        _, mesh = pt.correction.data
+        U, T, lam = prob.unpack(pt.u)
+        if floquet:
+            fields = self._floquet_fields(pt)
+        else:
+            fields = {"multipliers": np.zeros(0), "trivial_multiplier": complex("nan"),
+                      "n_unstable": 0, "stable": False, "reliable": False}
+        pt.info["lazy"] = not floquet
         orbit = PeriodicOrbit(mesh=mesh, ncol=prob.m, states=U, period=T, p=prob.params(lam))
-        return CyclePoint(value=lam, period=T, orbit=orbit, multipliers=mult,
-                          trivial_multiplier=triv, n_unstable=nun, stable=nun == 0,
+        return CyclePoint(value=lam, period=T, orbit=orbit,
                           extrema=orbit_extrema(prob.system, orbit, self.names),
                           converged=True, iterations=pt.correction.iterations,
-                          residual=pt.correction.residual, kind=kind, reliable=reliable)
+                          residual=pt.correction.residual, kind=kind, **fields)
+
+    def complete(self, pt: BranchPoint | None) -> None:
+        """Fill in the multipliers of a point read out without them (in place)."""
+        if pt is not None and pt.info.get("lazy") and "cycle" in pt.info:
+            pt.info["cycle"] = dataclasses.replace(pt.info["cycle"],
+                                                   **self._floquet_fields(pt))
+            pt.info["lazy"] = False
 
     # --- test functions ---
     def test_functions(self, pt: BranchPoint) -> dict[str, float]:
@@ -549,7 +569,9 @@ class CycleProblem:
             if self.stop_at is not None:
                 out["STOP"] = pt.value - self.stop_at
             return out
-        c = self.cycle_point(pt)
+        # without special points the multipliers are needed only at the points the branch
+        # keeps (filled in afterwards), not at the trial points of the event location
+        c = self.cycle_point(pt, floquet=self.detect)
         pt.info["cycle"] = c
         out = {"LPC": float(pt.t[-1])} if self.detect else {}
         if c.reliable and self.detect:
@@ -816,9 +838,14 @@ def cycle_branch(
 
     def notify(step, pt):
         if progress is not None and "cycle" in pt.info:
+            cyc.complete(pt)
             progress(step, pt.info["cycle"])
 
     res = continuation(cyc, Yh, tY, options, progress=notify, first=first)
+    for pt in res.points[1:]:
+        cyc.complete(pt)
+    for ev in res.events:
+        cyc.complete(ev.point)
     warnings = list(cyc.warnings)
     points: list[CyclePoint] = []
     for pt in res.points[1:]:
