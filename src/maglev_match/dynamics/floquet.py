@@ -41,6 +41,13 @@ them off and runs the periodic QZ on the K orthogonally condensed pairs):
   of the multipliers) gives estimates that serve as shifts, so the periodic QZ deflates about
   one eigenvalue per sweep and a half; the eigenvalues returned are the periodic QZ's.
 
+The periodic QZ runs in Python loops (about 10-25 ms per orbit on model A). When the grouped
+sequence is short, LAPACK's QR on its block cyclic matrix (whose eigenvalues are the K-th
+roots of the multipliers) is used instead, but only when its first-order error bound, from
+the eigenvalue condition numbers, proves every multiplier to 1e-10 relative
+(:func:`_cyclic_multipliers`); otherwise, e.g. with multipliers 1e-30 and 1e3 in a short
+sequence, the periodic QZ decides. ``method="periodic_qz"`` forces the periodic QZ.
+
 Limits. The result is as accurate as the factors allow, which is the best any method working
 on the collocation blocks can do; near a homoclinic orbit the trivial multiplier is itself
 ill-conditioned (the flow vector almost vanishes near the saddle) and the discretisation of
