@@ -693,6 +693,7 @@ def cycle_branch(
     restart_param: str | None = None,
     linear_solver: str = "condensed",
     floquet_method: str = "auto",
+    predictor_tol: float | None = 0.05,
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
 
@@ -747,6 +748,10 @@ def cycle_branch(
         (a sparse LU of the whole system, the earlier code path, kept as the baseline).
     floquet_method : "auto" (default), "periodic_qz" or "cyclic_qr": how the multipliers
         are computed (:func:`~maglev_match.dynamics.floquet.floquet_analysis`).
+    predictor_tol : target distance between predicted and corrected point (scaled units,
+        as ``ds``) by which easy steps may grow faster than the Newton-count rule allows
+        (:class:`~maglev_match.dynamics.continuation.ContinuationOptions`); None: the
+        Newton-count rule alone.
 
     Returns
     -------
@@ -778,7 +783,7 @@ def cycle_branch(
                          f"{', '.join(map(str, LinearSolver))}")
     options = ContinuationOptions(
         ds=min(max(ds, ds_min), ds_max), ds_min=ds_min, ds_max=ds_max, max_steps=max_steps,
-        newton_tol=tol, newton_max_iter=max_newton,
+        newton_tol=tol, newton_max_iter=max_newton, predictor_tol=predictor_tol,
         param_bounds=None if param_bounds is None else tuple(map(float, param_bounds)))
     prob = _Problem(system=system, ipar=ipar, p0=np.array(start.p, float),
                     mesh=np.linspace(0.0, 1.0, ntst + 1), m=m,
