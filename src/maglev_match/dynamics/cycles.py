@@ -340,15 +340,16 @@ def orbit_extrema(
     for name in names:
         g = _observable_batch(system.observables[name])
         vals = np.asarray(g(jnp.asarray(X), pj)).reshape(ntst, Lc.shape[0], -1)
-        res = []
-        for sign in (1.0, -1.0):
-            v = sign * vals
-            j = int(np.unravel_index(int(np.argmax(v)), v.shape)[0])
-            js = np.array([(j - 1) % ntst, j, (j + 1) % ntst])
-            Xf = np.einsum("sk,jkn->jsn", Lf, nodes[js]).reshape(-1, X.shape[1])
-            vf = sign * np.asarray(g(jnp.asarray(Xf), pj))
-            res.append(sign * max(float(np.max(vf)), float(np.max(v))))
-        out[name] = (res[0], res[1])
+        # the fine passes around the largest and the smallest value in one call
+        jmax = int(np.unravel_index(int(np.argmax(vals)), vals.shape)[0])
+        jmin = int(np.unravel_index(int(np.argmax(-vals)), vals.shape)[0])
+        js = np.array([(jmax - 1) % ntst, jmax, (jmax + 1) % ntst,
+                       (jmin - 1) % ntst, jmin, (jmin + 1) % ntst])
+        Xf = np.einsum("sk,jkn->jsn", Lf, nodes[js]).reshape(-1, X.shape[1])
+        vf = np.asarray(g(jnp.asarray(Xf), pj))
+        half = vf.shape[0] // 2
+        out[name] = (max(float(np.max(vf[:half])), float(np.max(vals))),
+                     min(float(np.min(vf[half:])), float(np.min(vals))))
     return out
 
 
