@@ -50,7 +50,8 @@ def main() -> None:
 
     def run(path: str):
         kw = {} if path == "new" else {"linear_solver": "sparse_lu",
-                                       "floquet_method": "periodic_qz"}
+                                       "floquet_method": "periodic_qz",
+                                       "predictor_tol": None}
         return cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits, **kw)
 
     res: dict[str, float] = {}
@@ -65,8 +66,8 @@ def main() -> None:
             times.append(time.perf_counter() - t)
             cpu.append(time.process_time() - c0)
         res[path] = statistics.median(times)
-        label = {"old": "earlier path (sparse LU, periodic QZ)",
-                 "new": "current path (condensed, cyclic QR / QZ)"}[path]
+        label = {"old": "earlier path (sparse LU, periodic QZ, Newton-count steps)",
+                 "new": "current path (condensed, cyclic QR / QZ, predicted-error steps)"}[path]
         print(f"{label}: first call {first:.2f} s, median {res[path]:.3f} s wall, "
               f"{statistics.median(cpu):.3f} s CPU over {repeats}; min {min(times):.3f} s; "
               f"{br.steps} steps ({br.rejected_steps} rejected), {len(br.points)} cycles, "

@@ -102,10 +102,12 @@ def bounding_cycle(
         lo, hi = search[hp.param]
         # the direct route: only the limit contact and the design value end the branch, and
         # only the cycle solved at the design value is read, so no fold / PD / NS / BP is
-        # located on the way (those solves changed nothing in h)
+        # located on the way (those solves changed nothing in h). The step sequence is the
+        # Newton-count rule's (predictor_tol=None): the mesh is adapted every 3 steps, so a
+        # different sequence ends on a different mesh and moves h by ~4e-8 relative.
         br = cycle_branch(system, hp, hp.param, stop_at=target, ntst=ntst, ncol=ncol,
                           max_steps=max_steps, limits=limits, param_bounds=(lo, hi),
-                          detect_special_points=False)
+                          detect_special_points=False, predictor_tol=None)
         branches.append(br)
         last = br.last
         if last is not None and last.kind == "stop_at" and last.converged:
