@@ -25,6 +25,11 @@ converged Y: the residual and its sparse Jacobian (:meth:`CollocationProblem.eva
 the derivative of the residual with respect to any model parameter by JAX autodiff of f
 (:meth:`CollocationProblem.param_derivative`), and the profile at a time s with its
 derivative with respect to Y (:meth:`CollocationProblem.profile_at`).
+
+Linear algebra (:class:`LinearSolver`): by default each Newton step condenses the interior
+nodes of every interval out of the system (:class:`CondensedLU`, as AUTO does) and solves
+the remaining mesh-node system, of fixed sparsity pattern, by sparse LU; ``"sparse_lu"``
+factorises the whole bordered matrix (the earlier code path, kept for comparison).
 """
 
 from __future__ import annotations

@@ -15,11 +15,13 @@ profile is continuous). The equations are
 * the pseudo-arclength condition <X - X_prev, X'_prev>_W - ds = 0 (or a fixed parameter),
 
 for the unknowns X = (profile, period T, parameter). Newton's method uses the exact
-Jacobian (JAX, vmapped over collocation points) assembled as a scipy sparse matrix and
-factorised by sparse LU. Floquet multipliers are the eigenvalues of the monodromy matrix,
-the product of the interval transfer matrices obtained by condensing each collocation block
-of the variational equation. The mesh is adapted by equidistributing |u^(NCOL+1)|^(1/(NCOL+1))
-(de Boor's criterion, as AUTO does).
+Jacobian (JAX, vmapped over collocation points); by default the interior collocation
+unknowns of each interval are condensed out and the small mesh-node system is factorised
+by sparse LU (:class:`~maglev_match.dynamics.collocation.CondensedLU`; ``linear_solver=
+"sparse_lu"`` factorises the whole system instead). Floquet multipliers are those of the
+product of the interval transfer matrices of the variational equation, computed without
+forming it (:mod:`~maglev_match.dynamics.floquet`). The mesh is adapted by
+equidistributing |u^(NCOL+1)|^(1/(NCOL+1)) (de Boor's criterion, as AUTO does).
 """
 
 from __future__ import annotations
