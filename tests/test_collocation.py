@@ -142,3 +142,12 @@ def test_unknown_linear_solver_is_an_error():
     with pytest.raises(ValueError, match="linear_solver"):
         cycle_branch(HOPF_NF, start, "mu", stop_at=0.1, linear_solver="dense")
     assert set(LinearSolver) == {"condensed", "sparse_lu"}
+
+
+@pytest.mark.parametrize(("kw", "field"), [({"predictor_tol": -1.0}, "predictor_tol"),
+                                           ({"floquet_method": "product"}, "floquet_method")])
+def test_bad_step_and_floquet_options_are_errors_naming_the_field(kw, field):
+    p = HOPF_NF.params_with(mu=0.0, l1=-1.0)
+    start = hopf_start(HOPF_NF, np.zeros(5), p, "mu", CYCLE_OMEGA, Q_CRIT, -1.0)
+    with pytest.raises(ValueError, match=field):
+        cycle_branch(HOPF_NF, start, "mu", stop_at=0.1, **kw)
