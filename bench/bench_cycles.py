@@ -1,9 +1,13 @@
 """Benchmark: one branch of model A cycles (printed defaults, sigma = 4e-4) from the Hopf
-point until the first physical-limit contact, by collocation (NTST 80, NCOL 4), against a
+point until the first physical-limit contact, by collocation (NTST 80, NCOL 4), in one warm
+process: the current path (condensed linear solver, Floquet multipliers by the block cyclic
+QR when its bound allows) against the earlier path run in the same process
+(``linear_solver="sparse_lu"``, ``floquet_method="periodic_qz"``), the cost of one Newton
+iteration of the collocation system at NTST 80 (both solvers), chi at one point warm; then a
 shooting baseline (Newton on the flow map, DOP853 + variational equations) solving the same
 cycles from a warm start (a lower bound on shooting's cost), and the whole CLI command.
 
-    .venv/bin/python bench/bench_cycles.py [--quick]
+    .venv/bin/python bench/bench_cycles.py [--quick] [--skip-shooting]
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ from maglev_match.params import load_preset
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="fewer repeats, shooting on 1/4")
+    ap.add_argument("--skip-shooting", action="store_true",
+                    help="only the collocation timings (no shooting, no CLI run)")
     args = ap.parse_args()
     repeats = 2 if args.quick else 5
     params = load_preset("alpha1").replace(sigma=4e-4)
@@ -40,23 +46,77 @@ def main() -> None:
           f"Python {platform.python_version()}, load average {os.getloadavg()[0]:.1f}")
     print(f"Hopf point omega1 = {hopf.value:.8g} rad/s, l1 = {hopf.l1:.4g}")
 
-    t = time.perf_counter()
-    br = cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits)
-    first = time.perf_counter() - t
-    times, cpu = [], []
+    print(f"load (uptime): {open('/proc/loadavg').read().split()[:3]}")
+
+    def run(path: str):
+        kw = {} if path == "new" else {"linear_solver": "sparse_lu",
+                                       "floquet_method": "periodic_qz",
+                                       "predictor_tol": None}
+        return cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits, **kw)
+
+    res: dict[str, float] = {}
+    for path in ("old", "new"):
+        t = time.perf_counter()
+        br = run(path)
+        first = time.perf_counter() - t
+        times, cpu = [], []
+        for _ in range(repeats):
+            t, c0 = time.perf_counter(), time.process_time()
+            br = run(path)
+            times.append(time.perf_counter() - t)
+            cpu.append(time.process_time() - c0)
+        res[path] = statistics.median(times)
+        label = {"old": "earlier path (sparse LU, periodic QZ, Newton-count steps)",
+                 "new": "current path (condensed, cyclic QR / QZ, predicted-error steps)"}[path]
+        print(f"{label}: first call {first:.2f} s, median {res[path]:.3f} s wall, "
+              f"{statistics.median(cpu):.3f} s CPU over {repeats}; min {min(times):.3f} s; "
+              f"{br.steps} steps ({br.rejected_steps} rejected), {len(br.points)} cycles, "
+              f"Newton iterations {sum(c.iterations for c in br.points)}, stopped: "
+              f"{br.stopped_reason}")
+        for sp in br.special_points:
+            print(f"  {sp.type} at omega1 = {sp.value:.12g} ({sp.detail}, {sp.located})")
+    coll = res["new"]
+    print(f"branch ratio earlier / current: {res['old'] / res['new']:.2f}x "
+          f"(AUTO-07p one thread 0.166 s: {'met' if coll < 0.166 else 'not met'})")
+
+    # one Newton iteration at NTST 80: residual + Jacobian blocks, factorisation, solve
+    from maglev_match.dynamics.collocation import (
+        CollocationProblem,
+        _factor,
+    )
+    c = br.points[len(br.points) // 2]
+    o = c.orbit
+    prob = CollocationProblem(system=system, ipar=system.param_index("omega1"), p0=o.p,
+                              mesh=o.mesh, m=4, scale=np.asarray(system.state_scale, float),
+                              T_scale=o.period, lam_scale=5.0)
+    Y = prob.pack(o.states, o.period, c.value)
+    row = np.zeros(prob.size)
+    row[-1] = 1.0
+    phase = prob.phase_row(o.states)
+    for solver in ("sparse_lu", "condensed"):
+        ts = []
+        for _ in range(50):
+            t = time.perf_counter()
+            pa = prob.parts(Y, phase, o.states, row, c.value / 5.0)
+            lu = _factor(prob, pa, solver, -pa.resid)
+            lu.solve(-pa.resid)
+            ts.append(time.perf_counter() - t)
+        print(f"one Newton iteration, NTST 80, {solver}: median {statistics.median(ts) * 1e3:.2f} "
+              f"ms, min {min(ts) * 1e3:.2f} ms (target < 1.5 ms)")
+
+    # chi at one point, warm (continuation)
+    from maglev_match.matching import matching_index
+    p_alpha = load_preset("alpha1")
+    matching_index(p_alpha, simulate=False)
+    ts = []
     for _ in range(repeats):
-        t, c0 = time.perf_counter(), time.process_time()
-        br = cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits)
-        times.append(time.perf_counter() - t)
-        cpu.append(time.process_time() - c0)
-    coll = statistics.median(times)
-    print(f"collocation branch: first call (with compile) {first:.2f} s, median "
-          f"{coll:.3f} s wall, {statistics.median(cpu):.3f} s CPU (all threads) over "
-          f"{repeats}; min {min(times):.3f} s wall; {br.steps} steps "
-          f"({br.rejected_steps} rejected), "
-          f"{len(br.points)} cycles, stopped: {br.stopped_reason}")
-    for s in br.special_points:
-        print(f"  {s.type} at omega1 = {s.value:.8g} ({s.detail}, {s.located})")
+        t = time.perf_counter()
+        mi = matching_index(p_alpha, simulate=False)
+        ts.append(time.perf_counter() - t)
+    print(f"chi at alpha1 by continuation, warm: median {statistics.median(ts):.3f} s "
+          f"(chi = {mi.chi:.10g}; target < 0.1 s)")
+    if args.skip_shooting:
+        return
 
     # amplitude accuracy against a finer mesh at one parameter value
     fine = cycle_branch(system, hopf, "omega1", stop_at=125.0, ntst=160, ncol=5)

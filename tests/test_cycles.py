@@ -420,3 +420,34 @@ def test_restart_in_a_second_parameter():
     for c in new.points:
         assert c.orbit.p[0] == pytest.approx(mu, abs=0)
         assert c.max("radius") == pytest.approx(math.sqrt(-mu / c.value), rel=1e-6)
+
+
+def test_step_growth_on_the_predicted_error_takes_fewer_steps_to_the_same_cycle():
+    """Hopf normal form with l1 = +1 (unstable cycles for mu < 0) to mu = -0.5: with the
+    predicted-error rule the branch needs fewer steps than with the Newton-count rule
+    alone, and the cycle at the stop value is the same (radius sqrt(-mu / l1), closed
+    form)."""
+    old = cycle_branch(HOPF_NF, _start(HOPF_NF, 1.0), "mu", stop_at=-0.5, ntst=20, ncol=4,
+                       max_steps=200, predictor_tol=None)
+    new = cycle_branch(HOPF_NF, _start(HOPF_NF, 1.0), "mu", stop_at=-0.5, ntst=20, ncol=4,
+                       max_steps=200)
+    assert old.stopped_reason == new.stopped_reason == "reached stop_at"
+    assert new.steps < old.steps
+    a, b = old.points[-1], new.points[-1]
+    assert b.max("radius") == pytest.approx(a.max("radius"), rel=1e-9)
+    assert b.max("radius") == pytest.approx(math.sqrt(0.5), rel=1e-6)
+    assert b.period == pytest.approx(a.period, rel=1e-9)
+
+
+def test_branch_without_special_points_still_has_multipliers_at_every_kept_point():
+    """detect_special_points=False computes the multipliers only for the points the branch
+    keeps (not at the trial points of the event location); they equal those of the full
+    run at the stop value, and every kept point has its n multipliers."""
+    full = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", stop_at=0.4, ntst=16, ncol=4)
+    lean = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", stop_at=0.4, ntst=16, ncol=4,
+                        detect_special_points=False)
+    assert all(len(c.multipliers) == 4 and c.reliable for c in lean.points)
+    ma = np.sort_complex(np.asarray(full.points[-1].multipliers))
+    mb = np.sort_complex(np.asarray(lean.points[-1].multipliers))
+    assert np.max(np.abs(ma - mb)) < 1e-9
+    assert lean.points[-1].stable and lean.points[-1].n_unstable == 0

@@ -115,24 +115,28 @@ def test_product_of_matrix_exponentials_matches_expm_of_the_sum():
     assert rel_match(product_eigenvalues(F), exact) > 1e-3
 
 
+@pytest.mark.parametrize("method", ["periodic_qz", "cyclic_qr"])
 @pytest.mark.parametrize(("ntst", "ncol"), [(80, 6), (200, 4)])
-def test_collocated_hopf_cycle_times_oscillators_has_closed_form_multipliers(ntst, ncol):
+def test_collocated_hopf_cycle_times_oscillators_has_closed_form_multipliers(ntst, ncol,
+                                                                             method):
     """Collocation of the variational equation along the Hopf normal-form cycle, coupled
     (by a change of coordinates) to a stable and an unstable oscillator: the six
-    multipliers {1, e^-2muT, 1e-30 e^(+-i b_s T), 1e3 e^(+-i b_u T)} to 1e-8 relative."""
+    multipliers {1, e^-2muT, 1e-30 e^(+-i b_s T), 1e3 e^(+-i b_u T)} to 1e-8 relative,
+    by the periodic QZ and by the block cyclic QR (accepted by its error bound here)."""
     J, h = gauss_point_jacobians(spread_jacobian, ntst, ncol, T_HOPF)
-    res = fq.floquet_analysis(J, T_HOPF, h, ncol)
+    res = fq.floquet_analysis(J, T_HOPF, h, ncol, method=method)
     assert res.converged and res.reliable
     assert rel_match(res.multipliers, SPREAD_EXACT) < 1e-8
     assert res.trivial_error < 1e-10
     assert np.all(np.diff(res.log_abs) <= 0.0)  # sorted by |mu| descending
-    assert res.method == fq.FloquetMethod.PERIODIC_QZ
+    assert res.method == method
     # conjugate pairs exact; nontrivial = everything but the one nearest 1
     mu = res.multipliers
     assert np.allclose(np.sort_complex(mu), np.sort_complex(np.conj(mu)), rtol=0, atol=0)
     assert len(res.nontrivial) == 5 and not np.any(np.isclose(res.nontrivial, 1.0))
     # the function cycles.py calls returns the same n multipliers
-    assert rel_match(fq.floquet_multipliers_from_blocks(J, T_HOPF, h, ncol), SPREAD_EXACT) < 1e-8
+    assert rel_match(fq.floquet_multipliers_from_blocks(J, T_HOPF, h, ncol, method=method),
+                     SPREAD_EXACT) < 1e-8
     # the old explicit product loses the 1e-30 pair
     assert rel_match(fq.floquet_multipliers_product(J, T_HOPF, h, ncol), SPREAD_EXACT) > 1e-3
 
@@ -279,3 +283,32 @@ def test_non_finite_jacobian_is_an_error_not_a_result():
     J[3, 1, 0, 0] = np.nan
     with pytest.raises(ValueError, match="not finite"):
         fq.floquet_multipliers_from_blocks(J, T_HOPF, h, 3)
+
+
+def test_block_cyclic_qr_is_refused_when_its_error_bound_fails():
+    """Two factors whose product has multipliers 1e-32, 1 and 900: the square roots 1e-16
+    next to 30 in the block cyclic matrix cannot be resolved to 1e-10 relative by an
+    unstructured QR, so the bound refuses the cyclic result (None) and the periodic QZ is
+    used; with a mild spread (multipliers 0.25 .. 4) the bound accepts it and the result
+    equals the periodic QZ's to 1e-10."""
+    S = np.array([[1.0, 0.4, 0.1], [0.2, 1.0, -0.3], [0.0, 0.5, 1.0]])
+    Si = np.linalg.inv(S)
+    # upper triangular factors: the multipliers are exactly the products of the diagonals
+    wide = np.array([[[1e-16, 0.3, 0.2], [0.0, 1.0, 0.5], [0.0, 0.0, 30.0]],
+                     [[1e-16, -0.7, 0.1], [0.0, 1.0, 0.9], [0.0, 0.0, 30.0]]])
+    assert fq._cyclic_multipliers(wide) is None
+    pe = fq.periodic_eigenvalues(wide)
+    assert np.allclose(np.sort(pe.log_abs), np.log([1e-32, 1.0, 900.0]), rtol=0, atol=1e-9)
+    mild = np.array([S @ np.diag([0.5, 1.0, 2.0]) @ Si, S @ np.diag([0.5, -1.0, 2.0]) @ Si])
+    la, ph, bound = fq._cyclic_multipliers(mild)
+    assert bound <= fq.CYCLIC_RTOL
+    exact = np.array([0.25, -1.0, 4.0])
+    got = np.exp(la) * np.exp(1j * ph)
+    assert rel_match(got, exact) < 1e-10
+    assert rel_match(fq.periodic_eigenvalues(mild).values, got) < 1e-10
+
+
+def test_floquet_method_must_be_known():
+    J, h = gauss_point_jacobians(spread_jacobian, 20, 4, T_HOPF)
+    with pytest.raises(ValueError, match="method"):
+        fq.floquet_analysis(J, T_HOPF, h, 4, method="product")

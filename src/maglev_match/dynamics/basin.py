@@ -5,9 +5,11 @@ Model-agnostic. At a design parameter point p, with the equilibrium stable:
 1. locate the Hopf points of the equilibrium along each search parameter (the others held
    at their design values), nearest first by relative distance;
 2. from each, continue the branch of periodic orbits in that parameter until it reaches the
-   design value. If the cycle there is unstable, it surrounds the equilibrium: that cycle
-   bounds the basin (case ``unstable_cycle``). If the branch first touches a limit (the
-   ``limits`` callable) between the Hopf point and the design value, the surrounding cycle
+   design value (directly: no special points other than the limit contact and the design
+   value are located on the way, and the multipliers are computed only at the points kept).
+   If the cycle there is unstable, it surrounds the equilibrium: that cycle bounds the
+   basin (case ``unstable_cycle``). If the branch first touches a limit (the ``limits``
+   callable) between the Hopf point and the design value, the surrounding cycle
    lies beyond the physical range (case ``beyond_limits``); a contact on the far side of
    the Hopf point (the branch heading away from the design) counts as turning away. If it
    turns away or leaves the search range, that Hopf point gives no
@@ -98,8 +100,14 @@ def bounding_cycle(
     for _, hp in cands:
         target = design[hp.param]
         lo, hi = search[hp.param]
+        # the direct route: only the limit contact and the design value end the branch, and
+        # only the cycle solved at the design value is read, so no fold / PD / NS / BP is
+        # located on the way (those solves changed nothing in h). The step sequence is the
+        # Newton-count rule's (predictor_tol=None): the mesh is adapted every 3 steps, so a
+        # different sequence ends on a different mesh and moves h by ~4e-8 relative.
         br = cycle_branch(system, hp, hp.param, stop_at=target, ntst=ntst, ncol=ncol,
-                          max_steps=max_steps, limits=limits, param_bounds=(lo, hi))
+                          max_steps=max_steps, limits=limits, param_bounds=(lo, hi),
+                          detect_special_points=False, predictor_tol=None)
         branches.append(br)
         last = br.last
         if last is not None and last.kind == "stop_at" and last.converged:

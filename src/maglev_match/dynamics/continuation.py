@@ -15,7 +15,12 @@ by Newton's method. The next tangent solves the same bordered matrix with right-
 
 Step-size rule (the only one in the package): a rejected corrector halves s; an accepted
 step with at most ``fast_iterations`` Newton iterations multiplies s by ``grow``, one with
-at least ``slow_iterations`` by ``slow_factor``; s stays in [ds_min, ds_max].
+at least ``slow_iterations`` by ``slow_factor``; s stays in [ds_min, ds_max]. Optionally
+(``predictor_tol``) an easy step grows by more, on the predicted error: the distance
+e = |u_corrected - u_predicted|_W of a tangent predictor is O(s^2) (its local error is the
+curvature term; Allgower & Georg 1990, sec. 6.1; Deuflhard 2004, sec. 5.1), so the step
+that would make it predictor_tol is s sqrt(predictor_tol / e); the next step is 0.8 times
+that, at most ``max_grow`` s, and never less than the Newton-count rule gives.
 
 Events: a problem offers named scalar test functions g(point). They are evaluated at every
 accepted point; when one changes sign between u_k and u_(k+1) its zero is located inside
@@ -103,6 +108,9 @@ class ContinuationOptions:
     fast_iterations, slow_iterations : what "easy" and "slow" mean (Newton iterations).
     event_tol : an event is solved when its bracket in s is below event_tol * step.
     event_max_iter : Illinois iterations per event.
+    predictor_tol : target distance (weighted norm, scaled units) between the predicted and
+        the corrected point; None: the Newton-count rule alone.
+    max_grow : largest step growth per step under ``predictor_tol``.
     """
 
     ds: float = 0.01
@@ -119,6 +127,8 @@ class ContinuationOptions:
     slow_iterations: int = 6
     event_tol: float = 1e-10
     event_max_iter: int = 40
+    predictor_tol: float | None = None
+    max_grow: float = 4.0
 
     def __post_init__(self) -> None:
         for name in ("ds", "ds_min", "ds_max", "newton_tol", "grow", "event_tol"):
@@ -139,6 +149,14 @@ class ContinuationOptions:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and 0 < v < 1):
                 raise ValueError(f"ContinuationOptions.{name} = {v!r}: must lie in (0, 1)")
+        if self.predictor_tol is not None and not (
+                isinstance(self.predictor_tol, int | float)
+                and math.isfinite(self.predictor_tol) and self.predictor_tol > 0):
+            raise ValueError(f"ContinuationOptions.predictor_tol = {self.predictor_tol!r}: "
+                             "must be None or a positive finite number")
+        if not (math.isfinite(self.max_grow) and self.max_grow >= 1):
+            raise ValueError(f"ContinuationOptions.max_grow = {self.max_grow!r}: must be "
+                             ">= 1")
         if self.grow < 1:
             raise ValueError(f"ContinuationOptions.grow = {self.grow!r}: must be >= 1")
         if self.param_bounds is not None:
@@ -400,7 +418,15 @@ def continuation(
             break
         its = corr.iterations
         if its <= opt.fast_iterations:
-            s = min(s * opt.grow, opt.ds_max)
+            grow = opt.grow
+            if opt.predictor_tol is not None:
+                d = corr.u - (a.u + s * a.t)
+                e = math.sqrt(float(np.sum(W * d * d)))
+                if e > 0:
+                    grow = max(grow, min(opt.max_grow, 0.8 * math.sqrt(opt.predictor_tol / e)))
+                else:
+                    grow = max(grow, opt.max_grow)
+            s = min(s * grow, opt.ds_max)
         elif its >= opt.slow_iterations:
             s = max(s * opt.slow_factor, opt.ds_min)
         b.info["ds_next"] = s  # the step that follows this point (for a restart)

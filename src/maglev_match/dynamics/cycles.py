@@ -15,11 +15,13 @@ profile is continuous). The equations are
 * the pseudo-arclength condition <X - X_prev, X'_prev>_W - ds = 0 (or a fixed parameter),
 
 for the unknowns X = (profile, period T, parameter). Newton's method uses the exact
-Jacobian (JAX, vmapped over collocation points) assembled as a scipy sparse matrix and
-factorised by sparse LU. Floquet multipliers are the eigenvalues of the monodromy matrix,
-the product of the interval transfer matrices obtained by condensing each collocation block
-of the variational equation. The mesh is adapted by equidistributing |u^(NCOL+1)|^(1/(NCOL+1))
-(de Boor's criterion, as AUTO does).
+Jacobian (JAX, vmapped over collocation points); by default the interior collocation
+unknowns of each interval are condensed out and the small mesh-node system is factorised
+by sparse LU (:class:`~maglev_match.dynamics.collocation.CondensedLU`; ``linear_solver=
+"sparse_lu"`` factorises the whole system instead). Floquet multipliers are those of the
+product of the interval transfer matrices of the variational equation, computed without
+forming it (:mod:`~maglev_match.dynamics.floquet`). The mesh is adapted by
+equidistributing |u^(NCOL+1)|^(1/(NCOL+1)) (de Boor's criterion, as AUTO does).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.dynamics.collocation import (
+    LinearSolver,
     _adapt_mesh,
     _evaluate_profile,
     _interval_index,
@@ -343,15 +346,16 @@ def orbit_extrema(
     for name in names:
         g = _observable_batch(system.observables[name])
         vals = np.asarray(g(jnp.asarray(X), pj)).reshape(ntst, Lc.shape[0], -1)
-        res = []
-        for sign in (1.0, -1.0):
-            v = sign * vals
-            j = int(np.unravel_index(int(np.argmax(v)), v.shape)[0])
-            js = np.array([(j - 1) % ntst, j, (j + 1) % ntst])
-            Xf = np.einsum("sk,jkn->jsn", Lf, nodes[js]).reshape(-1, X.shape[1])
-            vf = sign * np.asarray(g(jnp.asarray(Xf), pj))
-            res.append(sign * max(float(np.max(vf)), float(np.max(v))))
-        out[name] = (res[0], res[1])
+        # the fine passes around the largest and the smallest value in one call
+        jmax = int(np.unravel_index(int(np.argmax(vals)), vals.shape)[0])
+        jmin = int(np.unravel_index(int(np.argmax(-vals)), vals.shape)[0])
+        js = np.array([(jmax - 1) % ntst, jmax, (jmax + 1) % ntst,
+                       (jmin - 1) % ntst, jmin, (jmin + 1) % ntst])
+        Xf = np.einsum("sk,jkn->jsn", Lf, nodes[js]).reshape(-1, X.shape[1])
+        vf = np.asarray(g(jnp.asarray(Xf), pj))
+        half = vf.shape[0] // 2
+        out[name] = (max(float(np.max(vf[:half])), float(np.max(vals))),
+                     min(float(np.min(vf[half:])), float(np.min(vals))))
     return out
 
 
@@ -504,6 +508,7 @@ class CycleProblem:
         self.warnings: list[str] = []
         self.restarting = False
         self.detect = True
+        self.floquet_method = "auto"
 
     # --- corrector and read-outs ---
     def correct(self, u_pred, row, target, max_iter):
@@ -527,19 +532,40 @@ class CycleProblem:
         d = u_new - a.u
         return float(np.sqrt(np.sum(self.weights * d * d))) <= 3.0 * s
 
-    def cycle_point(self, pt: BranchPoint, kind: str = "step") -> CyclePoint:
-        prob = self.prob
-        (J, Tb, h), mesh = pt.correction.data
-        U, T, lam = prob.unpack(pt.u)
-        triv, mult = _split_trivial(floquet_multipliers_from_blocks(J, Tb, h, prob.m))
+    def _floquet_fields(self, pt: BranchPoint) -> dict[str, Any]:
+        (J, Tb, h), _ = pt.correction.data
+        triv, mult = _split_trivial(floquet_multipliers_from_blocks(
+            J, Tb, h, self.prob.m, method=self.floquet_method))
         nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
-        reliable = bool(abs(triv - 1.0) <= self.trivial_tol)
+        return {"multipliers": mult, "trivial_multiplier": triv, "n_unstable": nun,
+                "stable": nun == 0,
+                "reliable": bool(abs(triv - 1.0) <= self.trivial_tol)}
+
+    def cycle_point(self, pt: BranchPoint, kind: str = "step", floquet: bool = True
+                    ) -> CyclePoint:
+        """The read-out of a branch point. ``floquet`` False leaves the multipliers out
+        (placeholders, marked in ``pt.info["lazy"]``) for :meth:`complete` to fill in."""
+        prob = self.prob
+        _, mesh = pt.correction.data
+        U, T, lam = prob.unpack(pt.u)
+        if floquet:
+            fields = self._floquet_fields(pt)
+        else:
+            fields = {"multipliers": np.zeros(0), "trivial_multiplier": complex("nan"),
+                      "n_unstable": 0, "stable": False, "reliable": False}
+        pt.info["lazy"] = not floquet
         orbit = PeriodicOrbit(mesh=mesh, ncol=prob.m, states=U, period=T, p=prob.params(lam))
-        return CyclePoint(value=lam, period=T, orbit=orbit, multipliers=mult,
-                          trivial_multiplier=triv, n_unstable=nun, stable=nun == 0,
+        return CyclePoint(value=lam, period=T, orbit=orbit,
                           extrema=orbit_extrema(prob.system, orbit, self.names),
                           converged=True, iterations=pt.correction.iterations,
-                          residual=pt.correction.residual, kind=kind, reliable=reliable)
+                          residual=pt.correction.residual, kind=kind, **fields)
+
+    def complete(self, pt: BranchPoint | None) -> None:
+        """Fill in the multipliers of a point read out without them (in place)."""
+        if pt is not None and pt.info.get("lazy") and "cycle" in pt.info:
+            pt.info["cycle"] = dataclasses.replace(pt.info["cycle"],
+                                                   **self._floquet_fields(pt))
+            pt.info["lazy"] = False
 
     # --- test functions ---
     def test_functions(self, pt: BranchPoint) -> dict[str, float]:
@@ -550,7 +576,9 @@ class CycleProblem:
             if self.stop_at is not None:
                 out["STOP"] = pt.value - self.stop_at
             return out
-        c = self.cycle_point(pt)
+        # without special points the multipliers are needed only at the points the branch
+        # keeps (filled in afterwards), not at the trial points of the event location
+        c = self.cycle_point(pt, floquet=self.detect)
         pt.info["cycle"] = c
         out = {"LPC": float(pt.t[-1])} if self.detect else {}
         if c.reliable and self.detect:
@@ -670,6 +698,9 @@ def cycle_branch(
     restart: RestartState | None = None,
     detect_special_points: bool = True,
     restart_param: str | None = None,
+    linear_solver: str = "condensed",
+    floquet_method: str = "auto",
+    predictor_tol: float | None = 0.05,
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
 
@@ -720,6 +751,15 @@ def cycle_branch(
         towards larger values, the other parameters fixed at the saved point.
     detect_special_points : locate LPC, BP, PD, NS (False: only the limit contact and the
         stop value, which end the branch; saves the solves when only the branch matters).
+    linear_solver : "condensed" (default: the interior collocation unknowns condensed per
+        interval, :class:`~maglev_match.dynamics.collocation.CondensedLU`) or "sparse_lu"
+        (a sparse LU of the whole system, the earlier code path, kept as the baseline).
+    floquet_method : "auto" (default), "periodic_qz" or "cyclic_qr": how the multipliers
+        are computed (:func:`~maglev_match.dynamics.floquet.floquet_analysis`).
+    predictor_tol : target distance between predicted and corrected point (scaled units,
+        as ``ds``) by which easy steps may grow faster than the Newton-count rule allows
+        (:class:`~maglev_match.dynamics.continuation.ContinuationOptions`); None: the
+        Newton-count rule alone.
 
     Returns
     -------
@@ -748,14 +788,17 @@ def cycle_branch(
                          "number > 1")
     if not trivial_tol > 0:
         raise ValueError(f"trivial_tol = {trivial_tol!r}: must be > 0")
+    if linear_solver not in tuple(LinearSolver):
+        raise ValueError(f"linear_solver = {linear_solver!r}: must be one of "
+                         f"{', '.join(map(str, LinearSolver))}")
     options = ContinuationOptions(
         ds=min(max(ds, ds_min), ds_max), ds_min=ds_min, ds_max=ds_max, max_steps=max_steps,
-        newton_tol=tol, newton_max_iter=max_newton,
+        newton_tol=tol, newton_max_iter=max_newton, predictor_tol=predictor_tol,
         param_bounds=None if param_bounds is None else tuple(map(float, param_bounds)))
     prob = _Problem(system=system, ipar=ipar, p0=np.array(start.p, float),
                     mesh=np.linspace(0.0, 1.0, ntst + 1), m=m,
                     scale=np.asarray(system.state_scale, float), T_scale=T0,
-                    lam_scale=float(lam_scale))
+                    lam_scale=float(lam_scale), linear_solver=LinearSolver(linear_solver))
     W = prob.W()
     # --- the start: the Hopf point as a constant profile, tangent = eigenvector profile
     s_nodes = _node_times(prob.mesh, m)
@@ -770,6 +813,10 @@ def cycle_branch(
     cyc = CycleProblem(prob, names, limits, stop_at, trivial_tol, max_period_factor * T0,
                        adapt_every, tol, start_orbit)
     cyc.detect = bool(detect_special_points)
+    if floquet_method not in ("auto", "periodic_qz", "cyclic_qr"):
+        raise ValueError(f"floquet_method = {floquet_method!r}: must be auto, periodic_qz "
+                         "or cyclic_qr")
+    cyc.floquet_method = floquet_method
     first = Correction(u=Yh, iterations=0, residual=0.0, solve=lambda e: tY, data=None)
     if new_param:
         prob.mesh = np.array(restart.mesh, float)
@@ -806,9 +853,14 @@ def cycle_branch(
 
     def notify(step, pt):
         if progress is not None and "cycle" in pt.info:
+            cyc.complete(pt)
             progress(step, pt.info["cycle"])
 
     res = continuation(cyc, Yh, tY, options, progress=notify, first=first)
+    for pt in res.points[1:]:
+        cyc.complete(pt)
+    for ev in res.events:
+        cyc.complete(ev.point)
     warnings = list(cyc.warnings)
     points: list[CyclePoint] = []
     for pt in res.points[1:]:

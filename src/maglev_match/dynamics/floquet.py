@@ -41,6 +41,13 @@ them off and runs the periodic QZ on the K orthogonally condensed pairs):
   of the multipliers) gives estimates that serve as shifts, so the periodic QZ deflates about
   one eigenvalue per sweep and a half; the eigenvalues returned are the periodic QZ's.
 
+The periodic QZ runs in Python loops (about 10-25 ms per orbit on model A). When the grouped
+sequence is short, LAPACK's QR on its block cyclic matrix (whose eigenvalues are the K-th
+roots of the multipliers) is used instead, but only when its first-order error bound, from
+the eigenvalue condition numbers, proves every multiplier to 1e-10 relative
+(:func:`_cyclic_multipliers`); otherwise, e.g. with multipliers 1e-30 and 1e3 in a short
+sequence, the periodic QZ decides. ``method="periodic_qz"`` forces the periodic QZ.
+
 Limits. The result is as accurate as the factors allow, which is the best any method working
 on the collocation blocks can do; near a homoclinic orbit the trivial multiplier is itself
 ill-conditioned (the flow vector almost vanishes near the saddle) and the discretisation of
@@ -86,6 +93,7 @@ class FloquetMethod(StrEnum):
     """How the multipliers were computed."""
 
     PERIODIC_QZ = "periodic_qz"  # periodic Schur form of the condensed pairs
+    CYCLIC_QR = "cyclic_qr"  # LAPACK QR on the block cyclic matrix, accepted by its bound
     PRODUCT = "product"  # eigenvalues of the explicit monodromy product (old method)
 
 
@@ -478,17 +486,38 @@ def transfer_matrices(J: np.ndarray, T: float, h: np.ndarray, m: int) -> np.ndar
     return np.linalg.solve(blk[:, :, n:], -blk[:, :, :n])[:, -n:, :]
 
 
-def _group(P: np.ndarray, max_cond: float) -> np.ndarray:
+def _group(P: np.ndarray, max_cond: float, chunk: int = 16) -> np.ndarray:
+    """Runs of consecutive factors multiplied together while the run's 2-norm condition
+    number stays <= max_cond (the same products, in the same order, as one at a time: the
+    running products of a run are formed ``chunk`` at a time and their condition numbers
+    computed in one batched SVD)."""
     groups = []
-    G = P[0]
-    for j in range(1, P.shape[0]):
-        G2 = P[j] @ G
-        if np.linalg.cond(G2) <= max_cond:
-            G = G2
-        else:
-            groups.append(G)
-            G = P[j]
-    groups.append(G)
+    K = P.shape[0]
+    start = 0
+    while start < K:
+        G = P[start]
+        k = 1  # factors start .. start + k - 1 are in the run, G is their product
+        while start + k < K:
+            run = []
+            H = G
+            for j in range(start + k, min(K, start + k + chunk)):
+                H = P[j] @ H
+                run.append(H)
+            R = np.stack(run)
+            with np.errstate(all="ignore"):
+                ok = np.all(np.isfinite(R), axis=(1, 2))
+                cond = np.full(len(run), np.inf)
+                if np.any(ok):
+                    sv = np.linalg.svd(R[ok], compute_uv=False)
+                    cond[ok] = sv[:, 0] / sv[:, -1]
+            bad = np.nonzero(~(cond <= max_cond))[0]
+            if bad.size:
+                if bad[0] > 0:
+                    G, k = R[bad[0] - 1], k + int(bad[0])
+                break
+            G, k = R[-1], k + len(run)
+        groups.append(G)
+        start += k
     return np.stack(groups)
 
 
@@ -520,6 +549,71 @@ def _cyclic_estimates(G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.array(out_l), np.array(out_p)
 
 
+#: Largest first-order error bound (relative, on every multiplier) with which the block
+#: cyclic QR result is accepted instead of running the periodic QZ.
+CYCLIC_RTOL = 1e-10
+#: Largest order K n of the block cyclic matrix tried (beyond it the dense QR costs more
+#: than the periodic QZ).
+CYCLIC_MAX_ORDER = 160
+
+
+def _cyclic_multipliers(G: np.ndarray, rtol: float = CYCLIC_RTOL
+                        ) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """Multipliers of G_{K-1} ... G_0 from LAPACK's QR algorithm on the block cyclic matrix
+    C (see :func:`_cyclic_estimates`) when a first-order error bound proves them accurate;
+    None otherwise (the caller then runs the periodic QZ).
+
+    The computed eigenvalues of C are exact for C + dC with ||dC|| <= p(Kn) u ||C||
+    (backward stability of the Hessenberg QR algorithm), so an eigenvalue lambda_i of C with
+    reciprocal condition number s_i = |y_i^H x_i| / (||x_i|| ||y_i||) (left and right
+    eigenvectors) moves by at most e_i = u ||C||_1 / s_i to first order, with the modest
+    growth factor p taken as 1 as in LAPACK's own error bound EERRBD = EPSMCH * ABNRM /
+    RCONDE (LAPACK Users' Guide, 3rd ed., sec. 4.8.1; Wilkinson 1965; Golub & Van Loan
+    2013, sec. 7.2.2). A multiplier is mu = lambda^K, so its relative error is at most
+    K e_i / |lambda_i|. The result is accepted only when this bound is <= ``rtol`` for every
+    one of the K n eigenvalues, and when the K roots lambda^K of each multiplier agree to
+    the same bound; this holds for the well-conditioned factors of the grouped sequence
+    (condition numbers <= 1e4) unless multipliers of very different size (e.g. 1e-30 next
+    to 1e3) make some lambda small against ||C||, where the periodic QZ is needed. Returns
+    (ln|mu|, arg mu, largest bound) for the n multipliers."""
+    K, n, _ = G.shape
+    if K * n > CYCLIC_MAX_ORDER:
+        return None
+    C = np.zeros((K * n, K * n))
+    for j in range(K):
+        jn = (j + 1) % K
+        C[jn * n:(jn + 1) * n, j * n:(j + 1) * n] = G[j]
+    if not np.all(np.isfinite(C)):
+        return None
+    lam, vl, vr = scipy.linalg.eig(C, left=True, right=True)
+    sc = np.abs(np.sum(np.conj(vl) * vr, axis=0)) / (
+        np.linalg.norm(vl, axis=0) * np.linalg.norm(vr, axis=0))
+    absl = np.abs(lam)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = K * (_EPS * np.linalg.norm(C, 1) / sc) / absl
+    if not (np.all(np.isfinite(bound)) and float(np.max(bound)) <= rtol):
+        return None
+    la = K * np.log(absl)
+    ph = np.angle(lam ** K) if K > 1 else np.angle(lam)
+    left = list(np.argsort(-la, kind="stable"))
+    out_l, out_p = [], []
+    worst = float(np.max(bound))
+    while left:
+        i = left[0]
+        d = np.abs(la[left] - la[i]) + np.abs(np.angle(np.exp(1j * (ph[left] - ph[i]))))
+        take = [left[k] for k in np.argsort(d, kind="stable")[:K]]
+        if len(take) < K or float(np.max(d[np.argsort(d, kind="stable")[:K]])) > \
+                4.0 * float(np.max(bound[take])) + 4.0 * rtol:
+            return None  # the K roots of one multiplier do not agree: not trusted
+        z = np.mean(np.exp(1j * (ph[take] - ph[i]))) * np.exp(1j * ph[i])
+        out_l.append(float(np.mean(la[take])))
+        out_p.append(float(np.angle(z)))
+        left = [k for k in left if k not in take]
+    if len(out_l) != n:
+        return None
+    return np.array(out_l), np.array(out_p), worst
+
+
 def grouped_transfer_matrices(F: np.ndarray, E: np.ndarray, max_cond: float) -> np.ndarray:
     """Collapse runs of consecutive transfer matrices E_j^{-1} F_j into their products while
     the 2-norm condition number of a run's product stays <= ``max_cond``.
@@ -547,16 +641,28 @@ def _balanced(J: np.ndarray) -> np.ndarray:
     return J * s[None, None, None, :] / s[None, None, :, None]
 
 
-def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND
-                 ) -> tuple[np.ndarray, np.ndarray, PeriodicEigenvalues, int]:
-    """(multipliers, ln|multipliers|, raw result, number of factors), by |mu| descending."""
+def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND, method: str = "auto"
+                 ) -> tuple[np.ndarray, np.ndarray, PeriodicEigenvalues, int, FloquetMethod]:
+    """(multipliers, ln|multipliers|, raw result, number of factors, method), by |mu|
+    descending. ``method``: "auto" (the block cyclic QR when its error bound proves it
+    accurate, else the periodic QZ), "periodic_qz" or "cyclic_qr" (falls back to the
+    periodic QZ when the bound fails)."""
     J = np.asarray(J, float)
     if not (np.all(np.isfinite(J)) and math.isfinite(T)):
         raise ValueError("Floquet multipliers: the Jacobian along the orbit (or the period) "
                          "is not finite")
     J = _balanced(J)
+    if method not in ("auto", *tuple(FloquetMethod)) or method == FloquetMethod.PRODUCT:
+        raise ValueError(f"method = {method!r}: must be auto, periodic_qz or cyclic_qr")
     if group_cond > 1.0:
         F, E = _group(transfer_matrices(J, T, h, m), group_cond), None
+        cyc = None if method == FloquetMethod.PERIODIC_QZ else _cyclic_multipliers(F)
+        if cyc is not None:
+            la, ph = _pair_conjugates(cyc[0], cyc[1])
+            order = np.argsort(-la, kind="stable")
+            la, ph = la[order], ph[order]
+            pe = PeriodicEigenvalues(log_abs=la, phase=ph, sweeps=0, converged=True)
+            return _to_values(la, ph), la, pe, int(F.shape[0]), FloquetMethod.CYCLIC_QR
         pe = periodic_eigenvalues(F, shifts=_cyclic_estimates(F))
     else:
         F, E = condensed_pairs(J, T, h, m)
@@ -564,10 +670,11 @@ def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND
     la, ph = _pair_conjugates(pe.log_abs, pe.phase)
     order = np.argsort(-la, kind="stable")
     la, ph = la[order], ph[order]
-    return _to_values(la, ph), la, pe, int(F.shape[0])
+    return _to_values(la, ph), la, pe, int(F.shape[0]), FloquetMethod.PERIODIC_QZ
 
 
-def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: int) -> np.ndarray:
+def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: int,
+                                    method: str = "auto") -> np.ndarray:
     """Floquet multipliers (all n, by |mu| descending) of a collocation orbit from the
     Jacobian at its Gauss points, by periodic QZ on the grouped transfer matrices (see the
     module docstring); the monodromy matrix is never formed.
@@ -585,7 +692,7 @@ def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: i
     pairs. If the periodic QZ exhausts its sweep budget (never seen in practice) the
     explicit product is used instead; :func:`floquet_analysis` reports that case.
     """
-    mu, _, pe, _ = _multipliers(J, T, h, m)
+    mu, _, pe, _, _ = _multipliers(J, T, h, m, method=method)
     if not pe.converged:
         return floquet_multipliers_product(J, T, h, m)
     return mu
@@ -628,7 +735,8 @@ class FloquetResult:
 
 def floquet_analysis(J: np.ndarray, T: float, h: np.ndarray, m: int, *,
                      tol: float = DEFAULT_TRIVIAL_TOL,
-                     group_cond: float = DEFAULT_GROUP_COND) -> FloquetResult:
+                     group_cond: float = DEFAULT_GROUP_COND,
+                     method: str = "auto") -> FloquetResult:
     """Floquet multipliers with a reliability verdict.
 
     Parameters
@@ -656,11 +764,11 @@ def floquet_analysis(J: np.ndarray, T: float, h: np.ndarray, m: int, *,
     """
     if not tol > 0.0:
         raise ValueError(f"tol = {tol!r}: must be > 0")
-    mu_sorted, log_abs, pe, nfac = _multipliers(J, T, h, m, group_cond)
+    mu_sorted, log_abs, pe, nfac, used = _multipliers(J, T, h, m, group_cond, method)
     k = int(np.argmin(np.abs(mu_sorted - 1.0)))
     triv = complex(mu_sorted[k])
     err = abs(triv - 1.0)
     return FloquetResult(multipliers=mu_sorted, log_abs=log_abs, trivial=triv,
                          trivial_error=err, reliable=bool(pe.converged and err <= tol), tol=tol,
-                         method=FloquetMethod.PERIODIC_QZ, sweeps=pe.sweeps,
+                         method=used, sweeps=pe.sweeps,
                          converged=pe.converged, factors=nfac)
