@@ -30,6 +30,7 @@ import numpy as np
 from maglev_match.dynamics.cycles import CycleBranch, CyclePoint, cycle_branch
 from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
 from maglev_match.dynamics.system import System
+from maglev_match.reprs import compact_repr
 
 __all__ = ["CycleBound", "bounding_cycle"]
 
@@ -39,6 +40,8 @@ FAILED = ("newton failed", "step too small")
 @dataclass(frozen=True)
 class CycleBound:
     """What bounds the basin of a stable equilibrium at one parameter point."""
+
+    __repr__ = compact_repr
 
     case: str  # "unstable_cycle", "beyond_limits", "no_cycle"
     hopf: HopfPoint | None  # the Hopf point whose branch decided (or the nearest one)

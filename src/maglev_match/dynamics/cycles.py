@@ -61,6 +61,7 @@ from maglev_match.dynamics.continuation import (
 )
 from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 from maglev_match.dynamics.system import System
+from maglev_match.reprs import compact_repr
 
 __all__ = [
     "HopfStart",
@@ -120,6 +121,8 @@ class PeriodicOrbit:
     t_j + k/NCOL (t_{j+1} - t_j); time t = T s for the normalised time s.
     """
 
+    __repr__ = compact_repr
+
     mesh: np.ndarray
     ncol: int
     states: np.ndarray
@@ -167,6 +170,8 @@ class RestartState:
 class CyclePoint:
     """One converged cycle on a branch with its Floquet multipliers and read-outs."""
 
+    __repr__ = compact_repr
+
     value: float  # continuation parameter
     period: float  # s
     orbit: PeriodicOrbit
@@ -212,6 +217,8 @@ class SpecialPoint:
 @dataclass(frozen=True)
 class CycleBranch:
     """A branch of periodic orbits continued in one parameter from a Hopf point."""
+
+    __repr__ = compact_repr
 
     param: str
     hopf: HopfStart

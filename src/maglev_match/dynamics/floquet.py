@@ -66,6 +66,7 @@ import numpy as np
 import scipy.linalg
 
 from maglev_match.dynamics.collocation import _tables
+from maglev_match.reprs import compact_repr
 
 __all__ = [
     "FloquetMethod",
@@ -714,6 +715,8 @@ class FloquetResult:
     converged : the periodic QZ deflated every eigenvalue.
     factors : length of the periodic sequence the QZ worked on (after grouping).
     """
+
+    __repr__ = compact_repr
 
     multipliers: np.ndarray
     log_abs: np.ndarray
