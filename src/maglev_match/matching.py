@@ -329,7 +329,7 @@ def index_of_system(
                 hopf_distance=bound.hopf_distance, l1=hp.l1 if hp else None, gh_ratio=gh)
     if bound.hopf_distance is not None and bound.hopf_distance < NEAR_HOPF:
         warnings.append(
-            f"the design point is only {bound.hopf_distance:.1%} from the Hopf point at "
+            f"the design point is only {100 * bound.hopf_distance:.2g} % from the Hopf point at "
             f"{hp.param} = {hp.value:.6g}: a small change of the parameters loses stability")
     if gh is not None and gh > NEAR_GH:
         warnings.append(

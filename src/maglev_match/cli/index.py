@@ -82,7 +82,7 @@ def print_index(res, preset: str, config, set_) -> None:
     console.print(f"  beam: omega1 = {res.omega1:.5g} rad/s, sigma = {res.sigma:.4g} 1/kg")
     console.print(f"  equilibrium: {verdict}, max Re(lambda) = {res.max_real_part:.4g} 1/s")
     if res.hopf_param is not None:
-        dist = f" ({res.hopf_distance:.1%} away)" if res.hopf_distance is not None else ""
+        dist = f" ({100 * res.hopf_distance:.3g} % away)" if res.hopf_distance is not None else ""
         kind = ("subcritical" if (res.l1 or 0) > 0 else "supercritical") if res.l1 else ""
         console.print(f"  nearest Hopf point: {res.hopf_param} = {res.hopf_value:.6g}{dist}"
                       + (f", {kind}, l1 = {res.l1:.3g}" if kind else ""))
