@@ -249,4 +249,6 @@ def test_map_out_folder_gets_the_default_name(capsys, tmp_path):
     assert (tmp_path / "maps" / "map_omega1_sigma.nc").is_file()
     assert (tmp_path / "maps" / "map_omega1_sigma.png").is_file()
     tiles = [m.group(2) for m in map(PROGRESS_LINE.match, err.splitlines()) if m]
-    assert tiles[-1] == "1/1 tiles done"
+    # the tiles, then the map's self-check as its own stage
+    assert tiles[-2:] == ["1/1 tiles done",
+                          "spot check: recomputing sample points one by one ..."]

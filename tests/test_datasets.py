@@ -36,9 +36,7 @@ def test_the_writers_are_the_ones_checked_here():
     """If a new netCDF writer appears, this test names it so that it gets a check below."""
     writers = sorted(str(p.relative_to(SRC)) for p in SRC.rglob("*.py")
                      if re.search(r"\.to_netcdf\(", p.read_text()))
-    # io.py names to_netcdf in its usage example
-    assert writers == ["cli/cycles.py", "cli/hopf.py", "cli/index.py", "io.py",
-                       "simulation.py"], writers
+    assert writers == ["cli/cycles.py", "cli/hopf.py", "cli/index.py", "simulation.py"], writers
 
 
 def test_saved_cycle_branch_and_hopf_curve_are_self_describing(tmp_path):
