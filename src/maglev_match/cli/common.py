@@ -6,6 +6,7 @@ import json
 import math
 import os
 import re
+import sys
 import tempfile
 import warnings
 from collections.abc import Callable
@@ -28,7 +29,9 @@ from maglev_match.params import (
     load_params,
 )
 
-console = Console(soft_wrap=True)  # text lines are not hard-wrapped (pipes, logs)
+# Text lines are not hard-wrapped (pipes, logs); off a terminal, tables get 160 columns
+# instead of Rich's 80 so their numbers are not folded (a terminal keeps its own width).
+console = Console(soft_wrap=True, width=None if sys.stdout.isatty() else 160)
 console_err = Console(stderr=True)
 
 
