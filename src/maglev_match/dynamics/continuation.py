@@ -46,6 +46,7 @@ from typing import Any, Protocol
 import numpy as np
 
 __all__ = [
+    "signed_geometric_mean",
     "SpecialPointKind",
     "StopReason",
     "ContinuationOptions",
@@ -526,3 +527,18 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
     pt.kind = str(kind)
     return Event(name=name, kind=str(kind), step=step, point=pt, located=located,
                  value=float(g), terminal=bool(terminal(name)), s=sm)
+
+
+def signed_geometric_mean(r: np.ndarray) -> float:
+    """A test function value from many factors: the sign of prod r (r complex; non-real
+    factors come in conjugate pairs, so the product is real) with the geometric mean of |r|
+    as magnitude (no under/overflow). Used by the cycle (PD/NS/BP) and Hopf-curve (ZH/HH)
+    test functions, whose zeros are the zeros of a factor."""
+    if r.size == 0:
+        return 1.0
+    a = np.abs(r)
+    if np.any(a == 0):
+        return 0.0
+    real = np.abs(r.imag) <= 1e-9 * a
+    sign = float(np.prod(np.sign(r.real[real]))) if np.any(real) else 1.0
+    return sign * float(np.exp(np.mean(np.log(a))))

@@ -58,6 +58,7 @@ from maglev_match.dynamics.continuation import (
     SpecialPointKind,
     StopReason,
     continuation,
+    signed_geometric_mean,
 )
 from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 from maglev_match.dynamics.system import System
@@ -441,19 +442,6 @@ _MULTIPLIER_TESTS = {"PD": SpecialPointKind.PD, "NS": SpecialPointKind.NS,
                      "BP": SpecialPointKind.BP}
 
 
-def _signed_geometric_mean(r: np.ndarray) -> float:
-    """A real number with the sign of prod r (r complex; non-real factors come in
-    conjugate pairs) and magnitude the geometric mean of |r| (no under/overflow)."""
-    if r.size == 0:
-        return 1.0
-    a = np.abs(r)
-    if np.any(a == 0):
-        return 0.0
-    real = np.abs(r.imag) <= 1e-9 * a
-    sign = float(np.prod(np.sign(r.real[real]))) if np.any(real) else 1.0
-    return sign * float(np.exp(np.mean(np.log(a))))
-
-
 def multiplier_tests(mult: np.ndarray) -> dict[str, float]:
     """Test functions of the nontrivial multipliers mu_i (Kuznetsov 2004, sec. 10.3.2):
 
@@ -468,9 +456,9 @@ def multiplier_tests(mult: np.ndarray) -> dict[str, float]:
     i, j = np.triu_indices(mult.size, 1)
     prod = mult[i] * mult[j]
     return {
-        "PD": _signed_geometric_mean((mult + 1.0) / (1.0 + np.abs(mult))),
-        "NS": _signed_geometric_mean((prod - 1.0) / (1.0 + np.abs(prod))),
-        "BP": _signed_geometric_mean((mult - 1.0) / (1.0 + np.abs(mult))),
+        "PD": signed_geometric_mean((mult + 1.0) / (1.0 + np.abs(mult))),
+        "NS": signed_geometric_mean((prod - 1.0) / (1.0 + np.abs(prod))),
+        "BP": signed_geometric_mean((mult - 1.0) / (1.0 + np.abs(mult))),
     }
 
 

@@ -29,6 +29,7 @@ from maglev_match.dynamics.continuation import (
     SpecialPointKind,
     StopReason,
     continuation,
+    signed_geometric_mean,
 )
 from maglev_match.dynamics.hopf import (
     HopfPoint,
@@ -371,19 +372,6 @@ def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.triu_indices(n, 1)
 
 
-def _signed_mean(r: np.ndarray) -> float:
-    """Sign of prod r (real: non-real factors come in conjugate pairs) times the geometric
-    mean of |r|."""
-    if r.size == 0:
-        return 1.0
-    a = np.abs(r)
-    if np.any(a == 0):
-        return 0.0
-    real = np.abs(r.imag) <= 1e-9 * a
-    sign = float(np.prod(np.sign(r.real[real]))) if np.any(real) else 1.0
-    return sign * float(np.exp(np.mean(np.log(a))))
-
-
 class _HopfCurveProblem:
     """The Hopf defining system in two parameters as a problem for
     :func:`~maglev_match.dynamics.continuation.continuation`: scaled unknowns, Euclidean
@@ -435,10 +423,10 @@ class _HopfCurveProblem:
             l1, _, _, _, others = pinfo
             pt.info["others"] = others
             out["GH"] = l1
-            out["ZH"] = _signed_mean(others / (1.0 + np.abs(others)))
+            out["ZH"] = signed_geometric_mean(others / (1.0 + np.abs(others)))
             i, j = _pairs(others.size)
             sums = others[i] + others[j]
-            out["HH"] = _signed_mean(sums / (np.abs(others[i]) + np.abs(others[j])
+            out["HH"] = signed_geometric_mean(sums / (np.abs(others[i]) + np.abs(others[j])
                                              + 1e-300))
         return out
 
