@@ -271,3 +271,17 @@ def test_cli_hopf_curve_rejects_unknown_parameter(capsys):
     code, _, err = _run(capsys, "hopf-curve", "--params", "omega1,nonsense")
     assert code == 2
     assert "nonsense" in err
+
+
+def test_hopf_curve_module_imports_first_and_hopf_reexports_it():
+    """hopf_curve imports hopf; hopf re-exports the curve's names lazily, so either module
+    can be imported first in a fresh interpreter."""
+    import subprocess
+    import sys
+
+    code = ("import maglev_match.dynamics.hopf_curve as hc\n"
+            "from maglev_match.dynamics.hopf import HopfCurve, hopf_curve\n"
+            "assert HopfCurve is hc.HopfCurve and hopf_curve is hc.hopf_curve\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr

@@ -277,10 +277,9 @@ def hopf_curve(params: Params | str | None = None, *, names: tuple[str, str] | N
     Returns
     -------
     list of HopfCurve
-        One [`HopfCurve`][maglev_match.dynamics.hopf.HopfCurve] per branch.
+        One [`HopfCurve`][maglev_match.dynamics.hopf_curve.HopfCurve] per branch.
     """
-    from maglev_match.dynamics.hopf import hopf_curve as _hopf_curve
-    from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans
 
     base = resolve_params(params, **overrides)
     system = build_system(base, model)
@@ -303,34 +302,10 @@ def hopf_curve(params: Params | str | None = None, *, names: tuple[str, str] | N
         for v in lims[n]:
             _validate_value(base, n, v)
     a, b = lims[names[1]]
-    curves: list[HopfCurve] = []
-    for v2 in (a + f * (b - a) for f in (0.5, 0.1, 0.9)):
-        p = system.params_with(**{names[1]: v2})
-        scan = locate_hopf_points(system, names[0], *lims[names[0]], p, n_scan=n_scan)
-        for hp in scan.points:
-            if not hp.converged or _on_curve(hp, curves, names, system, lims):
-                continue
-            if progress is not None:
-                progress(f"continuing the Hopf curve through {names[0]} = {hp.value:.6g}, "
-                         f"{names[1]} = {v2:.6g}")
-            curves.append(_hopf_curve(system, names, hp, lims, max_step=max_step))
+    curves, _ = hopf_curves_from_scans(system, names, lims,
+                                       [a + f * (b - a) for f in (0.5, 0.1, 0.9)],
+                                       n_scan=n_scan, max_step=max_step, progress=progress)
     return curves
-
-
-def _on_curve(hp, curves, names, system, bounds) -> bool:
-    """Whether a Hopf point lies on a branch already computed (2 % of the plane and of
-    the frequency)."""
-    w = np.array([system.param(n, hp.p) for n in names])
-    span = np.array([bounds[n][1] - bounds[n][0] for n in names])
-    for c in curves:
-        v = c.values()
-        if len(v) == 0:
-            continue
-        d = np.min(np.hypot(*((v - w) / span).T)
-                   + np.abs(c.frequency() - hp.frequency) / hp.frequency)
-        if d < 2e-2:
-            return True
-    return False
 
 
 def cycle_branch(param: str = "omega1", params: Params | str | None = None, *,

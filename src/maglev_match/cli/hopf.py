@@ -37,12 +37,11 @@ from maglev_match.cli.common import (
 )
 from maglev_match.cli.models import resolve_model
 from maglev_match.dynamics.hopf import (
-    HopfCurve,
     HopfPoint,
-    hopf_curve,
     locate_hopf_points,
     stability_grid,
 )
+from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans
 from maglev_match.engineering import PARAM_HELP, engineering_hopf_points, is_engineering
 from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError
@@ -148,43 +147,6 @@ def _parse_ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _on_curve(hp: HopfPoint, curves: list[HopfCurve], names, system, bounds) -> bool:
-    """Whether a Hopf point lies on one of the branches already computed."""
-    w = np.array([system.param(n, hp.p) for n in names])
-    span = np.array([bounds[n][1] - bounds[n][0] for n in names])
-    for c in curves:
-        v = c.values()
-        if len(v) == 0:
-            continue
-        freq = c.frequency()
-        d = np.min(np.hypot(*((v - w) / span).T) + np.abs(freq - hp.frequency) / hp.frequency)
-        if d < 2e-2:
-            return True
-    return False
-
-
-def compute_hopf_curves(system, names: tuple[str, str], bounds, scan_values: list[float],
-                        n_scan: int = 100, max_step: float = 1e-2,
-                        progress=None) -> tuple[list[HopfCurve], list[str]]:
-    """Every branch of the Hopf curve met by scans of names[0] at the given values of
-    names[1]; each branch continued inside ``bounds``."""
-    curves: list[HopfCurve] = []
-    warnings: list[str] = []
-    lo, hi = bounds[names[0]]
-    for v2 in scan_values:
-        p = system.params_with(**{names[1]: v2})
-        scan = locate_hopf_points(system, names[0], lo, hi, p, n_scan=n_scan)
-        warnings.extend(scan.warnings)
-        for hp in scan.points:
-            if not hp.converged or _on_curve(hp, curves, names, system, bounds):
-                continue
-            if progress is not None:
-                progress(f"continuing the branch through {names[0]} = {hp.value:.6g}, "
-                         f"{names[1]} = {v2:.6g}")
-            curves.append(hopf_curve(system, names, hp, bounds, max_step=max_step))
-    return curves, warnings
-
-
 @app.command("hopf-curve")
 def hopf_curve_command(
     params_opt: Annotated[
@@ -250,7 +212,7 @@ def hopf_curve_command(
 
     with progress_report("hopf-curve") as prog:
         prog.stage(f"scanning {names[0]} at {len(scan_values)} values of {names[1]} ...")
-        curves, warnings = compute_hopf_curves(system, names, bounds, scan_values,
+        curves, warnings = hopf_curves_from_scans(system, names, bounds, scan_values,
                                                n_scan=scan_steps, max_step=max_step,
                                                progress=prog.stage)
         grid_data = None

@@ -38,16 +38,11 @@ from maglev_match.reprs import compact_repr
 __all__ = [
     "HopfPoint",
     "HopfScan",
-    "HopfCurvePoint",
-    "CodimTwoPoint",
-    "HopfCurve",
     "locate_hopf_points",
     "refine_hopf_point",
     "first_lyapunov_coefficient",
     "second_lyapunov_coefficient",
     "hopf_eigenvectors",
-    "hopf_curve",
-    "stability_grid",
 ]
 
 
@@ -450,19 +445,16 @@ def _with_warning(hp: HopfPoint, msg: str) -> HopfPoint:
 
 
 
-# ----------------------------------------------------------------------------------------
-# stability on a grid (independent check of the Hopf curve, shading of regions S/U)
-# ----------------------------------------------------------------------------------------
+# The curve lives in its own module (which imports this one); its names are re-exported
+# here lazily (PEP 562), so ``from maglev_match.dynamics.hopf import hopf_curve`` works and
+# either module can be imported first.
+_FROM_HOPF_CURVE = ("CodimTwoPoint", "HopfCurve", "HopfCurvePoint", "hopf_curve",
+                    "stability_grid")
 
 
+def __getattr__(name: str):
+    if name in _FROM_HOPF_CURVE:
+        from maglev_match.dynamics import hopf_curve as _hopf_curve_module
 
-
-# the curve and the normal forms live in their own modules; re-exported here so that
-# ``from maglev_match.dynamics.hopf import hopf_curve, first_lyapunov_coefficient`` works
-from maglev_match.dynamics.hopf_curve import (  # noqa: E402
-    CodimTwoPoint,
-    HopfCurve,
-    HopfCurvePoint,
-    hopf_curve,
-    stability_grid,
-)
+        return getattr(_hopf_curve_module, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

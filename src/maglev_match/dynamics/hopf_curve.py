@@ -14,7 +14,7 @@ solving; Bogdanov-Takens (BT) when the frequency falls to zero.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
 
@@ -39,6 +39,7 @@ from maglev_match.dynamics.hopf import (
     _pack,
     _unpack,
     _z_scale,
+    locate_hopf_points,
 )
 from maglev_match.dynamics.normal_forms import (
     _l1_from_forms,
@@ -53,6 +54,7 @@ __all__ = [
     "CodimTwoPoint",
     "HopfCurve",
     "hopf_curve",
+    "hopf_curves_from_scans",
     "stability_grid",
 ]
 
@@ -660,3 +662,51 @@ def stability_grid(
         mr[good] = np.linalg.eigvals(Js[good]).real.max(axis=1)
     return mr.reshape(V1.shape), ok.reshape(V1.shape)
 
+
+def _on_curve(hp, curves: Sequence[HopfCurve], names: tuple[str, str], system: System,
+              bounds: Mapping[str, tuple[float, float]]) -> bool:
+    """Whether a Hopf point lies on a branch already computed: within 2 % in the plane
+    (scaled by the bounds) plus the relative frequency difference."""
+    w = np.array([system.param(n, hp.p) for n in names])
+    span = np.array([bounds[n][1] - bounds[n][0] for n in names])
+    for c in curves:
+        v = c.values()
+        if len(v) == 0:
+            continue
+        d = np.min(np.hypot(*((v - w) / span).T)
+                   + np.abs(c.frequency() - hp.frequency) / hp.frequency)
+        if d < 2e-2:
+            return True
+    return False
+
+
+def hopf_curves_from_scans(
+    system: System,
+    names: tuple[str, str],
+    bounds: Mapping[str, tuple[float, float]],
+    scan_values: Sequence[float],
+    n_scan: int = 100,
+    max_step: float = 1e-2,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[list[HopfCurve], list[str]]:
+    """Every branch of the Hopf curve met by Hopf searches along names[0] (inside its
+    bounds) at the given values of names[1], each branch continued inside ``bounds`` and
+    computed once (a Hopf point on a branch already found starts no new one).
+
+    Returns the branches and the warnings of the searches.
+    """
+    curves: list[HopfCurve] = []
+    warnings: list[str] = []
+    lo, hi = bounds[names[0]]
+    for v2 in scan_values:
+        p = system.params_with(**{names[1]: v2})
+        scan = locate_hopf_points(system, names[0], lo, hi, p, n_scan=n_scan)
+        warnings.extend(scan.warnings)
+        for hp in scan.points:
+            if not hp.converged or _on_curve(hp, curves, names, system, bounds):
+                continue
+            if progress is not None:
+                progress(f"continuing the branch through {names[0]} = {hp.value:.6g}, "
+                         f"{names[1]} = {v2:.6g}")
+            curves.append(hopf_curve(system, names, hp, bounds, max_step=max_step))
+    return curves, warnings

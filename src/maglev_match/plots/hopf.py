@@ -47,7 +47,7 @@ def hopf_curve_figure(
 
     Parameters
     ----------
-    curves : branches of the Hopf curve (from :func:`~maglev_match.dynamics.hopf.hopf_curve`).
+    curves : branches of the Hopf curve (from :func:`~maglev_match.dynamics.hopf_curve.hopf_curve`).
     params : the parameter names (x axis, y axis).
     units : their units for the axis labels.
     grid : optional (values1, values2, max_real_part[len(values2), len(values1)]) of the
