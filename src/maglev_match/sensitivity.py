@@ -556,18 +556,40 @@ def system_sensitivity(system: System, index: MatchingIndex, p: np.ndarray | Non
 
 
 # ---------------------------------------------------------------------------------------
-# maglev layer: engineering parameters -> model A parameters, w0, h_max
+# maglev layer: engineering parameters -> model parameters, w0, h_max
 # ---------------------------------------------------------------------------------------
 _BEAM_OMEGA = ("L", "EI", "mbar")
 _BEAM_SIGMA = ("L", "mbar", "l", "k")
 _LIMITS = ("gap_max",)
+MODELS = ("unit", "vehicle")
 
 
-def engineering_names(params: Params) -> tuple[str, ...]:
-    """The parameters with a d chi / d p row: model A's own parameters, with omega1 and
-    sigma replaced by the beam's (L, EI, mbar, l, k) where they are derived, and gap_max."""
-    out = [n for n in MODEL_A_PARAMS if n not in ("omega1", "sigma")]
+def _model_names(model: str) -> tuple[str, ...]:
+    from maglev_match.params import ParameterError
+
+    if model == "unit":
+        return MODEL_A_PARAMS
+    if model == "vehicle":
+        from maglev_match.models.vehicle import PARAM_NAMES as MODEL_B_PARAMS
+
+        return MODEL_B_PARAMS
+    raise ParameterError("model", model, "must be 'unit' or 'vehicle'")
+
+
+def engineering_names(params: Params, model: str = "unit") -> tuple[str, ...]:
+    """The parameters with a d chi / d p row: the model's own parameters, with the derived
+    modal values replaced by the beam's where they are derived, and gap_max.
+
+    Model A: omega1 and sigma become L, EI, mbar, l, k. Model B (the vehicle): omega1
+    becomes EI (L and mbar are parameters of the vehicle model already: mode shapes and
+    modal masses); sigma does not enter model B.
+    """
     derived_w = "omega1" not in params.explicit
+    if model == "vehicle":
+        out = [n for n in _model_names(model) if n != "omega1"]
+        out.append("EI" if derived_w else "omega1")
+        return tuple(out + list(_LIMITS))
+    out = [n for n in _model_names(model) if n not in ("omega1", "sigma")]
     derived_s = "sigma" not in params.explicit
     beam = [n for n in ("L", "EI", "mbar", "l", "k")
             if (derived_w and n in _BEAM_OMEGA) or (derived_s and n in _BEAM_SIGMA)]
@@ -577,15 +599,26 @@ def engineering_names(params: Params) -> tuple[str, ...]:
     return tuple(out)
 
 
-def derived_map(params: Params) -> Callable:
-    """q (values of :func:`engineering_names`) -> (model A parameter vector, w0, h_max),
+def derived_map(params: Params, model: str = "unit") -> Callable:
+    """q (values of :func:`engineering_names`) -> (model parameter vector, w0, h_max),
     a JAX function so its Jacobian is exact. omega1 and sigma follow the simply supported
     Euler-Bernoulli beam unless set explicitly:
 
         omega1 = (pi / L)^2 sqrt(EI / mbar),
         sigma = 8 k L / (pi^2 l^2 mbar) sin^2(pi l / (2 L)),
-        w0 = sigma (m + M) g / omega1^2,  h_max = gap_max - c0.
+        h_max = gap_max - c0,
+
+    and w0 is the static mid-span deflection: model A w0 = sigma (m + M) g / omega1^2;
+    model B the modal sum (Clough & Penzien, Dynamics of Structures, ch. 18)
+
+        w0 = sum_n q_n* sin(n pi / 2),
+        q_n* = 2 / (mbar L omega_n^2) sum_j F sin(n pi x_j / L),  omega_n = n^2 omega1,
+
+    with F the weight per levitation point and x_j the six points' positions on the span.
     """
+    if model == "vehicle":
+        return _vehicle_derived_map("omega1" not in params.explicit, int(params.n_modes))
+    _model_names(model)
     return _derived_map("omega1" not in params.explicit, "sigma" not in params.explicit)
 
 
@@ -614,36 +647,88 @@ def _derived_map(derived_w: bool, derived_s: bool) -> Callable:
     return fmap
 
 
+@cache
+def _vehicle_derived_map(derived_w: bool, n_modes: int) -> Callable:
+    from maglev_match.models.vehicle import _geometry
+
+    model_names = _model_names("vehicle")
+    names = engineering_names(Params(**({} if derived_w else {"omega1": 100.0})), "vehicle")
+    pos = {n: i for i, n in enumerate(names)}
+    mid = jnp.sin(jnp.arange(1, n_modes + 1, dtype=jnp.float64) * jnp.pi / 2.0)
+
+    def fmap(q):
+        v = {n: q[i] for n, i in pos.items()}
+        if derived_w:
+            w1 = (jnp.pi / v["L"]) ** 2 * jnp.sqrt(v["EI"] / v["mbar"])
+        else:
+            w1 = v["omega1"]
+        full = dict(v, omega1=w1)
+        p = jnp.stack([full[n] for n in model_names])
+        q_static = _geometry(p, n_modes)[-1]
+        return p, q_static @ mid, v["gap_max"] - v["c0"]
+
+    return fmap
+
+
 def _values(params: Params, names: tuple[str, ...]) -> np.ndarray:
     return np.array([float(getattr(params, n)) for n in names])
 
 
 def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
-                      boundaries: bool = True) -> IndexSensitivity:
+                      boundaries: bool = True, model: str | None = None) -> IndexSensitivity:
     """d chi / d p, the elasticity (p / chi) d chi / d p, d margin / d p and the derivative of
-    the relative Hopf distance for every parameter of model A at ``params``.
+    the relative Hopf distance for every parameter of model A or model B at ``params``.
 
     Parameters
     ----------
     params : the parameter set.
     index : the index at ``params`` (computed, without simulation, when not given).
     boundaries : also solve, for each parameter, the value where the equilibrium changes
-        stability (Newton's method with the exact slope of max Re lambda).
+        stability (Newton's method with the exact slope of max Re lambda), and the first-order
+        cycle-limit boundary.
+    model : 'unit' (model A) or 'vehicle' (model B); default: the model of ``index``, else
+        'unit'. For the vehicle, h is the largest gap deviation over the six levitation
+        points on the cycle (the envelope theorem picks the point and the time of the
+        maximum) and w0 the static mid-span deflection (:func:`derived_map`).
 
     chi = h / w0 gives d chi = (dh - chi dw0) / w0 with dh = (dh/dp_model)(dp_model/dq) in
-    the cycle case and dh = d(gap_max - c0) in case ``no_cycle_within_limits``.
+    the cycle case and dh = d(gap_max - c0) in case ``no_cycle_within_limits``. No
+    simulation is needed: the vehicle's sensitivities take one implicit solve on its cycle.
     """
-    idx = index if index is not None else matching_index(params, simulate=False)
-    system = unit_system(params)
-    names = engineering_names(params)
+    model = model or (index.model if index is not None else "unit")
+    _model_names(model)
+    if model == "vehicle":
+        from threadpoolctl import threadpool_limits
+
+        # small dense blocks: BLAS threads only contend (as in matching_index)
+        with threadpool_limits(1):
+            return _index_sensitivity(params, index, boundaries, model)
+    return _index_sensitivity(params, index, boundaries, model)
+
+
+def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: bool,
+                       model: str) -> IndexSensitivity:
+    idx = index if index is not None else matching_index(params, model=model, simulate=False)
+    if model == "vehicle":
+        from maglev_match.models.vehicle import vehicle_system
+
+        system = vehicle_system(params)
+        search = {"omega1": search_ranges(params)["omega1"]}
+    else:
+        system = unit_system(params)
+        search = search_ranges(params)
+    names = engineering_names(params, model)
     q = _values(params, names)
-    fmap = derived_map(params)
+    fmap = derived_map(params, model)
     jac = _map_jacobian(fmap)
     (pm, w0, hmax), (Pq, W0q, Hq) = jac(jnp.asarray(q))
     Pq, W0q, Hq = np.asarray(Pq), np.asarray(W0q), np.asarray(Hq)
     w0 = float(w0)
     sens = system_sensitivity(system, idx, np.asarray(pm))
     warnings = list(sens.warnings)
+    if abs(w0 - idx.w0) > 1e-8 * abs(idx.w0):
+        warnings.append(f"the static deflection of the beam formulas, {w0:.10g} m, differs "
+                        f"from the index's w0 {idx.w0:.10g} m")
     status = sens.h_status
     if status == DerivativeStatus.RULE:
         dh_q = Hq
@@ -657,7 +742,7 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     dmargin = -(sens.dmax_re_dp @ Pq)
     ddist = None
     if sens.dhopf_dp is not None and idx.hopf_param is not None:
-        k = MODEL_A_PARAMS.index(idx.hopf_param)
+        k = system.param_index(idx.hopf_param)
         v = float(np.asarray(pm)[k])
         a = float(sens.hopf_value)
         # distance = |a - v| / |v| with a = alpha_H(p), v the design value of that parameter
@@ -672,7 +757,7 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     limit_b = np.full(len(names), np.nan)
     limit_note = ""
     if boundaries and status in (DerivativeStatus.EXACT, DerivativeStatus.RULE):
-        ext = branch_extremes(system, np.asarray(pm), search_ranges(params))
+        ext = branch_extremes(system, np.asarray(pm), search)
         if ext is None:
             limit_note = "no surrounding cycle without the gap limit either: no cycle-limit " \
                          "boundary"
