@@ -21,7 +21,7 @@ required); the design returned is the best re-checked one, or, when none meets t
 requirements, the best found with the status ``infeasible``.
 
 The numerics (grid, starts, SLSQP, re-check) are model-agnostic through the small
-:class:`Evaluator` interface; :class:`MaglevEvaluator` is model A's.
+:class:`Evaluator` interface; :class:`MaglevEvaluator` is the maglev models' (A and B).
 """
 
 from __future__ import annotations
@@ -175,14 +175,18 @@ class Evaluator(Protocol):
 
 
 class MaglevEvaluator:
-    """Model A at ``base`` with the parameters ``names`` set to the given values."""
+    """Model A (``model`` 'unit') or the vehicle ('vehicle') at ``base`` with the parameters
+    ``names`` set to the given values."""
 
-    def __init__(self, base: Params, names: Sequence[str]):
+    def __init__(self, base: Params, names: Sequence[str], model: str = "unit"):
         for n in names:
             if n not in FIELD_NAMES:
                 raise ParameterError("--vary", n, "unknown parameter")
+        if model not in ("unit", "vehicle"):
+            raise ParameterError("--model", model, "must be 'unit' or 'vehicle'")
         self.base = base
         self.names = tuple(names)
+        self.model = model
 
     def params(self, values: np.ndarray) -> Params:
         return self.base.replace(**{n: float(v) for n, v in zip(self.names, values,
@@ -191,28 +195,29 @@ class MaglevEvaluator:
     def evaluate(self, values: np.ndarray, gradient: bool) -> Evaluation:
         t = time.perf_counter()
         p = self.params(values)
-        idx = matching_index(p, simulate=False)
+        idx = matching_index(p, model=self.model, simulate=False)
         dchi = dmargin = None
         status = None
         if gradient:
-            sens = index_sensitivity(p, idx, boundaries=False)
+            sens = index_sensitivity(p, idx, boundaries=False, model=self.model)
             status = sens.status
-            dchi = np.array([_row(sens, n, "dchi") for n in self.names])
-            dmargin = np.array([_row(sens, n, "dmargin") for n in self.names])
+            dchi = np.array([_row(sens, n, "dchi", self.model) for n in self.names])
+            dmargin = np.array([_row(sens, n, "dmargin", self.model) for n in self.names])
         return Evaluation(np.asarray(values, float), idx.chi, -idx.max_real_part, dchi,
                           dmargin, status, idx, time.perf_counter() - t)
 
     def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex:
-        return matching_index(self.params(values), simulate=simulate)
+        return matching_index(self.params(values), model=self.model, simulate=simulate)
 
 
-def _row(sens, name: str, attr: str) -> float:
+def _row(sens, name: str, attr: str, model: str = "unit") -> float:
     """A derivative by a varied parameter; a derivable value (omega1, sigma) that is varied
     becomes explicit, so it has its own row."""
     try:
         return float(getattr(sens.row(name), attr))
     except KeyError:
-        raise ParameterError("--vary", name, "not a parameter of model A's index") from None
+        which = "model A's" if model == "unit" else "the vehicle's"
+        raise ParameterError("--vary", name, f"not a parameter of {which} index") from None
 
 
 class SystemEvaluator:
@@ -411,7 +416,7 @@ def optimise_design(
     Parameters
     ----------
     problem : varied parameters with bounds, the goal and the requirements.
-    evaluator : the model (:class:`MaglevEvaluator` for model A).
+    evaluator : the model (:class:`MaglevEvaluator` for model A or B).
     grid : points per varied parameter of the coarse start grid (default 9 for one
         parameter, 5 for two, 3 beyond).
     starts : optimiser runs, from the best grid points.

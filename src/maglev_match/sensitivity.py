@@ -561,6 +561,7 @@ def system_sensitivity(system: System, index: MatchingIndex, p: np.ndarray | Non
 _BEAM_OMEGA = ("L", "EI", "mbar")
 _BEAM_SIGMA = ("L", "mbar", "l", "k")
 _LIMITS = ("gap_max",)
+_FAR = 4.0  # boundaries are looked for within a factor 4 of the design value
 MODELS = ("unit", "vehicle")
 
 
@@ -779,6 +780,11 @@ def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: 
                 pick = deltas[np.argmin(np.abs(np.nan_to_num(deltas, nan=np.inf)), axis=0),
                               np.arange(len(names))]
             limit_b = q + pick
+            # a first-order extrapolation far from the design point says nothing: keep it
+            # within the factor the stability scan uses
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = limit_b / q
+            limit_b = np.where((ratio >= 1.0 / _FAR) & (ratio <= _FAR), limit_b, np.nan)
             limit_note = (f"along the cycle branch from the Hopf point to the design point the "
                           f"gap deviation reaches {hi_v * 1e3:.4g} mm (at {idx.hopf_param} = "
                           f"{hi_l:.5g}) and {lo_v * 1e3:.4g} mm (at {lo_l:.5g}); the limits are "
@@ -820,7 +826,7 @@ def _map_jacobian(fmap: Callable) -> Callable:
 
 
 def _stability_boundaries(system: System, fmap: Callable, q: np.ndarray,
-                          names: tuple[str, ...], factor: float = 4.0, n_scan: int = 33,
+                          names: tuple[str, ...], factor: float = _FAR, n_scan: int = 33,
                           max_iter: int = 30) -> dict[str, tuple[float | None, str]]:
     """For each parameter q_k alone: the nearest value where max Re lambda changes sign.
 
@@ -928,11 +934,13 @@ class SampledSpread:
 
 
 def _chunk_key(base: Params, scatter: Mapping[str, float], n: int, seed: int,
-               chunk: int) -> str:
+               chunk: int, model: str = "unit") -> str:
     import json
 
     d = {"base": {k: v for k, v in sorted(base.as_input_dict().items())},
          "scatter": dict(sorted(scatter.items())), "n": n, "seed": seed, "chunk": chunk}
+    if model != "unit":  # model A's key as before, so its existing checkpoints resume
+        d["model"] = model
     return json.dumps(d, sort_keys=True, default=float)
 
 
@@ -944,10 +952,10 @@ def _sample(base: Params, scatter: Mapping[str, float], n: int, seed: int) -> np
     return v0 * (1.0 + pct * rng.standard_normal((n, len(names))))
 
 
-def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarray
-             ) -> np.ndarray:
-    """chi (no simulation) for each row of sampled values; NaN where the index failed,
-    -inf where the sample breaks a parameter rule. Runs on a Dask worker."""
+def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarray,
+             model: str = "unit") -> np.ndarray:
+    """chi (no simulation) of ``model`` for each row of sampled values; NaN where the index
+    failed, -inf where the sample breaks a parameter rule. Runs on a Dask worker."""
     from maglev_match.params import ParameterError, make_params
 
     out = np.empty(len(rows))
@@ -958,7 +966,7 @@ def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarr
         except ParameterError:
             out[i] = -np.inf
             continue
-        out[i] = matching_index(p, simulate=False).chi
+        out[i] = matching_index(p, model=model, simulate=False).chi
     return out
 
 
@@ -966,12 +974,13 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
                    seed: int = 0, chunk: int = 16, resume: bool = False,
                    workers: int | None = None, scheduler: str | None = None,
                    progress: Callable[[int, int], None] | None = None,
-                   linearised: dict[str, Any] | None = None) -> SampledSpread:
+                   linearised: dict[str, Any] | None = None,
+                   model: str = "unit") -> SampledSpread:
     """The distribution of chi over ``n`` samples, chunk by chunk on Dask (the map's worker
     set-up: single-threaded processes, glibc's malloc thresholds), each chunk saved in
     ``checkpoint`` as it finishes; with ``resume`` finished chunks are reused (the chunk
     files carry a key of base, scatter, n and seed, so a resume cannot mix studies).
-    ``workers == 0`` computes in this process."""
+    ``workers == 0`` computes in this process; ``model`` 'unit' or 'vehicle'."""
     import os
     from pathlib import Path
 
@@ -984,7 +993,7 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
     folder = Path(checkpoint)
     folder.mkdir(parents=True, exist_ok=True)
     starts = list(range(0, n, chunk))
-    key0 = _chunk_key(base, scatter, n, seed, chunk)
+    key0 = _chunk_key(base, scatter, n, seed, chunk, model)
     keyfile = folder / "study.json"
     if resume and keyfile.exists() and keyfile.read_text() != key0:
         raise ParameterError("--resume", str(folder), "the checkpoint belongs to a different "
@@ -1004,7 +1013,7 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
     base_values = base.as_input_dict()
     if todo and workers == 0 and scheduler is None:
         for a in todo:
-            np.save(path(a), mc_chunk(base_values, names, X[a:a + chunk]))
+            np.save(path(a), mc_chunk(base_values, names, X[a:a + chunk], model))
             done += 1
             if progress:
                 progress(done, len(starts))
@@ -1033,8 +1042,8 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
         else:
             client = Client(scheduler)
         try:
-            futs = {client.submit(mc_chunk, base_values, names, X[a:a + chunk], pure=False,
-                                  retries=2): a for a in todo}
+            futs = {client.submit(mc_chunk, base_values, names, X[a:a + chunk], model,
+                                  pure=False, retries=2): a for a in todo}
             for fut in as_completed(futs):
                 np.save(path(futs[fut]), fut.result())
                 done += 1
