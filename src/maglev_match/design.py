@@ -209,6 +209,31 @@ class MaglevEvaluator:
     def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex:
         return matching_index(self.params(values), model=self.model, simulate=simulate)
 
+    def scan(self, problem: DesignProblem, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """chi and the margin on the start grid (``n`` points per varied parameter, in the
+        order of :func:`_grid`) by the design map's rows: one equilibrium scan and one cycle
+        continuation per Hopf point along each row (:func:`maglev_match.maps.compute_row`)
+        instead of a full index per point. Only for ranking starts: each start is then
+        evaluated by the full index. Model A with one or two varied parameters; None
+        otherwise (the caller falls back to full indices)."""
+        d = len(problem.variables)
+        if self.model != "unit" or d > 2:
+            return None
+        from maglev_match.maps import Axis, MapSpec, compute_row
+        from maglev_match.matching import cycle_settings
+
+        v = problem.variables
+        x = Axis(v[0].name, v[0].lo, v[0].hi, n)
+        # one varied parameter: a single row (the y "axis" holds gap_max at its value)
+        y = (Axis(v[1].name, v[1].lo, v[1].hi, n) if d == 2
+             else Axis("gap_max", self.base.gap_max, self.base.gap_max, 1))
+        spec = MapSpec(base=self.base.as_input_dict(), x=x, y=y, ntst=cycle_settings.ntst,
+                       ncol=cycle_settings.ncol, max_steps=cycle_settings.max_steps)
+        rows = [compute_row(spec, r) for r in range(y.count)]
+        chi = np.array([r["chi"] for r in rows]).T.reshape(-1)  # x outer, y inner
+        margin = -np.array([r["max_real_part"] for r in rows]).T.reshape(-1)
+        return chi, margin
+
 
 def _row(sens, name: str, attr: str, model: str = "unit") -> float:
     """A derivative by a varied parameter; a derivable value (omega1, sigma) that is varied
@@ -431,9 +456,15 @@ def optimise_design(
     say = progress or (lambda s: None)
     U = _grid(d, n)
     say(f"coarse grid: {len(U)} points")
-    evs = [cache(u, gradient=False) for u in U]
-    grid_chi = np.array([e.chi for e in evs])
-    margins = np.array([e.margin for e in evs])
+    scanned = getattr(evaluator, "scan", lambda *a: None)(problem, n)
+    if scanned is not None:  # the map's rows: cheap, for the starts only
+        grid_chi, margins = scanned
+        grid_values = [problem.values(u) for u in U]
+    else:
+        evs = [cache(u, gradient=False) for u in U]
+        grid_chi = np.array([e.chi for e in evs])
+        margins = np.array([e.margin for e in evs])
+        grid_values = [e.values for e in evs]
     finite = margins[np.isfinite(margins)]
     margin_scale = float(np.max(np.abs(finite))) if finite.size else 1.0
     margin_scale = margin_scale or 1.0
@@ -444,6 +475,7 @@ def optimise_design(
     reqs = list(problem.requirements)
     chi_req = next((r.bound for r in reqs if r.quantity == Quantity.CHI), None)
     candidates: list[Candidate] = []
+    cand_index: list[MatchingIndex] = []  # the full index of each candidate
     total_its = 0
 
     def objective_of(values: np.ndarray, chi: float) -> float:
@@ -453,9 +485,8 @@ def optimise_design(
 
     def rank_starts(chi_bound: float | None) -> list[int]:
         def score(i: int) -> tuple[float, float]:
-            e = evs[i]
-            short = _shortfall(_grad_reqs(reqs, chi_bound), e.chi, e.margin, None)
-            obj = objective_of(e.values, e.chi)
+            short = _shortfall(_grad_reqs(reqs, chi_bound), grid_chi[i], margins[i], None)
+            obj = objective_of(grid_values[i], grid_chi[i])
             sign = -1.0 if problem.goal == Goal.MAXIMIZE else 1.0
             return (short, sign * obj if math.isfinite(obj) else math.inf)
         order = sorted(range(len(U)), key=score)
@@ -520,6 +551,7 @@ def optimise_design(
                 cache.count += 1
                 chi_sim = full.chi_simulation
             short = _shortfall(problem.requirements, ev.chi, ev.margin, chi_sim)
+            cand_index.append(ev.index)
             candidates.append(Candidate(
                 start=problem.values(U[i]), values=ev.values, chi=ev.chi, margin=ev.margin,
                 chi_simulation=chi_sim, feasible=short == 0.0, violation=short,
@@ -551,8 +583,11 @@ def optimise_design(
         status = DesignStatus.INFEASIBLE
         message = ("no design in the box meets the requirements; the best found "
                    f"misses them by {best.violation:.1%}")
-    final = evaluator.recheck(best.values, simulate=problem.needs_simulation)
-    cache.count += 1
+    if problem.needs_simulation:
+        final = evaluator.recheck(best.values, simulate=True)
+        cache.count += 1
+    else:  # the candidate's own evaluation is already the full index at these values
+        final = cand_index[next(i for i, c in enumerate(candidates) if c is best)]
     active = _active(problem, best, final, chi_bound)
     return DesignResult(
         problem=problem, status=status,
