@@ -171,3 +171,20 @@ def test_cli_vehicle_design_meets_its_requirement_and_1pct_cheaper_does_not(caps
     again = matching_index(p, model="vehicle", simulate=False)
     assert again.chi >= 10.0 and again.case == "unstable_cycle"
     assert matching_index(p.replace(kD=0.99 * kd), model="vehicle", simulate=False).chi < 10.0
+
+
+def test_report_section_shows_the_vehicle_table(cyc, tmp_path):
+    from dataclasses import replace
+
+    from maglev_match.report import ReportContext, ReportSettings, section_sensitivity
+
+    p, sens = cyc
+    settings = replace(ReportSettings.quick_settings(), include_vehicle=True)
+    ctx = ReportContext(out_dir=tmp_path, settings=settings,
+                        cache={"matching": matching_index(p, simulate=False),
+                               "matching_vehicle": sens.index})
+    html, files, data = section_sensitivity(p, ctx)
+    assert "The full vehicle (model B)" in html and files
+    assert data["vehicle"]["status"] == "exact" and data["unit"]["case"] == "unstable_cycle"
+    rows = {r["name"]: r["dchi"] for r in data["vehicle"]["rows"]}
+    assert rows["kD"] == pytest.approx(sens.dchi("kD"), rel=1e-12)
