@@ -346,8 +346,8 @@ def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str,
 
 
 def branch_extremes(system: System, p: np.ndarray, search: Mapping[str, tuple[float, float]],
-                    observable: str = "gap_deviation") -> dict[str, tuple[float, np.ndarray,
-                                                                        float]] | None:
+                    observable: str = "gap_deviation", bound: Any = None
+                    ) -> dict[str, tuple[float, np.ndarray, float]] | None:
     """The largest and the smallest value of ``observable`` over the whole branch of the
     bounding cycle, from its Hopf point to the design point (continued without limits), and
     their derivatives by every parameter.
@@ -360,14 +360,13 @@ def branch_extremes(system: System, p: np.ndarray, search: Mapping[str, tuple[fl
     parameters then follows from the envelope theorem (d/d lambda = 0 there).
 
     Returns {"max": (value, d/dp, lambda*), "min": (...)} or None when no surrounding cycle
-    is found without limits either.
+    is found without limits either. ``bound``: the unlimited
+    :func:`~maglev_match.dynamics.basin.bounding_cycle` result, when already computed
+    (:func:`unlimited_bound`).
     """
-    from maglev_match.dynamics.basin import bounding_cycle
     from maglev_match.dynamics.cycles import correct_cycle
-    from maglev_match.matching import cycle_settings as cs
 
-    bound = bounding_cycle(system, p, search, limits=None, ntst=cs.ntst, ncol=cs.ncol,
-                           max_steps=cs.max_steps)
+    bound = bound if bound is not None else unlimited_bound(system, p, search)
     if bound.case != "unstable_cycle" or not bound.branches:
         return None
     br = bound.branches[-1]
@@ -398,6 +397,66 @@ def branch_extremes(system: System, p: np.ndarray, search: Mapping[str, tuple[fl
         val, dval, _, _ = _cycle_h_derivative(system, pt.orbit, observable, sign)
         out[key] = (val, dval, float(pt.value))
     return out
+
+
+def unlimited_bound(system: System, p: np.ndarray,
+                    search: Mapping[str, tuple[float, float]]) -> Any:
+    """The bounding-cycle search of the index with the gap limits off (index settings)."""
+    from maglev_match.dynamics.basin import bounding_cycle
+    from maglev_match.matching import cycle_settings as cs
+
+    return bounding_cycle(system, np.asarray(p, float), search, limits=None, ntst=cs.ntst,
+                          ncol=cs.ncol, max_steps=cs.max_steps)
+
+
+def limit_contact(system: System, bound: Any, hi: float, lo: float,
+                  observable: str = "gap_deviation"
+                  ) -> tuple[float, np.ndarray, str, float] | None:
+    """Where the cycle branch of the nearest Hopf point first reaches a gap limit (``hi``
+    above, ``lo`` below, as gap deviations in m), when that branch cannot be continued to the
+    design point even without limits (e.g. the force is singular at gap 0, so the branch
+    ends at the lower limit). The contact lambda_c solves E(lambda) = limit, with E the
+    extreme of ``observable`` on the cycle at the branch parameter lambda (Brent's method
+    on cycles re-solved by :func:`~maglev_match.dynamics.cycles.correct_cycle`).
+
+    Returns (lambda_c, dE/dp at the contact for every parameter, "max" or "min", the
+    sign +1 / -1 of the extreme) or None when the branch never reaches a limit."""
+    from maglev_match.dynamics.cycles import correct_cycle
+
+    if bound.hopf is None:
+        return None
+    brs = [b for b in bound.branches if b.points and b.points[0].value is not None]
+    br = next((b for b in brs if abs(b.points[0].value - bound.hopf.value)
+               <= 1e-6 * max(abs(bound.hopf.value), 1.0)), brs[0] if brs else None)
+    if br is None:
+        return None
+    pts = [pt for pt in br.points if pt.converged]
+    j = next((i for i, pt in enumerate(pts)
+              if pt.extrema[observable][0] >= hi or pt.extrema[observable][1] <= lo), None)
+    if not j:  # never reached, or already beyond at the Hopf point
+        return None
+    key, sign, col, limit = (("max", 1.0, 0, hi) if pts[j].extrema[observable][0] >= hi
+                             else ("min", -1.0, 1, lo))
+    seen: dict[float, Any] = {}
+
+    def excess(lam: float) -> float:
+        r = correct_cycle(system, pts[j - 1].orbit, br.param, lam, observables=[observable])
+        if not r.converged or r.point is None:
+            raise ArithmeticError(f"cycle not re-solved at {br.param} = {lam:.8g}")
+        seen[lam] = r.point
+        return sign * (r.point.extrema[observable][col] - limit)
+
+    try:
+        lam = scipy.optimize.brentq(excess, pts[j - 1].value, pts[j].value,
+                                    xtol=1e-12 * max(abs(pts[j].value), 1.0))
+    except (ArithmeticError, ValueError):
+        return None
+    pt = seen.get(lam) or correct_cycle(system, pts[j - 1].orbit, br.param, lam,
+                                        observables=[observable]).point
+    if pt is None:
+        return None
+    _, dval, _, _ = _cycle_h_derivative(system, pt.orbit, observable, sign)
+    return float(lam), sign * dval, key, sign
 
 
 @cache
@@ -758,10 +817,40 @@ def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: 
     limit_b = np.full(len(names), np.nan)
     limit_note = ""
     if boundaries and status in (DerivativeStatus.EXACT, DerivativeStatus.RULE):
-        ext = branch_extremes(system, np.asarray(pm), search)
-        if ext is None:
+        ubound = unlimited_bound(system, np.asarray(pm), search)
+        ext = branch_extremes(system, np.asarray(pm), search, bound=ubound)
+        lo_lim = params.gap_min - params.c0
+        contact = (limit_contact(system, ubound, float(hmax), lo_lim)
+                   if ext is None and status == DerivativeStatus.RULE else None)
+        if ext is None and contact is None:
             limit_note = "no surrounding cycle without the gap limit either: no cycle-limit " \
                          "boundary"
+        elif ext is None:
+            # the branch cannot reach the design point: the case changes where its contact
+            # with the limit, lambda_c(q), meets the design value of the branch parameter.
+            # E(lambda_c, p) = limit(q)  =>  d lambda_c / dq = -(dE/dp Pq - dlimit/dq) / E_lam
+            lam_c, dE, which, _ = contact
+            k = system.param_index(idx.hopf_param)
+            e_lam = dE[k]
+            dE_other = dE.copy()
+            dE_other[k] = 0.0
+            c0_k = np.array([1.0 if n == "c0" else 0.0 for n in names])
+            dlimit = Hq if which == "max" else -c0_k
+            dlam_c = -(dE_other @ Pq - dlimit) / e_lam
+            G = lam_c - float(np.asarray(pm)[k])
+            dG = dlam_c - Pq[k]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                pick = np.where(dG != 0, -G / dG, np.nan)
+            limit_b = q + pick
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = limit_b / q
+            limit_b = np.where((ratio >= 1.0 / _FAR) & (ratio <= _FAR), limit_b, np.nan)
+            lim_v = float(hmax) if which == "max" else lo_lim
+            limit_note = (f"the cycle branch from the Hopf point at {idx.hopf_param} = "
+                          f"{idx.hopf_value:.6g} reaches the gap-deviation limit "
+                          f"{lim_v * 1e3:.4g} mm at {idx.hopf_param} = {lam_c:.6g} and cannot "
+                          "be continued to the design point; 'cycle-limit boundary': where "
+                          "that contact meets the design point, to first order")
         else:
             (hi_v, hi_d, hi_l), (lo_v, lo_d, lo_l) = ext["max"], ext["min"]
             c0_k = np.array([1.0 if n == "c0" else 0.0 for n in names])
