@@ -47,7 +47,11 @@ The maglev layer (:func:`index_sensitivity`) chains these model-parameter deriva
 exact derivatives of the derived values omega1 = (pi/L)^2 sqrt(EI/mbar),
 sigma = 8 k L / (pi^2 l^2 mbar) sin^2(pi l / (2 L)) and w0 = sigma (m + M) g / omega1^2
 (Euler-Bernoulli beam, simply supported), so that engineering parameters (L, EI, mbar, l, k)
-and the gains (kP, kD, ke, xi0, omega0) all get d chi / d p.
+and the gains (kP, kD, ke, xi0, omega0) all get d chi / d p. For the full vehicle (model B)
+the beam enters through the modal frequencies omega_n = n^2 omega1 of its modes and through
+L and mbar directly (mode shapes at the six levitation points, modal mass); w0 is the static
+mid-span deflection sum_n q_n* sin(n pi / 2), differentiated through the same formulas
+(:func:`derived_map`), and h is the largest gap deviation over the six points on the cycle.
 """
 
 from __future__ import annotations
@@ -411,29 +415,34 @@ def unlimited_bound(system: System, p: np.ndarray,
 
 def limit_contact(system: System, bound: Any, hi: float, lo: float,
                   observable: str = "gap_deviation"
-                  ) -> tuple[float, np.ndarray, str, float] | None:
-    """Where the cycle branch of the nearest Hopf point first reaches a gap limit (``hi``
-    above, ``lo`` below, as gap deviations in m), when that branch cannot be continued to the
+                  ) -> tuple[float, np.ndarray, str, bool] | None:
+    """Where a cycle branch first reaches a gap limit (``hi`` above, ``lo`` below, as gap
+    deviations in m) between its Hopf point and the design point (the first such branch, in
+    the index's order: nearest Hopf point first), when no branch can be continued to the
     design point even without limits (e.g. the force is singular at gap 0, so the branch
     ends at the lower limit). The contact lambda_c solves E(lambda) = limit, with E the
     extreme of ``observable`` on the cycle at the branch parameter lambda (Brent's method
     on cycles re-solved by :func:`~maglev_match.dynamics.cycles.correct_cycle`).
 
-    Returns (lambda_c, dE/dp at the contact for every parameter, "max" or "min", the
-    sign +1 / -1 of the extreme) or None when the branch never reaches a limit."""
+    Returns (lambda_c, dE/dp at the contact for every parameter, "max" or "min", whether
+    the contact was solved (False: bracketed between two branch points, see below)) or None
+    when no branch reaches a limit between its Hopf point and the design point."""
     from maglev_match.dynamics.cycles import correct_cycle
 
-    if bound.hopf is None:
-        return None
-    brs = [b for b in bound.branches if b.points and b.points[0].value is not None]
-    br = next((b for b in brs if abs(b.points[0].value - bound.hopf.value)
-               <= 1e-6 * max(abs(bound.hopf.value), 1.0)), brs[0] if brs else None)
+    br = pts = j = None
+    for b in bound.branches:  # in the order of the index: nearest Hopf point first
+        cand = [pt for pt in b.points if pt.converged]
+        if len(cand) < 2:
+            continue
+        lam_h, design = cand[0].value, bound.design[b.param]
+        jj = next((i for i, pt in enumerate(cand)
+                   if pt.extrema[observable][0] >= hi or pt.extrema[observable][1] <= lo), None)
+        # only a contact between the Hopf point and the design point decides the case
+        if jj and (cand[jj].value - lam_h) * (design - lam_h) > 0 and \
+                abs(cand[jj].value - lam_h) <= abs(design - lam_h):
+            br, pts, j = b, cand, jj
+            break
     if br is None:
-        return None
-    pts = [pt for pt in br.points if pt.converged]
-    j = next((i for i, pt in enumerate(pts)
-              if pt.extrema[observable][0] >= hi or pt.extrema[observable][1] <= lo), None)
-    if not j:  # never reached, or already beyond at the Hopf point
         return None
     key, sign, col, limit = (("max", 1.0, 0, hi) if pts[j].extrema[observable][0] >= hi
                              else ("min", -1.0, 1, lo))
@@ -449,14 +458,22 @@ def limit_contact(system: System, bound: Any, hi: float, lo: float,
     try:
         lam = scipy.optimize.brentq(excess, pts[j - 1].value, pts[j].value,
                                     xtol=1e-12 * max(abs(pts[j].value), 1.0))
+        pt = seen.get(lam) or correct_cycle(system, pts[j - 1].orbit, br.param, lam,
+                                            observables=[observable]).point
+        solved = pt is not None
     except (ArithmeticError, ValueError):
-        return None
-    pt = seen.get(lam) or correct_cycle(system, pts[j - 1].orbit, br.param, lam,
-                                        observables=[observable]).point
-    if pt is None:
-        return None
+        solved = False
+    if not solved:
+        # at the singular gap 0 the re-solved cycles do not bracket the contact (the
+        # extreme there moves with the mesh by more than the step between branch points):
+        # the contact is taken between the two branch points, by linear interpolation of
+        # the extreme, with the derivative of the last cycle inside the limit
+        e0, e1 = (pts[j - 1].extrema[observable][col], pts[j].extrema[observable][col])
+        t = (limit - e0) / (e1 - e0) if e1 != e0 else 1.0
+        lam = pts[j - 1].value + min(max(t, 0.0), 1.0) * (pts[j].value - pts[j - 1].value)
+        pt = pts[j - 1]
     _, dval, _, _ = _cycle_h_derivative(system, pt.orbit, observable, sign)
-    return float(lam), sign * dval, key, sign
+    return float(lam), dval, key, solved
 
 
 @cache
@@ -829,7 +846,7 @@ def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: 
             # the branch cannot reach the design point: the case changes where its contact
             # with the limit, lambda_c(q), meets the design value of the branch parameter.
             # E(lambda_c, p) = limit(q)  =>  d lambda_c / dq = -(dE/dp Pq - dlimit/dq) / E_lam
-            lam_c, dE, which, _ = contact
+            lam_c, dE, which, solved = contact
             k = system.param_index(idx.hopf_param)
             e_lam = dE[k]
             dE_other = dE.copy()
@@ -849,8 +866,11 @@ def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: 
             limit_note = (f"the cycle branch from the Hopf point at {idx.hopf_param} = "
                           f"{idx.hopf_value:.6g} reaches the gap-deviation limit "
                           f"{lim_v * 1e3:.4g} mm at {idx.hopf_param} = {lam_c:.6g} and cannot "
-                          "be continued to the design point; 'cycle-limit boundary': where "
-                          "that contact meets the design point, to first order")
+                          "be continued to the design point"
+                          + ("" if solved else " (contact bracketed between two branch points, "
+                             "not solved: the cycle is near-singular at gap 0)")
+                          + "; 'cycle-limit boundary': where that contact meets the design "
+                          "point, to first order")
         else:
             (hi_v, hi_d, hi_l), (lo_v, lo_d, lo_l) = ext["max"], ext["min"]
             c0_k = np.array([1.0 if n == "c0" else 0.0 for n in names])
