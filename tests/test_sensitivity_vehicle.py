@@ -101,6 +101,7 @@ def test_vehicle_margin_derivative_and_spread(cyc):
     assert spread["sd"] == pytest.approx(expect, rel=1e-14)
 
 
+@pytest.mark.slow
 def test_vehicle_case_rule_point_moves_only_through_w0_and_gap_max():
     # a smaller gap range: the same cycle (5.34 mm) no longer fits, the rule sets h
     p = CYCLE_POINT.replace(gap_max=0.012)
@@ -156,6 +157,7 @@ def test_cli_vehicle_sensitivity_text_and_json(capsys, tmp_path):
     assert data["spread"]["sd"] == pytest.approx(expect, rel=1e-12)
 
 
+@pytest.mark.slow
 def test_cli_vehicle_design_meets_its_requirement_and_1pct_cheaper_does_not(capsys, tmp_path):
     # chi rises with kD at the cycle point (d chi / d kD > 0) until the cycle reaches the gap
     # limit; the least kD with chi >= 10 is an interior optimum with the chi constraint active
