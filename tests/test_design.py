@@ -98,7 +98,8 @@ def test_parsing_and_problem_errors():
     (["design", "--vary", "EI=5e9:4e10", "--require", "chi>=5"], "--minimize/--maximize"),
     (["design", "--vary", "EI=-1:4e10", "--minimize", "EI"], "EI"),
     (["design", "--vary", "EI=5e9:4e10", "--minimize", "kD"], "--minimize"),
-    (["sensitivity", "--model", "vehicle"], "--model"),
+    (["sensitivity", "--model", "tram"], "--model"),
+    (["design", "--vary", "EI=5e9:4e10", "--minimize", "EI", "--model", "tram"], "--model"),
     (["sensitivity", "--scatter", "EI"], "--scatter"),
 ])
 def test_cli_user_errors_exit_2(capsys, args, field):

@@ -213,3 +213,19 @@ def test_model_a_derivative_of_the_polynomial_maximum_is_exact_to_1e6(soft):
     sm = index_sensitivity(p.replace(kD=p.kD - d), boundaries=False)
     fd = (sp.system.h / sp.index.w0 - sm.system.h / sm.index.w0) / (2 * d)
     assert sens.dchi("kD") == pytest.approx(fd, rel=1e-6)
+
+
+def test_case_rule_boundary_from_the_branch_contact_with_the_gap_limit():
+    # the cheapest soft beam of the design problem: the cycle branch from the Hopf point in
+    # sigma reaches gap 0 before the design sigma, and cannot be continued past it even
+    # without limits; the case boundary in sigma (the branch parameter) is that contact
+    base = load_preset("turnout-soft").replace(EI=8.2e9)
+    p = base.replace(sigma=base.sigma)  # sigma explicit: it has a row
+    sens = index_sensitivity(p, boundaries=True)
+    assert sens.status == DerivativeStatus.RULE
+    assert "reaches the gap-deviation limit" in sens.limit_boundary_note
+    s_c = sens.row("sigma").limit_boundary
+    assert p.sigma < s_c < sens.index.hopf_value
+    above = matching_index(p.replace(sigma=1.01 * s_c), simulate=False)
+    below = matching_index(p.replace(sigma=0.99 * s_c), simulate=False)
+    assert above.case == "unstable_cycle" and below.case == "no_cycle_within_limits"

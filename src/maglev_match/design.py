@@ -21,7 +21,7 @@ required); the design returned is the best re-checked one, or, when none meets t
 requirements, the best found with the status ``infeasible``.
 
 The numerics (grid, starts, SLSQP, re-check) are model-agnostic through the small
-:class:`Evaluator` interface; :class:`MaglevEvaluator` is model A's.
+:class:`Evaluator` interface; :class:`MaglevEvaluator` is the maglev models' (A and B).
 """
 
 from __future__ import annotations
@@ -175,14 +175,18 @@ class Evaluator(Protocol):
 
 
 class MaglevEvaluator:
-    """Model A at ``base`` with the parameters ``names`` set to the given values."""
+    """Model A (``model`` 'unit') or the vehicle ('vehicle') at ``base`` with the parameters
+    ``names`` set to the given values."""
 
-    def __init__(self, base: Params, names: Sequence[str]):
+    def __init__(self, base: Params, names: Sequence[str], model: str = "unit"):
         for n in names:
             if n not in FIELD_NAMES:
                 raise ParameterError("--vary", n, "unknown parameter")
+        if model not in ("unit", "vehicle"):
+            raise ParameterError("--model", model, "must be 'unit' or 'vehicle'")
         self.base = base
         self.names = tuple(names)
+        self.model = model
 
     def params(self, values: np.ndarray) -> Params:
         return self.base.replace(**{n: float(v) for n, v in zip(self.names, values,
@@ -191,28 +195,54 @@ class MaglevEvaluator:
     def evaluate(self, values: np.ndarray, gradient: bool) -> Evaluation:
         t = time.perf_counter()
         p = self.params(values)
-        idx = matching_index(p, simulate=False)
+        idx = matching_index(p, model=self.model, simulate=False)
         dchi = dmargin = None
         status = None
         if gradient:
-            sens = index_sensitivity(p, idx, boundaries=False)
+            sens = index_sensitivity(p, idx, boundaries=False, model=self.model)
             status = sens.status
-            dchi = np.array([_row(sens, n, "dchi") for n in self.names])
-            dmargin = np.array([_row(sens, n, "dmargin") for n in self.names])
+            dchi = np.array([_row(sens, n, "dchi", self.model) for n in self.names])
+            dmargin = np.array([_row(sens, n, "dmargin", self.model) for n in self.names])
         return Evaluation(np.asarray(values, float), idx.chi, -idx.max_real_part, dchi,
                           dmargin, status, idx, time.perf_counter() - t)
 
     def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex:
-        return matching_index(self.params(values), simulate=simulate)
+        return matching_index(self.params(values), model=self.model, simulate=simulate)
+
+    def scan(self, problem: DesignProblem, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """chi and the margin on the start grid (``n`` points per varied parameter, in the
+        order of :func:`_grid`) by the design map's rows: one equilibrium scan and one cycle
+        continuation per Hopf point along each row (:func:`maglev_match.maps.compute_row`)
+        instead of a full index per point. Only for ranking starts: each start is then
+        evaluated by the full index. Model A with one or two varied parameters; None
+        otherwise (the caller falls back to full indices)."""
+        d = len(problem.variables)
+        if self.model != "unit" or d > 2:
+            return None
+        from maglev_match.maps import Axis, MapSpec, compute_row
+        from maglev_match.matching import cycle_settings
+
+        v = problem.variables
+        x = Axis(v[0].name, v[0].lo, v[0].hi, n)
+        # one varied parameter: a single row (the y "axis" holds gap_max at its value)
+        y = (Axis(v[1].name, v[1].lo, v[1].hi, n) if d == 2
+             else Axis("gap_max", self.base.gap_max, self.base.gap_max, 1))
+        spec = MapSpec(base=self.base.as_input_dict(), x=x, y=y, ntst=cycle_settings.ntst,
+                       ncol=cycle_settings.ncol, max_steps=cycle_settings.max_steps)
+        rows = [compute_row(spec, r) for r in range(y.count)]
+        chi = np.array([r["chi"] for r in rows]).T.reshape(-1)  # x outer, y inner
+        margin = -np.array([r["max_real_part"] for r in rows]).T.reshape(-1)
+        return chi, margin
 
 
-def _row(sens, name: str, attr: str) -> float:
+def _row(sens, name: str, attr: str, model: str = "unit") -> float:
     """A derivative by a varied parameter; a derivable value (omega1, sigma) that is varied
     becomes explicit, so it has its own row."""
     try:
         return float(getattr(sens.row(name), attr))
     except KeyError:
-        raise ParameterError("--vary", name, "not a parameter of model A's index") from None
+        which = "model A's" if model == "unit" else "the vehicle's"
+        raise ParameterError("--vary", name, f"not a parameter of {which} index") from None
 
 
 class SystemEvaluator:
@@ -411,7 +441,7 @@ def optimise_design(
     Parameters
     ----------
     problem : varied parameters with bounds, the goal and the requirements.
-    evaluator : the model (:class:`MaglevEvaluator` for model A).
+    evaluator : the model (:class:`MaglevEvaluator` for model A or B).
     grid : points per varied parameter of the coarse start grid (default 9 for one
         parameter, 5 for two, 3 beyond).
     starts : optimiser runs, from the best grid points.
@@ -426,9 +456,15 @@ def optimise_design(
     say = progress or (lambda s: None)
     U = _grid(d, n)
     say(f"coarse grid: {len(U)} points")
-    evs = [cache(u, gradient=False) for u in U]
-    grid_chi = np.array([e.chi for e in evs])
-    margins = np.array([e.margin for e in evs])
+    scanned = getattr(evaluator, "scan", lambda *a: None)(problem, n)
+    if scanned is not None:  # the map's rows: cheap, for the starts only
+        grid_chi, margins = scanned
+        grid_values = [problem.values(u) for u in U]
+    else:
+        evs = [cache(u, gradient=False) for u in U]
+        grid_chi = np.array([e.chi for e in evs])
+        margins = np.array([e.margin for e in evs])
+        grid_values = [e.values for e in evs]
     finite = margins[np.isfinite(margins)]
     margin_scale = float(np.max(np.abs(finite))) if finite.size else 1.0
     margin_scale = margin_scale or 1.0
@@ -439,6 +475,7 @@ def optimise_design(
     reqs = list(problem.requirements)
     chi_req = next((r.bound for r in reqs if r.quantity == Quantity.CHI), None)
     candidates: list[Candidate] = []
+    cand_index: list[MatchingIndex] = []  # the full index of each candidate
     total_its = 0
 
     def objective_of(values: np.ndarray, chi: float) -> float:
@@ -448,9 +485,8 @@ def optimise_design(
 
     def rank_starts(chi_bound: float | None) -> list[int]:
         def score(i: int) -> tuple[float, float]:
-            e = evs[i]
-            short = _shortfall(_grad_reqs(reqs, chi_bound), e.chi, e.margin, None)
-            obj = objective_of(e.values, e.chi)
+            short = _shortfall(_grad_reqs(reqs, chi_bound), grid_chi[i], margins[i], None)
+            obj = objective_of(grid_values[i], grid_chi[i])
             sign = -1.0 if problem.goal == Goal.MAXIMIZE else 1.0
             return (short, sign * obj if math.isfinite(obj) else math.inf)
         order = sorted(range(len(U)), key=score)
@@ -515,6 +551,7 @@ def optimise_design(
                 cache.count += 1
                 chi_sim = full.chi_simulation
             short = _shortfall(problem.requirements, ev.chi, ev.margin, chi_sim)
+            cand_index.append(ev.index)
             candidates.append(Candidate(
                 start=problem.values(U[i]), values=ev.values, chi=ev.chi, margin=ev.margin,
                 chi_simulation=chi_sim, feasible=short == 0.0, violation=short,
@@ -546,8 +583,11 @@ def optimise_design(
         status = DesignStatus.INFEASIBLE
         message = ("no design in the box meets the requirements; the best found "
                    f"misses them by {best.violation:.1%}")
-    final = evaluator.recheck(best.values, simulate=problem.needs_simulation)
-    cache.count += 1
+    if problem.needs_simulation:
+        final = evaluator.recheck(best.values, simulate=True)
+        cache.count += 1
+    else:  # the candidate's own evaluation is already the full index at these values
+        final = cand_index[next(i for i, c in enumerate(candidates) if c is best)]
     active = _active(problem, best, final, chi_bound)
     return DesignResult(
         problem=problem, status=status,

@@ -759,6 +759,7 @@ def section_matching(params: Params, ctx: ReportContext) -> tuple[str, list[Path
     data = mi.as_json() if hasattr(mi, "as_json") else mi
     if ctx.settings.include_vehicle:
         mv = matching_index(params, model="vehicle", simulate=not ctx.settings.quick)
+        ctx.cache["matching_vehicle"] = mv  # the sensitivity section differentiates it
         parts.append("<h3>Model A and the full vehicle (model B) on the same beam</h3>")
         parts.append(table_html(["quantity", "model A (one unit)", "model B (full vehicle)"],
                                 side_by_side_rows(mi, mv), "matching-side-by-side"))
@@ -804,7 +805,24 @@ def section_sensitivity(params: Params, ctx: ReportContext) -> tuple[str, list[P
     html, files = save_and_embed(tornado_figure(sens), ctx, "sensitivity_tornado",
                                  "Elasticities of chi and of the stability margin")
     parts.append(html)
-    return "".join(parts), files, sens.as_json()
+    data = sens.as_json()
+    mv = ctx.cache.get("matching_vehicle") if ctx.settings.include_vehicle else None
+    if mv is not None:
+        # model B's sensitivities at its own index (one implicit solve on the vehicle's
+        # cycle; no stability boundaries: each would scan the 40-state equilibrium)
+        sv = index_sensitivity(params, index=mv, boundaries=False, model="vehicle")
+        parts.append("<h3>The full vehicle (model B)</h3>")
+        parts.append(f"<p>Status of the derivative: <b>{esc(sv.status)}</b> (case "
+                     f"{esc(mv.case)}, chi = {fmt(mv.chi, 4)}). The beam enters through EI, "
+                     "L and mbar (the modal frequencies n<sup>2</sup> omega1 and the static "
+                     "deflection of three modes).</p>")
+        parts.append(table_html(["parameter", "value", "d chi / d p", "elasticity",
+                                 "d margin / d p (1/s per unit)", "stability lost at"],
+                                sensitivity_rows(sv), "sensitivity-vehicle"))
+        for w in sv.warnings:
+            parts.append(note_html(f"model B: {w}", "warning"))
+        data = {"unit": data, "vehicle": sv.as_json()}
+    return "".join(parts), files, data
 
 
 # ---------------------------------------------------------------------------------------

@@ -47,7 +47,11 @@ The maglev layer (:func:`index_sensitivity`) chains these model-parameter deriva
 exact derivatives of the derived values omega1 = (pi/L)^2 sqrt(EI/mbar),
 sigma = 8 k L / (pi^2 l^2 mbar) sin^2(pi l / (2 L)) and w0 = sigma (m + M) g / omega1^2
 (Euler-Bernoulli beam, simply supported), so that engineering parameters (L, EI, mbar, l, k)
-and the gains (kP, kD, ke, xi0, omega0) all get d chi / d p.
+and the gains (kP, kD, ke, xi0, omega0) all get d chi / d p. For the full vehicle (model B)
+the beam enters through the modal frequencies omega_n = n^2 omega1 of its modes and through
+L and mbar directly (mode shapes at the six levitation points, modal mass); w0 is the static
+mid-span deflection sum_n q_n* sin(n pi / 2), differentiated through the same formulas
+(:func:`derived_map`), and h is the largest gap deviation over the six points on the cycle.
 """
 
 from __future__ import annotations
@@ -346,8 +350,8 @@ def _cycle_h_derivative(system: System, orbit: PeriodicOrbit, observable: str,
 
 
 def branch_extremes(system: System, p: np.ndarray, search: Mapping[str, tuple[float, float]],
-                    observable: str = "gap_deviation") -> dict[str, tuple[float, np.ndarray,
-                                                                        float]] | None:
+                    observable: str = "gap_deviation", bound: Any = None
+                    ) -> dict[str, tuple[float, np.ndarray, float]] | None:
     """The largest and the smallest value of ``observable`` over the whole branch of the
     bounding cycle, from its Hopf point to the design point (continued without limits), and
     their derivatives by every parameter.
@@ -360,14 +364,13 @@ def branch_extremes(system: System, p: np.ndarray, search: Mapping[str, tuple[fl
     parameters then follows from the envelope theorem (d/d lambda = 0 there).
 
     Returns {"max": (value, d/dp, lambda*), "min": (...)} or None when no surrounding cycle
-    is found without limits either.
+    is found without limits either. ``bound``: the unlimited
+    :func:`~maglev_match.dynamics.basin.bounding_cycle` result, when already computed
+    (:func:`unlimited_bound`).
     """
-    from maglev_match.dynamics.basin import bounding_cycle
     from maglev_match.dynamics.cycles import correct_cycle
-    from maglev_match.matching import cycle_settings as cs
 
-    bound = bounding_cycle(system, p, search, limits=None, ntst=cs.ntst, ncol=cs.ncol,
-                           max_steps=cs.max_steps)
+    bound = bound if bound is not None else unlimited_bound(system, p, search)
     if bound.case != "unstable_cycle" or not bound.branches:
         return None
     br = bound.branches[-1]
@@ -398,6 +401,79 @@ def branch_extremes(system: System, p: np.ndarray, search: Mapping[str, tuple[fl
         val, dval, _, _ = _cycle_h_derivative(system, pt.orbit, observable, sign)
         out[key] = (val, dval, float(pt.value))
     return out
+
+
+def unlimited_bound(system: System, p: np.ndarray,
+                    search: Mapping[str, tuple[float, float]]) -> Any:
+    """The bounding-cycle search of the index with the gap limits off (index settings)."""
+    from maglev_match.dynamics.basin import bounding_cycle
+    from maglev_match.matching import cycle_settings as cs
+
+    return bounding_cycle(system, np.asarray(p, float), search, limits=None, ntst=cs.ntst,
+                          ncol=cs.ncol, max_steps=cs.max_steps)
+
+
+def limit_contact(system: System, bound: Any, hi: float, lo: float,
+                  observable: str = "gap_deviation"
+                  ) -> tuple[float, np.ndarray, str, bool] | None:
+    """Where a cycle branch first reaches a gap limit (``hi`` above, ``lo`` below, as gap
+    deviations in m) between its Hopf point and the design point (the first such branch, in
+    the index's order: nearest Hopf point first), when no branch can be continued to the
+    design point even without limits (e.g. the force is singular at gap 0, so the branch
+    ends at the lower limit). The contact lambda_c solves E(lambda) = limit, with E the
+    extreme of ``observable`` on the cycle at the branch parameter lambda (Brent's method
+    on cycles re-solved by :func:`~maglev_match.dynamics.cycles.correct_cycle`).
+
+    Returns (lambda_c, dE/dp at the contact for every parameter, "max" or "min", whether
+    the contact was solved (False: bracketed between two branch points, see below)) or None
+    when no branch reaches a limit between its Hopf point and the design point."""
+    from maglev_match.dynamics.cycles import correct_cycle
+
+    br = pts = j = None
+    for b in bound.branches:  # in the order of the index: nearest Hopf point first
+        cand = [pt for pt in b.points if pt.converged]
+        if len(cand) < 2:
+            continue
+        lam_h, design = cand[0].value, bound.design[b.param]
+        jj = next((i for i, pt in enumerate(cand)
+                   if pt.extrema[observable][0] >= hi or pt.extrema[observable][1] <= lo), None)
+        # only a contact between the Hopf point and the design point decides the case
+        if jj and (cand[jj].value - lam_h) * (design - lam_h) > 0 and \
+                abs(cand[jj].value - lam_h) <= abs(design - lam_h):
+            br, pts, j = b, cand, jj
+            break
+    if br is None:
+        return None
+    key, sign, col, limit = (("max", 1.0, 0, hi) if pts[j].extrema[observable][0] >= hi
+                             else ("min", -1.0, 1, lo))
+    seen: dict[float, Any] = {}
+
+    def excess(lam: float) -> float:
+        r = correct_cycle(system, pts[j - 1].orbit, br.param, lam, observables=[observable])
+        if not r.converged or r.point is None:
+            raise ArithmeticError(f"cycle not re-solved at {br.param} = {lam:.8g}")
+        seen[lam] = r.point
+        return sign * (r.point.extrema[observable][col] - limit)
+
+    try:
+        lam = scipy.optimize.brentq(excess, pts[j - 1].value, pts[j].value,
+                                    xtol=1e-12 * max(abs(pts[j].value), 1.0))
+        pt = seen.get(lam) or correct_cycle(system, pts[j - 1].orbit, br.param, lam,
+                                            observables=[observable]).point
+        solved = pt is not None
+    except (ArithmeticError, ValueError):
+        solved = False
+    if not solved:
+        # at the singular gap 0 the re-solved cycles do not bracket the contact (the
+        # extreme there moves with the mesh by more than the step between branch points):
+        # the contact is taken between the two branch points, by linear interpolation of
+        # the extreme, with the derivative of the last cycle inside the limit
+        e0, e1 = (pts[j - 1].extrema[observable][col], pts[j].extrema[observable][col])
+        t = (limit - e0) / (e1 - e0) if e1 != e0 else 1.0
+        lam = pts[j - 1].value + min(max(t, 0.0), 1.0) * (pts[j].value - pts[j - 1].value)
+        pt = pts[j - 1]
+    _, dval, _, _ = _cycle_h_derivative(system, pt.orbit, observable, sign)
+    return float(lam), dval, key, solved
 
 
 @cache
@@ -556,18 +632,41 @@ def system_sensitivity(system: System, index: MatchingIndex, p: np.ndarray | Non
 
 
 # ---------------------------------------------------------------------------------------
-# maglev layer: engineering parameters -> model A parameters, w0, h_max
+# maglev layer: engineering parameters -> model parameters, w0, h_max
 # ---------------------------------------------------------------------------------------
 _BEAM_OMEGA = ("L", "EI", "mbar")
 _BEAM_SIGMA = ("L", "mbar", "l", "k")
 _LIMITS = ("gap_max",)
+_FAR = 4.0  # boundaries are looked for within a factor 4 of the design value
+MODELS = ("unit", "vehicle")
 
 
-def engineering_names(params: Params) -> tuple[str, ...]:
-    """The parameters with a d chi / d p row: model A's own parameters, with omega1 and
-    sigma replaced by the beam's (L, EI, mbar, l, k) where they are derived, and gap_max."""
-    out = [n for n in MODEL_A_PARAMS if n not in ("omega1", "sigma")]
+def _model_names(model: str) -> tuple[str, ...]:
+    from maglev_match.params import ParameterError
+
+    if model == "unit":
+        return MODEL_A_PARAMS
+    if model == "vehicle":
+        from maglev_match.models.vehicle import PARAM_NAMES as MODEL_B_PARAMS
+
+        return MODEL_B_PARAMS
+    raise ParameterError("model", model, "must be 'unit' or 'vehicle'")
+
+
+def engineering_names(params: Params, model: str = "unit") -> tuple[str, ...]:
+    """The parameters with a d chi / d p row: the model's own parameters, with the derived
+    modal values replaced by the beam's where they are derived, and gap_max.
+
+    Model A: omega1 and sigma become L, EI, mbar, l, k. Model B (the vehicle): omega1
+    becomes EI (L and mbar are parameters of the vehicle model already: mode shapes and
+    modal masses); sigma does not enter model B.
+    """
     derived_w = "omega1" not in params.explicit
+    if model == "vehicle":
+        out = [n for n in _model_names(model) if n != "omega1"]
+        out.append("EI" if derived_w else "omega1")
+        return tuple(out + list(_LIMITS))
+    out = [n for n in _model_names(model) if n not in ("omega1", "sigma")]
     derived_s = "sigma" not in params.explicit
     beam = [n for n in ("L", "EI", "mbar", "l", "k")
             if (derived_w and n in _BEAM_OMEGA) or (derived_s and n in _BEAM_SIGMA)]
@@ -577,15 +676,26 @@ def engineering_names(params: Params) -> tuple[str, ...]:
     return tuple(out)
 
 
-def derived_map(params: Params) -> Callable:
-    """q (values of :func:`engineering_names`) -> (model A parameter vector, w0, h_max),
+def derived_map(params: Params, model: str = "unit") -> Callable:
+    """q (values of :func:`engineering_names`) -> (model parameter vector, w0, h_max),
     a JAX function so its Jacobian is exact. omega1 and sigma follow the simply supported
     Euler-Bernoulli beam unless set explicitly:
 
         omega1 = (pi / L)^2 sqrt(EI / mbar),
         sigma = 8 k L / (pi^2 l^2 mbar) sin^2(pi l / (2 L)),
-        w0 = sigma (m + M) g / omega1^2,  h_max = gap_max - c0.
+        h_max = gap_max - c0,
+
+    and w0 is the static mid-span deflection: model A w0 = sigma (m + M) g / omega1^2;
+    model B the modal sum (Clough & Penzien, Dynamics of Structures, ch. 18)
+
+        w0 = sum_n q_n* sin(n pi / 2),
+        q_n* = 2 / (mbar L omega_n^2) sum_j F sin(n pi x_j / L),  omega_n = n^2 omega1,
+
+    with F the weight per levitation point and x_j the six points' positions on the span.
     """
+    if model == "vehicle":
+        return _vehicle_derived_map("omega1" not in params.explicit, int(params.n_modes))
+    _model_names(model)
     return _derived_map("omega1" not in params.explicit, "sigma" not in params.explicit)
 
 
@@ -614,36 +724,88 @@ def _derived_map(derived_w: bool, derived_s: bool) -> Callable:
     return fmap
 
 
+@cache
+def _vehicle_derived_map(derived_w: bool, n_modes: int) -> Callable:
+    from maglev_match.models.vehicle import _geometry
+
+    model_names = _model_names("vehicle")
+    names = engineering_names(Params(**({} if derived_w else {"omega1": 100.0})), "vehicle")
+    pos = {n: i for i, n in enumerate(names)}
+    mid = jnp.sin(jnp.arange(1, n_modes + 1, dtype=jnp.float64) * jnp.pi / 2.0)
+
+    def fmap(q):
+        v = {n: q[i] for n, i in pos.items()}
+        if derived_w:
+            w1 = (jnp.pi / v["L"]) ** 2 * jnp.sqrt(v["EI"] / v["mbar"])
+        else:
+            w1 = v["omega1"]
+        full = dict(v, omega1=w1)
+        p = jnp.stack([full[n] for n in model_names])
+        q_static = _geometry(p, n_modes)[-1]
+        return p, q_static @ mid, v["gap_max"] - v["c0"]
+
+    return fmap
+
+
 def _values(params: Params, names: tuple[str, ...]) -> np.ndarray:
     return np.array([float(getattr(params, n)) for n in names])
 
 
 def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
-                      boundaries: bool = True) -> IndexSensitivity:
+                      boundaries: bool = True, model: str | None = None) -> IndexSensitivity:
     """d chi / d p, the elasticity (p / chi) d chi / d p, d margin / d p and the derivative of
-    the relative Hopf distance for every parameter of model A at ``params``.
+    the relative Hopf distance for every parameter of model A or model B at ``params``.
 
     Parameters
     ----------
     params : the parameter set.
     index : the index at ``params`` (computed, without simulation, when not given).
     boundaries : also solve, for each parameter, the value where the equilibrium changes
-        stability (Newton's method with the exact slope of max Re lambda).
+        stability (Newton's method with the exact slope of max Re lambda), and the first-order
+        cycle-limit boundary.
+    model : 'unit' (model A) or 'vehicle' (model B); default: the model of ``index``, else
+        'unit'. For the vehicle, h is the largest gap deviation over the six levitation
+        points on the cycle (the envelope theorem picks the point and the time of the
+        maximum) and w0 the static mid-span deflection (:func:`derived_map`).
 
     chi = h / w0 gives d chi = (dh - chi dw0) / w0 with dh = (dh/dp_model)(dp_model/dq) in
-    the cycle case and dh = d(gap_max - c0) in case ``no_cycle_within_limits``.
+    the cycle case and dh = d(gap_max - c0) in case ``no_cycle_within_limits``. No
+    simulation is needed: the vehicle's sensitivities take one implicit solve on its cycle.
     """
-    idx = index if index is not None else matching_index(params, simulate=False)
-    system = unit_system(params)
-    names = engineering_names(params)
+    model = model or (index.model if index is not None else "unit")
+    _model_names(model)
+    if model == "vehicle":
+        from threadpoolctl import threadpool_limits
+
+        # small dense blocks: BLAS threads only contend (as in matching_index)
+        with threadpool_limits(1):
+            return _index_sensitivity(params, index, boundaries, model)
+    return _index_sensitivity(params, index, boundaries, model)
+
+
+def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: bool,
+                       model: str) -> IndexSensitivity:
+    idx = index if index is not None else matching_index(params, model=model, simulate=False)
+    if model == "vehicle":
+        from maglev_match.models.vehicle import vehicle_system
+
+        system = vehicle_system(params)
+        search = {"omega1": search_ranges(params)["omega1"]}
+    else:
+        system = unit_system(params)
+        search = search_ranges(params)
+    names = engineering_names(params, model)
     q = _values(params, names)
-    fmap = derived_map(params)
+    fmap = derived_map(params, model)
     jac = _map_jacobian(fmap)
     (pm, w0, hmax), (Pq, W0q, Hq) = jac(jnp.asarray(q))
     Pq, W0q, Hq = np.asarray(Pq), np.asarray(W0q), np.asarray(Hq)
     w0 = float(w0)
     sens = system_sensitivity(system, idx, np.asarray(pm))
     warnings = list(sens.warnings)
+    if abs(w0 - idx.w0) > 1e-8 * abs(idx.w0):
+        warnings.append(f"the static deflection of the beam formulas, {w0:.10g} m, differs "
+                        f"from the index's w0 {idx.w0:.10g} m")
     status = sens.h_status
     if status == DerivativeStatus.RULE:
         dh_q = Hq
@@ -657,7 +819,7 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     dmargin = -(sens.dmax_re_dp @ Pq)
     ddist = None
     if sens.dhopf_dp is not None and idx.hopf_param is not None:
-        k = MODEL_A_PARAMS.index(idx.hopf_param)
+        k = system.param_index(idx.hopf_param)
         v = float(np.asarray(pm)[k])
         a = float(sens.hopf_value)
         # distance = |a - v| / |v| with a = alpha_H(p), v the design value of that parameter
@@ -672,10 +834,43 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     limit_b = np.full(len(names), np.nan)
     limit_note = ""
     if boundaries and status in (DerivativeStatus.EXACT, DerivativeStatus.RULE):
-        ext = branch_extremes(system, np.asarray(pm), search_ranges(params))
-        if ext is None:
+        ubound = unlimited_bound(system, np.asarray(pm), search)
+        ext = branch_extremes(system, np.asarray(pm), search, bound=ubound)
+        lo_lim = params.gap_min - params.c0
+        contact = (limit_contact(system, ubound, float(hmax), lo_lim)
+                   if ext is None and status == DerivativeStatus.RULE else None)
+        if ext is None and contact is None:
             limit_note = "no surrounding cycle without the gap limit either: no cycle-limit " \
                          "boundary"
+        elif ext is None:
+            # the branch cannot reach the design point: the case changes where its contact
+            # with the limit, lambda_c(q), meets the design value of the branch parameter.
+            # E(lambda_c, p) = limit(q)  =>  d lambda_c / dq = -(dE/dp Pq - dlimit/dq) / E_lam
+            lam_c, dE, which, solved = contact
+            k = system.param_index(idx.hopf_param)
+            e_lam = dE[k]
+            dE_other = dE.copy()
+            dE_other[k] = 0.0
+            c0_k = np.array([1.0 if n == "c0" else 0.0 for n in names])
+            dlimit = Hq if which == "max" else -c0_k
+            dlam_c = -(dE_other @ Pq - dlimit) / e_lam
+            G = lam_c - float(np.asarray(pm)[k])
+            dG = dlam_c - Pq[k]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                pick = np.where(dG != 0, -G / dG, np.nan)
+            limit_b = q + pick
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = limit_b / q
+            limit_b = np.where((ratio >= 1.0 / _FAR) & (ratio <= _FAR), limit_b, np.nan)
+            lim_v = float(hmax) if which == "max" else lo_lim
+            limit_note = (f"the cycle branch from the Hopf point at {idx.hopf_param} = "
+                          f"{idx.hopf_value:.6g} reaches the gap-deviation limit "
+                          f"{lim_v * 1e3:.4g} mm at {idx.hopf_param} = {lam_c:.6g} and cannot "
+                          "be continued to the design point"
+                          + ("" if solved else " (contact bracketed between two branch points, "
+                             "not solved: the cycle is near-singular at gap 0)")
+                          + "; 'cycle-limit boundary': where that contact meets the design "
+                          "point, to first order")
         else:
             (hi_v, hi_d, hi_l), (lo_v, lo_d, lo_l) = ext["max"], ext["min"]
             c0_k = np.array([1.0 if n == "c0" else 0.0 for n in names])
@@ -694,6 +889,11 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
                 pick = deltas[np.argmin(np.abs(np.nan_to_num(deltas, nan=np.inf)), axis=0),
                               np.arange(len(names))]
             limit_b = q + pick
+            # a first-order extrapolation far from the design point says nothing: keep it
+            # within the factor the stability scan uses
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = limit_b / q
+            limit_b = np.where((ratio >= 1.0 / _FAR) & (ratio <= _FAR), limit_b, np.nan)
             limit_note = (f"along the cycle branch from the Hopf point to the design point the "
                           f"gap deviation reaches {hi_v * 1e3:.4g} mm (at {idx.hopf_param} = "
                           f"{hi_l:.5g}) and {lo_v * 1e3:.4g} mm (at {lo_l:.5g}); the limits are "
@@ -735,7 +935,7 @@ def _map_jacobian(fmap: Callable) -> Callable:
 
 
 def _stability_boundaries(system: System, fmap: Callable, q: np.ndarray,
-                          names: tuple[str, ...], factor: float = 4.0, n_scan: int = 33,
+                          names: tuple[str, ...], factor: float = _FAR, n_scan: int = 33,
                           max_iter: int = 30) -> dict[str, tuple[float | None, str]]:
     """For each parameter q_k alone: the nearest value where max Re lambda changes sign.
 
@@ -843,11 +1043,13 @@ class SampledSpread:
 
 
 def _chunk_key(base: Params, scatter: Mapping[str, float], n: int, seed: int,
-               chunk: int) -> str:
+               chunk: int, model: str = "unit") -> str:
     import json
 
     d = {"base": {k: v for k, v in sorted(base.as_input_dict().items())},
          "scatter": dict(sorted(scatter.items())), "n": n, "seed": seed, "chunk": chunk}
+    if model != "unit":  # model A's key as before, so its existing checkpoints resume
+        d["model"] = model
     return json.dumps(d, sort_keys=True, default=float)
 
 
@@ -859,10 +1061,10 @@ def _sample(base: Params, scatter: Mapping[str, float], n: int, seed: int) -> np
     return v0 * (1.0 + pct * rng.standard_normal((n, len(names))))
 
 
-def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarray
-             ) -> np.ndarray:
-    """chi (no simulation) for each row of sampled values; NaN where the index failed,
-    -inf where the sample breaks a parameter rule. Runs on a Dask worker."""
+def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarray,
+             model: str = "unit") -> np.ndarray:
+    """chi (no simulation) of ``model`` for each row of sampled values; NaN where the index
+    failed, -inf where the sample breaks a parameter rule. Runs on a Dask worker."""
     from maglev_match.params import ParameterError, make_params
 
     out = np.empty(len(rows))
@@ -873,7 +1075,7 @@ def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarr
         except ParameterError:
             out[i] = -np.inf
             continue
-        out[i] = matching_index(p, simulate=False).chi
+        out[i] = matching_index(p, model=model, simulate=False).chi
     return out
 
 
@@ -881,12 +1083,13 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
                    seed: int = 0, chunk: int = 16, resume: bool = False,
                    workers: int | None = None, scheduler: str | None = None,
                    progress: Callable[[int, int], None] | None = None,
-                   linearised: dict[str, Any] | None = None) -> SampledSpread:
+                   linearised: dict[str, Any] | None = None,
+                   model: str = "unit") -> SampledSpread:
     """The distribution of chi over ``n`` samples, chunk by chunk on Dask (the map's worker
     set-up: single-threaded processes, glibc's malloc thresholds), each chunk saved in
     ``checkpoint`` as it finishes; with ``resume`` finished chunks are reused (the chunk
     files carry a key of base, scatter, n and seed, so a resume cannot mix studies).
-    ``workers == 0`` computes in this process."""
+    ``workers == 0`` computes in this process; ``model`` 'unit' or 'vehicle'."""
     import os
     from pathlib import Path
 
@@ -899,7 +1102,7 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
     folder = Path(checkpoint)
     folder.mkdir(parents=True, exist_ok=True)
     starts = list(range(0, n, chunk))
-    key0 = _chunk_key(base, scatter, n, seed, chunk)
+    key0 = _chunk_key(base, scatter, n, seed, chunk, model)
     keyfile = folder / "study.json"
     if resume and keyfile.exists() and keyfile.read_text() != key0:
         raise ParameterError("--resume", str(folder), "the checkpoint belongs to a different "
@@ -919,7 +1122,7 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
     base_values = base.as_input_dict()
     if todo and workers == 0 and scheduler is None:
         for a in todo:
-            np.save(path(a), mc_chunk(base_values, names, X[a:a + chunk]))
+            np.save(path(a), mc_chunk(base_values, names, X[a:a + chunk], model))
             done += 1
             if progress:
                 progress(done, len(starts))
@@ -948,8 +1151,8 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
         else:
             client = Client(scheduler)
         try:
-            futs = {client.submit(mc_chunk, base_values, names, X[a:a + chunk], pure=False,
-                                  retries=2): a for a in todo}
+            futs = {client.submit(mc_chunk, base_values, names, X[a:a + chunk], model,
+                                  pure=False, retries=2): a for a in todo}
             for fut in as_completed(futs):
                 np.save(path(futs[fut]), fut.result())
                 done += 1

@@ -19,6 +19,7 @@ from maglev_match.cli.common import (
     OutOpt,
     PresetOpt,
     SetOpt,
+    check_index_params,
     check_model,
     console,
     emit_json,
@@ -28,6 +29,9 @@ from maglev_match.cli.common import (
     progress_report,
 )
 from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
+
+MODEL_TEXT = {"unit": "model A (one levitation unit)",
+              "vehicle": "model B (full vehicle, six levitation points)"}
 
 # `design` exits with this code when no candidate meets the requirements (the best one found
 # is still printed): distinct from 1 (a failure or a bug) and 2 (a usage error).
@@ -54,17 +58,18 @@ SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed of the Monte C
 
 
 def _monte_carlo(params, scatter: dict[str, float], n: int | None, spread: dict | None,
-                 folder, workers: int | None, resume: bool, seed: int):
+                 folder, workers: int | None, resume: bool, seed: int, model: str = "unit",
+                 command: str = "design"):
     if n is None:
         return None
     if not scatter:
         raise ParameterError("--monte-carlo", n, "needs at least one --scatter NAME=PCT")
     from maglev_match.sensitivity import sampled_spread
 
-    with progress_report("design") as prog:
+    with progress_report(command) as prog:
         prog.stage(f"Monte Carlo, {n} samples ...")
         return sampled_spread(params, scatter, n, folder / "monte-carlo", seed=seed,
-                              resume=resume, workers=workers, linearised=spread,
+                              resume=resume, workers=workers, linearised=spread, model=model,
                               progress=lambda d, t: prog.tiles(d, t, "chunks"))
 
 
@@ -83,11 +88,6 @@ def _print_sampled(mc, bound: float | None = None) -> None:
     if mc.failed or mc.invalid:
         console.print(f"  [yellow]{mc.failed} samples failed (index not converged), "
                       f"{mc.invalid} broke a parameter rule; both left out[/]")
-
-
-def _need_unit(model: str) -> None:
-    if check_model(model) != "unit":
-        raise ParameterError("--model", model, "only 'unit' (model B has no index yet)")
 
 
 def parse_scatter(items: list[str] | None) -> dict[str, float]:
@@ -112,6 +112,19 @@ def parse_scatter(items: list[str] | None) -> dict[str, float]:
     return out
 
 
+def check_scatter_names(params, scatter: dict[str, float], model: str) -> None:
+    """Every --scatter name must have a row in the sensitivity table of ``model`` (checked
+    before any computation, so a typo costs no index)."""
+    from maglev_match.sensitivity import engineering_names
+
+    rows = engineering_names(params, model)
+    for name in scatter:
+        if name not in rows:
+            raise ParameterError("--scatter", name, "has no row in the sensitivity table of "
+                                 f"this model (a derived or unused value; rows: "
+                                 f"{', '.join(rows)})")
+
+
 def _spread(sens, scatter: dict[str, float]) -> dict | None:
     if not scatter:
         return None
@@ -124,6 +137,35 @@ def _spread(sens, scatter: dict[str, float]) -> dict | None:
             raise ParameterError("--scatter", name, "has no row in the sensitivity table "
                                  "(a derived value: scatter its beam parameters)") from None
     return linearised_spread(sens, scatter)
+
+
+def scatter_report(params, index, scatter: dict[str, float], monte_carlo: int | None,
+                   out, workers: int | None, resume: bool, seed: int, model: str
+                   ) -> tuple[dict | None, object]:
+    """The linearised spread of chi at an already computed ``index`` (its sensitivities,
+    without stability boundaries) and, with ``monte_carlo``, the sampled distribution in
+    ``<out>/monte-carlo`` (resumable). For `index --scatter`; (None, None) without
+    --scatter."""
+    if not scatter:
+        return None, None
+    from maglev_match.sensitivity import index_sensitivity
+
+    with progress_report("index") as prog:
+        prog.stage("sensitivities for the linearised spread ...")
+        sens = index_sensitivity(params, index, boundaries=False, model=model)
+    spread = _spread(sens, scatter)
+    mc = None
+    if monte_carlo is not None:
+        folder, _ = output_target(out, "index", "index")
+        mc = _monte_carlo(params, scatter, monte_carlo, spread, folder, workers, resume, seed,
+                          model, "index")
+    return spread, mc
+
+
+def print_scatter(spread: dict | None, mc) -> None:
+    """The text lines of `index --scatter` (and --monte-carlo)."""
+    _print_spread(spread)
+    _print_sampled(mc)
 
 
 def _print_spread(spread: dict | None) -> None:
@@ -158,21 +200,27 @@ def sensitivity_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Exact d chi / d p, the elasticity (p / chi) d chi / d p and the margin's sensitivity
-    for every parameter of model A, sorted by magnitude, with a tornado figure."""
+    for every parameter of model A or of the vehicle (--model vehicle), sorted by magnitude,
+    with a tornado figure."""
     from maglev_match.plots import save_figure
     from maglev_match.plots.design import tornado_figure
     from maglev_match.sensitivity import DerivativeStatus, index_sensitivity
 
-    _need_unit(model)
+    model = check_model(model)
     params = params_from_options(preset, config, set_)
+    check_index_params(params)
     sc = parse_scatter(scatter)
+    check_scatter_names(params, sc, model)
+    if monte_carlo is not None and not sc:
+        raise ParameterError("--monte-carlo", monte_carlo, "needs at least one --scatter NAME=PCT")
     with progress_report("sensitivity") as prog:
         prog.stage("computing the index and its sensitivities ...")
-        sens = index_sensitivity(params, boundaries=boundaries)
+        sens = index_sensitivity(params, boundaries=boundaries, model=model)
     spread = _spread(sens, sc)
     folder, stem = output_target(out, "sensitivity", "tornado")
     figs = save_figure(tornado_figure(sens), folder / stem)
-    mc = _monte_carlo(params, sc, monte_carlo, spread, folder, workers, resume, seed)
+    mc = _monte_carlo(params, sc, monte_carlo, spread, folder, workers, resume, seed, model,
+                      "sensitivity")
     if json_out:
         data = sens.as_json()
         data["figures"] = [str(f) for f in figs]
@@ -181,7 +229,7 @@ def sensitivity_command(
         emit_json(data)
         return
     idx = sens.index
-    console.print(f"[bold]maglev-match sensitivity[/] — preset {preset}"
+    console.print(f"[bold]maglev-match sensitivity[/] — {MODEL_TEXT[model]}, preset {preset}"
                   + (f", config {config}" if config else "")
                   + (f", set {' '.join(set_)}" if set_ else ""))
     console.print(f"  chi = {idx.chi:.5g} ({idx.case}), h = {idx.h * 1e3:.4g} mm, "
@@ -257,7 +305,7 @@ def design_command(
     from maglev_match.plots import save_figure
     from maglev_match.plots.design import design_path_figure
 
-    _need_unit(model)
+    model = check_model(model)
     if (minimize is None) == (maximize is None):
         raise ParameterError("--minimize/--maximize", minimize or maximize,
                              "give exactly one of them")
@@ -274,7 +322,8 @@ def design_command(
         base.replace(**{var.name: var.lo})
         base.replace(**{var.name: var.hi})
     sc = parse_scatter(scatter)
-    evaluator = MaglevEvaluator(base, problem.names)
+    check_index_params(base)
+    evaluator = MaglevEvaluator(base, problem.names, model=model)
     with progress_report("design") as prog:
         prog.stage("searching ...")
         res = optimise_design(problem, evaluator, grid=grid, starts=starts,
@@ -284,10 +333,12 @@ def design_command(
     if sc:
         from maglev_match.sensitivity import index_sensitivity
 
-        spread = _spread(index_sensitivity(design_params, res.index, boundaries=False), sc)
+        spread = _spread(index_sensitivity(design_params, res.index, boundaries=False,
+                                           model=model), sc)
     folder, stem = output_target(out, "design", "design-path")
     figs = save_figure(design_path_figure(res), folder / stem)
-    mc = _monte_carlo(design_params, sc, monte_carlo, spread, folder, workers, resume, seed)
+    mc = _monte_carlo(design_params, sc, monte_carlo, spread, folder, workers, resume, seed,
+                      model)
     chi_req = next((r.bound for r in reqs if r.quantity == "chi"), None)
     if json_out:
         data = res.as_json()
@@ -301,7 +352,8 @@ def design_command(
             raise typer.Exit(NO_FEASIBLE_DESIGN)
         return
     idx = res.index
-    console.print(f"[bold]maglev-match design[/] — preset {preset}: {goal} {problem.objective}"
+    console.print(f"[bold]maglev-match design[/] — {MODEL_TEXT[model]}, preset {preset}: "
+                  f"{goal} {problem.objective}"
                   + (" subject to " + ", ".join(str(r) for r in reqs) if reqs else ""))
     ok = res.status == DesignStatus.FEASIBLE
     console.print(("  [bold green]feasible[/]: " if ok else "  [bold red]no feasible design"
@@ -311,8 +363,8 @@ def design_command(
         console.print(f"  [bold]{n} = {v:.6g}[/] (range {var.lo:g} .. {var.hi:g})")
     console.print(f"  full index there: chi = {idx.chi:.5g} ({idx.case}), h = "
                   f"{idx.h * 1e3:.4g} mm, w0 = {idx.w0 * 1e3:.4g} mm, margin = "
-                  f"{-idx.max_real_part:.4g} 1/s, omega1 = {idx.omega1:.5g} rad/s, sigma = "
-                  f"{idx.sigma:.4g} 1/kg"
+                  f"{-idx.max_real_part:.4g} 1/s, omega1 = {idx.omega1:.5g} rad/s"
+                  + (f", sigma = {idx.sigma:.4g} 1/kg" if model == "unit" else "")
                   + (f", chi_simulation = {idx.chi_simulation:.4g}"
                      if idx.chi_simulation is not None else ""))
     console.print("  active: " + (", ".join(res.active) if res.active else "none"))
@@ -340,4 +392,6 @@ def design_command(
         raise typer.Exit(NO_FEASIBLE_DESIGN)
 
 
-__all__ = ["NO_FEASIBLE_DESIGN", "sensitivity_command", "design_command", "parse_scatter"]
+__all__ = ["NO_FEASIBLE_DESIGN", "sensitivity_command", "design_command", "parse_scatter",
+           "check_scatter_names", "scatter_report", "print_scatter", "ScatterOpt", "McOpt",
+           "WorkersOpt", "ResumeOpt", "SeedOpt"]

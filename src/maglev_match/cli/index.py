@@ -29,6 +29,7 @@ from maglev_match.cli.common import (
     scheduler_option,
     workers_option,
 )
+from maglev_match.cli.design import McOpt, ResumeOpt, ScatterOpt, SeedOpt, WorkersOpt
 from maglev_match.cli.models import MaglevOnlyModelOpt, is_model_file, refuse_model_file
 
 CASE_TEXT = {
@@ -49,24 +50,50 @@ def index_command(
     no_simulation: Annotated[
         bool, typer.Option("--no-simulation", help="Skip the simulation-based h_simulation.")
     ] = False,
+    scatter: ScatterOpt = None,
+    monte_carlo: McOpt = None,
+    workers: WorkersOpt = None,
+    resume: ResumeOpt = False,
+    seed: SeedOpt = 0,
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="Folder for the --monte-carlo chunks (default: "
+        "maglev-match-out/index/).")] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """The matching index chi = h / w0 (model A or the full vehicle), with the case that
-    decided h, the simulated critical disturbance in both directions and the reading."""
+    decided h, the simulated critical disturbance in both directions and the reading;
+    with --scatter, the spread of chi from parameter scatter."""
     if is_model_file(model):
         refuse_model_file(model, "index")
+    from maglev_match.cli.design import (
+        check_scatter_names,
+        parse_scatter,
+        print_scatter,
+        scatter_report,
+    )
     from maglev_match.matching import matching_index
+    from maglev_match.params import ParameterError
 
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
+    sc = parse_scatter(scatter)
+    check_scatter_names(params, sc, model)
+    if monte_carlo is not None and not sc:
+        raise ParameterError("--monte-carlo", monte_carlo, "needs at least one --scatter NAME=PCT")
     with progress_report("index") as prog:
         prog.stage("computing the matching index ...")
         res = matching_index(params, model=model, simulate=not no_simulation)
+    spread, mc = scatter_report(params, res, sc, monte_carlo, out, workers, resume, seed, model)
     if json_out:
-        emit_json(res.as_json())
+        data = res.as_json()
+        if sc:
+            data["spread"] = spread
+            data["monte_carlo"] = None if mc is None else mc.as_json()
+        emit_json(data)
         return
     print_index(res, preset, config, set_)
+    print_scatter(spread, mc)
 
 
 def print_index(res, preset: str, config, set_) -> None:
