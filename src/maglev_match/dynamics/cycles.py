@@ -382,6 +382,8 @@ def orbit_extrema(
     intervals around the extreme values. All observables in one compiled call
     (:func:`_extrema_kernel`); the values of an orbit asked again are remembered."""
     names = list(names)
+    if not names:
+        return {}
     for sys_, orb, ref, ext in _EXTREMA_MEMO:
         if sys_ is system and orb is orbit and ref == refine and all(k in ext for k in names):
             return {k: ext[k] for k in names}
@@ -656,6 +658,12 @@ class CycleProblem:
     def terminal(self, name: str) -> bool:
         return name in ("LIMIT", "STOP")
 
+    def event_tolerance(self, name: str) -> float | None:
+        """The stop value needs one secant trial inside the step: the cycle there is then
+        solved at exactly the stop value (:func:`_fixed_param`), whatever the trial's
+        distance from it. Every other event is located to ``event_tol``."""
+        return 1.0 if name == "STOP" else None
+
     def worth_locating(self, name: str, a: BranchPoint, b: BranchPoint) -> bool:
         """Skip sign changes that the end points show are no special point: BP in a step
         where the tangent turns (the fold's multiplier +1), NS when the number of
@@ -928,6 +936,10 @@ def cycle_branch(
         options = dataclasses.replace(options, ds=float(np.clip(restart.ds, ds_min, ds_max)))
         row = W * tY
         first = cyc.correct(Yh, row, float(row @ Yh), max_newton)
+        if adapt_every and cyc.accepted % adapt_every == 0:
+            # the saved point had its mesh adapted: the uninterrupted run went on without a
+            # kept factorisation from there, and so does the restart (same steps)
+            cyc.chord_lu = None
         if first is None:
             return CycleBranch(param=param, hopf=start, points=(), special_points=(),
                                stopped_reason=CycleStop.NEWTON_FAILED,
@@ -941,8 +953,10 @@ def cycle_branch(
 
     res = continuation(cyc, Yh, tY, options, progress=notify, first=first)
     every = multipliers_at == "all" or bool(detect_special_points)
+    # a branch ending at the stop value gets that cycle re-solved (with its multipliers)
+    resolved = any(ev.kind == "STOP" and ev.point is not None for ev in res.events)
     for pt in res.points[1:]:
-        if every or pt is res.points[-1]:
+        if every or (pt is res.points[-1] and not resolved):
             cyc.complete(pt)
     for ev in res.events:
         cyc.complete(ev.point)
