@@ -30,6 +30,10 @@ Linear algebra (:class:`LinearSolver`): by default each Newton step condenses th
 nodes of every interval out of the system (:class:`CondensedLU`, as AUTO does) and solves
 the remaining mesh-node system, of fixed sparsity pattern, by sparse LU; ``"sparse_lu"``
 factorises the whole bordered matrix (the earlier code path, kept for comparison).
+Continuation uses the chord iteration (:func:`_chord_newton`): the factorisation made at
+one solution serves the next corrector while the iteration contracts fast, and the same
+factorisation gives the tangent and the Floquet transfer matrices
+(:meth:`CondensedLU.transfer_matrices`).
 """
 
 from __future__ import annotations
@@ -484,19 +488,22 @@ class CondensedLU:
     The square block K_j = [Aint_j | Aend_j] (m n x m n) is the collocation matrix of the
     initial-value problem on one interval (nonsingular for a Gauss collocation step, which
     is A-stable, and well conditioned when T h_j |J| is moderate, as the mesh keeps it). One
-    batched LU solve per interval gives [w_j; v_{j+1}] = K_j^{-1} b_j - X_j (v_j, dT,
-    dlambda) with X_j = K_j^{-1} [A0_j cT_j cL_j]. The last n rows are n condensed equations
-    v_{j+1} + X_j^end (v_j, dT, dlambda) = (K_j^{-1} b_j)^end free of w_j; substituting w_j
-    into the two dense rows (phase and arclength) leaves a system in the (NTST + 1) n mesh
-    unknowns and the two borders, (NTST + 1) n + 2 equations whose sparsity pattern is fixed
-    (block bidiagonal rows, periodicity, two dense rows and columns: filled in place,
-    :func:`_reduced_pattern`) and factorised by SuperLU. The interior unknowns are then
-    recovered interval by interval. Every step is an exact equivalence transformation, so the
-    solution equals that of the whole system up to rounding (tested to 1e-12 relative).
+    inverse per interval block (:func:`_batched_inverse`, LAPACK LU) gives [w_j; v_{j+1}] =
+    K_j^{-1} b_j - X_j (v_j, dT, dlambda) with X_j = K_j^{-1} [A0_j cT_j cL_j]. The last n
+    rows are n condensed equations v_{j+1} + X_j^end (v_j, dT, dlambda) = (K_j^{-1} b_j)^end
+    free of w_j; substituting w_j into the two dense rows (phase and arclength) leaves a
+    system in the (NTST + 1) n mesh unknowns and the two borders, (NTST + 1) n + 2 equations
+    whose sparsity pattern is fixed (block bidiagonal rows, periodicity, two dense rows and
+    columns: filled in place, :func:`_reduced_pattern`) and factorised by SuperLU. The
+    interior unknowns are then recovered interval by interval. Every step is an exact
+    equivalence transformation, so the solution equals that of the whole system up to
+    rounding (tested to 1e-12 relative).
 
     The right-hand side b0 of the first solve (the Newton step) is solved alongside X_j; a
     right-hand side that vanishes on the collocation rows (the tangent, e_last) needs no
-    interval solve at all; any other one costs one more batched solve with K_j.
+    interval solve at all; any other one (a chord iteration) costs one batched
+    matrix-vector product with the kept K_j^{-1}. The end rows of X_j are the interval
+    transfer matrices of the variational equation (:meth:`transfer_matrices`).
 
     Parameters
     ----------

@@ -18,9 +18,12 @@ for the unknowns X = (profile, period T, parameter). Newton's method uses the ex
 Jacobian (JAX, vmapped over collocation points); by default the interior collocation
 unknowns of each interval are condensed out and the small mesh-node system is factorised
 by sparse LU (:class:`~maglev_match.dynamics.collocation.CondensedLU`; ``linear_solver=
-"sparse_lu"`` factorises the whole system instead). Floquet multipliers are those of the
-product of the interval transfer matrices of the variational equation, computed without
-forming it (:mod:`~maglev_match.dynamics.floquet`). The mesh is adapted by
+"sparse_lu"`` factorises the whole system instead); the corrector is the chord iteration,
+which keeps the factorisation of the previous solution while it contracts fast
+(``newton="full"``: a factorisation per iteration). Floquet multipliers are those of the
+product of the interval transfer matrices of the variational equation (taken from the
+condensation at each solution), computed without forming the product
+(:mod:`~maglev_match.dynamics.floquet`). The mesh is adapted by
 equidistributing |u^(NCOL+1)|^(1/(NCOL+1)) (de Boor's criterion, as AUTO does).
 """
 
