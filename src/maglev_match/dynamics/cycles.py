@@ -1001,8 +1001,15 @@ def cycle_branch(
                 continue
             # the located point is refined at exactly the stop value
             fixed = _fixed_param(prob, ev.point.u, float(stop_at), tol, max_newton + 4)
-            c = cyc.cycle_point(fixed, kind="stop_at") if fixed is not None else \
-                dataclasses.replace(ev.point.info["cycle"], kind="stop_at")
+            if fixed is not None:
+                c = cyc.cycle_point(fixed, kind="stop_at")
+            else:  # reported, never passed off as the cycle at the stop value
+                cyc.complete(ev.point)
+                c = dataclasses.replace(ev.point.info["cycle"], kind="stop_at",
+                                        converged=False)
+                warnings.append(f"the cycle at {param} = {stop_at:g} did not converge; the "
+                                f"branch point found near it ({param} = {c.value:.8g}) is "
+                                "reported, marked not converged")
             if points and points[-1] is ev.point.info.get("cycle"):
                 points[-1] = c
             else:
