@@ -112,11 +112,13 @@ def bounding_cycle(
         # located on the way (those solves changed nothing in h). The step sequence is the
         # Newton-count rule's (predictor_tol=None): the mesh is adapted every 3 steps, so a
         # different sequence ends on a different mesh and moves h by ~4e-8 relative.
-        # The multipliers are computed only at the end point (the only one read).
+        # The multipliers are computed only at the end point (the only one read), and a
+        # limit contact is only bracketed: whether and on which side of the Hopf point the
+        # branch meets a limit is all the index reads of it.
         br = cycle_branch(system, hp, hp.param, stop_at=target, ntst=ntst, ncol=ncol,
                           max_steps=max_steps, limits=limits, param_bounds=(lo, hi),
                           detect_special_points=False, predictor_tol=None, newton=newton,
-                          multipliers_at="last")
+                          multipliers_at="last", locate_limit=False)
         branches.append(br)
         last = br.last
         if last is not None and last.kind == "stop_at" and last.converged:

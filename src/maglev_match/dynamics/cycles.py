@@ -560,6 +560,7 @@ class CycleProblem:
         self.newton = NewtonMode.CHORD
         self.chord_lu: Any = None  # the last corrector's factorisation (same mesh)
         self.stats = NewtonStats()
+        self.locate_limit = True  # False: a limit contact is only bracketed (one trial)
 
     # --- corrector and read-outs ---
     def correct(self, u_pred, row, target, max_iter):
@@ -665,7 +666,9 @@ class CycleProblem:
         """The stop value needs one secant trial inside the step: the cycle there is then
         solved at exactly the stop value (:func:`_fixed_param`), whatever the trial's
         distance from it. Every other event is located to ``event_tol``."""
-        return 1.0 if name == "STOP" else None
+        if name == "STOP" or (name == "LIMIT" and not self.locate_limit):
+            return 1.0
+        return None
 
     def worth_locating(self, name: str, a: BranchPoint, b: BranchPoint) -> bool:
         """Skip sign changes that the end points show are no special point: BP in a step
@@ -775,6 +778,7 @@ def cycle_branch(
     predictor_tol: float | None = 0.05,
     newton: str = "chord",
     multipliers_at: str = "all",
+    locate_limit: bool = True,
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
 
@@ -842,6 +846,10 @@ def cycle_branch(
         detection) only the last point of the branch gets its Floquet multipliers; the
         other points have none (empty ``multipliers``, ``reliable`` False). For callers
         that read only the end point (the matching index).
+    locate_limit : True (default): the first limit contact is solved (margin 0 to 1e-6).
+        False: it is only bracketed inside the step where the margin changes sign (one
+        secant trial, the branch ends there, ``located`` says "bracketed"), for callers
+        that need only whether and on which side a limit is reached (the matching index).
 
     Returns
     -------
@@ -911,6 +919,7 @@ def cycle_branch(
                          "or cyclic_qr")
     cyc.floquet_method = floquet_method
     cyc.newton = NewtonMode(newton)
+    cyc.locate_limit = bool(locate_limit)
     first = Correction(u=Yh, iterations=0, residual=0.0, solve=lambda e: tY, data=None)
     if new_param:
         prob.mesh = np.array(restart.mesh, float)
@@ -1031,7 +1040,9 @@ def cycle_branch(
             mg_c, lname = _margin(limits, system, c.orbit)
             detail = lname
             located = SOLVED if abs(mg_c) <= 1e-6 else f"bracketed (margin {mg_c:.2e})"
-            if located != SOLVED:
+            if located != SOLVED and not locate_limit:
+                located = f"bracketed (margin {mg_c:.2e}; not solved: locate_limit=False)"
+            elif located != SOLVED:
                 warnings.append(f"limit contact '{lname}' bracketed, not solved: the "
                                 f"corrector failed closer to it (margin {mg_c:.2e})")
             c = dataclasses.replace(c, kind="limit")
