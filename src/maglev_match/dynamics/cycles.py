@@ -839,8 +839,8 @@ def cycle_branch(
         (:class:`~maglev_match.dynamics.continuation.ContinuationOptions`); None: the
         Newton-count rule alone.
     newton : "chord" (default: the factorisation at the previous solution is kept while
-        the iteration contracts fast, :func:`~maglev_match.dynamics.collocation.
-        _chord_newton`; the Floquet transfer matrices come from the factorisation at each
+        the iteration contracts fast: the chord iteration of the collocation module; the
+        Floquet transfer matrices come from the factorisation at each
         solution) or "full" (a new factorisation every iteration, the earlier path).
     multipliers_at : "all" (default) or "last": with "last" (and no special-point
         detection) only the last point of the branch gets its Floquet multipliers; the
