@@ -1,9 +1,11 @@
 """Benchmark: one branch of model A cycles (printed defaults, sigma = 4e-4) from the Hopf
 point until the first physical-limit contact, by collocation (NTST 80, NCOL 4), in one warm
-process: the current path (condensed linear solver, Floquet multipliers by the block cyclic
-QR when its bound allows) against the earlier path run in the same process
-(``linear_solver="sparse_lu"``, ``floquet_method="periodic_qz"``), the cost of one Newton
-iteration of the collocation system at NTST 80 (both solvers), chi at one point warm; then a
+process: the current path (chord Newton on the condensed system, Floquet transfer matrices
+from the condensation, block cyclic QR when its bound allows) against last round's path
+(``newton="full"``) and the earlier path (``linear_solver="sparse_lu"``,
+``floquet_method="periodic_qz"``, Newton-count steps), all run in the same process; the
+cost of one Newton iteration and one chord iteration at NTST 80; chi at one point warm
+(against the earlier route and the simulated critical disturbance); then a
 shooting baseline (Newton on the flow map, DOP853 + variational equations) solving the same
 cycles from a warm start (a lower bound on shooting's cost), and the whole CLI command.
 
@@ -48,14 +50,23 @@ def main() -> None:
 
     print(f"load (uptime): {open('/proc/loadavg').read().split()[:3]}")
 
+    # three paths, run in this process: the code before issue 14 ("earlier": whole-system
+    # sparse LU, periodic QZ, Newton-count steps), last round's ("round 2": condensed LU,
+    # full Newton, cyclic QR, predicted-error steps), and the current one (chord Newton with
+    # the Floquet transfer matrices from the condensation)
+    paths = {
+        "earlier": {"linear_solver": "sparse_lu", "floquet_method": "periodic_qz",
+                    "predictor_tol": None, "newton": "full"},
+        "round 2": {"newton": "full"},
+        "current": {},
+    }
+
     def run(path: str):
-        kw = {} if path == "new" else {"linear_solver": "sparse_lu",
-                                       "floquet_method": "periodic_qz",
-                                       "predictor_tol": None}
-        return cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits, **kw)
+        return cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits,
+                            **paths[path])
 
     res: dict[str, float] = {}
-    for path in ("old", "new"):
+    for path in paths:
         t = time.perf_counter()
         br = run(path)
         first = time.perf_counter() - t
@@ -65,21 +76,23 @@ def main() -> None:
             br = run(path)
             times.append(time.perf_counter() - t)
             cpu.append(time.process_time() - c0)
-        res[path] = statistics.median(times)
-        label = {"old": "earlier path (sparse LU, periodic QZ, Newton-count steps)",
-                 "new": "current path (condensed, cyclic QR / QZ, predicted-error steps)"}[path]
-        print(f"{label}: first call {first:.2f} s, median {res[path]:.3f} s wall, "
-              f"{statistics.median(cpu):.3f} s CPU over {repeats}; min {min(times):.3f} s; "
+        res[path] = statistics.median(cpu)
+        print(f"{path}: first call {first:.2f} s, median {statistics.median(times):.3f} s wall, "
+              f"{res[path]:.3f} s CPU over {repeats} (min {min(cpu):.3f} s CPU); "
               f"{br.steps} steps ({br.rejected_steps} rejected), {len(br.points)} cycles, "
-              f"Newton iterations {sum(c.iterations for c in br.points)}, stopped: "
-              f"{br.stopped_reason}")
+              f"corrector iterations {br.newton_iterations} "
+              f"({br.newton_iterations / max(br.steps, 1):.1f} per step), factorisations "
+              f"{br.factorizations} ({br.factorizations / max(br.steps, 1):.1f} per step), "
+              f"stopped: {br.stopped_reason}")
         for sp in br.special_points:
             print(f"  {sp.type} at omega1 = {sp.value:.12g} ({sp.detail}, {sp.located})")
-    coll = res["new"]
-    print(f"branch ratio earlier / current: {res['old'] / res['new']:.2f}x "
-          f"(AUTO-07p one thread 0.166 s: {'met' if coll < 0.166 else 'not met'})")
+    coll = res["current"]
+    print(f"branch CPU ratio earlier / current: {res['earlier'] / coll:.2f}x, round 2 / "
+          f"current: {res['round 2'] / coll:.2f}x (AUTO-07p one thread 0.166 s: "
+          f"{'met' if coll < 0.166 else 'not met'})")
 
-    # one Newton iteration at NTST 80: residual + Jacobian blocks, factorisation, solve
+    # one Newton iteration at NTST 80: residual + Jacobian blocks, factorisation, solve;
+    # and one chord iteration (residual, solve with the kept factorisation)
     from maglev_match.dynamics.collocation import (
         CollocationProblem,
         _factor,
@@ -93,28 +106,82 @@ def main() -> None:
     row = np.zeros(prob.size)
     row[-1] = 1.0
     phase = prob.phase_row(o.states)
-    for solver in ("sparse_lu", "condensed"):
-        ts = []
-        for _ in range(50):
-            t = time.perf_counter()
-            pa = prob.parts(Y, phase, o.states, row, c.value / 5.0)
-            lu = _factor(prob, pa, solver, -pa.resid)
-            lu.solve(-pa.resid)
-            ts.append(time.perf_counter() - t)
-        print(f"one Newton iteration, NTST 80, {solver}: median {statistics.median(ts) * 1e3:.2f} "
-              f"ms, min {min(ts) * 1e3:.2f} ms (target < 1.5 ms)")
 
-    # chi at one point, warm (continuation)
+    def timed(f, n=50):
+        ts, cs = [], []
+        for _ in range(n):
+            t, c0 = time.perf_counter(), time.process_time()
+            f()
+            ts.append(time.perf_counter() - t)
+            cs.append(time.process_time() - c0)
+        return statistics.median(ts) * 1e3, statistics.median(cs) * 1e3, min(ts) * 1e3
+
+    def newton_iteration(solver):
+        pa = prob.parts(Y, phase, o.states, row, c.value / 5.0)
+        lu = _factor(prob, pa, solver, -pa.resid)
+        lu.solve(-pa.resid)
+
+    kept = _factor(prob, prob.parts(Y, phase, o.states, row, c.value / 5.0), "condensed")
+
+    def chord_iteration():
+        r = prob.residual(Y, phase, o.states, row, c.value / 5.0)
+        kept.solve(-r)
+
+    it = {}
+    for name, f in (("Newton, sparse_lu", lambda: newton_iteration("sparse_lu")),
+                    ("Newton, condensed", lambda: newton_iteration("condensed")),
+                    ("chord (kept factorisation)", chord_iteration)):
+        w, cp, mn = timed(f)
+        it[name] = cp
+        print(f"one {name} iteration, NTST 80: median {w:.2f} ms wall, {cp:.2f} ms CPU, "
+              f"min {mn:.2f} ms (target < 1.5 ms)")
+    br_now = run("current")
+    print(f"branch average, current path: {coll * 1e3 / max(br_now.newton_iterations, 1):.2f} "
+          f"ms CPU per corrector iteration, everything included (Floquet, read-outs)")
+
+    # chi at one point, warm (continuation), against the same route with the multipliers at
+    # every point and the whole-system LU (the earlier path), and against the simulated
+    # critical disturbance at the same point
+    from maglev_match.dynamics import basin
     from maglev_match.matching import matching_index
+    from maglev_match.simulation import critical_disturbance
     p_alpha = load_preset("alpha1")
-    matching_index(p_alpha, simulate=False)
-    ts = []
+    current_cb = basin.cycle_branch
+
+    def earlier_cb(*a, **kw):
+        kw.update(multipliers_at="all", linear_solver="sparse_lu")
+        return current_cb(*a, **kw)
+
+    chi = {}
+    for name, cb in (("earlier", earlier_cb), ("current", current_cb)):
+        basin.cycle_branch = cb
+        try:
+            matching_index(p_alpha, simulate=False)
+            ts, cs = [], []
+            for _ in range(repeats):
+                t, c0 = time.perf_counter(), time.process_time()
+                mi = matching_index(p_alpha, simulate=False)
+                ts.append(time.perf_counter() - t)
+                cs.append(time.process_time() - c0)
+        finally:
+            basin.cycle_branch = current_cb
+        chi[name] = statistics.median(cs)
+        print(f"chi at alpha1 by continuation, warm, {name} route: median "
+              f"{statistics.median(ts):.3f} s wall, {chi[name]:.3f} s CPU "
+              f"(chi = {mi.chi!r}; target < 0.1 s)")
+    critical_disturbance(p_alpha, direction=-1)
+    ts, cs = [], []
     for _ in range(repeats):
-        t = time.perf_counter()
-        mi = matching_index(p_alpha, simulate=False)
+        t, c0 = time.perf_counter(), time.process_time()
+        critical_disturbance(p_alpha, direction=-1)
+        critical_disturbance(p_alpha, direction=1)
         ts.append(time.perf_counter() - t)
-    print(f"chi at alpha1 by continuation, warm: median {statistics.median(ts):.3f} s "
-          f"(chi = {mi.chi:.10g}; target < 0.1 s)")
+        cs.append(time.process_time() - c0)
+    sim = statistics.median(cs)
+    print(f"simulated critical disturbance at alpha1 (both directions), warm: median "
+          f"{statistics.median(ts):.3f} s wall, {sim:.3f} s CPU; continuation chi is "
+          f"{sim / chi['current']:.2f}x faster (target >= 3x); chi ratio earlier / current "
+          f"{chi['earlier'] / chi['current']:.2f}x")
     if args.skip_shooting:
         return
 

@@ -151,3 +151,110 @@ def test_bad_step_and_floquet_options_are_errors_naming_the_field(kw, field):
     start = hopf_start(HOPF_NF, np.zeros(5), p, "mu", CYCLE_OMEGA, Q_CRIT, -1.0)
     with pytest.raises(ValueError, match=field):
         cycle_branch(HOPF_NF, start, "mu", stop_at=0.1, **kw)
+
+
+def test_transfer_matrices_from_the_condensation_equal_the_interval_solves():
+    """The Floquet transfer matrices taken from the Newton step's condensation (no second
+    solve) equal the batched interval solves of the variational collocation to 1e-12
+    relative, and give the same multipliers (closed form for the normal form: 1 (double,
+    the trivial one and the radial direction's exp(-2 mu T)... checked against the
+    interval-solve route to 1e-10)."""
+    from maglev_match.dynamics.floquet import (
+        floquet_multipliers_from_blocks,
+        transfer_matrices,
+    )
+
+    br = _branch("condensed")
+    c = br.points[-1]
+    o = c.orbit
+    prob = CollocationProblem(system=HOPF_NF, ipar=0, p0=o.p, mesh=o.mesh, m=4,
+                              scale=np.asarray(HOPF_NF.state_scale, float) * np.array(
+                                  [1.0, 3.0, 0.5, 2.0, 7.0]),  # unequal scales on purpose
+                              T_scale=o.period, lam_scale=0.1)
+    Y = prob.pack(o.states, o.period, c.value)
+    row = np.zeros(prob.size)
+    row[-1] = 1.0
+    pa = prob.parts(Y, prob.phase_row(o.states), o.states, row, c.value / 0.1)
+    J, T, h = pa.blocks
+    P = CondensedLU(prob, pa).transfer_matrices(prob.scale)
+    P_ref = transfer_matrices(J, T, h, 4)
+    assert np.max(np.abs(P - P_ref)) <= 1e-12 * np.max(np.abs(P_ref))
+    mu = np.sort_complex(floquet_multipliers_from_blocks(J, T, h, 4, transfer=P))
+    mu_ref = np.sort_complex(floquet_multipliers_from_blocks(J, T, h, 4))
+    assert np.max(np.abs(mu - mu_ref)) < 1e-10
+    # the trivial multiplier is there, and the radial one is exp(-2 mu T) (l1 = -1)
+    assert np.min(np.abs(mu - 1.0)) < 1e-8
+    assert np.min(np.abs(mu - math.exp(-2.0 * c.value * c.period))) < 1e-6
+
+
+def test_chord_newton_reaches_the_newton_solution_with_one_kept_factorisation():
+    """From a perturbed cycle, the chord iteration started with the factorisation at the
+    unperturbed cycle converges to the solution Newton's method finds (to the tolerance),
+    factorising only once more (at the solution, for the tangent and the multipliers);
+    the factorisation it returns is the one at its solution."""
+    from maglev_match.dynamics.collocation import NewtonStats, _chord_newton
+
+    br = _branch("condensed")
+    c = br.points[-1]
+    prob, Y, _ = _problem_near(c, HOPF_NF, 0, 4, seed=11)
+    row = np.zeros(prob.size)
+    row[-1] = 1.0
+    Uref = c.orbit.states
+    target = c.value / 0.1
+    Y_exact = prob.pack(c.orbit.states, c.orbit.period, c.value)
+    pa0 = prob.parts(Y_exact, prob.phase_row(Uref), Uref, row, target)
+    lu0 = CondensedLU(prob, pa0)
+    stats = NewtonStats()
+    cr = _chord_newton(prob, Y, Uref, row, target, 1e-10, 30, lu0=lu0, stats=stats)
+    Yn, ok, _, _, _, _ = _newton(prob, Y, Uref, row, target, 1e-10, 12)
+    assert cr.converged and ok
+    assert np.max(np.abs(cr.Y - Yn)) < 1e-10
+    pa = prob.parts(cr.Y, prob.phase_row(Uref), Uref, row, target)
+    assert np.max(np.abs(pa.resid)) < 1e-11
+    assert cr.factorizations == 1 and stats.factorizations == 1  # only the one at the end
+    assert cr.iterations >= 2 and stats.iterations == cr.iterations
+    b = np.random.default_rng(2).standard_normal(prob.size)
+    x_ref = CondensedLU(prob, pa).solve(b)
+    assert np.max(np.abs(cr.lu.solve(b) - x_ref)) <= 1e-12 * np.max(np.abs(x_ref))
+
+
+def test_chord_and_full_newton_give_the_same_branch_with_fewer_factorisations():
+    """The chord corrector ends on the same cycle as full Newton (closed-form radius
+    sqrt(mu), period, multipliers), with fewer factorisations of the bordered Jacobian."""
+    p = HOPF_NF.params_with(mu=0.0, l1=-1.0)
+    start = hopf_start(HOPF_NF, np.zeros(5), p, "mu", CYCLE_OMEGA, Q_CRIT, -1.0)
+    a, b = (cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4, max_steps=200,
+                         newton=mode) for mode in ("full", "chord"))
+    assert a.stopped_reason == b.stopped_reason == "reached stop_at"
+    ca, cb = a.points[-1], b.points[-1]
+    assert cb.period == pytest.approx(ca.period, rel=1e-9)
+    assert cb.max("radius") == pytest.approx(ca.max("radius"), rel=1e-9)
+    assert cb.max("radius") == pytest.approx(math.sqrt(0.4), rel=1e-6)
+    ma, mb = (np.sort_complex(np.asarray(x.multipliers)) for x in (ca, cb))
+    assert np.max(np.abs(ma - mb)) < 1e-8
+    assert b.factorizations < a.factorizations
+    assert a.newton_iterations == a.factorizations  # full Newton: one per iteration
+
+
+def test_multipliers_only_at_the_last_point():
+    """multipliers_at='last' (without special points) computes the multipliers of the
+    end point only, equal to those of the full run; the other points say they have none."""
+    p = HOPF_NF.params_with(mu=0.0, l1=-1.0)
+    start = hopf_start(HOPF_NF, np.zeros(5), p, "mu", CYCLE_OMEGA, Q_CRIT, -1.0)
+    full = cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4,
+                        detect_special_points=False)
+    lean = cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4,
+                        detect_special_points=False, multipliers_at="last")
+    ma, mb = (np.sort_complex(np.asarray(x.points[-1].multipliers)) for x in (full, lean))
+    assert len(mb) == 4 and np.max(np.abs(ma - mb)) < 1e-12
+    assert lean.points[-1].reliable and lean.points[-1].stable
+    assert all(len(c.multipliers) == 0 and not c.reliable for c in lean.points[:-1])
+
+
+@pytest.mark.parametrize(("kw", "field"), [({"newton": "quasi"}, "newton"),
+                                           ({"multipliers_at": "first"}, "multipliers_at")])
+def test_bad_corrector_options_are_errors_naming_the_field(kw, field):
+    p = HOPF_NF.params_with(mu=0.0, l1=-1.0)
+    start = hopf_start(HOPF_NF, np.zeros(5), p, "mu", CYCLE_OMEGA, Q_CRIT, -1.0)
+    with pytest.raises(ValueError, match=field):
+        cycle_branch(HOPF_NF, start, "mu", stop_at=0.1, **kw)

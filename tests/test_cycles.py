@@ -451,3 +451,24 @@ def test_branch_without_special_points_still_has_multipliers_at_every_kept_point
     mb = np.sort_complex(np.asarray(lean.points[-1].multipliers))
     assert np.max(np.abs(ma - mb)) < 1e-9
     assert lean.points[-1].stable and lean.points[-1].n_unstable == 0
+
+
+def test_limit_contact_only_bracketed_on_request():
+    """locate_limit=False (the matching index's route): the branch still ends at the first
+    contact (radius 0.5 at mu = 0.25, closed form), inside the step that crosses it, with
+    one trial instead of the solved contact, and says it is only bracketed."""
+    def limits(system, orbit):
+        r = np.sqrt(np.sum((orbit.states @ _Q)[:, :2] ** 2, axis=1))
+        return {"radius 0.5": 0.5 - float(np.max(r))}
+
+    kw = dict(ntst=20, ncol=4, max_steps=200, limits=limits, detect_special_points=False)
+    solved = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", **kw)
+    rough = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", locate_limit=False, **kw)
+    assert solved.stopped_reason == rough.stopped_reason == "limit"
+    a, b = (next(s for s in br.special_points if s.type == "LIMIT") for br in (solved, rough))
+    assert a.located == "solved" and a.value == pytest.approx(0.25, rel=1e-7)
+    assert b.located.startswith("bracketed") and "locate_limit=False" in b.located
+    before = rough.points[-2].value  # the last accepted point before the contact
+    assert before < 0.25 and abs(b.value - 0.25) <= 0.25 - before
+    assert rough.points[-1].kind == "limit"
+    assert not any("limit contact" in w for w in rough.warnings)  # asked for: no warning

@@ -241,6 +241,7 @@ def matching_index(
             limits=cycle_limit_margins(params, include_current=False),
             stability_result=stability_result,
             omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
+            newton="chord" if model == "vehicle" else "full",
         )
     res = replace(res, model=model)
     if not simulate:
@@ -303,6 +304,7 @@ def index_of_system(
     stability_result: StabilityResult | None = None,
     omega1: float = float("nan"),
     sigma: float = float("nan"),
+    newton: str = "full",
 ) -> MatchingIndex:
     """The index for any System with observables "gap_deviation" and "current": h from the
     stability of the equilibrium and the bounding cycle, chi = h / w0.
@@ -311,6 +313,9 @@ def index_of_system(
     ``search`` gives the parameter ranges in which Hopf points are looked for. The result
     carries the paper-only reading (``reading_basis`` "paper") and the warnings that do not
     need a simulation (case message, near Hopf, near generalised Hopf, current reversal).
+    ``newton`` is the cycle corrector (:func:`~maglev_match.dynamics.basin.bounding_cycle`):
+    model A keeps "full" (h then stays that of the Newton-count step sequence); the vehicle
+    uses "chord" (2.2x less CPU for its 40-state cycles, measured on turnout-soft).
     """
     stab = stability_result or stability(system, p)
     base = dict(w0=w0, stable=stab.stable, max_real_part=stab.max_real_part,
@@ -321,7 +326,8 @@ def index_of_system(
                              reading=reading(0.0, Case.UNSTABLE_EQUILIBRIUM, False),
                              warnings=tuple(warnings), **base)
     bound = bounding_cycle(system, p, search, limits=limits, ntst=cycle_settings.ntst,
-                           ncol=cycle_settings.ncol, max_steps=cycle_settings.max_steps)
+                           ncol=cycle_settings.ncol, max_steps=cycle_settings.max_steps,
+                           newton=newton)
     warnings.extend(bound.warnings)
     hp = bound.hopf
     gh = _gh_ratio(system, hp, h_max) if hp is not None else None

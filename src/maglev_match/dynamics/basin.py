@@ -71,6 +71,7 @@ def bounding_cycle(
     ntst: int = 60,
     ncol: int = 4,
     max_steps: int = 400,
+    newton: str = "full",
 ) -> CycleBound:
     """The unstable cycle around the (stable) equilibrium at ``p``, by continuation.
 
@@ -81,6 +82,9 @@ def bounding_cycle(
     limits : passed to :func:`~maglev_match.dynamics.cycles.cycle_branch`: the branch
         stops at the first contact with a limit.
     n_scan, ntst, ncol, max_steps : scan resolution and collocation/continuation settings.
+    newton : the corrector of the cycle branch ("full" by default: the step sequence, and
+        so the adapted mesh and h, stay those of the Newton-count rule; "chord" is faster
+        and moves h by ~6e-8 relative through the other step sequence).
     """
     p = np.asarray(p, float)
     design = {name: float(p[system.param_index(name)]) for name in search}
@@ -108,9 +112,13 @@ def bounding_cycle(
         # located on the way (those solves changed nothing in h). The step sequence is the
         # Newton-count rule's (predictor_tol=None): the mesh is adapted every 3 steps, so a
         # different sequence ends on a different mesh and moves h by ~4e-8 relative.
+        # The multipliers are computed only at the end point (the only one read), and a
+        # limit contact is only bracketed: whether and on which side of the Hopf point the
+        # branch meets a limit is all the index reads of it.
         br = cycle_branch(system, hp, hp.param, stop_at=target, ntst=ntst, ncol=ncol,
                           max_steps=max_steps, limits=limits, param_bounds=(lo, hi),
-                          detect_special_points=False, predictor_tol=None)
+                          detect_special_points=False, predictor_tol=None, newton=newton,
+                          multipliers_at="last", locate_limit=False)
         branches.append(br)
         last = br.last
         if last is not None and last.kind == "stop_at" and last.converged:

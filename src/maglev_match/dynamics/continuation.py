@@ -242,6 +242,9 @@ class ContinuationProblem(Protocol):
     * ``admissible(a, u_new, s)`` : reject a corrected point (branch jumping).
     * ``after_accept(point)`` : hook (mesh adaptation), returns the point to continue from.
     * ``stop(point)`` : a reason to stop after this point, or None.
+    * ``event_tolerance(name)`` : the relative bracket (of the step) to which this event is
+      located, or None for ``options.event_tol`` (a problem that re-solves the point of an
+      event exactly anyway, e.g. at a stop value, needs only one secant trial: 1.0).
     """
 
     weights: np.ndarray
@@ -451,7 +454,11 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
             make_point, opt: ContinuationOptions, classify, terminal, step: int
             ) -> Event | None:
     """Zero of test function ``name`` between a (s = 0) and b (s = s_step): Illinois
-    regula falsi on s, every trial re-corrected onto the branch."""
+    regula falsi on s, every trial re-corrected onto the branch, to the relative bracket
+    ``problem.event_tolerance(name)`` (default ``opt.event_tol``)."""
+    tol_hook = getattr(problem, "event_tolerance", None)
+    ev_tol = tol_hook(name) if tol_hook is not None else None
+    ev_tol = opt.event_tol if ev_tol is None else float(ev_tol)
     lo, glo, hi, ghi = 0.0, a.tests[name], s_step, b.tests[name]
     g_start = glo
     best: tuple[float, float, BranchPoint] | None = None
@@ -493,8 +500,8 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
         if (g == 0 or (g > 0) == (g_start > 0)) and (best_before is None
                                                       or abs(g) <= abs(best_before[0])):
             best_before = (g, sm, pt)
-        if g == 0 or (hi - lo) < opt.event_tol * s_step or (
-                s_prev is not None and abs(sm - s_prev) < opt.event_tol * s_step):
+        if g == 0 or (hi - lo) < ev_tol * s_step or ev_tol >= 1.0 or (
+                s_prev is not None and abs(sm - s_prev) < ev_tol * s_step):
             located = SOLVED
             break
         s_prev = sm

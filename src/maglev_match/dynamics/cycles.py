@@ -18,9 +18,12 @@ for the unknowns X = (profile, period T, parameter). Newton's method uses the ex
 Jacobian (JAX, vmapped over collocation points); by default the interior collocation
 unknowns of each interval are condensed out and the small mesh-node system is factorised
 by sparse LU (:class:`~maglev_match.dynamics.collocation.CondensedLU`; ``linear_solver=
-"sparse_lu"`` factorises the whole system instead). Floquet multipliers are those of the
-product of the interval transfer matrices of the variational equation, computed without
-forming it (:mod:`~maglev_match.dynamics.floquet`). The mesh is adapted by
+"sparse_lu"`` factorises the whole system instead); the corrector is the chord iteration,
+which keeps the factorisation of the previous solution while it contracts fast
+(``newton="full"``: a factorisation per iteration). Floquet multipliers are those of the
+product of the interval transfer matrices of the variational equation (taken from the
+condensation at each solution), computed without forming the product
+(:mod:`~maglev_match.dynamics.floquet`). The mesh is adapted by
 equidistributing |u^(NCOL+1)|^(1/(NCOL+1)) (de Boor's criterion, as AUTO does).
 """
 
@@ -39,8 +42,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.dynamics.collocation import (
+    CondensedLU,
     LinearSolver,
+    NewtonStats,
     _adapt_mesh,
+    _chord_newton,
     _evaluate_profile,
     _interval_index,
     _kernel,
@@ -72,6 +78,7 @@ __all__ = [
     "CycleBranch",
     "CorrectionResult",
     "CycleStop",
+    "NewtonMode",
     "RestartState",
     "branch_to_xarray",
     "load_restart",
@@ -231,6 +238,8 @@ class CycleBranch:
     ncol: int = 0
     steps: int = 0  # continuation steps taken (accepted)
     rejected_steps: int = 0
+    newton_iterations: int = 0  # corrector iterations over the whole run (linear solves)
+    factorizations: int = 0  # factorisations of the bordered Jacobian over the run
 
     @property
     def values(self) -> np.ndarray:
@@ -293,11 +302,6 @@ LAM_ZERO = 1e-12
 
 
 
-@cache
-def _observable_batch(g: Callable) -> Callable:
-    return jax.jit(jax.vmap(g, (0, None)))
-
-
 
 
 # ---------------------------------------------------------------------------------------
@@ -337,38 +341,62 @@ def _local_basis(m: int, npts: int) -> np.ndarray:
     return _lagrange(np.linspace(0.0, 1.0, m + 1), np.linspace(0.0, 1.0, npts))[0]
 
 
+@cache
+def _extrema_kernel(gs: tuple[Callable, ...], m: int, refine: int) -> Callable:
+    """One jitted call giving (max, min) of each observable in ``gs`` over an orbit: the
+    coarse pass over 4 NCOL + 1 points per interval, the intervals around each extreme, and
+    the fine pass (``refine`` + 1 points per interval) over those (cached per observables,
+    NCOL, refine; see :func:`orbit_extrema`)."""
+    Lc = jnp.asarray(_local_basis(m, 4 * m + 1))
+    Lf = jnp.asarray(_local_basis(m, refine + 1))
+    batches = [jax.vmap(g, (0, None)) for g in gs]
+
+    def kernel(nodes, p):
+        ntst, n = nodes.shape[0], nodes.shape[2]
+        X = jnp.einsum("sk,jkn->jsn", Lc, nodes).reshape(-1, n)
+        out = []
+        for g in batches:
+            vals = g(X, p).reshape(ntst, Lc.shape[0], -1)
+            jmax = jnp.argmax(vals.reshape(-1)) // (vals.shape[1] * vals.shape[2])
+            jmin = jnp.argmax(-vals.reshape(-1)) // (vals.shape[1] * vals.shape[2])
+            js = jnp.stack([(jmax - 1) % ntst, jmax, (jmax + 1) % ntst,
+                            (jmin - 1) % ntst, jmin, (jmin + 1) % ntst])
+            Xf = jnp.einsum("sk,jkn->jsn", Lf, nodes[js]).reshape(-1, n)
+            vf = g(Xf, p).reshape(6 * Lf.shape[0], -1)
+            half = vf.shape[0] // 2
+            out.append(jnp.stack([jnp.maximum(jnp.max(vf[:half]), jnp.max(vals)),
+                                  jnp.minimum(jnp.min(vf[half:]), jnp.min(vals))]))
+        return jnp.stack(out)
+
+    return jax.jit(kernel)
+
+
+# the last few orbits' extrema: a branch point's read-out and its limit margins ask for
+# the same orbit (entries hold the orbit itself, so an id is never reused while cached)
+_EXTREMA_MEMO: list[tuple[System, PeriodicOrbit, int, dict[str, tuple[float, float]]]] = []
+
+
 def orbit_extrema(
     system: System, orbit: PeriodicOrbit, names: Sequence[str], refine: int = 200
 ) -> dict[str, tuple[float, float]]:
     """Max and min of each named observable over the orbit (over all components of a
     vector observable), from the collocation polynomial: a coarse pass over 4 NCOL + 1
     points per interval, then a fine pass (``refine`` + 1 points per interval) over the
-    intervals around the extreme values."""
-    out: dict[str, tuple[float, float]] = {}
-    ntst, m = orbit.ntst, orbit.ncol
-    nodes = orbit.states[_interval_index(ntst, m)]  # (ntst, m+1, n)
-    Lc = _local_basis(m, 4 * m + 1)
-    Lf = _local_basis(m, refine + 1)
-    X = np.einsum("sk,jkn->jsn", Lc, nodes).reshape(-1, orbit.states.shape[1])
-    pj = jnp.asarray(orbit.p)
-    for name in names:
-        g = _observable_batch(system.observables[name])
-        vals = np.asarray(g(jnp.asarray(X), pj)).reshape(ntst, Lc.shape[0], -1)
-        # the fine passes around the largest and the smallest value in one call
-        jmax = int(np.unravel_index(int(np.argmax(vals)), vals.shape)[0])
-        jmin = int(np.unravel_index(int(np.argmax(-vals)), vals.shape)[0])
-        js = np.array([(jmax - 1) % ntst, jmax, (jmax + 1) % ntst,
-                       (jmin - 1) % ntst, jmin, (jmin + 1) % ntst])
-        Xf = np.einsum("sk,jkn->jsn", Lf, nodes[js]).reshape(-1, X.shape[1])
-        vf = np.asarray(g(jnp.asarray(Xf), pj))
-        half = vf.shape[0] // 2
-        out[name] = (max(float(np.max(vf[:half])), float(np.max(vals))),
-                     min(float(np.min(vf[half:])), float(np.min(vals))))
-    return out
-
-
-
-
+    intervals around the extreme values. All observables in one compiled call
+    (:func:`_extrema_kernel`); the values of an orbit asked again are remembered."""
+    names = list(names)
+    if not names:
+        return {}
+    for sys_, orb, ref, ext in _EXTREMA_MEMO:
+        if sys_ is system and orb is orbit and ref == refine and all(k in ext for k in names):
+            return {k: ext[k] for k in names}
+    nodes = orbit.states[_interval_index(orbit.ntst, orbit.ncol)]  # (ntst, m+1, n)
+    gs = tuple(system.observables[name] for name in names)
+    v = np.asarray(_extrema_kernel(gs, orbit.ncol, refine)(nodes, np.asarray(orbit.p, float)))
+    out = {name: (float(v[k, 0]), float(v[k, 1])) for k, name in enumerate(names)}
+    _EXTREMA_MEMO.insert(0, (system, orbit, refine, out))
+    del _EXTREMA_MEMO[4:]
+    return dict(out)
 
 
 # ---------------------------------------------------------------------------------------
@@ -435,6 +463,31 @@ class CycleStop(StrEnum):
     STEP_TOO_SMALL = "step too small"
     NEWTON_FAILED = "newton failed"
     MAX_STEPS = "max_steps"
+
+
+class NewtonMode(StrEnum):
+    """The corrector of a cycle branch."""
+
+    CHORD = "chord"  # kept factorisation, rate-monitored (collocation._chord_newton)
+    FULL = "full"  # a new factorisation every iteration (collocation._newton)
+
+
+def _blocks_at(prob: _Problem, Y: np.ndarray, mesh: np.ndarray
+               ) -> tuple[np.ndarray, float, np.ndarray]:
+    """(J, T, h) at the solution Y on ``mesh`` (the problem's mesh may have moved on)."""
+    m = prob.m
+    U, T, lam = prob.unpack(Y)
+    h = np.diff(mesh)
+    p = prob.params(lam)
+    _, _, J, _ = _kernel(prob.system.rhs, m)(
+        U[_interval_index(mesh.size - 1, m)], h, T, p, np.zeros_like(p))
+    return np.asarray(J), T, h
+
+
+def _transfer(prob: _Problem, lu: Any) -> np.ndarray | None:
+    """The Floquet transfer matrices from a condensed factorisation at the solution (None
+    for the whole-system sparse LU, which does not form them)."""
+    return lu.transfer_matrices(prob.scale) if isinstance(lu, CondensedLU) else None
 
 
 # multiplier test functions and the kinds they detect
@@ -504,16 +557,33 @@ class CycleProblem:
         self.restarting = False
         self.detect = True
         self.floquet_method = "auto"
+        self.newton = NewtonMode.CHORD
+        self.chord_lu: Any = None  # the last corrector's factorisation (same mesh)
+        self.stats = NewtonStats()
+        self.locate_limit = True  # False: a limit contact is only bracketed (one trial)
 
     # --- corrector and read-outs ---
     def correct(self, u_pred, row, target, max_iter):
         Uref, _, _ = self.prob.unpack(u_pred)
+        if self.newton == NewtonMode.CHORD:
+            cr = _chord_newton(self.prob, u_pred, Uref, row, target, self.tol, max_iter,
+                               lu0=self.chord_lu, stats=self.stats)
+            if not cr.converged:
+                return None
+            self.chord_lu = cr.lu
+            return Correction(u=cr.Y, iterations=cr.iterations, residual=cr.residual,
+                              solve=cr.lu.solve,
+                              data=(cr.blocks, self.prob.mesh.copy(), _transfer(self.prob,
+                                                                                cr.lu)))
         Y, ok, its, res, lu, blocks = _newton(self.prob, u_pred, Uref, row, target,
-                                              self.tol, max_iter)
+                                              self.tol, max_iter, lazy_blocks=True)
+        self.stats.correctors += 1
+        self.stats.iterations += its
+        self.stats.factorizations += its
         if not ok:
             return None
         return Correction(u=Y, iterations=its, residual=res, solve=lu.solve,
-                          data=(blocks, self.prob.mesh.copy()))
+                          data=(blocks, self.prob.mesh.copy(), None))
 
     def parameter(self, u) -> float:
         return self.prob.unpack(u)[2]
@@ -528,9 +598,10 @@ class CycleProblem:
         return float(np.sqrt(np.sum(self.weights * d * d))) <= 3.0 * s
 
     def _floquet_fields(self, pt: BranchPoint) -> dict[str, Any]:
-        (J, Tb, h), _ = pt.correction.data
+        blocks, mesh, P = pt.correction.data
+        J, Tb, h = blocks if blocks is not None else _blocks_at(self.prob, pt.u, mesh)
         triv, mult = _split_trivial(floquet_multipliers_from_blocks(
-            J, Tb, h, self.prob.m, method=self.floquet_method))
+            J, Tb, h, self.prob.m, method=self.floquet_method, transfer=P))
         nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
         return {"multipliers": mult, "trivial_multiplier": triv, "n_unstable": nun,
                 "stable": nun == 0,
@@ -541,7 +612,7 @@ class CycleProblem:
         """The read-out of a branch point. ``floquet`` False leaves the multipliers out
         (placeholders, marked in ``pt.info["lazy"]``) for :meth:`complete` to fill in."""
         prob = self.prob
-        _, mesh = pt.correction.data
+        mesh = pt.correction.data[1]
         U, T, lam = prob.unpack(pt.u)
         if floquet:
             fields = self._floquet_fields(pt)
@@ -590,6 +661,14 @@ class CycleProblem:
 
     def terminal(self, name: str) -> bool:
         return name in ("LIMIT", "STOP")
+
+    def event_tolerance(self, name: str) -> float | None:
+        """The stop value needs one secant trial inside the step: the cycle there is then
+        solved at exactly the stop value (:func:`_fixed_param`), whatever the trial's
+        distance from it. Every other event is located to ``event_tol``."""
+        if name == "STOP" or (name == "LIMIT" and not self.locate_limit):
+            return 1.0
+        return None
 
     def worth_locating(self, name: str, a: BranchPoint, b: BranchPoint) -> bool:
         """Skip sign changes that the end points show are no special point: BP in a step
@@ -655,6 +734,7 @@ class CycleProblem:
         U2 = _remesh(prob.mesh, prob.m, U, new_mesh)
         Ut2 = _remesh(prob.mesh, prob.m, Ut, new_mesh)
         prob.mesh = new_mesh
+        self.chord_lu = None  # the kept factorisation belongs to the old mesh
         t = prob.pack(Ut2, Tt, lt)
         t /= math.sqrt(float(np.sum(self.weights * t * t)))
         return BranchPoint(u=prob.pack(U2, T, lam), t=t, value=pt.value,
@@ -696,6 +776,9 @@ def cycle_branch(
     linear_solver: str = "condensed",
     floquet_method: str = "auto",
     predictor_tol: float | None = 0.05,
+    newton: str = "chord",
+    multipliers_at: str = "all",
+    locate_limit: bool = True,
 ) -> CycleBranch:
     """Continue the cycles born at a Hopf point in the parameter ``param``.
 
@@ -755,6 +838,18 @@ def cycle_branch(
         as ``ds``) by which easy steps may grow faster than the Newton-count rule allows
         (:class:`~maglev_match.dynamics.continuation.ContinuationOptions`); None: the
         Newton-count rule alone.
+    newton : "chord" (default: the factorisation at the previous solution is kept while
+        the iteration contracts fast: the chord iteration of the collocation module; the
+        Floquet transfer matrices come from the factorisation at each
+        solution) or "full" (a new factorisation every iteration, the earlier path).
+    multipliers_at : "all" (default) or "last": with "last" (and no special-point
+        detection) only the last point of the branch gets its Floquet multipliers; the
+        other points have none (empty ``multipliers``, ``reliable`` False). For callers
+        that read only the end point (the matching index).
+    locate_limit : True (default): the first limit contact is solved (margin 0 to 1e-6).
+        False: it is only bracketed inside the step where the margin changes sign (one
+        secant trial, the branch ends there, ``located`` says "bracketed"), for callers
+        that need only whether and on which side a limit is reached (the matching index).
 
     Returns
     -------
@@ -783,12 +878,23 @@ def cycle_branch(
                          "number > 1")
     if not trivial_tol > 0:
         raise ValueError(f"trivial_tol = {trivial_tol!r}: must be > 0")
+    if newton not in tuple(NewtonMode):
+        raise ValueError(f"newton = {newton!r}: must be one of "
+                         f"{', '.join(map(str, NewtonMode))}")
+    if multipliers_at not in ("all", "last"):
+        raise ValueError(f"multipliers_at = {multipliers_at!r}: must be all or last")
     if linear_solver not in tuple(LinearSolver):
         raise ValueError(f"linear_solver = {linear_solver!r}: must be one of "
                          f"{', '.join(map(str, LinearSolver))}")
+    # the chord iteration takes about twice Newton's iterations for the same step (linear
+    # convergence at rate <= CHORD_MAX_RATE instead of quadratic): the Newton-count rule
+    # reads "easy" as <= 5 and "slow" as >= 10 iterations then, and allows 8 more
+    chord = newton == NewtonMode.CHORD
     options = ContinuationOptions(
         ds=min(max(ds, ds_min), ds_max), ds_min=ds_min, ds_max=ds_max, max_steps=max_steps,
-        newton_tol=tol, newton_max_iter=max_newton, predictor_tol=predictor_tol,
+        newton_tol=tol, newton_max_iter=max_newton + (8 if chord else 0),
+        predictor_tol=predictor_tol, fast_iterations=5 if chord else 3,
+        slow_iterations=10 if chord else 6,
         param_bounds=None if param_bounds is None else tuple(map(float, param_bounds)))
     prob = _Problem(system=system, ipar=ipar, p0=np.array(start.p, float),
                     mesh=np.linspace(0.0, 1.0, ntst + 1), m=m,
@@ -812,6 +918,8 @@ def cycle_branch(
         raise ValueError(f"floquet_method = {floquet_method!r}: must be auto, periodic_qz "
                          "or cyclic_qr")
     cyc.floquet_method = floquet_method
+    cyc.newton = NewtonMode(newton)
+    cyc.locate_limit = bool(locate_limit)
     first = Correction(u=Yh, iterations=0, residual=0.0, solve=lambda e: tY, data=None)
     if new_param:
         prob.mesh = np.array(restart.mesh, float)
@@ -840,6 +948,10 @@ def cycle_branch(
         options = dataclasses.replace(options, ds=float(np.clip(restart.ds, ds_min, ds_max)))
         row = W * tY
         first = cyc.correct(Yh, row, float(row @ Yh), max_newton)
+        if adapt_every and cyc.accepted % adapt_every == 0:
+            # the saved point had its mesh adapted: the uninterrupted run went on without a
+            # kept factorisation from there, and so does the restart (same steps)
+            cyc.chord_lu = None
         if first is None:
             return CycleBranch(param=param, hopf=start, points=(), special_points=(),
                                stopped_reason=CycleStop.NEWTON_FAILED,
@@ -852,8 +964,12 @@ def cycle_branch(
             progress(step, pt.info["cycle"])
 
     res = continuation(cyc, Yh, tY, options, progress=notify, first=first)
+    every = multipliers_at == "all" or bool(detect_special_points)
+    # a branch ending at the stop value gets that cycle re-solved (with its multipliers)
+    resolved = any(ev.kind == "STOP" and ev.point is not None for ev in res.events)
     for pt in res.points[1:]:
-        cyc.complete(pt)
+        if every or (pt is res.points[-1] and not resolved):
+            cyc.complete(pt)
     for ev in res.events:
         cyc.complete(ev.point)
     warnings = list(cyc.warnings)
@@ -894,8 +1010,15 @@ def cycle_branch(
                 continue
             # the located point is refined at exactly the stop value
             fixed = _fixed_param(prob, ev.point.u, float(stop_at), tol, max_newton + 4)
-            c = cyc.cycle_point(fixed, kind="stop_at") if fixed is not None else \
-                dataclasses.replace(ev.point.info["cycle"], kind="stop_at")
+            if fixed is not None:
+                c = cyc.cycle_point(fixed, kind="stop_at")
+            else:  # reported, never passed off as the cycle at the stop value
+                cyc.complete(ev.point)
+                c = dataclasses.replace(ev.point.info["cycle"], kind="stop_at",
+                                        converged=False)
+                warnings.append(f"the cycle at {param} = {stop_at:g} did not converge; the "
+                                f"branch point found near it ({param} = {c.value:.8g}) is "
+                                "reported, marked not converged")
             if points and points[-1] is ev.point.info.get("cycle"):
                 points[-1] = c
             else:
@@ -917,7 +1040,9 @@ def cycle_branch(
             mg_c, lname = _margin(limits, system, c.orbit)
             detail = lname
             located = SOLVED if abs(mg_c) <= 1e-6 else f"bracketed (margin {mg_c:.2e})"
-            if located != SOLVED:
+            if located != SOLVED and not locate_limit:
+                located = f"bracketed (margin {mg_c:.2e}; not solved: locate_limit=False)"
+            elif located != SOLVED:
                 warnings.append(f"limit contact '{lname}' bracketed, not solved: the "
                                 f"corrector failed closer to it (margin {mg_c:.2e})")
             c = dataclasses.replace(c, kind="limit")
@@ -951,7 +1076,9 @@ def cycle_branch(
     return CycleBranch(param=param, hopf=start, points=tuple(points),
                        special_points=tuple(specials), stopped_reason=stopped,
                        warnings=tuple(warnings), ntst=ntst, ncol=m,
-                       steps=max(len(res.points) - 1, 0), rejected_steps=res.rejected)
+                       steps=max(len(res.points) - 1, 0), rejected_steps=res.rejected,
+                       newton_iterations=cyc.stats.iterations,
+                       factorizations=cyc.stats.factorizations)
 
 
 def _fixed_param(prob: _Problem, Y: np.ndarray, value: float, tol: float, max_iter: int
@@ -965,7 +1092,7 @@ def _fixed_param(prob: _Problem, Y: np.ndarray, value: float, tol: float, max_it
     if not ok:
         return None
     corr = Correction(u=Yv, iterations=its, residual=res, solve=lu.solve,
-                      data=(blocks, prob.mesh.copy()))
+                      data=(blocks, prob.mesh.copy(), None))
     return BranchPoint(u=Yv, t=np.zeros_like(Yv), value=value, correction=corr)
 
 
@@ -995,7 +1122,7 @@ def correct_cycle(
     if not ok:
         return CorrectionResult(None, False, its, f"no convergence (residual {res:.2e})")
     U, T, lam = prob.unpack(Y)
-    J, Tb, h = blocks
+    J, Tb, h = blocks if blocks is not None else _blocks_at(prob, Y, prob.mesh)
     triv, mult = _split_trivial(floquet_multipliers_from_blocks(J, Tb, h, orbit.ncol))
     nun = int(np.sum(np.abs(mult) > 1.0 + 1e-6))
     orb = PeriodicOrbit(prob.mesh, orbit.ncol, U, T, prob.params(lam))

@@ -630,6 +630,15 @@ def grouped_transfer_matrices(F: np.ndarray, E: np.ndarray, max_cond: float) -> 
     return P if max_cond <= 1.0 else _group(P, max_cond)
 
 
+def _balance_scale(J: np.ndarray) -> np.ndarray:
+    """The diagonal D of :func:`_balanced` (n,)."""
+    if J.shape[-1] < 2:
+        return np.ones(J.shape[-1])
+    _, (s, _) = scipy.linalg.matrix_balance(np.abs(J).mean(axis=(0, 1)), permute=False,
+                                            separate=True)
+    return s
+
+
 def _balanced(J: np.ndarray) -> np.ndarray:
     """D^-1 J(t) D with one diagonal D (powers of 2, so exact) for the whole orbit, chosen by
     balancing the mean |J| (Parlett & Reinsch 1969). The transfer matrices become D^-1 P_j D:
@@ -637,26 +646,34 @@ def _balanced(J: np.ndarray) -> np.ndarray:
     longer make every P_j look ill-conditioned, which would defeat the grouping."""
     if J.shape[-1] < 2:
         return J
-    _, (s, _) = scipy.linalg.matrix_balance(np.abs(J).mean(axis=(0, 1)), permute=False,
-                                            separate=True)
+    s = _balance_scale(J)
     return J * s[None, None, None, :] / s[None, None, :, None]
 
 
-def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND, method: str = "auto"
+def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND, method: str = "auto",
+                 transfer: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray, PeriodicEigenvalues, int, FloquetMethod]:
     """(multipliers, ln|multipliers|, raw result, number of factors, method), by |mu|
     descending. ``method``: "auto" (the block cyclic QR when its error bound proves it
     accurate, else the periodic QZ), "periodic_qz" or "cyclic_qr" (falls back to the
-    periodic QZ when the bound fails)."""
+    periodic QZ when the bound fails). ``transfer``: the interval transfer matrices P_j if
+    already known (e.g. from the condensation of the Newton step), else computed from J."""
     J = np.asarray(J, float)
     if not (np.all(np.isfinite(J)) and math.isfinite(T)):
         raise ValueError("Floquet multipliers: the Jacobian along the orbit (or the period) "
                          "is not finite")
-    J = _balanced(J)
     if method not in ("auto", *tuple(FloquetMethod)) or method == FloquetMethod.PRODUCT:
         raise ValueError(f"method = {method!r}: must be auto, periodic_qz or cyclic_qr")
+    if transfer is not None and group_cond > 1.0:
+        d = _balance_scale(J)  # the same balancing, applied to the given P_j: D^-1 P_j D
+        P = np.asarray(transfer, float) * (d[None, None, :] / d[None, :, None])
+    else:
+        J = _balanced(J)
+        P = None
     if group_cond > 1.0:
-        F, E = _group(transfer_matrices(J, T, h, m), group_cond), None
+        if P is None:
+            P = transfer_matrices(J, T, h, m)
+        F, E = _group(P, group_cond), None
         cyc = None if method == FloquetMethod.PERIODIC_QZ else _cyclic_multipliers(F)
         if cyc is not None:
             la, ph = _pair_conjugates(cyc[0], cyc[1])
@@ -675,7 +692,8 @@ def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND, method: str
 
 
 def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: int,
-                                    method: str = "auto") -> np.ndarray:
+                                    method: str = "auto",
+                                    transfer: np.ndarray | None = None) -> np.ndarray:
     """Floquet multipliers (all n, by |mu| descending) of a collocation orbit from the
     Jacobian at its Gauss points, by periodic QZ on the grouped transfer matrices (see the
     module docstring); the monodromy matrix is never formed.
@@ -686,6 +704,11 @@ def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: i
     T : period (s).
     h : mesh interval lengths on [0, 1], shape (NTST,).
     m : NCOL.
+    method : "auto", "periodic_qz" or "cyclic_qr" (see :func:`floquet_analysis`).
+    transfer : the interval transfer matrices P_j (NTST, n, n) when they are already known
+        (:meth:`~maglev_match.dynamics.collocation.CondensedLU.transfer_matrices`, a
+        by-product of the Newton step's condensation at this orbit): they replace the
+        batched interval solve; J is still used for the balancing.
 
     Returns
     -------
@@ -693,7 +716,7 @@ def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: i
     pairs. If the periodic QZ exhausts its sweep budget (never seen in practice) the
     explicit product is used instead; :func:`floquet_analysis` reports that case.
     """
-    mu, _, pe, _, _ = _multipliers(J, T, h, m, method=method)
+    mu, _, pe, _, _ = _multipliers(J, T, h, m, method=method, transfer=transfer)
     if not pe.converged:
         return floquet_multipliers_product(J, T, h, m)
     return mu
