@@ -98,6 +98,10 @@ import jax  # noqa: E402  (after the thread settings above)
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_platforms", os.environ.get("JAX_PLATFORMS", "cpu") or "cpu")
 
+# the folder of the persistent caches (XLA executables, and the exported kernels of
+# maglev_match.aot in its "aot" subfolder); None when the cache is switched off or unusable
+CACHE_DIR: Path | None = None
+
 _cache = os.environ.get("MAGLEV_MATCH_CACHE", str(Path.home() / ".cache" / "maglev-match" / "jax"))
 if _cache:
     try:
@@ -107,5 +111,6 @@ if _cache:
         # which a threshold would leave to be redone in every process
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+        CACHE_DIR = Path(_cache)
     except OSError:  # read-only home: run without the persistent cache
         pass

@@ -46,6 +46,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.system import System
 
 __all__ = ["CollocationProblem", "LinearSolver"]
@@ -125,7 +126,7 @@ def _kernel(rhs: Callable, m: int) -> Callable:
         F = f2(Uc, p)
         return dU - T * F, F, j2(Uc, p), fp2(Uc, p, e)
 
-    return jax.jit(kernel)
+    return cached_kernel(kernel, rhs, m)
 
 
 @cache
@@ -152,7 +153,7 @@ def _parts_kernel(rhs: Callable, m: int) -> Callable:
         return (res * hs, -F * hs * T_scale, -T * Fp * hs * lam_scale,
                 blk.reshape(ntst, m * n, (m + 1) * n), J)
 
-    return jax.jit(parts)
+    return cached_kernel(parts, rhs, m)
 
 
 @lru_cache(maxsize=32)
