@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.collocation import (
     LinearSolver,
     _adapt_mesh,
@@ -295,7 +296,7 @@ LAM_ZERO = 1e-12
 
 @cache
 def _observable_batch(g: Callable) -> Callable:
-    return jax.jit(jax.vmap(g, (0, None)))
+    return cached_kernel(jax.vmap(g, (0, None)), g, name="cycles.observable_batch")
 
 
 

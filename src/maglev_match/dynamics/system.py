@@ -90,6 +90,11 @@ def _observable_single(g: Callable) -> Callable:
 
 
 @cache
+def _observable_gradient(g: Callable) -> Callable:
+    return cached_kernel(jax.jacfwd(g, argnums=0), g, name="system.observable_gradient")
+
+
+@cache
 def _observable_batch(g: Callable) -> Callable:
     return cached_kernel(jax.vmap(g, in_axes=(0, None)), g, name="system.observable_batch")
 
@@ -239,6 +244,17 @@ class System:
         if x.ndim == 1:
             return np.asarray(_observable_single(g)(x, pj))
         return np.asarray(_observable_batch(g)(x, pj))
+
+    def observable_gradient(self, name: str, x: Array, p: np.ndarray | None = None
+                            ) -> np.ndarray:
+        """d g / d x of a named observable at one state (exact, forward-mode autodiff):
+        shape (dim,) for a scalar observable, (k, dim) for one with k components."""
+        if name not in self.observables:
+            raise KeyError(f"system '{self.name}' has no observable '{name}'; it has: "
+                           + ", ".join(self.observables))
+        g = _observable_gradient(self.observables[name])
+        return np.asarray(g(np.asarray(x, np.float64),
+                            np.asarray(self.p if p is None else p, np.float64)))
 
     def f_and_jacobian(self, x: Array, p: np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
