@@ -39,7 +39,9 @@ def run(args: list[str], env: dict[str, str]) -> tuple[float, float]:
     """Wall and CPU (children's user + sys) seconds of one process."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True)
+    with tempfile.TemporaryDirectory(prefix="mm-bench-cwd-") as cwd:  # output files go here
+        proc = subprocess.run([sys.executable, *args], env=env, capture_output=True,
+                              text=True, cwd=cwd)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:
