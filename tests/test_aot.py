@@ -227,3 +227,19 @@ def test_cli_import_does_not_load_heavy_optional_modules():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]", f"import maglev_match.cli loaded: {out}"
+
+
+def test_prune_removes_only_old_files_of_other_environments(aot_cache):
+    _, fn, static, name, args = _kernels_and_args()[0]
+    _fresh(fn, *static, name=name)(*args)
+    (current,) = aot_cache.glob("*.jaxexport")
+    other_old = aot_cache / "hopf.G-000000000000-0123.jaxexport"
+    other_new = aot_cache / "hopf.G-111111111111-0123.jaxexport"
+    for f in (other_old, other_new):
+        f.write_bytes(b"x")
+    old = 30 * 86400.0
+    os.utime(other_old, (os.path.getmtime(other_old) - old,) * 2)
+    os.utime(current, (os.path.getmtime(current) - old,) * 2)  # old, but this environment
+    assert aot.prune(aot_cache) == 1
+    assert sorted(f.name for f in aot_cache.glob("*.jaxexport")) == sorted(
+        [current.name, other_new.name])

@@ -31,10 +31,12 @@ Parameter values are arguments of the kernels, never part of the key, so a new p
 value reuses the same file. A static ingredient without a stable identity (a user's model
 loaded with ``--model file.py``, a closure over an object) makes the kernel a plain
 ``jax.jit`` (nothing written). A corrupt, truncated or mismatching file is ignored and
-rewritten. The mechanism is off (plain ``jax.jit``) when the cache is switched off
-(``MAGLEV_MATCH_CACHE=""``), when ``MAGLEV_MATCH_AOT=0``, or when ``jax.export`` cannot
-serialize (the ``flatbuffers`` package is missing). Calls with tracers (a kernel used
-inside another kernel's trace) always go to the plain ``jax.jit``, which inlines.
+rewritten; files of another environment unused for 7 days are deleted (:func:`prune`,
+once per process, before its first export). The mechanism is off (plain ``jax.jit``) when
+the cache is switched off (``MAGLEV_MATCH_CACHE=""``), when ``MAGLEV_MATCH_AOT=0``, or when
+``jax.export`` cannot serialize (the ``flatbuffers`` package is missing). Calls with tracers
+(a kernel used inside another kernel's trace) always go to the plain ``jax.jit``, which
+inlines.
 
 Reference: JAX documentation, "Exporting and serializing staged-out computations"
 (``jax.export``), and "Persistent compilation cache".
@@ -57,7 +59,8 @@ import numpy as np
 
 from maglev_match import jax_setup
 
-__all__ = ["AotStats", "Kernel", "STATS", "aot_dir", "cached_kernel", "enabled", "identity"]
+__all__ = ["AotStats", "Kernel", "STATS", "aot_dir", "cached_kernel", "enabled", "identity",
+           "prune"]
 
 _PACKAGE_ROOT = Path(__file__).resolve().parent
 _MAX_ARRAY = 4096  # arrays up to this many elements can be static ingredients
@@ -178,6 +181,40 @@ def _environment() -> str:
     return _ENV
 
 
+def _environment_tag() -> str:
+    """12 hex digits naming the environment (source, versions) in the file names."""
+    return hashlib.sha256(_environment().encode()).hexdigest()[:12]
+
+
+_PRUNED = False
+STALE_AFTER_DAYS = 7.0
+
+
+def prune(folder: Path, max_age_days: float = STALE_AFTER_DAYS) -> int:
+    """Delete the exported kernels of other environments (another source or jax version)
+    that were not written or read for ``max_age_days``; returns how many were deleted.
+
+    Run once per process, before its first export, so the folder does not grow with every
+    change of the package. Recent files of other environments are kept: two installations
+    may share a cache folder."""
+    import time
+
+    tag = _environment_tag()
+    cutoff = time.time() - max_age_days * 86400.0
+    removed = 0
+    for f in folder.glob("*.jaxexport"):
+        parts = f.name.rsplit("-", 2)
+        if len(parts) == 3 and parts[1] == tag:
+            continue
+        try:
+            if f.stat().st_mtime < cutoff:
+                f.unlink()
+                removed += 1
+        except OSError:  # another process removed it first, or no permission
+            pass
+    return removed
+
+
 def _leaf_signature(x: Any) -> tuple | None:
     """(shape, dtype, weak) of one argument leaf, or None for what cannot be exported."""
     if isinstance(x, (np.ndarray, np.generic, jax.Array)):
@@ -242,9 +279,9 @@ class Kernel:
         if folder is None:
             return None
         text = f"{self.key}\n{sig!r}\n{_environment()}"
-        digest = hashlib.sha256(text.encode()).hexdigest()[:40]
+        digest = hashlib.sha256(text.encode()).hexdigest()[:32]
         short = "".join(c if c.isalnum() or c in "._-" else "_" for c in self.name)[-60:]
-        return folder / f"{short}-{digest}.jaxexport"
+        return folder / f"{short}-{_environment_tag()}-{digest}.jaxexport"
 
     def _prepare(self, sig: tuple, args: tuple) -> Callable:
         """The callable for one signature: the loaded or freshly exported kernel, or the
@@ -269,7 +306,16 @@ class Kernel:
             except Exception:  # corrupt, truncated or stale: export again
                 exp = None
                 STATS.rejected += 1
+            else:  # used: keep it from being pruned as stale
+                try:
+                    os.utime(path)
+                except OSError:
+                    pass
         if exp is None:
+            global _PRUNED
+            if not _PRUNED:
+                _PRUNED = True
+                prune(path.parent)
             try:
                 exp = export.export(self.plain)(*args)
                 data = exp.serialize()
