@@ -12,7 +12,9 @@ JAX (and, through it, NumPy's BLAS) is loaded, unless the caller imported them e
   JAX's: the lowered program, the argument shapes/dtypes and the compiler version. Model
   parameters are traced arguments of the kernels, so a new parameter value finds the same
   entry; only a new shape, a new model function or a new option that is a compile-time
-  constant compiles again.
+  constant compiles again. The package's kernels are also exported ahead of time into the
+  ``aot`` subfolder (:mod:`maglev_match.aot`), so a new process does not trace them again
+  to find their executables; ``MAGLEV_MATCH_AOT=0`` switches that off.
 * **Threads.** The models are small (9 to 39 states): XLA's and BLAS's thread pools cost
   more than they give on them, and the handing-over between cores of a compiled while loop
   dominates a simulation (model B, 5 s: 0.22 s on two cores, 0.11 s pinned to one, measured
@@ -98,6 +100,10 @@ import jax  # noqa: E402  (after the thread settings above)
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_platforms", os.environ.get("JAX_PLATFORMS", "cpu") or "cpu")
 
+# the folder of the persistent caches (XLA executables, and the exported kernels of
+# maglev_match.aot in its "aot" subfolder); None when the cache is switched off or unusable
+CACHE_DIR: Path | None = None
+
 _cache = os.environ.get("MAGLEV_MATCH_CACHE", str(Path.home() / ".cache" / "maglev-match" / "jax"))
 if _cache:
     try:
@@ -107,5 +113,6 @@ if _cache:
         # which a threshold would leave to be redone in every process
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+        CACHE_DIR = Path(_cache)
     except OSError:  # read-only home: run without the persistent cache
         pass

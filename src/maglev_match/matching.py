@@ -276,14 +276,11 @@ def _gh_ratio(system: System, hp: Any, h_max: float) -> float | None:
     (Kuznetsov 2004, section 8.3). Large means near a generalised-Hopf (Bautin) point,
     where the cubic truncation fails and h changes fast with the parameters. The ratio does
     not depend on the eigenvector normalisation (l1 ~ |q|^-2, l2 ~ |q|^-4, r ~ |q|)."""
-    import jax
-
     from maglev_match.dynamics.hopf import second_lyapunov_coefficient
 
     try:
         l1, l2 = second_lyapunov_coefficient(system, hp.x, hp.p, hp.frequency, hp.q, hp.p_adj)
-        g = np.atleast_2d(np.asarray(jax.jacfwd(system.observables["gap_deviation"])(
-            hp.x, hp.p)))
+        g = np.atleast_2d(system.observable_gradient("gap_deviation", hp.x, hp.p))
         amp = 2.0 * float(np.max(np.abs(g @ np.asarray(hp.q, complex))))
     except Exception:  # noqa: BLE001 - a diagnostic only; its failure must not stop the index
         return None

@@ -33,6 +33,7 @@ from maglev_match.cli.common import (
     ncol_option,
     ntst_option,
     output_target,
+    preload,
     progress_report,
     steps_option,
 )
@@ -190,6 +191,8 @@ def cycles_command(
                            max_steps, json_out, out)
     check_model(model)
     params = apply_at(_params(preset, config, set_), at)
+    if out is not None or not json_out:  # files at the end: load their writers meanwhile
+        preload("maglev_match.plots.cycles", "maglev_match.datasets", "xarray", "h5netcdf")
     system = build_system(params, model)
     try:
         design = getattr(params, param) if is_engineering(param) else system.param(param)

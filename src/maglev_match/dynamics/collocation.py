@@ -51,6 +51,7 @@ import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.system import System
 
 __all__ = ["CollocationProblem", "LinearSolver"]
@@ -130,7 +131,7 @@ def _kernel(rhs: Callable, m: int) -> Callable:
         F = f2(Uc, p)
         return dU - T * F, F, j2(Uc, p), fp2(Uc, p, e)
 
-    return jax.jit(kernel)
+    return cached_kernel(kernel, rhs, m)
 
 
 @cache
@@ -157,7 +158,7 @@ def _parts_kernel(rhs: Callable, m: int) -> Callable:
         return (res * hs, -F * hs * T_scale, -T * Fp * hs * lam_scale,
                 blk.reshape(ntst, m * n, (m + 1) * n), J)
 
-    return jax.jit(parts)
+    return cached_kernel(parts, rhs, m)
 
 
 @cache
@@ -174,7 +175,7 @@ def _residual_kernel(rhs: Callable, m: int) -> Callable:
         dU = jnp.einsum("lk,jkn->jln", Dj, Ui) / h[:, None, None]
         return (dU - T * f2(Uc, p)) * (h[:, None, None] / sc)
 
-    return jax.jit(res)
+    return cached_kernel(res, rhs, m)
 
 
 @lru_cache(maxsize=32)

@@ -41,6 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.collocation import (
     CondensedLU,
     LinearSolver,
@@ -368,7 +369,7 @@ def _extrema_kernel(gs: tuple[Callable, ...], m: int, refine: int) -> Callable:
                                   jnp.minimum(jnp.min(vf[half:]), jnp.min(vals))]))
         return jnp.stack(out)
 
-    return jax.jit(kernel)
+    return cached_kernel(kernel, gs, m, refine)
 
 
 # the last few orbits' extrema: a branch point's read-out and its limit margins ask for

@@ -29,6 +29,7 @@ import jax
 import numpy as np
 import scipy.linalg
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.continuation import (
     SOLVED,
     BranchPoint,
@@ -308,7 +309,7 @@ def _branch_kernel(rhs):
         fx, fe = jax.jvp(lambda q: rhs(x, q), (p,), (e,))
         return fx, jac(x, p), fe
 
-    return jax.jit(kernel)
+    return cached_kernel(kernel, rhs, name="equilibria.branch")
 
 
 def _sorted_eigs(w: np.ndarray) -> np.ndarray:

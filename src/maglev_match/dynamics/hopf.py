@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.normal_forms import (
     first_lyapunov_coefficient,
     hopf_eigenvectors,
@@ -140,7 +141,10 @@ def _defining_kernels(rhs, idx: tuple[int, ...]):
         ])
 
     DG = jax.jacfwd(G, argnums=0)
-    return jax.jit(G), jax.jit(DG), jax.jit(lambda z, p, c: (G(z, p, c), DG(z, p, c)))
+    return (cached_kernel(G, rhs, idx, name="hopf.G"),
+            cached_kernel(DG, rhs, idx, name="hopf.DG"),
+            cached_kernel(lambda z, p, c: (G(z, p, c), DG(z, p, c)), rhs, idx,
+                          name="hopf.G_DG"))
 
 
 @cache
@@ -153,7 +157,7 @@ def _crossing_kernel(rhs):
 
         return jax.jvp(Jv, (x, p), (dx, dp))[1]
 
-    return jax.jit(dJv)
+    return cached_kernel(dJv, rhs, name="hopf.dJv")
 
 
 # ----------------------------------------------------------------------------------------

@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.continuation import (
     BranchPoint,
     ContinuationOptions,
@@ -627,7 +628,8 @@ def _newton_batch(rhs, n_iter: int = 12):
         x, _ = jax.lax.scan(body, x0, None, length=n_iter)
         return x, rhs(x, p), jac(x, p)
 
-    return jax.jit(jax.vmap(solve, in_axes=(None, 0)))
+    return cached_kernel(jax.vmap(solve, in_axes=(None, 0)), rhs, n_iter,
+                         name="hopf_curve.newton_batch")
 
 
 def stability_grid(

@@ -25,6 +25,7 @@ import jax
 import numpy as np
 import scipy.linalg
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.system import System
 
 __all__ = [
@@ -56,7 +57,8 @@ def _real_forms(rhs) -> dict[int, Callable]:
     out = {}
     for k in (2, 3, 4, 5):
         axes = (None, None) + (0,) * k
-        out[k] = jax.jit(jax.vmap(_real_form(rhs, k), in_axes=axes))
+        out[k] = cached_kernel(jax.vmap(_real_form(rhs, k), in_axes=axes), rhs, k,
+                               name="normal_forms.form")
     return out
 
 

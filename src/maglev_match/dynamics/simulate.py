@@ -57,6 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match import jax_setup  # noqa: F401  (float64 on)
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.system import System
 from maglev_match.reprs import compact_repr
 
@@ -585,7 +586,8 @@ def _compiled_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
     if batch_x or batch_p:
         axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 11
         kernel = jax.vmap(kernel, in_axes=axes)
-    return jax.jit(kernel)
+    return cached_kernel(kernel, rhs, event_fn, solver_name, samples, n_save,
+                         stop_on_converged, batch_x, batch_p, unroll_stages)
 
 
 def _save_times(t_end: float, n_save: int, t_save: Array | None) -> np.ndarray:

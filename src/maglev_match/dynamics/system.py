@@ -14,7 +14,8 @@ Derivatives come from automatic differentiation (never finite differences):
 
 ``B`` and ``C`` accept complex directions (by multilinearity), as the Lyapunov-coefficient
 formulas need. Compiled functions are cached per right-hand side, so building many
-:class:`System` objects for the same model costs no recompilation.
+:class:`System` objects for the same model costs no recompilation, and exported ahead of
+time (:mod:`maglev_match.aot`), so a new process does not trace them again.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match import jax_setup  # noqa: F401  (float64 on, compilation cache)
+from maglev_match.aot import cached_kernel
 from maglev_match.reprs import compact_repr
 
 Array = Any
@@ -66,26 +68,35 @@ def compiled(rhs: RHS) -> CompiledDerivatives:
         return jax.jvp(lambda y: second(y, p, u, v), (x,), (w,))[1]
 
     jac = jax.jacfwd(rhs, argnums=0)
+
+    def kernel(fn, what):
+        return cached_kernel(fn, rhs, name=f"system.{what}")
+
     return CompiledDerivatives(
-        f=jax.jit(rhs),
-        jacobian=jax.jit(jac),
-        jacobian_batch=jax.jit(jax.vmap(jac)),
-        f_batch=jax.jit(jax.vmap(rhs)),
-        param_jacobian=jax.jit(jax.jacfwd(rhs, argnums=1)),
-        f_and_jacobian=jax.jit(lambda x, p: (rhs(x, p), jac(x, p))),
-        B=jax.jit(second),
-        C=jax.jit(third),
+        f=kernel(rhs, "f"),
+        jacobian=kernel(jac, "jacobian"),
+        jacobian_batch=kernel(jax.vmap(jac), "jacobian_batch"),
+        f_batch=kernel(jax.vmap(rhs), "f_batch"),
+        param_jacobian=kernel(jax.jacfwd(rhs, argnums=1), "param_jacobian"),
+        f_and_jacobian=kernel(lambda x, p: (rhs(x, p), jac(x, p)), "f_and_jacobian"),
+        B=kernel(second, "B"),
+        C=kernel(third, "C"),
     )
 
 
 @cache
 def _observable_single(g: Callable) -> Callable:
-    return jax.jit(g)
+    return cached_kernel(g, g, name="system.observable")
+
+
+@cache
+def _observable_gradient(g: Callable) -> Callable:
+    return cached_kernel(jax.jacfwd(g, argnums=0), g, name="system.observable_gradient")
 
 
 @cache
 def _observable_batch(g: Callable) -> Callable:
-    return jax.jit(jax.vmap(g, in_axes=(0, None)))
+    return cached_kernel(jax.vmap(g, in_axes=(0, None)), g, name="system.observable_batch")
 
 
 def _split(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -233,6 +244,17 @@ class System:
         if x.ndim == 1:
             return np.asarray(_observable_single(g)(x, pj))
         return np.asarray(_observable_batch(g)(x, pj))
+
+    def observable_gradient(self, name: str, x: Array, p: np.ndarray | None = None
+                            ) -> np.ndarray:
+        """d g / d x of a named observable at one state (exact, forward-mode autodiff):
+        shape (dim,) for a scalar observable, (k, dim) for one with k components."""
+        if name not in self.observables:
+            raise KeyError(f"system '{self.name}' has no observable '{name}'; it has: "
+                           + ", ".join(self.observables))
+        g = _observable_gradient(self.observables[name])
+        return np.asarray(g(np.asarray(x, np.float64),
+                            np.asarray(self.p if p is None else p, np.float64)))
 
     def f_and_jacobian(self, x: Array, p: np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray]:
