@@ -241,13 +241,21 @@ def _no_events(x, p):
 # ---------------------------------------------------------------------------------------
 # the compiled kernel
 # ---------------------------------------------------------------------------------------
-def _unrolled_fsal_step(solver):
+def _unrolled_fsal_step(solver, elementwise: bool = False):
     """An explicit, first-same-as-last Runge-Kutta step written out stage by stage from the
     solver's Butcher tableau (for an autonomous vector field), or None if the solver is not
     of that kind. The same arithmetic as diffrax's step (stages ``k_i = h f(y0 + sum_j
     a_ij k_j)``, solution from the last stage, error ``sum_i e_i k_i``; Hairer, Norsett &
     Wanner, *Solving ODEs I*, sec. II.4-II.6), without diffrax's loop over the stages, which
     costs a loop iteration per stage inside every step.
+
+    ``elementwise=False``: the stage sums are the zero-padded tableau rows dotted with a
+    stage buffer, as diffrax does (the same numbers to the last bit). ``elementwise=True``:
+    the sums run over the nonzero coefficients only, as plain elementwise arithmetic that
+    XLA fuses into the next stage's evaluation (no buffer update, no small matrix product
+    per stage). Mathematically the same step; the rounding differs in the last bits. The
+    elementwise form halves a vmapped batch (256 model-A runs, measured: 0.78 against
+    0.39 s CPU) but is ~20 % slower for a single run, so the kernel uses it for batches.
 
     Returns ``step(f, z0, f0, h) -> (z1, err, dense_info, f1)``: ``f0 = f(z0)`` from the
     previous step, ``dense_info`` as diffrax's (``y0``, ``y1``, ``k`` = stages x h).
@@ -263,6 +271,25 @@ def _unrolled_fsal_step(solver):
         A[i + 1, : i + 1] = row
     b_err = np.asarray(tab.b_error, float)
     hi = jax.lax.Precision.HIGHEST
+
+    def combo(coef, ks):
+        terms = [float(c) * k for c, k in zip(coef, ks, strict=False) if c != 0.0]
+        out = terms[0]
+        for t in terms[1:]:
+            out = out + t
+        return out
+
+    def step_elementwise(f, z0, f0, h):
+        ks = [f0 * h]
+        for i in range(1, n_stages):
+            zi = z0 + combo(A[i, :i], ks)
+            fi = f(zi)
+            ks.append(fi * h)
+        err = combo(b_err, ks)
+        return zi, err, dict(y0=z0, y1=zi, k=jnp.stack(ks)), fi
+
+    if elementwise:
+        return step_elementwise
 
     def step(f, z0, f0, h):
         # the same operations as diffrax's stage loop (zero-padded tableau rows dotted
@@ -280,13 +307,17 @@ def _unrolled_fsal_step(solver):
 
 
 def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
-                 stop_on_converged: bool, unroll_stages: bool | None = None):
-    """Build the (unjitted) single-run kernel. All array inputs are traced."""
+                 stop_on_converged: bool, unroll_stages: bool | None = None,
+                 batched: bool = False):
+    """Build the (unjitted) single-run kernel. All array inputs are traced. ``batched``:
+    the kernel will be vmapped (the stages are then written as elementwise sums,
+    :func:`_unrolled_fsal_step`)."""
     import diffrax
     import equinox.internal as eqxi
 
     solver = getattr(diffrax, _SOLVERS[solver_name])()
-    unrolled0 = _unrolled_fsal_step(solver) if unroll_stages is not False else None
+    unrolled0 = (_unrolled_fsal_step(solver, elementwise=batched)
+                 if unroll_stages is not False else None)
     interp_cls = solver.interpolation_cls
     eps = float(np.finfo(float).eps)
 
@@ -581,7 +612,7 @@ def _compiled_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                      stop_on_converged: bool, batch_x: bool, batch_p: bool,
                      unroll_stages: bool | None = None):
     kernel = _make_kernel(rhs, event_fn, solver_name, samples, n_save, stop_on_converged,
-                          unroll_stages)
+                          unroll_stages, batched=batch_x or batch_p)
     if batch_x or batch_p:
         axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 11
         kernel = jax.vmap(kernel, in_axes=axes)
