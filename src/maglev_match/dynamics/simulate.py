@@ -69,6 +69,7 @@ __all__ = [
     "SimulationOptions",
     "SimulationResult",
     "BatchSimulation",
+    "EventsWithArgs",
     "simulate",
     "simulate_batch",
 ]
@@ -238,6 +239,35 @@ def _no_events(x, p):
     return jnp.zeros((0,), dtype=x.dtype)
 
 
+@dataclass(frozen=True)
+class EventsWithArgs:
+    """An event function with numeric arguments that are *traced* inputs of the compiled
+    integrator, not constants baked into it: ``fn(x, p, args) -> array`` (the same meaning
+    as an ``event_fn``), ``args`` a tuple of floats (e.g. the gap limits in m). Runs with
+    the same ``fn`` and different ``args`` share one compiled kernel (a new limit value
+    does not recompile). Called as ``events(x, p)`` it is an ordinary event function."""
+
+    fn: Callable[[Array, Array, Array], Array]
+    args: tuple[float, ...]
+
+    def __call__(self, x, p):
+        return self.fn(x, p, jnp.asarray(self.args, dtype=jnp.float64))
+
+
+@lru_cache(maxsize=64)
+def _event_caller(event_fn, with_args: bool):
+    """``g(x, p, args)`` for the kernel: the function of an :class:`EventsWithArgs`, or a
+    plain ``event_fn(x, p)`` that ignores ``args`` (cached: a stable object per function,
+    so compiled kernels are reused)."""
+    if with_args:
+        return event_fn
+
+    def call(x, p, args):
+        return event_fn(x, p)
+
+    return call
+
+
 # ---------------------------------------------------------------------------------------
 # the compiled kernel
 # ---------------------------------------------------------------------------------------
@@ -322,7 +352,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
     eps = float(np.finfo(float).eps)
 
     def kernel(x0, p, scale, x_ref, t_end, ts_save, rtol, atol, converge_tol, hold_time,
-               max_steps, dt0, decay_floor):
+               max_steps, dt0, decay_floor, event_args):
         term = diffrax.ODETerm(lambda t, z, args: rhs(z * scale, args) / scale)
         controller = diffrax.PIDController(rtol=rtol, atol=atol)
         order = solver.error_order(term)
@@ -331,7 +361,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
         t0 = jnp.asarray(0.0)
 
         def g_of_z(z):
-            return event_fn(z * scale, p)
+            return event_fn(z * scale, p, event_args)
 
         m = int(jax.eval_shape(g_of_z, z0).shape[0])
         sstate = solver.init(term, t0, t_end, z0, p)
@@ -614,7 +644,7 @@ def _compiled_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
     kernel = _make_kernel(rhs, event_fn, solver_name, samples, n_save, stop_on_converged,
                           unroll_stages, batched=batch_x or batch_p)
     if batch_x or batch_p:
-        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 11
+        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 12
         kernel = jax.vmap(kernel, in_axes=axes)
     return jax.jit(kernel)
 
@@ -639,7 +669,10 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
         raise ValueError(f"decay_floor must be >= 0, got {opts.decay_floor}")
     ts = _save_times(float(t_end), n_save, t_save)
     ev = event_fn if event_fn is not None else _no_events
-    fn = _compiled_kernel(system.rhs, ev, opts.solver, int(max(opts.samples, 2)), ts.size,
+    with_args = isinstance(ev, EventsWithArgs)
+    ev_args = np.asarray(ev.args if with_args else (), dtype=float)
+    ev_call = _event_caller(ev.fn if with_args else ev, with_args)
+    fn = _compiled_kernel(system.rhs, ev_call, opts.solver, int(max(opts.samples, 2)), ts.size,
                           bool(opts.stop_on_converged), batch_x, batch_p, opts.unroll_stages)
     xr = system.x_guess if x_ref is None else np.asarray(x_ref, float)
     out = fn(
@@ -648,7 +681,7 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
         jnp.asarray(float(t_end)), jnp.asarray(ts), jnp.asarray(opts.rtol),
         jnp.asarray(opts.atol), jnp.asarray(opts.converge_tol), jnp.asarray(opts.hold_time),
         jnp.asarray(opts.max_steps), jnp.asarray(opts.dt0 or 0.0),
-        jnp.asarray(opts.decay_floor),
+        jnp.asarray(opts.decay_floor), jnp.asarray(ev_args),
     )
     return ts, {k: np.asarray(v) for k, v in out.items()}
 
@@ -690,7 +723,9 @@ def simulate(
     t_end : horizon (s).
     p : parameter vector (defaults to ``system.p``).
     event_fn : ``g(x, p) -> array``; a negative entry ends the run as a collision. Use a
-        stable function object (cached) for the same reason as ``rhs``.
+        stable function object (cached) for the same reason as ``rhs``, or an
+        :class:`EventsWithArgs` whose numeric arguments are traced (new values reuse the
+        compiled kernel).
     x_ref : reference state for the convergence test (defaults to ``system.x_guess``).
     options : :class:`SimulationOptions`.
     n_save : number of equally spaced saved times in [0, t_end] (ignored if ``t_save``).
