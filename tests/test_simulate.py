@@ -435,3 +435,31 @@ def test_gap_limits_are_traced_arguments():
     assert tight.event_time == pytest.approx(ref.event_time, abs=1e-12)
     assert tight.event_state[0] - tight.event_state[4] + P.c0 == pytest.approx(10.2e-3,
                                                                                 abs=1e-12)
+
+
+def blowup_rhs(x, p):
+    # x' = x^2 (x = x0 / (1 - x0 t): a singularity at t = 1/x0 for x0 > 0), y' = -y
+    return jnp.stack([x[0] ** 2, -x[1]])
+
+
+BLOWUP = System(rhs=blowup_rhs, p=np.array([0.0]), param_names=("unused",),
+                state_names=("x", "y"), name="finite-time blow-up")
+
+
+def test_singularity_fails_at_once_and_spares_the_batch():
+    """A solution that blows up in finite time is 'failed' at the singularity with a
+    warning saying so, after a few hundred steps (not max_steps of rejected steps), and a
+    batch that contains it is not held up: the regular run beside it is exact."""
+    opts = SimulationOptions(rtol=1e-10, atol=1e-12)
+    r = simulate(BLOWUP, np.array([1.0, 1.0]), 2.0, x_ref=np.zeros(2), n_save=0,
+                 options=opts)
+    assert r.outcome == "failed"
+    assert r.final_time == pytest.approx(1.0, abs=1e-6)
+    assert r.steps < 2000
+    assert any("singularity" in w for w in r.warnings)
+    b = simulate_batch(BLOWUP, np.array([[1.0, 1.0], [-1.0, 1.0]]), 2.0, x_ref=np.zeros(2),
+                       options=opts)
+    assert list(b.outcome) == ["failed", "running"]
+    assert b.steps.max() < 2000
+    assert b.final_time[1] == 2.0
+    np.testing.assert_allclose(b.final_state[1], [-1.0 / 3.0, np.exp(-2.0)], rtol=1e-8)

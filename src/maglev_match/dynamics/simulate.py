@@ -33,8 +33,9 @@ through the solver's dense interpolant:
   (for basin bisection). A run that stays close to an unstable (or non-hyperbolic, or
   non-stationary) reference state ends as ``running`` with a warning saying so.
 * **Outcomes.** ``collision`` (an event fired: time, entry index, state), ``converged``,
-  ``running`` (neither by the horizon), ``failed`` (non-finite state or ``max_steps``
-  exhausted; never silently reported as one of the others).
+  ``running`` (neither by the horizon), ``failed`` (non-finite state, ``max_steps``
+  exhausted, or the step size driven down to the resolution of t by rejected steps, i.e.
+  a singularity of the solution; never silently reported as one of the others).
 
 The solver works in scaled coordinates ``z = x / state_scale`` so one absolute tolerance
 ``atol`` means "atol times the typical size" of every state; ``rtol`` is relative.
@@ -399,7 +400,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             peak=d0,  # largest d seen since conv_since (steps' ends and event samples)
             ys=jnp.full((n_save, dim), jnp.nan), save_idx=jnp.asarray(0),
             steps=jnp.asarray(0), accepted=jnp.asarray(0), rejected=jnp.asarray(0),
-            flagged=jnp.asarray(False),
+            flagged=jnp.asarray(False), stuck=jnp.asarray(False),
             gmin=g_of_z(z0) if m else jnp.zeros((0,)),
         )
         # a start outside the limits is a collision at t = 0
@@ -412,7 +413,8 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             carry["z_event"] = jnp.where(bad0, z0, jnp.nan)
 
         def cond(c):
-            go = (c["status"] == RUNNING) & (c["t"] < t_end) & (c["steps"] < max_steps)
+            go = ((c["status"] == RUNNING) & (c["t"] < t_end) & (c["steps"] < max_steps)
+                  & ~c["stuck"])
             if stop_on_converged:
                 go = go & ~settled_of(c)
             return go
@@ -616,6 +618,10 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                 accepted=c["accepted"] + keep.astype(int),
                 rejected=c["rejected"] + (active & ~keep).astype(int),
                 gmin=gmin, flagged=flag,
+                # a rejected step that can no longer shrink: the step is at the resolution
+                # of t (a singularity, e.g. a finite-time blow-up); the run fails now
+                # instead of spending max_steps on it (and, in a batch, every run with it)
+                stuck=c["stuck"] | (active & ~keep & (tn - t <= 64 * eps * jnp.abs(tn))),
             )
 
         c = jax.lax.while_loop(cond, lambda cc: step(cc, True), carry)
@@ -632,6 +638,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             ys=c["ys"], gmin=c["gmin"], steps=c["steps"], accepted=c["accepted"],
             rejected=c["rejected"], ref_max_real=ref_max_real, ref_residual=ref_residual,
             near=jnp.isfinite(c["conv_since"]) & ((c["t"] - c["conv_since"]) >= hold_time),
+            stuck=c["stuck"],
         )
 
     return kernel
@@ -744,6 +751,10 @@ def simulate(
     if code == FAILED:
         if not np.all(np.isfinite(o["x_final"])):
             warnings.append("the state became non-finite")
+        elif bool(o["stuck"]):
+            warnings.append(f"the step size fell to the resolution of t at "
+                            f"t = {float(o['t_final']):.10g} s after {int(o['steps'])} steps "
+                            "(a singularity of the solution, e.g. a finite-time blow-up)")
         else:
             warnings.append(f"stopped after max_steps = {int(o['steps'])} steps at "
                             f"t = {float(o['t_final']):.6g} s before the horizon")
