@@ -229,10 +229,12 @@ def main(quick: bool) -> None:
     old_b, ob = timed(lambda: simulate_batch(SA, x0, 5.0, event_fn=evA, options=old),
                       max(rep // 2, 1), "batch old")
     # vmapped runs sum the stages elementwise (rounding differs from diffrax's loop in the
-    # last bits): the same outcomes, collision times to 1e-9 s
+    # last bits, and a step accepted by one may be rejected by the other): the same
+    # outcomes, collision times within the integration tolerance
     assert np.array_equal(ob.outcome_code, bb.outcome_code)
     dt_ev = float(np.nanmax(np.abs(ob.event_time - bb.event_time)))
-    assert dt_ev < 1e-9, dt_ev
+    n_ev_diff = int(np.sum(np.abs(ob.event_time - bb.event_time) > 1e-12))
+    assert dt_ev < 1e-6, dt_ev
     n_sp = 32 if quick else nb
     idx = np.linspace(0, nb - 1, n_sp).astype(int)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -241,6 +243,8 @@ def main(quick: bool) -> None:
     sp_b_cpu = (time.process_time() - c0) * nb / n_sp
     agree = sum((s.status == 1) == (bb.outcome[k] == "collision")
                 for s, k in zip(sp_out, idx, strict=True))
+    sp_dt = max((abs(s.t[-1] - bb.event_time[k]) for s, k in zip(sp_out, idx, strict=True)
+                 if s.status == 1 and bb.outcome[k] == "collision"), default=float("nan"))
     print(f"batch of {nb} model-A runs (5 s): ours {ours_b:.3f} s, SciPy "
           f"{'(32 runs scaled) ' if quick else ''}{sp_b:.2f} s, ratio {sp_b / ours_b:.1f}x; "
           f"first call (compile) {compile_batch:.2f} s; outcomes: "
@@ -248,7 +252,8 @@ def main(quick: bool) -> None:
           f"SciPy in {agree}/{n_sp}")
     print(f"  batch old path {old_b:.3f} s: new/old {old_b / ours_b:.2f}x; CPU ours "
           f"{CPU['batch']:.3f} s, old {CPU['batch old']:.3f} s; outcomes equal, collision "
-          f"times differ by <= {dt_ev:.1e} s; SciPy CPU {sp_b_cpu:.2f} s, CPU ratio "
+          f"times differ by <= {dt_ev:.1e} s ({n_ev_diff} runs by > 1e-12 s; ours vs SciPy <= "
+          f"{sp_dt:.1e} s); SciPy CPU {sp_b_cpu:.2f} s, CPU ratio "
           f"{sp_b_cpu / CPU['batch']:.1f}x")
 
     # ---------------- gap limits are traced: another limit value compiles nothing
