@@ -401,3 +401,65 @@ def test_cli_unstable_equilibrium_is_not_converged(capsys):
     captured = capsys.readouterr()
     assert json.loads(captured.out)["outcome"] == "running"
     assert "unstable equilibrium" in " ".join(captured.err.split())  # (Rich wraps lines)
+
+
+def _unit_gap_events_tight(x, p):
+    # the gap limits of model A written out with an upper limit of 10.2 mm as constants:
+    # an independent event function for the traced-limits test below
+    gap = p[_C0] + x[0] - x[4]
+    return jnp.stack([gap - 0.0, 10.2e-3 - gap])
+
+
+_C0 = build_system(load_preset("alpha1"), "unit", limited=True).param_names.index("c0")
+
+
+def test_gap_limits_are_traced_arguments():
+    """Gap limits are arguments of the compiled kernel: a new limit value compiles nothing,
+    and the run with it is the run with the limits written into the event function."""
+    from maglev_match.dynamics import simulate as sim_mod
+
+    P = load_preset("alpha1")
+    assert P.gap_min == 0.0 and P.gap_max > 10.2e-3  # the control below uses these
+    sys_ = build_system(P, "unit", limited=True)
+    x0 = initial_state(P, "unit", x5=-1.5e-3)  # the gap starts at 9.5 mm, peaks at 10.6
+    opts = SimulationOptions(stop_on_converged=True)
+    wide = simulate(sys_, x0, 5.0, event_fn=gap_limit_events("unit", 0, P.gap_min, P.gap_max),
+                    options=opts, n_save=11)
+    misses = sim_mod._compiled_kernel.cache_info().misses
+    tight = simulate(sys_, x0, 5.0, event_fn=gap_limit_events("unit", 0, 0.0, 10.2e-3),
+                     options=opts, n_save=11)
+    assert sim_mod._compiled_kernel.cache_info().misses == misses  # no new kernel
+    assert wide.outcome == "converged" and tight.outcome == "collision"
+    ref = simulate(sys_, x0, 5.0, event_fn=_unit_gap_events_tight, options=opts, n_save=11)
+    assert ref.outcome == "collision" and ref.event_index == tight.event_index == 1
+    assert tight.event_time == pytest.approx(ref.event_time, abs=1e-12)
+    assert tight.event_state[0] - tight.event_state[4] + P.c0 == pytest.approx(10.2e-3,
+                                                                                abs=1e-12)
+
+
+def blowup_rhs(x, p):
+    # x' = x^2 (x = x0 / (1 - x0 t): a singularity at t = 1/x0 for x0 > 0), y' = -y
+    return jnp.stack([x[0] ** 2, -x[1]])
+
+
+BLOWUP = System(rhs=blowup_rhs, p=np.array([0.0]), param_names=("unused",),
+                state_names=("x", "y"), name="finite-time blow-up")
+
+
+def test_singularity_fails_at_once_and_spares_the_batch():
+    """A solution that blows up in finite time is 'failed' at the singularity with a
+    warning saying so, after a few hundred steps (not max_steps of rejected steps), and a
+    batch that contains it is not held up: the regular run beside it is exact."""
+    opts = SimulationOptions(rtol=1e-10, atol=1e-12)
+    r = simulate(BLOWUP, np.array([1.0, 1.0]), 2.0, x_ref=np.zeros(2), n_save=0,
+                 options=opts)
+    assert r.outcome == "failed"
+    assert r.final_time == pytest.approx(1.0, abs=1e-6)
+    assert r.steps < 2000
+    assert any("singularity" in w for w in r.warnings)
+    b = simulate_batch(BLOWUP, np.array([[1.0, 1.0], [-1.0, 1.0]]), 2.0, x_ref=np.zeros(2),
+                       options=opts)
+    assert list(b.outcome) == ["failed", "running"]
+    assert b.steps.max() < 2000
+    assert b.final_time[1] == 2.0
+    np.testing.assert_allclose(b.final_state[1], [-1.0 / 3.0, np.exp(-2.0)], rtol=1e-8)

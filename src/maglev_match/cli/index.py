@@ -134,7 +134,9 @@ def print_index(res, preset: str, config, set_) -> None:
                 continue
             val = "unknown" if size is None else f"{size * mm:.4g} mm"
             extra = ""
-            if d["status"] == "all_return":
+            if d["status"] == "bracketed":  # midpoint of a bracket no wider than the tolerance
+                extra = f" (+/- {d['tolerance'] / 2 * mm:.2g} mm, {d['runs']} runs)"
+            elif d["status"] == "all_return":
                 extra = " (every size returned: the whole gap range)"
             elif d["status"] == "open":
                 extra = " (inconclusive: largest size seen to return)"

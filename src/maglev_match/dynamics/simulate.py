@@ -33,8 +33,9 @@ through the solver's dense interpolant:
   (for basin bisection). A run that stays close to an unstable (or non-hyperbolic, or
   non-stationary) reference state ends as ``running`` with a warning saying so.
 * **Outcomes.** ``collision`` (an event fired: time, entry index, state), ``converged``,
-  ``running`` (neither by the horizon), ``failed`` (non-finite state or ``max_steps``
-  exhausted; never silently reported as one of the others).
+  ``running`` (neither by the horizon), ``failed`` (non-finite state, ``max_steps``
+  exhausted, or the step size driven down to the resolution of t by rejected steps, i.e.
+  a singularity of the solution; never silently reported as one of the others).
 
 The solver works in scaled coordinates ``z = x / state_scale`` so one absolute tolerance
 ``atol`` means "atol times the typical size" of every state; ``rtol`` is relative.
@@ -70,6 +71,7 @@ __all__ = [
     "SimulationOptions",
     "SimulationResult",
     "BatchSimulation",
+    "EventsWithArgs",
     "simulate",
     "simulate_batch",
 ]
@@ -239,16 +241,53 @@ def _no_events(x, p):
     return jnp.zeros((0,), dtype=x.dtype)
 
 
+@dataclass(frozen=True)
+class EventsWithArgs:
+    """An event function with numeric arguments that are *traced* inputs of the compiled
+    integrator, not constants baked into it: ``fn(x, p, args) -> array`` (the same meaning
+    as an ``event_fn``), ``args`` a tuple of floats (e.g. the gap limits in m). Runs with
+    the same ``fn`` and different ``args`` share one compiled kernel (a new limit value
+    does not recompile). Called as ``events(x, p)`` it is an ordinary event function."""
+
+    fn: Callable[[Array, Array, Array], Array]
+    args: tuple[float, ...]
+
+    def __call__(self, x, p):
+        return self.fn(x, p, jnp.asarray(self.args, dtype=jnp.float64))
+
+
+@lru_cache(maxsize=64)
+def _event_caller(event_fn, with_args: bool):
+    """``g(x, p, args)`` for the kernel: the function of an :class:`EventsWithArgs`, or a
+    plain ``event_fn(x, p)`` that ignores ``args`` (cached: a stable object per function,
+    so compiled kernels are reused)."""
+    if with_args:
+        return event_fn
+
+    def call(x, p, args):
+        return event_fn(x, p)
+
+    return call
+
+
 # ---------------------------------------------------------------------------------------
 # the compiled kernel
 # ---------------------------------------------------------------------------------------
-def _unrolled_fsal_step(solver):
+def _unrolled_fsal_step(solver, elementwise: bool = False):
     """An explicit, first-same-as-last Runge-Kutta step written out stage by stage from the
     solver's Butcher tableau (for an autonomous vector field), or None if the solver is not
     of that kind. The same arithmetic as diffrax's step (stages ``k_i = h f(y0 + sum_j
     a_ij k_j)``, solution from the last stage, error ``sum_i e_i k_i``; Hairer, Norsett &
     Wanner, *Solving ODEs I*, sec. II.4-II.6), without diffrax's loop over the stages, which
     costs a loop iteration per stage inside every step.
+
+    ``elementwise=False``: the stage sums are the zero-padded tableau rows dotted with a
+    stage buffer, as diffrax does (the same numbers to the last bit). ``elementwise=True``:
+    the sums run over the nonzero coefficients only, as plain elementwise arithmetic that
+    XLA fuses into the next stage's evaluation (no buffer update, no small matrix product
+    per stage). Mathematically the same step; the rounding differs in the last bits. The
+    elementwise form halves a vmapped batch (256 model-A runs, measured: 0.78 against
+    0.39 s CPU) but is ~20 % slower for a single run, so the kernel uses it for batches.
 
     Returns ``step(f, z0, f0, h) -> (z1, err, dense_info, f1)``: ``f0 = f(z0)`` from the
     previous step, ``dense_info`` as diffrax's (``y0``, ``y1``, ``k`` = stages x h).
@@ -264,6 +303,25 @@ def _unrolled_fsal_step(solver):
         A[i + 1, : i + 1] = row
     b_err = np.asarray(tab.b_error, float)
     hi = jax.lax.Precision.HIGHEST
+
+    def combo(coef, ks):
+        terms = [float(c) * k for c, k in zip(coef, ks, strict=False) if c != 0.0]
+        out = terms[0]
+        for t in terms[1:]:
+            out = out + t
+        return out
+
+    def step_elementwise(f, z0, f0, h):
+        ks = [f0 * h]
+        for i in range(1, n_stages):
+            zi = z0 + combo(A[i, :i], ks)
+            fi = f(zi)
+            ks.append(fi * h)
+        err = combo(b_err, ks)
+        return zi, err, dict(y0=z0, y1=zi, k=jnp.stack(ks)), fi
+
+    if elementwise:
+        return step_elementwise
 
     def step(f, z0, f0, h):
         # the same operations as diffrax's stage loop (zero-padded tableau rows dotted
@@ -281,18 +339,22 @@ def _unrolled_fsal_step(solver):
 
 
 def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
-                 stop_on_converged: bool, unroll_stages: bool | None = None):
-    """Build the (unjitted) single-run kernel. All array inputs are traced."""
+                 stop_on_converged: bool, unroll_stages: bool | None = None,
+                 batched: bool = False):
+    """Build the (unjitted) single-run kernel. All array inputs are traced. ``batched``:
+    the kernel will be vmapped (the stages are then written as elementwise sums,
+    :func:`_unrolled_fsal_step`)."""
     import diffrax
     import equinox.internal as eqxi
 
     solver = getattr(diffrax, _SOLVERS[solver_name])()
-    unrolled0 = _unrolled_fsal_step(solver) if unroll_stages is not False else None
+    unrolled0 = (_unrolled_fsal_step(solver, elementwise=batched)
+                 if unroll_stages is not False else None)
     interp_cls = solver.interpolation_cls
     eps = float(np.finfo(float).eps)
 
     def kernel(x0, p, scale, x_ref, t_end, ts_save, rtol, atol, converge_tol, hold_time,
-               max_steps, dt0, decay_floor):
+               max_steps, dt0, decay_floor, event_args):
         term = diffrax.ODETerm(lambda t, z, args: rhs(z * scale, args) / scale)
         controller = diffrax.PIDController(rtol=rtol, atol=atol)
         order = solver.error_order(term)
@@ -301,7 +363,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
         t0 = jnp.asarray(0.0)
 
         def g_of_z(z):
-            return event_fn(z * scale, p)
+            return event_fn(z * scale, p, event_args)
 
         m = int(jax.eval_shape(g_of_z, z0).shape[0])
         sstate = solver.init(term, t0, t_end, z0, p)
@@ -339,7 +401,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             peak=d0,  # largest d seen since conv_since (steps' ends and event samples)
             ys=jnp.full((n_save, dim), jnp.nan), save_idx=jnp.asarray(0),
             steps=jnp.asarray(0), accepted=jnp.asarray(0), rejected=jnp.asarray(0),
-            flagged=jnp.asarray(False),
+            flagged=jnp.asarray(False), stuck=jnp.asarray(False),
             gmin=g_of_z(z0) if m else jnp.zeros((0,)),
         )
         # a start outside the limits is a collision at t = 0
@@ -352,7 +414,8 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             carry["z_event"] = jnp.where(bad0, z0, jnp.nan)
 
         def cond(c):
-            go = (c["status"] == RUNNING) & (c["t"] < t_end) & (c["steps"] < max_steps)
+            go = ((c["status"] == RUNNING) & (c["t"] < t_end) & (c["steps"] < max_steps)
+                  & ~c["stuck"])
             if stop_on_converged:
                 go = go & ~settled_of(c)
             return go
@@ -556,6 +619,10 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                 accepted=c["accepted"] + keep.astype(int),
                 rejected=c["rejected"] + (active & ~keep).astype(int),
                 gmin=gmin, flagged=flag,
+                # a rejected step that can no longer shrink: the step is at the resolution
+                # of t (a singularity, e.g. a finite-time blow-up); the run fails now
+                # instead of spending max_steps on it (and, in a batch, every run with it)
+                stuck=c["stuck"] | (active & ~keep & (tn - t <= 64 * eps * jnp.abs(tn))),
             )
 
         c = jax.lax.while_loop(cond, lambda cc: step(cc, True), carry)
@@ -572,6 +639,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             ys=c["ys"], gmin=c["gmin"], steps=c["steps"], accepted=c["accepted"],
             rejected=c["rejected"], ref_max_real=ref_max_real, ref_residual=ref_residual,
             near=jnp.isfinite(c["conv_since"]) & ((c["t"] - c["conv_since"]) >= hold_time),
+            stuck=c["stuck"],
         )
 
     return kernel
@@ -582,9 +650,9 @@ def _compiled_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                      stop_on_converged: bool, batch_x: bool, batch_p: bool,
                      unroll_stages: bool | None = None):
     kernel = _make_kernel(rhs, event_fn, solver_name, samples, n_save, stop_on_converged,
-                          unroll_stages)
+                          unroll_stages, batched=batch_x or batch_p)
     if batch_x or batch_p:
-        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 11
+        axes = (0 if batch_x else None, 0 if batch_p else None) + (None,) * 12
         kernel = jax.vmap(kernel, in_axes=axes)
     return cached_kernel(kernel, rhs, event_fn, solver_name, samples, n_save,
                          stop_on_converged, batch_x, batch_p, unroll_stages)
@@ -610,7 +678,10 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
         raise ValueError(f"decay_floor must be >= 0, got {opts.decay_floor}")
     ts = _save_times(float(t_end), n_save, t_save)
     ev = event_fn if event_fn is not None else _no_events
-    fn = _compiled_kernel(system.rhs, ev, opts.solver, int(max(opts.samples, 2)), ts.size,
+    with_args = isinstance(ev, EventsWithArgs)
+    ev_args = np.asarray(ev.args if with_args else (), dtype=float)
+    ev_call = _event_caller(ev.fn if with_args else ev, with_args)
+    fn = _compiled_kernel(system.rhs, ev_call, opts.solver, int(max(opts.samples, 2)), ts.size,
                           bool(opts.stop_on_converged), batch_x, batch_p, opts.unroll_stages)
     xr = system.x_guess if x_ref is None else np.asarray(x_ref, float)
     out = fn(
@@ -619,7 +690,7 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
         jnp.asarray(float(t_end)), jnp.asarray(ts), jnp.asarray(opts.rtol),
         jnp.asarray(opts.atol), jnp.asarray(opts.converge_tol), jnp.asarray(opts.hold_time),
         jnp.asarray(opts.max_steps), jnp.asarray(opts.dt0 or 0.0),
-        jnp.asarray(opts.decay_floor),
+        jnp.asarray(opts.decay_floor), jnp.asarray(ev_args),
     )
     return ts, {k: np.asarray(v) for k, v in out.items()}
 
@@ -661,7 +732,9 @@ def simulate(
     t_end : horizon (s).
     p : parameter vector (defaults to ``system.p``).
     event_fn : ``g(x, p) -> array``; a negative entry ends the run as a collision. Use a
-        stable function object (cached) for the same reason as ``rhs``.
+        stable function object (cached) for the same reason as ``rhs``, or an
+        :class:`EventsWithArgs` whose numeric arguments are traced (new values reuse the
+        compiled kernel).
     x_ref : reference state for the convergence test (defaults to ``system.x_guess``).
     options : :class:`SimulationOptions`.
     n_save : number of equally spaced saved times in [0, t_end] (ignored if ``t_save``).
@@ -680,6 +753,10 @@ def simulate(
     if code == FAILED:
         if not np.all(np.isfinite(o["x_final"])):
             warnings.append("the state became non-finite")
+        elif bool(o["stuck"]):
+            warnings.append(f"the step size fell to the resolution of t at "
+                            f"t = {float(o['t_final']):.10g} s after {int(o['steps'])} steps "
+                            "(a singularity of the solution, e.g. a finite-time blow-up)")
         else:
             warnings.append(f"stopped after max_steps = {int(o['steps'])} steps at "
                             f"t = {float(o['t_final']):.6g} s before the horizon")
