@@ -206,7 +206,11 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     reverses = np.zeros(nx, dtype=bool)
 
     t_end = n_nodes - 1.0
-    path = path_system(system, nodes)
+    # the path's parameter vector is padded (the last node repeated, beyond t_end, never
+    # reached: the branches stop at t_end) to a multiple of PATH_PAD nodes, so that rows
+    # whose extensions differ by a node share every compiled kernel of the path system
+    pad = -n_nodes % PATH_PAD
+    path = path_system(system, np.concatenate([nodes, np.repeat(nodes[-1:], pad, axis=0)]))
     limits = cycle_limit_margins(pts[0], include_current=False)
     hopf_points = _scan_hopf_points(path, w_scan, t_end)
 
@@ -298,6 +302,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     }
 
 
+PATH_PAD = 16  # the path's nodes are padded to a multiple of this (shared kernels)
 SCAN_PER_NODE = 3  # samples of the Hopf scan per path interval (as the earlier scan)
 SCAN_BATCH = 64  # the stacked Jacobian call is padded to a multiple of this many samples
 FINE_SCAN = 17  # samples of the fallback scan by equilibrium continuation in one interval
