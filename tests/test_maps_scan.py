@@ -47,7 +47,7 @@ def test_eigenvalue_scan_finds_the_hopf_points_of_the_continuation_scan(row):
         ref = np.linalg.eigvals(np.asarray(system.jacobian(np.zeros(system.dim), nodes[k])))
         assert np.sort_complex(w[SCAN_PER_NODE * k]) == pytest.approx(np.sort_complex(ref),
                                                                        rel=1e-12, abs=1e-12)
-    mine = _scan_hopf_points(path, w, t_end)
+    mine = _scan_hopf_points(path, w, t_end, system, nodes)
     ref = [hp for hp in locate_hopf_points(path, PATH_PARAM, 0.0, t_end,
                                            n_scan=3 * len(nodes)).points if hp.converged]
     assert len(mine) >= 1  # each row of this grid crosses the Hopf curve

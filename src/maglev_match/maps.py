@@ -212,7 +212,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     pad = -n_nodes % PATH_PAD
     path = path_system(system, np.concatenate([nodes, np.repeat(nodes[-1:], pad, axis=0)]))
     limits = cycle_limit_margins(pts[0], include_current=False)
-    hopf_points = _scan_hopf_points(path, w_scan, t_end)
+    hopf_points = _scan_hopf_points(path, w_scan, t_end, system, nodes)
 
     def stretch_from(k: int, step: int) -> np.ndarray:
         """The stable nodes from node k (stable) walking in direction ``step``."""
@@ -305,6 +305,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
 PATH_PAD = 16  # the path's nodes are padded to a multiple of this (shared kernels)
 SCAN_PER_NODE = 3  # samples of the Hopf scan per path interval (as the earlier scan)
 SCAN_BATCH = 64  # the stacked Jacobian call is padded to a multiple of this many samples
+REFINE_WINDOW = 4  # nodes of the short path on which a Hopf guess is refined
 FINE_SCAN = 17  # samples of the fallback scan by equilibrium continuation in one interval
 
 
@@ -343,7 +344,36 @@ def _hopf_test_sign(w: np.ndarray) -> np.ndarray:
     return np.prod(signs, axis=1)
 
 
-def _scan_hopf_points(path, w: np.ndarray, t_end: float) -> list:
+def _refine_on_window(path, system, nodes: np.ndarray, tg: float, om: float, t_end: float):
+    """:func:`~maglev_match.dynamics.hopf.refine_hopf_point` at path position ``tg`` on the
+    path through the :data:`REFINE_WINDOW` nodes around it (the same piecewise-linear path
+    there, but its parameter vector is short: the parameter derivative of the crossing
+    speed then differentiates with respect to a few dozen parameters, not thousands, and
+    every row shares the kernels). The point is mapped back onto ``path`` (value + first
+    node, the full parameter vector); a point that converges outside the window (where the
+    short path would extrapolate its end segments) is refined again on the whole path."""
+    import dataclasses
+
+    from maglev_match.dynamics.hopf import refine_hopf_point
+    from maglev_match.dynamics.paths import PATH_PARAM, path_system
+
+    x0 = np.zeros(path.dim)
+    scale = max(abs(tg), t_end)
+    n = len(nodes)
+    if n > REFINE_WINDOW:
+        k0 = int(np.clip(math.floor(tg) - (REFINE_WINDOW - 2) // 2, 0, n - REFINE_WINDOW))
+        window = path_system(system, nodes[k0:k0 + REFINE_WINDOW])
+        hp = refine_hopf_point(window, PATH_PARAM, tg - k0, x0, om, value_scale=scale,
+                               bounds=(0.0, REFINE_WINDOW - 1.0))
+        if hp.converged:
+            value = hp.value + k0
+            return dataclasses.replace(hp, value=value,
+                                       p=path.params_with(path.p, **{PATH_PARAM: value}))
+    return refine_hopf_point(path, PATH_PARAM, tg, x0, om, value_scale=scale,
+                             bounds=(0.0, t_end))
+
+
+def _scan_hopf_points(path, w: np.ndarray, t_end: float, system, nodes: np.ndarray) -> list:
     """Converged Hopf points of the equilibrium x = 0 along the path, from the eigenvalues
     ``w`` at t = i / SCAN_PER_NODE (:func:`_path_eigenvalues`).
 
@@ -359,12 +389,11 @@ def _scan_hopf_points(path, w: np.ndarray, t_end: float) -> list:
     :data:`FINE_SCAN` samples (which splits steps until each crossing has its own).
     """
     from maglev_match.dynamics.equilibria import _pair_crossings
-    from maglev_match.dynamics.hopf import locate_hopf_points, refine_hopf_point
+    from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.dynamics.paths import PATH_PARAM
 
     ts = np.arange(len(w)) / SCAN_PER_NODE
     sign = _hopf_test_sign(w)
-    x0 = np.zeros(path.dim)
     points: list = []
 
     def add(hp) -> None:
@@ -386,9 +415,7 @@ def _scan_hopf_points(path, w: np.ndarray, t_end: float) -> list:
                     f = lam.real / (lam.real - mu.real)
                     tg = ts[i] + f * (ts[i + 1] - ts[i])
                     om = lam.imag + f * (mu.imag - lam.imag)
-                    add(refine_hopf_point(path, PATH_PARAM, float(tg), x0, float(om),
-                                          value_scale=max(abs(tg), t_end),
-                                          bounds=(0.0, t_end)))
+                    add(_refine_on_window(path, system, nodes, float(tg), float(om), t_end))
                     break
             continue
         fine = locate_hopf_points(path, PATH_PARAM, float(ts[i]), float(ts[i + 1]),
