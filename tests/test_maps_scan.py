@@ -70,3 +70,32 @@ def test_hopf_test_sign_is_the_sign_of_the_bialternate_product():
         prod = np.prod(w[i] + w[j])
         assert abs(prod.imag) <= 1e-9 * abs(prod)
         assert _hopf_test_sign(w[None, :])[0] == np.sign(prod.real)
+
+
+def test_intervals_that_are_not_one_simple_crossing_are_rescanned_by_continuation(
+        monkeypatch):
+    """Two complex pairs crossing the imaginary axis in opposite directions within one
+    sample interval leave the Hopf test's sign unchanged: that interval (and only that one)
+    goes to the continuation scan, which splits the step until each crossing has its own."""
+    import maglev_match.dynamics.hopf as hopf
+
+    calls = []
+
+    def record(system, param, start, stop, p=None, n_scan=200, progress=None):
+        calls.append((start, stop, n_scan))
+        return hopf.HopfScan(param, start, stop, [], np.linspace(start, stop, 2),
+                             np.zeros(2), ())
+
+    monkeypatch.setattr(hopf, "locate_hopf_points", record)
+    stay = [-1.0 + 0j, -2.0 + 0j]
+    w = np.array([
+        [-0.1 + 5j, -0.1 - 5j, 0.2 + 9j, 0.2 - 9j, *stay],
+        [-0.1 + 5j, -0.1 - 5j, 0.2 + 9j, 0.2 - 9j, *stay],
+        [0.1 + 5j, 0.1 - 5j, -0.2 + 9j, -0.2 - 9j, *stay],  # both pairs cross here
+        [0.1 + 5j, 0.1 - 5j, -0.2 + 9j, -0.2 - 9j, *stay],
+    ])
+    sign = _hopf_test_sign(w)
+    assert sign[1] == sign[2]  # the two crossings cancel in the test
+    out = _scan_hopf_points(None, w, 1.0, None, None)
+    assert out == []
+    assert calls == [(1 / SCAN_PER_NODE, 2 / SCAN_PER_NODE, 17)]
