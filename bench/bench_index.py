@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from maglev_match.maps import Axis, MapSpec, run_map
+from maglev_match.maps import Axis, MapSpec, compute_row, run_map
 from maglev_match.matching import matching_index
 from maglev_match.params import load_preset
 from maglev_match.simulation import critical_disturbance
@@ -36,12 +36,16 @@ def timed(fn, repeat: int) -> tuple[float, object]:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="small settings (CI)")
+    ap.add_argument("--grid", type=int, default=30, help="map size (grid x grid)")
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2],
+                    help="local worker counts to time the map with")
+    ap.add_argument("--skip-index", action="store_true", help="only the map part")
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {platform.processor() or 'cpu'}, "
           f"python {platform.python_version()}")
     points = ["turnout-soft", "turnout-stiff", "alpha1"]
     repeat = 1 if args.quick else 3
-    for name in points:
+    for name in points if not args.skip_index else []:
         p = load_preset(name)
         t0 = time.perf_counter()
         matching_index(p, simulate=False)
@@ -52,17 +56,32 @@ def main() -> None:
         print(f"{name:14s} chi = {res.chi:.4g} ({res.case}); first call {first:.2f} s; "
               f"median chi by continuation {t_cyc:.3f} s, by simulation bisection "
               f"{t_sim:.3f} s ({cd.runs} runs): ratio {t_sim / t_cyc:.2f}x")
-    n = 10 if args.quick else 30
+    n = 10 if args.quick else args.grid
     base = load_preset("turnout-soft")
     spec = MapSpec(base=base.as_input_dict(), x=Axis("omega1", 40, 190, n),
                    y=Axis("sigma", 2e-4, 6e-4, n), rows_per_tile=2)
-    for workers in (1, 2):
+    # one row in this process, warm (the cost a worker pays per row, single-threaded here)
+    row = n // 2
+    compute_row(spec, row)
+    t_row, _ = timed(lambda: compute_row(spec, row), repeat)
+    print(f"one row of {n} points, warm, in this process: {t_row:.3f} s")
+    for workers in args.workers:
         with tempfile.TemporaryDirectory() as d:
-            t = time.perf_counter()
+            t, c = time.perf_counter(), _cpu_seconds()
             run_map(spec, Path(d) / "tiles", workers=workers)
-            dt = time.perf_counter() - t
-        print(f"map {n}x{n} with {workers} worker(s): {dt:.1f} s, {n * n / dt:.2f} points/s "
-              "(includes cluster start and per-worker compilation)")
+            dt, dc = time.perf_counter() - t, _cpu_seconds() - c
+        print(f"map {n}x{n} with {workers} worker(s): {dt:.1f} s, {n * n / dt:.0f} points/s, "
+              f"CPU {dc:.1f} s (this process and its children; includes cluster start and "
+              "per-worker kernel loading)")
+
+
+def _cpu_seconds() -> float:
+    """User + system CPU time of this process and of its exited children (the Dask
+    nannies and, through them, the workers: counted once the cluster is closed)."""
+    import os
+
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
 
 
 if __name__ == "__main__":

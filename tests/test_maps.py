@@ -180,7 +180,10 @@ def test_unmatched_sign_change_is_unresolved_with_its_reason(monkeypatch):
         return hopf.HopfScan(param, start, stop, [], np.linspace(start, stop, 2),
                              np.zeros(2), ())
 
-    monkeypatch.setattr(hopf, "locate_hopf_points", nothing)
+    import maglev_match.maps as maps_mod
+
+    monkeypatch.setattr(hopf, "locate_hopf_points", nothing)  # the fine re-scan
+    monkeypatch.setattr(maps_mod, "_scan_hopf_points", lambda *args: [])  # the row scan
     spec = small_spec()
     row = compute_row(spec, 1)  # sigma = 4e-4: stable below the Hopf point, unstable above
     stable = row["stable"]

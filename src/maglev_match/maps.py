@@ -162,7 +162,10 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
 
     The row's path is extended beyond both ends by up to one span, sampled at the grid
     spacing, so that Hopf points just outside the grid (whose cycles reach into it) are
-    found with the same resolution as inside. Self-check: every sign change of max Re
+    found with the same resolution as inside. The equilibrium is x = 0 all along the path,
+    so the Hopf points are detected from the eigenvalues at three samples per path interval
+    (one batched Jacobian call, :func:`_scan_hopf_points`) rather than by continuing the
+    equilibrium. Self-check: every sign change of max Re
     between neighbouring path nodes must hold a Hopf point; where the first scan has none,
     the interval is scanned again finely, and if there is still none the adjacent stable
     grid points are marked unresolved (``reason`` :data:`REASON_NO_HOPF`).
@@ -170,7 +173,6 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     from maglev_match import jax_setup  # noqa: F401  (workers: float64 before anything)
     from maglev_match.dynamics.basin import FAILED
     from maglev_match.dynamics.cycles import cycle_branch
-    from maglev_match.dynamics.equilibria import eigenvalue_analysis
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.dynamics.paths import PATH_PARAM, path_system
     from maglev_match.limits_check import cycle_limit_margins
@@ -192,8 +194,10 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
                      + [param_vector(q) for _, q in ext_hi])
     off = len(ext_lo)
     n_nodes = len(nodes)
-    J = np.asarray(system.derivatives.jacobian_batch(np.zeros((n_nodes, system.dim)), nodes))
-    max_re_all = np.array([eigenvalue_analysis(Jk)[0].real.max() for Jk in J])
+    # eigenvalues of the equilibrium x = 0 at every node and two points between neighbours
+    # (one stacked LAPACK call); the nodes are every third sample
+    w_scan = _path_eigenvalues(system, nodes)
+    max_re_all = w_scan[::SCAN_PER_NODE].real.max(axis=1)
     stable_all = max_re_all < 0
     max_re = max_re_all[off:off + nx]
     stable = stable_all[off:off + nx]
@@ -205,10 +209,13 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     reverses = np.zeros(nx, dtype=bool)
 
     t_end = n_nodes - 1.0
-    path = path_system(system, nodes)
+    # the path's parameter vector is padded (the last node repeated, beyond t_end, never
+    # reached: the branches stop at t_end) to a multiple of PATH_PAD nodes, so that rows
+    # whose extensions differ by a node share every compiled kernel of the path system
+    pad = -n_nodes % PATH_PAD
+    path = path_system(system, np.concatenate([nodes, np.repeat(nodes[-1:], pad, axis=0)]))
     limits = cycle_limit_margins(pts[0], include_current=False)
-    scan = locate_hopf_points(path, PATH_PARAM, 0.0, t_end, n_scan=3 * n_nodes)
-    hopf_points = [hp for hp in scan.points if hp.converged]
+    hopf_points = _scan_hopf_points(path, w_scan, t_end, system, nodes)
 
     def stretch_from(k: int, step: int) -> np.ndarray:
         """The stable nodes from node k (stable) walking in direction ``step``."""
@@ -296,6 +303,128 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         "sigma_point": P[:, system.param_index("sigma")],
         "current_reverses": reverses, "resolved": resolved, "reason": reason,
     }
+
+
+PATH_PAD = 16  # the path's nodes are padded to a multiple of this (shared kernels)
+SCAN_PER_NODE = 3  # samples of the Hopf scan per path interval (as the earlier scan)
+SCAN_BATCH = 64  # the stacked Jacobian call is padded to a multiple of this many samples
+REFINE_WINDOW = 4  # nodes of the short path on which a Hopf guess is refined
+FINE_SCAN = 17  # samples of the fallback scan by equilibrium continuation in one interval
+
+
+def _path_eigenvalues(system, nodes: np.ndarray) -> np.ndarray:
+    """Eigenvalues of the Jacobian at the equilibrium x = 0 at the path positions
+    t = i / SCAN_PER_NODE, i = 0 .. SCAN_PER_NODE (n_nodes - 1): shape (n_samples, dim).
+
+    The parameter vectors are interpolated as the path system does, (1 - s) P_k + s P_{k+1}
+    (so sample SCAN_PER_NODE k is exactly node k); the Jacobians come from one batched
+    compiled call (padded to a multiple of :data:`SCAN_BATCH` rows so that rows of slightly
+    different lengths share one kernel) and their eigenvalues from one stacked LAPACK call.
+    """
+    s = np.arange(SCAN_PER_NODE) / SCAN_PER_NODE
+    P = ((1.0 - s)[None, :, None] * nodes[:-1, None, :]
+         + s[None, :, None] * nodes[1:, None, :]).reshape(-1, nodes.shape[1])
+    P = np.concatenate([P, nodes[-1:]])
+    m = len(P)
+    pad = -m % SCAN_BATCH
+    Pp = np.concatenate([P, np.repeat(P[-1:], pad, axis=0)]) if pad else P
+    J = np.asarray(system.derivatives.jacobian_batch(np.zeros((len(Pp), system.dim)), Pp))
+    return np.linalg.eigvals(J[:m])
+
+
+def _hopf_test_sign(w: np.ndarray) -> np.ndarray:
+    """Sign of the bialternate-product Hopf test prod_{i<j} (l_i + l_j) at each row of
+    eigenvalues ``w`` (shape (n_samples, dim)): it changes sign where a complex pair crosses
+    the imaginary axis, and at neutral saddles (Kuznetsov 2004, sec. 10.2.2). The product is
+    real (non-real sums come with their conjugates), so its sign is the product of the signs
+    of the real sums."""
+    i, j = np.triu_indices(w.shape[1], 1)
+    sums = w[:, i] + w[:, j]
+    real = np.abs(sums.imag) <= 1e-12 * np.abs(sums)
+    signs = np.where(real, np.sign(sums.real), 1.0)
+    return np.prod(signs, axis=1)
+
+
+def _refine_on_window(path, system, nodes: np.ndarray, tg: float, om: float, t_end: float):
+    """:func:`~maglev_match.dynamics.hopf.refine_hopf_point` at path position ``tg`` on the
+    path through the :data:`REFINE_WINDOW` nodes around it (the same piecewise-linear path
+    there, but its parameter vector is short: the parameter derivative of the crossing
+    speed then differentiates with respect to a few dozen parameters, not thousands, and
+    every row shares the kernels). The point is mapped back onto ``path`` (value + first
+    node, the full parameter vector); a point that converges outside the window (where the
+    short path would extrapolate its end segments) is refined again on the whole path."""
+    import dataclasses
+
+    from maglev_match.dynamics.hopf import refine_hopf_point
+    from maglev_match.dynamics.paths import PATH_PARAM, path_system
+
+    x0 = np.zeros(path.dim)
+    scale = max(abs(tg), t_end)
+    n = len(nodes)
+    if n > REFINE_WINDOW:
+        k0 = int(np.clip(math.floor(tg) - (REFINE_WINDOW - 2) // 2, 0, n - REFINE_WINDOW))
+        window = path_system(system, nodes[k0:k0 + REFINE_WINDOW])
+        hp = refine_hopf_point(window, PATH_PARAM, tg - k0, x0, om, value_scale=scale,
+                               bounds=(0.0, REFINE_WINDOW - 1.0))
+        if hp.converged:
+            value = hp.value + k0
+            return dataclasses.replace(hp, value=value,
+                                       p=path.params_with(path.p, **{PATH_PARAM: value}))
+    return refine_hopf_point(path, PATH_PARAM, tg, x0, om, value_scale=scale,
+                             bounds=(0.0, t_end))
+
+
+def _scan_hopf_points(path, w: np.ndarray, t_end: float, system, nodes: np.ndarray) -> list:
+    """Converged Hopf points of the equilibrium x = 0 along the path, from the eigenvalues
+    ``w`` at t = i / SCAN_PER_NODE (:func:`_path_eigenvalues`).
+
+    The same detection as the equilibrium continuation of
+    :func:`~maglev_match.dynamics.hopf.locate_hopf_points` without continuing a known
+    equilibrium: a sample interval where the Hopf test changes sign and exactly one complex
+    pair crosses the imaginary axis gives a Hopf guess (the real part of the crossing pair
+    interpolated linearly to zero, its imaginary part as the frequency), refined by Newton's
+    method on the Hopf defining system and validated
+    (:func:`~maglev_match.dynamics.hopf.refine_hopf_point`). Intervals that are not this
+    simple case (two pairs crossing, a sign change without a crossing pair, a crossing
+    without a sign change) are scanned again by equilibrium continuation with
+    :data:`FINE_SCAN` samples (which splits steps until each crossing has its own).
+    """
+    from maglev_match.dynamics.equilibria import _pair_crossings
+    from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.dynamics.paths import PATH_PARAM
+
+    ts = np.arange(len(w)) / SCAN_PER_NODE
+    sign = _hopf_test_sign(w)
+    points: list = []
+
+    def add(hp) -> None:
+        if any(abs(hp.value - o.value) <= 1e-9 * max(1.0, abs(o.value))
+               and abs(hp.frequency - o.frequency) <= 1e-6 * o.frequency for o in points):
+            return
+        points.append(hp)
+
+    for i in range(len(w) - 1):
+        wa, wb = w[i], w[i + 1]
+        flip = sign[i] != sign[i + 1]
+        crossings = _pair_crossings(wa, wb)
+        if not flip and crossings == 0:
+            continue
+        if flip and crossings == 1:
+            for lam in wa[wa.imag > 1e-9]:
+                mu = wb[int(np.argmin(np.abs(wb - lam)))]
+                if mu.imag > 1e-9 and (lam.real > 0) != (mu.real > 0):
+                    f = lam.real / (lam.real - mu.real)
+                    tg = ts[i] + f * (ts[i + 1] - ts[i])
+                    om = lam.imag + f * (mu.imag - lam.imag)
+                    add(_refine_on_window(path, system, nodes, float(tg), float(om), t_end))
+                    break
+            continue
+        fine = locate_hopf_points(path, PATH_PARAM, float(ts[i]), float(ts[i + 1]),
+                                  n_scan=FINE_SCAN)
+        for hp in fine.points:
+            add(hp)
+    points.sort(key=lambda hp: hp.value)
+    return [hp for hp in points if hp.converged]
 
 
 def _extension(spec: MapSpec, xs: np.ndarray, yv: float
