@@ -56,8 +56,9 @@ REASON_CODES = {
 SPOT_CHECK_FRACTION = 0.01
 SPOT_CHECK_MAX = 12
 SPOT_CHECK_TOL = 0.03
-# One worker process per core, each single-threaded: on 2 cores a row of 100 points runs in
-# 1.6 s single-threaded against 2.3 s with XLA's and BLAS's own thread pools (measured).
+# One worker process per core, each single-threaded: on 2 cores a row of 100 points ran in
+# 1.6 s single-threaded against 2.3 s with XLA's and BLAS's own thread pools (measured before
+# the row scan of issue 14; a warm single-threaded row now takes ~0.8 s).
 SINGLE_THREADED_ENV = {
     "OMP_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
