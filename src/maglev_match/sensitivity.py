@@ -699,6 +699,14 @@ def derived_map(params: Params, model: str = "unit") -> Callable:
     return _derived_map("omega1" not in params.explicit, "sigma" not in params.explicit)
 
 
+def _first_frequency(v: dict, derived_w: bool):
+    """omega1 = (pi / L)^2 sqrt(EI / mbar) from the beam's values in ``v`` (traced), or
+    ``v["omega1"]`` when omega1 was given explicitly."""
+    if derived_w:
+        return (jnp.pi / v["L"]) ** 2 * jnp.sqrt(v["EI"] / v["mbar"])
+    return v["omega1"]
+
+
 @cache
 def _derived_map(derived_w: bool, derived_s: bool) -> Callable:
     names = engineering_names(Params(**({} if derived_w else {"omega1": 100.0}),
@@ -707,10 +715,7 @@ def _derived_map(derived_w: bool, derived_s: bool) -> Callable:
 
     def fmap(q):
         v = {n: q[i] for n, i in pos.items()}
-        if derived_w:
-            w1 = (jnp.pi / v["L"]) ** 2 * jnp.sqrt(v["EI"] / v["mbar"])
-        else:
-            w1 = v["omega1"]
+        w1 = _first_frequency(v, derived_w)
         if derived_s:
             sg = (8.0 * v["k"] * v["L"] / (jnp.pi**2 * v["l"] ** 2 * v["mbar"])
                   * jnp.sin(jnp.pi * v["l"] / (2.0 * v["L"])) ** 2)
@@ -735,10 +740,7 @@ def _vehicle_derived_map(derived_w: bool, n_modes: int) -> Callable:
 
     def fmap(q):
         v = {n: q[i] for n, i in pos.items()}
-        if derived_w:
-            w1 = (jnp.pi / v["L"]) ** 2 * jnp.sqrt(v["EI"] / v["mbar"])
-        else:
-            w1 = v["omega1"]
+        w1 = _first_frequency(v, derived_w)
         full = dict(v, omega1=w1)
         p = jnp.stack([full[n] for n in model_names])
         q_static = _geometry(p, n_modes)[-1]

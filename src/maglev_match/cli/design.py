@@ -61,9 +61,7 @@ def _monte_carlo(params, scatter: dict[str, float], n: int | None, spread: dict 
                  folder, workers: int | None, resume: bool, seed: int, model: str = "unit",
                  command: str = "design"):
     if n is None:
-        return None
-    if not scatter:
-        raise ParameterError("--monte-carlo", n, "needs at least one --scatter NAME=PCT")
+        return None  # (a --monte-carlo without --scatter was refused by scatter_options)
     from maglev_match.sensitivity import sampled_spread
 
     with progress_report(command) as prog:
@@ -125,6 +123,18 @@ def check_scatter_names(params, scatter: dict[str, float], model: str) -> None:
             raise ParameterError("--scatter", name, "has no row in the sensitivity table of "
                                  f"this model (a derived or unused value; rows: "
                                  f"{', '.join(rows)})")
+
+
+def scatter_options(params, items: list[str] | None, monte_carlo: int | None,
+                    model: str) -> dict[str, float]:
+    """--scatter and --monte-carlo of ``sensitivity``, ``design`` and ``index``, checked
+    before any computation: {name: percent} (names with a row in ``model``'s sensitivity
+    table), and --monte-carlo only with at least one --scatter."""
+    sc = parse_scatter(items)
+    check_scatter_names(params, sc, model)
+    if monte_carlo is not None and not sc:
+        raise ParameterError("--monte-carlo", monte_carlo, "needs at least one --scatter NAME=PCT")
+    return sc
 
 
 def _spread(sens, scatter: dict[str, float]) -> dict | None:
@@ -211,10 +221,7 @@ def sensitivity_command(
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
-    sc = parse_scatter(scatter)
-    check_scatter_names(params, sc, model)
-    if monte_carlo is not None and not sc:
-        raise ParameterError("--monte-carlo", monte_carlo, "needs at least one --scatter NAME=PCT")
+    sc = scatter_options(params, scatter, monte_carlo, model)
     with progress_report("sensitivity") as prog:
         prog.stage("computing the index and its sensitivities ...")
         sens = index_sensitivity(params, boundaries=boundaries, model=model)
@@ -323,8 +330,8 @@ def design_command(
     for var in variables:  # both ends must be valid parameter values
         base.replace(**{var.name: var.lo})
         base.replace(**{var.name: var.hi})
-    sc = parse_scatter(scatter)
     check_index_params(base)
+    sc = scatter_options(base, scatter, monte_carlo, model)
     evaluator = MaglevEvaluator(base, problem.names, model=model)
     with progress_report("design") as prog:
         prog.stage("searching ...")
@@ -395,5 +402,5 @@ def design_command(
 
 
 __all__ = ["NO_FEASIBLE_DESIGN", "sensitivity_command", "design_command", "parse_scatter",
-           "check_scatter_names", "scatter_report", "print_scatter", "ScatterOpt", "McOpt",
-           "WorkersOpt", "ResumeOpt", "SeedOpt"]
+           "check_scatter_names", "scatter_options", "scatter_report", "print_scatter",
+           "ScatterOpt", "McOpt", "WorkersOpt", "ResumeOpt", "SeedOpt"]

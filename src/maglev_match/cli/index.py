@@ -65,22 +65,13 @@ def index_command(
     with --scatter, the spread of chi from parameter scatter."""
     if is_model_file(model):
         refuse_model_file(model, "index")
-    from maglev_match.cli.design import (
-        check_scatter_names,
-        parse_scatter,
-        print_scatter,
-        scatter_report,
-    )
+    from maglev_match.cli.design import print_scatter, scatter_options, scatter_report
     from maglev_match.matching import matching_index
-    from maglev_match.params import ParameterError
 
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
-    sc = parse_scatter(scatter)
-    check_scatter_names(params, sc, model)
-    if monte_carlo is not None and not sc:
-        raise ParameterError("--monte-carlo", monte_carlo, "needs at least one --scatter NAME=PCT")
+    sc = scatter_options(params, scatter, monte_carlo, model)
     with progress_report("index") as prog:
         prog.stage("computing the matching index ...")
         res = matching_index(params, model=model, simulate=not no_simulation)
