@@ -38,6 +38,14 @@ def tornado_figure(sens, top: int = 15, title: str = ""):
     return fig
 
 
+def _axis_label(name: str) -> str:
+    """A parameter's axis label with its unit ("EI (N m^2)"; none for dimensionless)."""
+    from maglev_match.params import PARAMETER_DOCS
+
+    unit = PARAMETER_DOCS.get(name, ("-", ""))[0]
+    return name if unit == "-" else f"{name} ({unit})"
+
+
 def design_path_figure(result, title: str = ""):
     """The coarse chi map used for the starts and every optimiser path, the design marked.
     ``result``: a :class:`~maglev_match.design.DesignResult`."""
@@ -57,7 +65,7 @@ def design_path_figure(result, title: str = ""):
             ax.axhline(b, color="r", ls="--", label=f"chi >= {b:g}")
         ax.plot([result.values[names[0]]], [result.index.chi], "*", ms=16, color="gold",
                 markeredgecolor="k", label=f"design ({result.status})")
-        ax.set_xlabel(names[0])
+        ax.set_xlabel(_axis_label(names[0]))
         ax.set_ylabel("chi = h / w0")
     else:
         fig, ax = new_figure(figsize=(8, 5.5))
@@ -81,8 +89,8 @@ def design_path_figure(result, title: str = ""):
                     label="start" if k == 0 else None)
         ax.plot([result.values[names[0]]], [result.values[names[1]]], "*", ms=16,
                 color="gold", markeredgecolor="k", label=f"design ({result.status})")
-        ax.set_xlabel(names[0])
-        ax.set_ylabel(names[1])
+        ax.set_xlabel(_axis_label(names[0]))
+        ax.set_ylabel(_axis_label(names[1]))
     ax.set_title(title or f"{prob.goal} {prob.objective}: "
                  + ", ".join(str(r) for r in prob.requirements))
     ax.legend(fontsize=8, loc="best")
