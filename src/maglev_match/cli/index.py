@@ -66,12 +66,12 @@ def index_command(
     if is_model_file(model):
         refuse_model_file(model, "index")
     from maglev_match.cli.design import print_scatter, scatter_options, scatter_report
-    from maglev_match.matching import matching_index
 
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
+    from maglev_match.matching import matching_index  # (after the checks: JAX loads here)
     with progress_report("index") as prog:
         prog.stage("computing the matching index ...")
         res = matching_index(params, model=model, simulate=not no_simulation)

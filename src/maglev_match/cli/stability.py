@@ -13,6 +13,7 @@ from rich.text import Text
 from maglev_match.cli import app
 from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,
+    PARAM_HELP,
     ConfigOpt,
     JsonOpt,
     ModelOpt,
@@ -31,11 +32,24 @@ from maglev_match.cli.common import (
     unit_of,
     validate_value,
 )
-from maglev_match.cli.models import resolve_model
-from maglev_match.dynamics.equilibria import root_locus, stability
-from maglev_match.engineering import PARAM_HELP, is_engineering
-from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError, available_presets, load_preset, preset_info
+
+# The numerical modules (and JAX with them) are imported inside the commands, so that
+# `presets`, `--help` and a usage error answer without loading them.
+
+
+def stability(system):
+    """:func:`maglev_match.dynamics.equilibria.stability`, imported when first called."""
+    from maglev_match.dynamics.equilibria import stability as _stability
+
+    return _stability(system)
+
+
+def root_locus(system, param, values):
+    """:func:`maglev_match.dynamics.equilibria.root_locus`, imported when first called."""
+    from maglev_match.dynamics.equilibria import root_locus as _root_locus
+
+    return _root_locus(system, param, values)
 
 #: Relative size below which an imaginary part is rounding noise: eigenvalues of a real
 #: matrix computed in float64 (LAPACK dgeev, backward error ~ 1e-16 ||J||) can split a real
@@ -67,6 +81,8 @@ def stability_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Equilibrium, eigenvalues and the stability verdict with its margin."""
+    from maglev_match.cli.models import resolve_model
+
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system = rm.params, rm.system
     res = stability(system)
@@ -120,6 +136,10 @@ def root_locus_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Eigenvalues along one parameter: writes CSV and a PNG/SVG figure."""
+    from maglev_match.cli.models import resolve_model
+    from maglev_match.engineering import is_engineering
+    from maglev_match.io import atomic_open
+
     check_output_path(out)
     if steps < 2:
         raise ParameterError("--steps", steps, "must be at least 2")

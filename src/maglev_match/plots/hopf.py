@@ -137,3 +137,47 @@ def hopf_curve_figure(
     ax.set_title(title or "Hopf curve: S stable, U unstable equilibrium")
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
     return fig
+
+
+def hopf_scan_figure(scan, param: str, unit: str = ""):
+    """The equilibrium's margin along one parameter with its Hopf points (``maglev-match
+    hopf``): max Re(lambda) (1/s) of the scanned equilibrium branch against ``param``, zero
+    marked, each refined Hopf point a red (subcritical, l1 > 0) or blue (supercritical,
+    l1 < 0) marker labelled with its value and frequency.
+
+    Parameters
+    ----------
+    scan : a :class:`~maglev_match.dynamics.hopf.HopfScan`.
+    param, unit : the parameter's name and unit.
+
+    Returns the figure.
+    """
+    fig, ax = new_figure(figsize=(7.0, 4.2))
+    vals = np.asarray(scan.scan_values, float)
+    mr = np.asarray(scan.max_real_part, float)
+    if len(vals) == len(mr):
+        order = np.argsort(vals, kind="stable")
+        ax.plot(vals[order], mr[order], color="k", lw=1.4,
+                label="max Re(lambda) of the equilibrium")
+    else:  # a scan along beam data keeps the margin on its own path: points only
+        ax.text(0.02, 0.95, "margin along the scan not drawn (scanned on a parameter path)",
+                transform=ax.transAxes, fontsize=8, va="top")
+        ax.set_xlim(min(vals.min(), scan.start), max(vals.max(), scan.stop))
+    ax.axhline(0.0, color="0.4", lw=0.8)
+    used = set()
+    sign = {"subcritical": " (l1 > 0)", "supercritical": " (l1 < 0)"}
+    for hp in scan.points:
+        color = _COLOR.get(hp.kind, "0.4")
+        label = None
+        if hp.kind not in used:
+            used.add(hp.kind)
+            label = f"Hopf point, {hp.kind}{sign.get(hp.kind, '')}"
+        ax.plot([hp.value], [0.0], "o", color=color, ms=8, mec="k", zorder=5, label=label)
+        ax.annotate(f"{param} = {hp.value:.5g}\nomega = {hp.frequency:.4g} rad/s",
+                    (hp.value, 0.0), textcoords="offset points", xytext=(6, 8), fontsize=8)
+    xl = f"{param} ({unit})" if unit else param
+    ax.set_xlabel(xl)
+    ax.set_ylabel("max Re(lambda) (1/s)")
+    ax.set_title(f"Equilibrium along {param}: unstable above 0")
+    ax.legend(loc="best", fontsize=8)
+    return fig
