@@ -208,6 +208,21 @@ def output_target(out: Path | None, command: str, stem: str) -> tuple[Path, str]
     return path.parent, path.stem
 
 
+def write_result_json(out: Path | None, command: str, stem: str, data: Any,
+                      json_out: bool) -> list[Path]:
+    """Save a command's JSON result as ``<folder>/<stem>.json`` (the folder of
+    :func:`output_target`); with ``--json`` and no ``--out`` nothing is written (stdout
+    holds the same object). Returns the written files."""
+    if json_out and out is None:
+        return []
+    from maglev_match.io import atomic_write_text
+
+    folder, name = output_target(out, command, stem)
+    path = folder / f"{name}.json"
+    atomic_write_text(path, json.dumps(to_jsonable(data), indent=2) + "\n")
+    return [path]
+
+
 def output_path(out: Path | None, default: str) -> Path:
     """The output path (creating its folder): ``out`` if given, else ``default``."""
     path = Path(out) if out is not None else Path(default)

@@ -33,6 +33,8 @@ from maglev_match.cli.common import (
     validate_value,
 )
 from maglev_match.params import ParameterError, available_presets, load_preset, preset_info
+from maglev_match.units import header, shown
+from maglev_match.units import label as unit_label
 
 # The numerical modules (and JAX with them) are imported inside the commands, so that
 # `presets`, `--help` and a usage error answer without loading them.
@@ -78,14 +80,20 @@ def stability_command(
     config: ConfigOpt = None,
     set_: SetOpt = None,
     model: ModelOpt = "unit",
+    out: OutOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Equilibrium, eigenvalues and the stability verdict with its margin."""
+    """Equilibrium, eigenvalues and the stability verdict with its margin.
+
+    Writes the eigenvalues (CSV) into --out (default maglev-match-out/stability/); with
+    --json and no --out, nothing is written."""
     from maglev_match.cli.models import resolve_model
 
+    check_output_path(out)
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system = rm.params, rm.system
     res = stability(system)
+    files = [] if json_out and out is None else [_write_eigenvalues(out, rm.label, res)]
     if json_out:
         out = {
             "model": rm.label,
@@ -98,6 +106,7 @@ def stability_command(
             "equilibrium_converged": res.equilibrium.converged,
             "equilibrium_scaled_residual": res.equilibrium.scaled_residual,
             "warnings": list(res.warnings),
+            "files": [str(f) for f in files],
         }
         if rm.is_user:
             out["parameters"] = dict(zip(system.param_names, system.p.tolist(), strict=True))
@@ -118,7 +127,26 @@ def stability_command(
     console.print(table)
     console.print("(one row per conjugate pair, Im > 0; |Im| below "
                   f"{IMAG_RTOL:g} |lambda| is shown as a real eigenvalue)")
+    for f in files:
+        console.print(f"wrote {f}", highlight=False)
     print_warnings(res.warnings)
+
+
+def _write_eigenvalues(out, model: str, res):
+    """Every eigenvalue of the equilibrium as CSV (units in the headers)."""
+    from maglev_match.io import atomic_open
+
+    folder, stem = output_target(out, "stability", f"stability_{model}")
+    path = folder / f"{stem}.csv"
+    with atomic_open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["index", header("re"), header("im"), header("frequency_hz"),
+                    header("damping_ratio")])
+        for k, z in enumerate(np.asarray(res.eigenvalues, complex)):
+            zeta = -z.real / abs(z) if abs(z) > 0 else float("nan")
+            w.writerow([k + 1, f"{z.real:.12g}", f"{z.imag:.12g}",
+                        f"{abs(z.imag) / (2 * np.pi):.12g}", f"{zeta:.12g}"])
+    return path
 
 
 @app.command("root-locus")
@@ -213,9 +241,13 @@ def root_locus_command(
 
 
 @app.command("presets")
-def presets_command(json_out: JsonOpt = False) -> None:
+def presets_command(out: OutOpt = None, json_out: JsonOpt = False) -> None:
     """List the shipped parameter presets: beam values, a description, and what each
-    changes relative to the preset it derives from."""
+    changes relative to the preset it derives from.
+
+    Writes the table (CSV, SI units) into --out (default maglev-match-out/presets/); with
+    --json and no --out, nothing is written."""
+    check_output_path(out)
     rows = []
     for name in available_presets():
         p = load_preset(name)
@@ -225,15 +257,18 @@ def presets_command(json_out: JsonOpt = False) -> None:
                      "base": info.base,
                      "changes": {k: {"base": a, "value": b}
                                  for k, (a, b) in info.changes.items()}})
+    files = [] if json_out and out is None else [_write_presets(out, rows)]
     if json_out:
-        emit_json({"presets": rows})
+        emit_json({"presets": rows, "files": [str(f) for f in files]})
         return
-    table = Table("preset", "omega1 (rad/s)", "sigma (1/kg)", "w0 (mm)", "L (m)", "EI (N m^2)")
+    table = Table("preset", *(unit_label(k) for k in ("omega1", "sigma", "w0", "L", "EI")))
     table.columns[0].no_wrap = True
     for r in rows:
         table.add_row(r["name"], f"{r['omega1']:.5g}", f"{r['sigma']:.4g}",
-                      f"{r['w0'] * 1e3:.4g}", f"{r['L']:g}", f"{r['EI']:.4g}")
+                      f"{shown('w0', r['w0']):.4g}", f"{r['L']:g}", f"{r['EI']:.4g}")
     console.print(table)
+    for f in files:
+        console.print(f"wrote {f}", highlight=False)
     for r in rows:
         if r["base"] is None:
             changed = "a base preset"
@@ -244,3 +279,19 @@ def presets_command(json_out: JsonOpt = False) -> None:
             changed = f"same values as {r['base']}"
         console.print(Text.assemble((r["name"], "bold"), f" ({changed})"), highlight=False)
         console.print(f"    {r['description']}", highlight=False, markup=False)
+
+
+def _write_presets(out, rows: list[dict]):
+    """The presets table as CSV: SI values, units in the headers."""
+    from maglev_match.io import atomic_open
+
+    folder, stem = output_target(out, "presets", "presets")
+    path = folder / f"{stem}.csv"
+    cols = ["omega1", "sigma", "w0", "L", "EI", "mbar"]
+    with atomic_open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["name", *(header(c) for c in cols), "base", "description"])
+        for r in rows:
+            w.writerow([r["name"], *(f"{r[c]:.10g}" for c in cols), r["base"] or "",
+                        r["description"]])
+    return path
