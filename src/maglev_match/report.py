@@ -38,6 +38,7 @@ import numpy as np
 
 from maglev_match.io import atomic_write_text
 from maglev_match.params import PARAMETER_DOCS, Params
+from maglev_match.units import label as unit_label
 
 log = logging.getLogger(__name__)
 
@@ -634,15 +635,44 @@ def outcome_text(sim: Any) -> str:
             "failed": "integration failed"}.get(sim.outcome, sim.outcome)
 
 
+#: A gap oscillation below this fraction of its peak counts as died out (the same rule as
+#: the simulation figure, :data:`maglev_match.plots.simulate.SETTLED_FRACTION`).
+SETTLED_FRACTION = 0.02
+
+
+def fitted_window(histories: Sequence[Any]) -> tuple[float, float]:
+    """(end of the fitted time axis, horizon) in s for history datasets: 25 % past the
+    latest time any gap deviation exceeds 2 % of its run's peak (a collision ends its run
+    there), at least 0.1 s, at most the horizon."""
+    horizon, latest = 0.0, 0.0
+    for ds in histories:
+        t = ds["time"].values
+        if len(t) == 0:
+            continue
+        horizon = max(horizon, float(t[-1]))
+        g = np.abs(ds["gap_deviation"].values).reshape(len(t), -1).max(axis=1)
+        if not np.any(g > 0):
+            continue
+        above = np.nonzero(g > SETTLED_FRACTION * g.max())[0]
+        latest = max(latest, float(t[min(above[-1] + 1, len(t) - 1)]))
+    horizon = horizon or 1.0
+    return float(min(horizon, max(0.1, 1.25 * latest))), horizon
+
+
 def time_history_figure(runs: Sequence[tuple[str, Any]], params: Params, title: str,
                         points: Sequence[int] | None = None):
-    """Left: gap deviation (mm) against time; right: phase portrait gap deviation against
-    gap rate. ``runs`` = (label, history Dataset) pairs; model B histories show the given
-    levitation points."""
+    """Left: gap deviation (mm) against time, the axis fitted to the motion
+    (:func:`fitted_window`) with the whole run in an inset when the motion ends early;
+    right: phase portrait gap deviation against gap rate (mm/s). ``runs`` = (label, history
+    Dataset) pairs; model B histories show the given levitation points."""
     from maglev_match.plots import new_figure
 
     fig, (ax1, ax2) = new_figure(1, 2, figsize=(11, 4.2))
     styles = ["-", "--", "-.", ":"]
+    t_fit, horizon = fitted_window([ds for _, ds in runs])
+    inset = None
+    if t_fit < 0.8 * horizon:  # the motion is over early: the whole run in an inset
+        inset = ax1.inset_axes([0.58, 0.62, 0.4, 0.34])
     for k, (label, ds) in enumerate(runs):
         t = ds["time"].values
         gd = ds["gap_deviation"].values
@@ -652,17 +682,27 @@ def time_history_figure(runs: Sequence[tuple[str, Any]], params: Params, title: 
             lab = label if len(pts) == 1 else f"{label}, point {pidx + 1}"
             color = f"C{(k * len(pts) + j) % 10}"
             ax1.plot(t, gd[:, pidx] * 1e3, color=color, ls=styles[k % 4], lw=1.2, label=lab)
+            if inset is not None:
+                inset.plot(t, gd[:, pidx] * 1e3, color=color, ls=styles[k % 4], lw=0.8)
             ax2.plot(gd[:, pidx] * 1e3, rate[:, pidx] * 1e3, color=color, ls=styles[k % 4],
                      lw=0.9)
     for g in (params.gap_min - params.c0, params.gap_max - params.c0):
         ax1.axhline(g * 1e3, color="k", ls=":", lw=1)
         ax2.axvline(g * 1e3, color="k", ls=":", lw=1)
-    ax1.set_xlabel("time (s)")
+    ax1.set_xlim(0.0, t_fit)
+    ax1.set_xlabel("time (s)" if inset is None else
+                   f"time (s); shown: 0 to {t_fit:.3g} s, the whole {horizon:g} s run inset")
     ax1.set_ylabel("gap deviation c - c0 (mm)")
     ax1.set_title(title)
-    ax1.legend(fontsize=7, loc="best")
+    ax1.legend(fontsize=7, loc="lower right" if inset is not None else "best")
+    if inset is not None:
+        inset.set_xlim(0.0, horizon)
+        inset.axvspan(0.0, t_fit, color="0.85", lw=0)
+        inset.set_title(f"whole run, 0 to {horizon:g} s", fontsize=7)
+        inset.tick_params(labelsize=6)
+        inset.grid(alpha=0.3)
     ax2.set_xlabel("gap deviation c - c0 (mm)")
-    ax2.set_ylabel("gap rate (mm/s)")
+    ax2.set_ylabel(unit_label("gap_rate", "gap rate dc/dt"))
     ax2.set_title("phase portrait")
     return fig
 

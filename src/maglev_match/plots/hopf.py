@@ -56,9 +56,15 @@ def hopf_curve_figure(
     design_point : optional (value of params[0], value of params[1]) of the design,
         marked with a star.
 
+    The lower panel shows the first Lyapunov coefficient l1 along each branch against
+    params[0] (symmetric-log scale: l1 spans decades), with l1 = 0 and the generalised Hopf
+    points (GH, where l1 changes sign) marked.
+
     Returns the figure.
     """
-    fig, ax = new_figure(figsize=(7.5, 5.2))
+    fig, (ax, ax_l1) = new_figure(2, 1, figsize=(7.5, 7.6), sharex=True,
+                                  gridspec_kw={"height_ratios": [3.0, 1.35]})
+    _l1_panel(ax_l1, curves, params, units)
     if grid is not None:
         v1, v2, mr = grid
         region = np.where(np.isfinite(mr), (mr > 0).astype(float), np.nan)
@@ -129,14 +135,47 @@ def hopf_curve_figure(
         ax.plot(*design_point, "*", color="gold", mec="k", ms=15, zorder=6,
                 label=f"design point ({params[0]} = {design_point[0]:.4g}, "
                       f"{params[1]} = {design_point[1]:.4g})")
-    ax.set_xlabel(f"{params[0]} ({units[0]})" if units[0] else params[0])
     ax.set_ylabel(f"{params[1]} ({units[1]})" if units[1] else params[1])
     if grid is not None:
         ax.set_xlim(grid[0].min(), grid[0].max())
         ax.set_ylim(grid[1].min(), grid[1].max())
     ax.set_title(title or "Hopf curve: S stable, U unstable equilibrium")
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    fig.tight_layout()
     return fig
+
+
+def _l1_panel(ax, curves: Sequence[HopfCurve], params: tuple[str, str],
+              units: tuple[str, str]) -> None:
+    """l1 along the Hopf curve against params[0]: red where subcritical (l1 > 0), blue
+    where supercritical (l1 < 0), on a symmetric-log axis; GH points as circles."""
+    values = [abs(v) for c in curves if c.points for v in c.l1() if np.isfinite(v) and v != 0]
+    linthresh = 10.0 ** np.floor(np.log10(min(values))) if values else 1e-6
+    for curve in curves:
+        if not curve.points:
+            continue
+        v, l1 = curve.values(), curve.l1()
+        for kind, _ok, seg_idx in _l1_runs(l1):
+            ax.plot(v[seg_idx, 0], l1[seg_idx], _LINESTYLE[kind], color=_COLOR[kind], lw=1.6)
+        for sp in curve.special_points:
+            if sp.type == "GH":
+                ax.plot(sp.values[0], 0.0, _MARKER["GH"], color="k", ms=6, zorder=5)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_yscale("symlog", linthresh=float(linthresh))
+    ax.set_ylabel("l1 (symlog)")
+    ax.set_xlabel(f"{params[0]} ({units[0]})" if units[0] else params[0])
+    ax.set_title("first Lyapunov coefficient along the curve (> 0 subcritical, < 0 "
+                 "supercritical)", fontsize=9)
+
+
+def _l1_runs(l1: np.ndarray):
+    """Index runs of equal sign of l1, overlapping by one point so the pieces join."""
+    kind = np.where(l1 > 0, "subcritical", "supercritical")
+    start = 0
+    for j in range(1, len(kind) + 1):
+        if j == len(kind) or kind[j] != kind[start]:
+            yield kind[start], True, np.arange(start, min(j + 1, len(kind)))
+            start = j
 
 
 def hopf_scan_figure(scan, param: str, unit: str = ""):
