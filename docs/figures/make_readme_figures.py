@@ -89,7 +89,7 @@ def fingerprint(folder: Path, command: str) -> dict:
                 "points": len(pts),
                 "samples": [[_round(pts[i][k]) for k in (1, 2, col["l1"])] for i in idx]}
         return out
-    ncs = sorted(folder.glob("*.nc"))
+    ncs = sorted(folder.glob("map*.nc"))
     if command == "map" and ncs:
         import xarray as xr
 
