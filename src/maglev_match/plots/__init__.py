@@ -7,7 +7,10 @@ from pathlib import Path
 
 import matplotlib
 
-matplotlib.use("Agg")  # files only; never needs a display
+# Files only, never a display: Agg, except inside a notebook whose inline backend shows
+# the figures under the cells (the tutorials are stored with those figures).
+if "inline" not in str(matplotlib.rcParams.get("backend", "")).lower():
+    matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from maglev_match.io import atomic_write  # noqa: E402
