@@ -5,10 +5,12 @@ A report is a list of *sections*. Each section is produced by a small function
 and, if the analysis it needs raises or is not available, renders a clear
 "not available: <reason>" box instead (and logs the reason), so a report always renders.
 
-The HTML file needs no network: figures are embedded as base64 PNG (the SVG and PNG files
-are also written beside the report), styles are inline, and no element refers to an
-``http://`` or ``https://`` address. The footer records the software version and the
-settings that produced the report.
+The HTML comes from Jinja2 templates in ``maglev_match/templates/report/`` (the page, its
+style sheet, the table/figure/note macros and the larger sections), rendered with
+autoescaping, so a value can never inject markup. The file needs no network: figures are
+embedded as base64 PNG (the SVG and PNG files are also written beside the report), styles
+are inline, and no element refers to an ``http://`` or ``https://`` address. The footer
+records the software version and the settings that produced the report.
 
 :func:`study_report` assembles the report for one vehicle-beam pair: parameters with units,
 stability and eigenvalues (models A and B), the root locus along omega1, the Hopf curve in
@@ -22,6 +24,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import datetime as _dt
+import functools
 import html
 import json
 import logging
@@ -170,6 +173,31 @@ def esc(text: Any) -> str:
     return html.escape(str(text), quote=True)
 
 
+TEMPLATES = Path(__file__).parent / "templates" / "report"
+
+
+@functools.cache
+def environment():
+    """The Jinja2 environment of the report templates: autoescaping on, the number format
+    :func:`fmt` and ``mm`` (metres -> millimetres) available in every template."""
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)),
+                             autoescape=True, trim_blocks=True, lstrip_blocks=True,
+                             undefined=jinja2.StrictUndefined)
+    env.globals.update(fmt=fmt, mm=lambda v: None if v is None else float(v) * 1e3)
+    return env
+
+
+def render(template: str, **context: Any) -> str:
+    """Render one template of ``templates/report`` with ``context``."""
+    return str(environment().get_template(template).render(**context))
+
+
+def _macros():
+    return environment().get_template("macros.html.j2").module
+
+
 def table_html(
     header: Sequence[str],
     rows: Iterable[Sequence[Any]],
@@ -178,36 +206,26 @@ def table_html(
     row_classes: Sequence[str] | None = None,
     column_classes: dict[int, str] | None = None,
 ) -> str:
-    """An HTML table; cells are escaped except the columns in ``raw_columns``;
-    ``column_classes`` gives a CSS class to the cells of some columns."""
-    cls = f' class="{esc(css_class)}"' if css_class else ""
-    out = [f"<table{cls}>", "<thead><tr>"]
-    out += [f"<th>{esc(h)}</th>" for h in header]
-    out.append("</tr></thead><tbody>")
-    for k, row in enumerate(rows):
-        rc = row_classes[k] if row_classes is not None and k < len(row_classes) else ""
-        out.append(f'<tr class="{esc(rc)}">' if rc else "<tr>")
-        for j, cell in enumerate(row):
-            text = str(cell) if j in raw_columns else esc(fmt(cell))
-            cc = (column_classes or {}).get(j)
-            out.append(f'<td class="{esc(cc)}">{text}</td>' if cc else f"<td>{text}</td>")
-        out.append("</tr>")
-    out.append("</tbody></table>")
-    return "".join(out)
+    """An HTML table (template macro ``table``); cells are formatted by :func:`fmt` and
+    escaped, except the columns in ``raw_columns`` (already HTML); ``column_classes``
+    gives a CSS class to the cells of some columns."""
+    from markupsafe import Markup
+
+    cells = [[Markup(str(c)) if j in raw_columns else fmt(c) for j, c in enumerate(row)]
+             for row in rows]
+    return str(_macros().table(list(header), cells, css_class, list(row_classes or []),
+                               dict(column_classes or {})))
 
 
 def figure_html(png_path: Path, caption: str, alt: str | None = None) -> str:
     """A figure embedded as a base64 PNG (no file reference in the HTML)."""
     data = base64.b64encode(Path(png_path).read_bytes()).decode("ascii")
-    return (
-        f'<figure><img src="data:image/png;base64,{data}" alt="{esc(alt or caption)}">'
-        f"<figcaption>{esc(caption)}</figcaption></figure>"
-    )
+    return str(_macros().figure(data, caption, alt or caption))
 
 
 def note_html(text: str, kind: str = "note") -> str:
     """A highlighted paragraph (kind: 'note', 'warning' or 'unavailable')."""
-    return f'<div class="{esc(kind)}">{esc(text)}</div>'
+    return str(_macros().note(text, kind))
 
 
 def save_and_embed(fig: Any, ctx: ReportContext, stem: str, caption: str
@@ -244,32 +262,7 @@ def run_section(key: str, title: str, fn: SectionFn, params: Params,
     return SectionResult(key, title, box, (), None, False, reason, time.perf_counter() - t0)
 
 
-CSS = """
-body{font-family:system-ui,-apple-system,'Segoe UI',Helvetica,Arial,sans-serif;margin:0;
- color:#1d2733;background:#fff;line-height:1.45}
-main{max-width:1100px;margin:0 auto;padding:1.5em 2em 3em}
-h1{font-size:1.6em;border-bottom:3px solid #2b6cb0;padding-bottom:.3em}
-h2{font-size:1.25em;margin-top:2em;border-bottom:1px solid #cbd5e0;padding-bottom:.2em}
-table{border-collapse:collapse;margin:.8em 0;font-size:.9em}
-th,td{border:1px solid #cbd5e0;padding:.25em .6em;text-align:left;vertical-align:top}
-th{background:#edf2f7}
-tr.agree td.verdict{background:#c6f6d5}
-tr.differ td.verdict{background:#fed7d7}
-tr.partly td.verdict{background:#fefcbf}
-figure{margin:1em 0;text-align:center}
-figure img{max-width:100%;border:1px solid #e2e8f0}
-figcaption{font-size:.85em;color:#4a5568;margin-top:.3em}
-.note{background:#ebf8ff;border-left:4px solid #3182ce;padding:.5em .8em;margin:.8em 0}
-.warning{background:#fffaf0;border-left:4px solid #dd6b20;padding:.5em .8em;margin:.8em 0}
-.unavailable{background:#fff5f5;border:2px dashed #e53e3e;padding:.7em 1em;margin:.8em 0;
- color:#9b2c2c;font-weight:600}
-.verdict-big{font-size:1.3em;font-weight:700}
-footer{font-size:.8em;color:#4a5568;border-top:1px solid #cbd5e0;margin-top:3em;
- padding-top:.8em}
-code,pre{font-family:ui-monospace,Menlo,Consolas,monospace;font-size:.85em}
-pre{background:#f7fafc;padding:.6em;overflow-x:auto;white-space:pre-wrap}
-nav ul{columns:2;font-size:.9em}
-"""
+CSS = (TEMPLATES / "report.css").read_text()  # the page's inline style sheet
 
 
 def software_version() -> dict[str, str]:
@@ -300,15 +293,9 @@ def software_version() -> dict[str, str]:
 
 def assemble_html(title: str, intro_html: str, sections: Sequence[SectionResult],
                   settings: dict[str, Any], params: Params | None = None) -> str:
-    """The complete self-contained HTML document."""
-    nav = "".join(
-        f'<li><a href="#{esc(s.key)}">{esc(s.title)}</a>'
-        + ("" if s.available else " (not available)") + "</li>"
-        for s in sections
-    )
-    body = []
-    for s in sections:
-        body.append(f'<section id="{esc(s.key)}"><h2>{esc(s.title)}</h2>{s.html}</section>')
+    """The complete self-contained HTML document (template ``page.html.j2``)."""
+    from markupsafe import Markup
+
     version = software_version()
     stamp = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     footer_rows = [(k, v) for k, v in version.items()]
@@ -320,13 +307,8 @@ def assemble_html(title: str, intro_html: str, sections: Sequence[SectionResult]
     footer_rows.append(("section run times (s)", ", ".join(
         f"{s.key} {s.seconds:.1f}" for s in sections)))
     footer = table_html(["item", "value"], footer_rows, "footer-table")
-    return (
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-        f"<title>{esc(title)}</title><style>{CSS}</style></head><body><main>"
-        f"<h1>{esc(title)}</h1>{intro_html}<nav><ul>{nav}</ul></nav>"
-        + "".join(body)
-        + f"<footer><h2>Software and settings</h2>{footer}</footer></main></body></html>\n"
-    )
+    return render("page.html.j2", title=title, intro=Markup(intro_html),
+                  sections=sections, footer=Markup(footer)) + "\n"
 
 
 def write_report(path: Path, title: str, intro_html: str, sections: Sequence[SectionResult],
