@@ -359,36 +359,38 @@ def stability_summary(params: Params, model: str = "unit") -> dict[str, Any]:
             "warnings": list(res.warnings)}
 
 
-def eigen_table_html(eigenvalues: np.ndarray, limit: int | None = None) -> str:
+def eigen_rows(eigenvalues: np.ndarray, limit: int | None = None) -> list[tuple]:
+    """(Re, Im, f in Hz, damping ratio) of each conjugate pair (Im >= 0) and real
+    eigenvalue, at most ``limit`` of them."""
     rows = []
     for z in eigenvalues:
         if z.imag < -1e-12:
             continue
         zeta = -z.real / abs(z) if abs(z) > 0 else float("nan")
-        rows.append((z.real, z.imag, abs(z.imag) / (2 * np.pi), zeta))
-    if limit is not None:
-        rows = rows[:limit]
-    return table_html(["Re (1/s)", "Im (rad/s)", "f (Hz)", "damping ratio"], rows, "eig")
+        rows.append((fmt(z.real), fmt(z.imag), fmt(abs(z.imag) / (2 * np.pi)), fmt(zeta)))
+    return rows if limit is None else rows[:limit]
+
+
+def eigen_table_html(eigenvalues: np.ndarray, limit: int | None = None) -> str:
+    return table_html(["Re (1/s)", "Im (rad/s)", "f (Hz)", "damping ratio"],
+                      eigen_rows(eigenvalues, limit), "eig")
 
 
 def section_stability(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
     """Stability verdict and eigenvalues, model A and (optionally) model B."""
     models = ["unit"] + (["vehicle"] if ctx.settings.include_vehicle else [])
-    parts, data = [], {}
+    shown, data = [], {}
     for model in models:
         s = stability_summary(params, model)
         data[model] = s
-        label = "Model A (one levitation unit, 9 states)" if model == "unit" else \
-            "Model B (full vehicle on a multi-mode beam)"
-        verdict = "STABLE" if s["stable"] else "UNSTABLE"
-        parts.append(f"<h3>{esc(label)}</h3><p class=\"verdict-big\">{verdict}: max Re(lambda)"
-                     f" = {fmt(s['max_real_part'])} 1/s</p>")
-        parts.append(eigen_table_html(s["eigenvalues"], limit=12 if model == "vehicle" else None))
-        parts.append("<p>One row per conjugate pair (Im &lt; 0 omitted)"
-                     + ("; the 12 least damped shown" if model == "vehicle" else "") + ".</p>")
-        for w in s["warnings"]:
-            parts.append(note_html(w, "warning"))
-    return "".join(parts), [], data
+        limit = 12 if model == "vehicle" else None
+        shown.append({
+            "label": "Model A (one levitation unit, 9 states)" if model == "unit" else
+                     "Model B (full vehicle on a multi-mode beam)",
+            "stable": s["stable"], "max_real_part": s["max_real_part"],
+            "rows": eigen_rows(s["eigenvalues"], limit), "truncated": limit is not None,
+            "warnings": s["warnings"]})
+    return render("stability.html.j2", models=shown), [], data
 
 
 def section_root_locus(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
@@ -725,7 +727,9 @@ def matching_rows(mi: Any) -> list[tuple[str, Any, str]]:
         return None if v is None else float(v) * 1e3
 
     return [
-        ("chi = h / w0 (the paper's definition)", mi.chi, "-"),
+        ("chi, the headline index (the one the reading uses)", mi.chi, "-"),
+        ("chi = h / w0 by the paper's definition", _chi_paper(mi), "-"),
+        ("chi_simulation (simulated critical disturbance / w0)", mi.chi_simulation, "-"),
         ("h (basin along the gap)", mm(mi.h), "mm"),
         ("w0 (static deflection, typical disturbance)", mm(mi.w0), "mm"),
         ("case that decided h", mi.case, ""),
@@ -745,7 +749,6 @@ def matching_rows(mi: Any) -> list[tuple[str, Any, str]]:
          None if mi.h_simulation is None and getattr(mi, "h_simulation_up", None) is None
          else " / ".join("-" if v is None else f"{v * 1e3:.4g}"
                          for v in (mi.h_simulation_up, mi.h_simulation_down)), "mm"),
-        ("chi from simulation (the smaller direction)", mi.chi_simulation, "-"),
     ]
 
 
@@ -755,7 +758,8 @@ def side_by_side_rows(unit: Any, vehicle: Any) -> list[tuple[str, Any, Any]]:
         return None if v is None else float(v) * 1e3
 
     return [
-        ("chi (the paper's definition)", unit.chi, vehicle.chi),
+        ("chi (headline)", unit.chi, vehicle.chi),
+        ("chi (the paper's definition)", _chi_paper(unit), _chi_paper(vehicle)),
         ("h (mm)", mm(unit.h), mm(vehicle.h)),
         ("w0 (mm)", mm(unit.w0), mm(vehicle.w0)),
         ("case", unit.case, vehicle.case),
@@ -765,30 +769,44 @@ def side_by_side_rows(unit: Any, vehicle: Any) -> list[tuple[str, Any, Any]]:
     ]
 
 
+BASIS_TEXT = {"paper": "the paper's definition", "simulation": "the simulation, the smaller "
+              "index"}
+
+
 def section_matching(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
-    """h, w0, chi, the case and the reading; with the vehicle included, the
-    full vehicle's index beside model A's for the same beam."""
+    """The headline index chi (the one the reading uses, with its basis), the paper's
+    definition and the simulation beside it, the case, the reading and every warning; with
+    the vehicle included, the full vehicle's index beside model A's for the same beam."""
     from maglev_match.matching import matching_index
 
     mi = ctx.cache.get("matching")
     if mi is None:
         mi = matching_index(params, simulate=not ctx.settings.quick)
         ctx.cache["matching"] = mi
-    parts = [f'<p class="verdict-big">chi = {fmt(mi.chi, 4)}: {esc(mi.reading)}</p>',
-             table_html(["quantity", "value", "unit"], matching_rows(mi), "matching")]
-    for w in mi.warnings:
-        parts.append(note_html(w, "warning"))
     data = mi.as_json() if hasattr(mi, "as_json") else mi
+    mv = None
     if ctx.settings.include_vehicle:
         mv = matching_index(params, model="vehicle", simulate=not ctx.settings.quick)
         ctx.cache["matching_vehicle"] = mv  # the sensitivity section differentiates it
-        parts.append("<h3>Model A and the full vehicle (model B) on the same beam</h3>")
-        parts.append(table_html(["quantity", "model A (one unit)", "model B (full vehicle)"],
-                                side_by_side_rows(mi, mv), "matching-side-by-side"))
-        for w in mv.warnings:
-            parts.append(note_html(f"model B: {w}", "warning"))
         data = {"unit": data, "vehicle": mv.as_json()}
-    return "".join(parts), [], data
+    basis = str(getattr(mi, "reading_basis", "paper"))
+    frag = render("matching.html.j2", mi=mi, rows=_formatted(matching_rows(mi)),
+                  chi_paper=_chi_paper(mi), basis_text=BASIS_TEXT.get(basis, basis),
+                  vehicle=mv,
+                  side_rows=_formatted(side_by_side_rows(mi, mv)) if mv is not None else [])
+    return frag, [], data
+
+
+def _formatted(rows: Iterable[Sequence[Any]]) -> list[tuple[str, ...]]:
+    """Table rows with every cell formatted by :func:`fmt` (the templates' tables escape
+    but do not format)."""
+    return [tuple(fmt(c) for c in r) for r in rows]
+
+
+def _chi_paper(mi: Any) -> float:
+    """chi by the paper's definition (``chi_paper`` when the result carries it)."""
+    v = getattr(mi, "chi_paper", None)
+    return mi.chi if v is None or not np.isfinite(v) else v
 
 
 def sensitivity_rows(sens: Any, top: int = 12) -> list[tuple[Any, ...]]:
@@ -815,36 +833,23 @@ def section_sensitivity(params: Params, ctx: ReportContext) -> tuple[str, list[P
         mi = matching_index(params, simulate=not ctx.settings.quick)
         ctx.cache["matching"] = mi
     sens = index_sensitivity(params, index=mi, boundaries=not ctx.settings.quick)
-    parts = [f"<p>Status of the derivative: <b>{esc(sens.status)}</b> (case {esc(mi.case)}). "
-             "Elasticity = (p / chi) d chi / d p: the % change of chi per % change of p.</p>",
-             table_html(["parameter", "value", "d chi / d p", "elasticity",
-                         "d margin / d p (1/s per unit)", "stability lost at"],
-                        sensitivity_rows(sens), "sensitivity")]
-    if sens.limit_boundary_note:
-        parts.append(note_html(sens.limit_boundary_note))
-    for w in sens.warnings:
-        parts.append(note_html(w, "warning"))
     html, files = save_and_embed(tornado_figure(sens), ctx, "sensitivity_tornado",
                                  "Elasticities of chi and of the stability margin")
-    parts.append(html)
     data = sens.as_json()
     mv = ctx.cache.get("matching_vehicle") if ctx.settings.include_vehicle else None
+    sv = None
     if mv is not None:
         # model B's sensitivities at its own index (one implicit solve on the vehicle's
         # cycle; no stability boundaries: each would scan the 40-state equilibrium)
         sv = index_sensitivity(params, index=mv, boundaries=False, model="vehicle")
-        parts.append("<h3>The full vehicle (model B)</h3>")
-        parts.append(f"<p>Status of the derivative: <b>{esc(sv.status)}</b> (case "
-                     f"{esc(mv.case)}, chi = {fmt(mv.chi, 4)}). The beam enters through EI, "
-                     "L and mbar (the modal frequencies n<sup>2</sup> omega1 and the static "
-                     "deflection of three modes).</p>")
-        parts.append(table_html(["parameter", "value", "d chi / d p", "elasticity",
-                                 "d margin / d p (1/s per unit)", "stability lost at"],
-                                sensitivity_rows(sv), "sensitivity-vehicle"))
-        for w in sv.warnings:
-            parts.append(note_html(f"model B: {w}", "warning"))
         data = {"unit": data, "vehicle": sv.as_json()}
-    return "".join(parts), files, data
+    header = ["parameter", "value", "d chi / d p", "elasticity",
+              "d margin / d p (1/s per unit)", "stability lost at"]
+    frag = render("sensitivity.html.j2", sens=sens, mi=mi, header=header,
+                  rows=_formatted(sensitivity_rows(sens)),
+                  figure=html, vehicle_sens=sv, vehicle_index=mv,
+                  vehicle_rows=_formatted(sensitivity_rows(sv)) if sv is not None else [])
+    return frag, files, data
 
 
 # ---------------------------------------------------------------------------------------

@@ -42,12 +42,19 @@ def axis_crossings(values: np.ndarray, eigenvalues: np.ndarray
     out = []
     for k in range(len(values) - 1):
         if (mr[k] < 0) != (mr[k + 1] < 0):  # (a sample exactly on the axis counts once)
-            t = mr[k] / (mr[k] - mr[k + 1])
-            im0, im1 = abs(lead[k].imag), abs(lead[k + 1].imag)
-            scale = max(abs(lead[k]), abs(lead[k + 1]), 1.0)
-            hopf = min(im0, im1) > 1e-9 * scale
+            # follow the eigenvalue that crossed: the rightmost one on the unstable side
+            # and, on the other side, the eigenvalue of the same track (the nearest one)
+            u, o = (k, k + 1) if mr[k] >= 0 else (k + 1, k)
+            zu = lead[u]
+            zo = ev[o][np.argmin(np.abs(ev[o].real - zu.real)
+                                 + np.abs(np.abs(ev[o].imag) - abs(zu.imag)))]
+            a, b = (zo, zu) if o == k else (zu, zo)  # in parameter order
+            t = a.real / (a.real - b.real) if a.real != b.real else 0.0
+            t = min(max(t, 0.0), 1.0)
+            scale = max(abs(a), abs(b), 1.0)
+            hopf = min(abs(a.imag), abs(b.imag)) > 1e-9 * scale
             out.append((float(values[k] + t * (values[k + 1] - values[k])),
-                        float(im0 + t * (im1 - im0)), bool(hopf)))
+                        float(abs(a.imag) + t * (abs(b.imag) - abs(a.imag))), bool(hopf)))
     return out
 
 
