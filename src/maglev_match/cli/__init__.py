@@ -317,18 +317,13 @@ def _main(argv: list[str] | None) -> int:
     if debug:
         args = [a for a in args if a != "--debug"]
         args = ["--debug", *args]
-    from maglev_match.checkpoint import CheckpointLocked, MapStopped
-
     old_show = warnings.showwarning
     warnings.showwarning = _show_warning
     try:
         rv = app(args=args, standalone_mode=False, prog_name="maglev-match")
-    except (ParameterError, UserError, CheckpointLocked) as exc:
+    except (ParameterError, UserError) as exc:
         print_error(str(exc))
         return 2
-    except MapStopped as exc:
-        print_error(str(exc), prefix="stopped" if exc.exit_code == 130 else "error")
-        return exc.exit_code
     except typer.Exit as exc:
         return int(exc.exit_code or 0)
     except (typer.Abort, KeyboardInterrupt):
@@ -343,6 +338,20 @@ def _main(argv: list[str] | None) -> int:
         else:
             print_error(text)
         return code
+    except RuntimeError as exc:  # a map's checkpoint errors (their module loads with maps)
+        cp = sys.modules.get("maglev_match.checkpoint")
+        if cp is not None and isinstance(exc, cp.CheckpointLocked):
+            print_error(str(exc))
+            return 2
+        if cp is not None and isinstance(exc, cp.MapStopped):
+            print_error(str(exc), prefix="stopped" if exc.exit_code == 130 else "error")
+            return exc.exit_code
+        if debug:
+            raise
+        print_error(f"internal error: {type(exc).__name__}: {' '.join(str(exc).split())}"
+                    f"{_where(exc)}. This is a bug: please report it to {REPORT_TO} with the "
+                    "command line and the output of the same command with --debug")
+        return 1
     except MemoryError:
         if debug:
             raise

@@ -14,7 +14,6 @@ from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.text import Text
@@ -148,6 +147,8 @@ def unit_of(name: str) -> str:
 def to_jsonable(obj: Any) -> Any:
     """Convert numpy scalars/arrays, complex numbers and dataclasses for json.dumps.
     Complex numbers become [re, im]; non-finite floats become null."""
+    import numpy as np  # (here: `--help` and usage errors need no NumPy)
+
     if is_dataclass(obj) and not isinstance(obj, type):
         return to_jsonable(asdict(obj))
     if isinstance(obj, dict):
