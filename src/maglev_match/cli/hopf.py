@@ -102,17 +102,19 @@ def hopf_command(
     for v in (start, stop):
         if params is not None:
             validate_value(params, param, v)
-    if engineering:  # a beam/vehicle quantity: omega1, sigma (model B: geometry) follow it
-        scan, system = engineering_hopf_points(params, model, param, start, stop, steps)
-        names = tuple(dict.fromkeys(DEFAULT_PLANE.get(model, ()) + ("sigma",)))
-        names = tuple(n for n in names if n in system.param_names)
-        records = [{param: hp.value, **_point_record(hp, system, names)}
-                   for hp in scan.points]
-        names = (param, *names)
-    else:
-        scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
-        names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
-        records = [_point_record(hp, system, names) for hp in scan.points]
+    with progress_report("hopf") as prog:
+        prog.stage(f"searching Hopf points along {param} in [{start:g}, {stop:g}] ...")
+        if engineering:  # a beam/vehicle quantity: omega1, sigma (model B: geometry) follow it
+            scan, system = engineering_hopf_points(params, model, param, start, stop, steps)
+            names = tuple(dict.fromkeys(DEFAULT_PLANE.get(model, ()) + ("sigma",)))
+            names = tuple(n for n in names if n in system.param_names)
+            records = [{param: hp.value, **_point_record(hp, system, names)}
+                       for hp in scan.points]
+            names = (param, *names)
+        else:
+            scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
+            names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
+            records = [_point_record(hp, system, names) for hp in scan.points]
     specials = [{"type": str(sp.type), param: sp.value, "located": sp.located,
                  "label": sp.label, "frequency": sp.frequency}
                 for sp in scan.special_points]

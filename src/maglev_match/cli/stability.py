@@ -28,6 +28,7 @@ from maglev_match.cli.common import (
     finite,
     output_target,
     print_warnings,
+    progress_report,
     scan_option,
     unit_of,
     validate_value,
@@ -182,14 +183,16 @@ def root_locus_command(
         if params is not None:
             validate_value(params, param, v)
     values = np.linspace(start, stop, steps)
-    if engineering:  # the path through the model parameters at each value: t = k is exact
-        from maglev_match.dynamics.paths import PATH_PARAM, path_system
-        from maglev_match.engineering import engineering_nodes
+    with progress_report("root-locus") as prog:
+        prog.stage(f"eigenvalues at {steps} values of {param} ...")
+        if engineering:  # the path through the model parameters at each value: t = k exact
+            from maglev_match.dynamics.paths import PATH_PARAM, path_system
+            from maglev_match.engineering import engineering_nodes
 
-        path = path_system(system, engineering_nodes(params, model, param, values))
-        res = root_locus(path, PATH_PARAM, np.arange(steps, dtype=float))
-    else:
-        res = root_locus(system, param, values)
+            path = path_system(system, engineering_nodes(params, model, param, values))
+            res = root_locus(path, PATH_PARAM, np.arange(steps, dtype=float))
+        else:
+            res = root_locus(system, param, values)
     folder, stem = output_target(out, "root-locus", f"root_locus_{model}_{param}")
     csv_path = folder / f"{stem}.csv"
     with atomic_open(csv_path, "w", newline="") as fh:
