@@ -561,7 +561,7 @@ def index_sensitivity(params: Params | str | None = None, *, model: str = "unit"
     Returns
     -------
     IndexSensitivity
-        See [`IndexSensitivity`][maglev_match.sensitivity.IndexSensitivity]; `.plot()`
+        See `maglev_match.sensitivity.IndexSensitivity`; `.plot()`
         draws the tornado figure.
     """
     from maglev_match.sensitivity import index_sensitivity as _index_sensitivity
@@ -608,7 +608,7 @@ def design_search(params: Params | str | None = None, *,
     Returns
     -------
     DesignResult
-        See [`DesignResult`][maglev_match.design.DesignResult]; `.plot()` draws the search.
+        See `maglev_match.design.DesignResult`; `.plot()` draws the search.
     """
     from maglev_match.design import (
         DesignProblem,
@@ -671,7 +671,7 @@ def study_report(params: Params | str | None = None, out: str | Path = "report.h
     -------
     ReportResult
         The written file, its figures and every section's data; see
-        [`ReportResult`][maglev_match.report.ReportResult].
+        `maglev_match.report.ReportResult`.
     """
     from maglev_match.report import ReportSettings
     from maglev_match.report import study_report as _study_report
