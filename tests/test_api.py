@@ -19,7 +19,10 @@ from maglev_match.models import build_system
 
 PUBLIC = ("load_preset", "load_params", "Params", "System", "stability", "hopf_points",
           "hopf_curve", "cycle_branch", "simulate", "matching_index", "design_map",
-          "ParameterError", "root_locus", "build_system")
+          "ParameterError", "root_locus", "build_system", "index_sensitivity",
+          "design_search", "study_report", "plot", "figure_of", "root_locus_figure",
+          "hopf_curve_figure", "cycle_diagram", "simulation_figure", "map_figure",
+          "tornado_figure", "design_path_figure", "hopf_scan_figure")
 
 
 def test_import_is_light_and_every_public_name_resolves():
@@ -75,7 +78,7 @@ def test_stability_equals_library_and_model_b_has_40_states():
 
 
 def test_hopf_points_lie_where_the_margin_vanishes():
-    scan = mm.hopf_points("omega1", 40.0, 190.0, "alpha1", n_scan=60)
+    scan = mm.hopf_points("alpha1", "omega1", 40.0, 190.0, n_scan=60)
     assert scan.points, "alpha1 has Hopf points along omega1 in 40..190 rad/s"
     for hp in scan.points:
         # independent check: a plain eigenvalue computation at the reported value
@@ -84,16 +87,16 @@ def test_hopf_points_lie_where_the_margin_vanishes():
         crossing = res.eigenvalues[np.argmin(np.abs(res.eigenvalues.real))]
         assert abs(abs(crossing.imag) - hp.frequency) < 1e-6 * hp.frequency
     with pytest.raises(mm.ParameterError, match="start"):
-        mm.hopf_points("omega1", 100.0, 50.0)
+        mm.hopf_points(None, "omega1", 100.0, 50.0)
     with pytest.raises(mm.ParameterError, match="param"):
-        mm.hopf_points("zeta", 1.0, 2.0)
+        mm.hopf_points(None, "zeta", 1.0, 2.0)
 
 
 def test_root_locus_dataset_has_the_margin_of_stability():
     from maglev_match.datasets import root_locus_dataset
 
     p = mm.load_preset("alpha1")
-    res = mm.root_locus("omega1", [90.0, 100.0], p)
+    res = mm.root_locus(p, "omega1", [90.0, 100.0])
     assert res.max_real_part[1] == pytest.approx(mm.stability(p).max_real_part, abs=1e-12)
     ds = root_locus_dataset(res, p, mm.build_system(p).state_names)
     assert ds["eigenvalue_real"].dims == ("omega1", "index")
@@ -102,8 +105,7 @@ def test_root_locus_dataset_has_the_margin_of_stability():
 
 
 def test_hopf_curve_points_are_hopf_points():
-    curves = mm.hopf_curve("alpha1", bounds={"omega1": (60.0, 160.0),
-                                             "sigma": (3e-4, 5e-4)},
+    curves = mm.hopf_curve("alpha1", x=("omega1", 60.0, 160.0), y=("sigma", 3e-4, 5e-4),
                            n_scan=40, max_step=5e-2)
     assert curves and all(c.params == ("omega1", "sigma") for c in curves)
     pts = [pt for c in curves for pt in c.points]
@@ -114,7 +116,7 @@ def test_hopf_curve_points_are_hopf_points():
 
 
 def test_cycle_branch_starts_at_the_hopf_frequency():
-    br = mm.cycle_branch("omega1", "alpha1", ntst=20, max_steps=6)
+    br = mm.cycle_branch("alpha1", "omega1", ntst=20, max_steps=6)
     assert br.param == "omega1" and br.points
     first = br.points[0]
     assert first.period == pytest.approx(2 * np.pi / br.hopf.frequency, rel=2e-2)
@@ -149,7 +151,8 @@ def test_matching_index_is_h_over_w0_and_equals_library():
 
 def test_design_map_in_memory_equals_cli_map_bit_for_bit(tmp_path):
     x, y = "omega1=110:140:3", "sigma=3e-4:5e-4:2"
-    ds = mm.design_map(x, y, preset="alpha1", workers=0, kD=150.0)
+    ds = mm.design_map("alpha1", x=("omega1", 110, 140, 3), y=("sigma", 3e-4, 5e-4, 2),
+                       workers=0, kD=150.0)
     out = tmp_path / "cli" / "map.nc"
     assert cli_main(["map", "--x", x, "--y", y, "--preset", "alpha1", "--set", "kD=150",
                      "--workers", "0", "--out", str(out), "--json"]) == 0
@@ -177,3 +180,77 @@ def test_design_map_in_memory_equals_cli_map_bit_for_bit(tmp_path):
     np.testing.assert_array_equal(again["chi"].values, ds["chi"].values)
     with pytest.raises(mm.ParameterError, match="x"):
         mm.design_map("omega1=190:40:3", y)
+
+
+def test_earlier_signatures_still_work_warn_and_agree():
+    """The forms before the one signature style give the same results, with a
+    DeprecationWarning naming the new form."""
+    p = mm.load_preset("alpha1")
+    with pytest.warns(DeprecationWarning, match=r"hopf_points\(params, param"):
+        old = mm.hopf_points("omega1", 40.0, 190.0, p, n_scan=40)
+    new = mm.hopf_points(p, "omega1", 40.0, 190.0, n_scan=40)
+    assert [h.value for h in old.points] == [h.value for h in new.points]
+    with pytest.warns(DeprecationWarning, match=r"root_locus\(params"):
+        old = mm.root_locus("omega1", [90.0, 100.0], p)
+    np.testing.assert_array_equal(old.eigenvalues,
+                                  mm.root_locus(p, "omega1", [90.0, 100.0]).eigenvalues)
+    with pytest.warns(DeprecationWarning, match=r"cycle_branch\(params, param\)"):
+        old = mm.cycle_branch("omega1", "alpha1", ntst=20, max_steps=3)
+    assert old.values.tolist() == mm.cycle_branch("alpha1", ntst=20, max_steps=3).values.tolist()
+    with pytest.warns(DeprecationWarning, match="names="):
+        old = mm.hopf_curve("alpha1", names=("omega1", "sigma"),
+                            bounds={"omega1": (60.0, 160.0), "sigma": (3e-4, 5e-4)},
+                            n_scan=40, max_step=5e-2)
+    new = mm.hopf_curve("alpha1", x=("omega1", 60.0, 160.0), y=("sigma", 3e-4, 5e-4),
+                        n_scan=40, max_step=5e-2)
+    np.testing.assert_array_equal(old[0].values(), new[0].values())
+    # map axes: the strings of the command line and the keyword ranges are the same grid
+    from maglev_match.api import _map_axis
+
+    with pytest.warns(DeprecationWarning, match="design_map"):
+        assert _map_axis("omega1=40:190:4", "x") == "omega1=40:190:4"
+    assert _map_axis(("omega1", 40, 190, 4), "x") == "omega1=40.0:190.0:4"
+    with pytest.raises(mm.ParameterError, match="count"):
+        _map_axis(("omega1", 40, 190, 2.5), "x")
+
+
+def test_full_vehicle_index_sensitivities_and_figures_through_the_api(tmp_path,
+                                                                      monkeypatch):
+    """matching_index(p, model="vehicle") is the library's vehicle index; the
+    sensitivities equal the library's; results with a figure draw it with .plot()."""
+    import matplotlib.figure
+
+    from maglev_match.matching import matching_index as lib_index
+    from maglev_match.sensitivity import index_sensitivity as lib_sens
+
+    p = mm.load_preset("turnout-soft")
+    calls = []
+    import maglev_match.matching as matching
+
+    def record(params, **kw):  # the vehicle index itself is tested in test_matching_vehicle
+        calls.append((params, kw))
+        return "index"
+
+    monkeypatch.setattr(matching, "matching_index", record)
+    assert mm.matching_index(p, model="vehicle", simulate=False, kD=140.0) == "index"
+    assert calls == [(p.replace(kD=140.0), {"model": "vehicle", "simulate": False})]
+    monkeypatch.setattr(matching, "matching_index", lib_index)
+    with pytest.raises(mm.ParameterError, match="model"):
+        mm.matching_index(p, model="bus")
+    sens = mm.index_sensitivity("alpha1", boundaries=False)
+    ref = lib_sens(mm.load_preset("alpha1"), boundaries=False, model="unit")
+    assert [(r.name, r.dchi) for r in sens.rows] == [(r.name, r.dchi) for r in ref.rows]
+    assert isinstance(sens.plot(), matplotlib.figure.Figure)
+    files = mm.root_locus(p, "omega1", np.linspace(90, 140, 11)).plot(tmp_path / "rl")
+    assert {f.suffix for f in files} == {".png", ".svg"} and all(f.stat().st_size for f in files)
+    assert isinstance(mm.hopf_points(p, "omega1", 40, 190, n_scan=30).plot(),
+                      matplotlib.figure.Figure)
+    with pytest.raises(TypeError, match="no figure"):
+        mm.plot(object())
+
+
+def test_design_search_takes_keyword_ranges_and_requirements():
+    with pytest.raises(mm.ParameterError, match="minimize/maximize"):
+        mm.design_search("turnout-soft", vary={"EI": (5e9, 4e10)})
+    with pytest.raises(mm.ParameterError):
+        mm.design_search("turnout-soft", vary={"EI": (-1.0, 4e10)}, minimize="EI")

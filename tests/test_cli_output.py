@@ -31,6 +31,8 @@ def test_progress_lines_on_stderr_off_a_terminal_and_json_stays_pure(capsys):
     doc = json.loads(out)  # stdout is exactly one JSON object
     assert doc["outcome"] in ("converged", "running", "collision")
     lines = [m for m in map(PROGRESS_LINE.match, err.splitlines()) if m]
+    # one line per stage (a slow machine adds 'still ...' lines every few seconds)
+    lines = [m for m in lines if not m.group(2).startswith("still ")]
     assert [m.group(1) for m in lines] == ["simulate", "simulate"]
     assert "simulating model A for 0.05 s" in lines[0].group(2)
     assert doc["outcome"] in lines[1].group(2)
@@ -44,8 +46,29 @@ def test_progress_report_plain_lines_one_per_stage_and_tile(capsys):
             prog.tiles(done, 3)
     err = capsys.readouterr().err.splitlines()
     msgs = [PROGRESS_LINE.match(line).group(2) for line in err]
-    assert msgs == ["map omega1 x sigma: 3 tiles ...", "0/3 tiles done", "1/3 tiles done",
-                    "2/3 tiles done", "3/3 tiles done"]
+    assert [m.split(",")[0] for m in msgs] == [
+        "map omega1 x sigma: 3 tiles ...", "0/3 tiles done", "1/3 tiles done",
+        "2/3 tiles done", "3/3 tiles done"]
+    # an estimate of the time left while tiles remain, none when all are done
+    assert all(re.search(r", about \d+ s left$", m) for m in msgs[2:4]), msgs
+    assert msgs[1] == "0/3 tiles done" and msgs[4] == "3/3 tiles done"
+
+
+def test_progress_report_repeats_a_long_stage_with_its_latest_detail(capsys):
+    """Off a terminal a stage that lasts longer than the heartbeat is repeated ('still
+    ...'), with the latest fine-grained news, so a log never falls silent for long."""
+    import time
+
+    from maglev_match.cli.common import ProgressReport
+
+    with ProgressReport("index", tty=False, heartbeat=0.2) as prog:
+        prog.stage("computing the matching index ...")
+        prog.update("step 7")
+        time.sleep(0.75)
+    msgs = [PROGRESS_LINE.match(line).group(2) for line in capsys.readouterr().err.splitlines()]
+    assert msgs[0] == "computing the matching index ..."
+    assert len(msgs) >= 3 and all(m == "still computing the matching index (step 7)"
+                                  for m in msgs[1:]), msgs
 
 
 # ----- --out -------------------------------------------------------------------------------
@@ -207,6 +230,9 @@ def test_help_has_no_bool_type_and_fits_100_columns(capsys, monkeypatch, command
 
 
 def test_command_help_is_unwrapped_inside_paragraphs():
+    from maglev_match.cli import load_all_commands
+
+    load_all_commands()  # (the program itself loads only the command it runs)
     for info in app.registered_commands:
         for paragraph in (info.help or "").split("\n\n"):
             assert "\n" not in paragraph, info.name

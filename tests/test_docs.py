@@ -4,6 +4,7 @@ no file of the repository points to the internal product brief."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 from pathlib import Path
 
@@ -65,11 +66,9 @@ def test_mkdocs_build_strict(tmp_path, monkeypatch):
     api = (site / "reference" / "api" / "index.html").read_text()
     model = (site / "model" / "index.html").read_text()
     # the command-line reference is generated from every command
-    import typer
+    from maglev_match.cli import all_commands
 
-    from maglev_match.cli import app
-
-    for name in typer.main.get_command(app).commands:
+    for name in all_commands():
         assert f"maglev-match {name}" in cli, name
     assert "<!-- cli-reference -->" not in cli
     # the API reference renders every public function's docstring
@@ -80,7 +79,38 @@ def test_mkdocs_build_strict(tmp_path, monkeypatch):
 
     for name in PARAMETER_DOCS:
         assert f"<code>{name}</code>" in model, name
+    _assert_no_external_scripts_or_styles(site)
+    # formulas are rendered by the KaTeX shipped with the site
+    assert (site / "assets" / "katex" / "katex.min.js").is_file()
+    assert "katex.min.css" in model and "katex-init.js" in model
+    assert 'class="arithmatex"' in model
+    # each tutorial page shows its notebook executed, figures embedded
+    for page in sorted((site / "tutorials").glob("*/index.html")):
+        text = page.read_text()
+        assert "The notebook, executed" in text and 'class="nb-output"' in text, page
+    assert sum("data:image/png;base64," in p.read_text()
+               for p in (site / "tutorials").glob("*/index.html")) >= 3
+    for page in ("continuation", "branch-files"):
+        assert (site / page / "index.html").exists(), page
     for page in ("tutorials/is-my-beam-a-match", "tutorials/design-map-on-dask",
                  "tutorials/own-model-or-controller", "tutorials/checking-the-paper",
                  "numerics", "matching-index", "files"):
         assert (site / page / "index.html").exists(), page
+
+
+EXTERNAL = re.compile(r"""<(script|link|img|iframe)\b[^>]*\b(src|href)\s*=\s*["']?"""
+                      r"""\s*(https?:)?//""", re.I)
+
+
+def _assert_no_external_scripts_or_styles(site: Path) -> None:
+    """No page loads a script, style sheet, font or image from the network (math is
+    rendered offline), and no style sheet imports one."""
+    offenders = []
+    for page in site.rglob("*.html"):
+        for m in EXTERNAL.finditer(page.read_text(errors="ignore")):
+            offenders.append(f"{page.relative_to(site)}: {m.group(0)[:80]}")
+    for css in site.rglob("*.css"):
+        text = css.read_text(errors="ignore")
+        for m in re.finditer(r"(@import|url\()\s*['\"]?(https?:)?//", text):
+            offenders.append(f"{css.relative_to(site)}: {m.group(0)}")
+    assert not offenders, offenders[:10]

@@ -23,12 +23,22 @@ def test_there_is_one_notebook_per_tutorial():
         assert len(names) == 1, f"{page.name} must name exactly one notebook of examples/"
 
 
-def test_notebooks_are_stored_without_outputs():
+def test_notebooks_are_stored_executed_with_their_outputs():
+    """The notebooks are saved after a full run (docs/figures/run_notebooks.py): every code
+    cell ran, in order, without an error, and the figures they draw are stored, so the
+    tutorial pages (and a reader on GitHub) see the outputs. test_notebook_executes below
+    runs them again, so the stored outputs cannot hide a notebook that no longer runs."""
     for path in NOTEBOOKS:
         nb = nbformat.read(path, as_version=4)
-        for cell in nb.cells:
-            if cell.cell_type == "code":
-                assert not cell.outputs and cell.execution_count is None, path.name
+        cells = [c for c in nb.cells if c.cell_type == "code" and c.source.strip()]
+        counts = [c.execution_count for c in cells]
+        assert None not in counts and counts == sorted(counts), f"{path.name}: not run in order"
+        assert not any(o.output_type == "error" for c in cells for o in c.outputs), path.name
+        assert any(c.outputs for c in cells), f"{path.name}: stored without outputs"
+    figures = [path.name for path in NOTEBOOKS
+               if any("image/png" in o.get("data", {}) for c in nbformat.read(path, 4).cells
+                      if c.cell_type == "code" for o in c.outputs)]
+    assert len(figures) >= 3, f"figures stored only in {figures}"
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])

@@ -191,8 +191,30 @@ def test_cycle_diagram_legend_is_complete_and_labels_branches():
         assert expected in texts, expected
     assert any(t.startswith("physical limits") for t in texts)
     assert any(t.startswith(f"{branch_label(0)}: cycles from the Hopf point") for t in texts)
-    assert [t.get_text() for t in ax.texts] == ["b1"]
+    # the branch label, and the limit the cycle touched named beside its mark
+    assert [t.get_text() for t in ax.texts] == ["b1", "touches: radius 1.3"]
     # line-style entries are neutral grey, not a branch colour
     styles = {t.get_text(): h for t, h in zip(ax.get_legend().get_texts(),
                                                ax.get_legend().legend_handles, strict=True)}
     assert matplotlib.colors.to_hex(styles["stable cycle (max/min)"].get_color()) == "#595959"
+
+
+def test_root_locus_marks_the_hopf_crossing_at_its_interpolated_value_and_frequency():
+    """A pair a(p) +- i w(p) with a = p - 1, w = 2 + p and a real eigenvalue -3 crosses the
+    axis at p = 1 with omega = 3 (linear data: interpolation is exact); the figure marks it
+    on both panels."""
+    from maglev_match.plots.rootlocus import axis_crossings, root_locus_figure
+
+    p = np.linspace(0.0, 2.0, 9)
+    a, w = p - 1.0, 2.0 + p
+    ev = np.column_stack([a + 1j * w, a - 1j * w, np.full_like(p, -3.0)])
+    ((value, omega, hopf),) = axis_crossings(p, ev)
+    assert value == pytest.approx(1.0) and omega == pytest.approx(3.0) and hopf
+    fig = root_locus_figure(p, ev, "p")
+    labels = [t.get_text() for ax in fig.axes if ax.get_legend() for t in
+              ax.get_legend().get_texts()]
+    assert any(t.startswith("Hopf crossing p = 1,") and "omega = 3 rad/s" in t
+               for t in labels), labels
+    # a real eigenvalue crossing is not called a Hopf point
+    ev_real = np.column_stack([p - 1.0, np.full_like(p, -3.0)])
+    assert [h for *_, h in axis_crossings(p, ev_real)] == [False]

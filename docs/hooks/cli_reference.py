@@ -39,11 +39,11 @@ def cli_reference() -> str:
     """The reference as Markdown: the program's help, then every command."""
     import typer
 
-    from maglev_match.cli import app
+    from maglev_match.cli import all_commands, app
 
     group = typer.main.get_command(app)
     lines = [_unwrap(group.help), ""]
-    for name, cmd in group.commands.items():
+    for name, cmd in all_commands().items():  # (the program loads its commands lazily)
         lines += [f"## `maglev-match {name}`", "", _unwrap(cmd.help), "",
                   "| option | default | meaning |", "|---|---|---|"]
         for p in cmd.params:

@@ -8,7 +8,9 @@ The public API lives at the top level of the package::
     p = mm.load_preset("turnout-soft")
     mm.stability(p)                       # eigenvalues and the verdict
     mm.matching_index(p, simulate=False)  # chi = h / w0 with the case that decided h
-    ds = mm.design_map("omega1=60:160:11", "sigma=3e-4:5e-4:5", workers=0)
+    mm.matching_index(p, model="vehicle") # the full vehicle
+    ds = mm.design_map(p, x=("omega1", 60, 160, 11), y=("sigma", 3e-4, 5e-4, 5))
+    mm.plot(ds, "map.png")                # any result with a figure; or result.plot()
 
 Importing the package is cheap: the names below are loaded on first use (module
 ``__getattr__``, PEP 562), so ``import maglev_match`` does not import JAX, Dask, xarray or
@@ -39,7 +41,21 @@ _LAZY: dict[str, str] = {
     "cycle_branch": "maglev_match.api",
     "simulate": "maglev_match.api",
     "matching_index": "maglev_match.api",
+    "index_sensitivity": "maglev_match.api",
+    "design_search": "maglev_match.api",
     "design_map": "maglev_match.api",
+    "study_report": "maglev_match.api",
+    # figures: plot(result) draws any result; the figure functions themselves
+    "plot": "maglev_match.plots",
+    "figure_of": "maglev_match.plots",
+    "root_locus_figure": "maglev_match.plots.rootlocus",
+    "hopf_scan_figure": "maglev_match.plots.hopf",
+    "hopf_curve_figure": "maglev_match.plots.hopf",
+    "cycle_diagram": "maglev_match.plots.cycles",
+    "simulation_figure": "maglev_match.plots.simulate",
+    "map_figure": "maglev_match.plots.maps",
+    "tornado_figure": "maglev_match.plots.design",
+    "design_path_figure": "maglev_match.plots.design",
     "load_model": "maglev_match.models.user",
 }
 
@@ -54,12 +70,15 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         build_system,
         cycle_branch,
         design_map,
+        design_search,
         hopf_curve,
         hopf_points,
+        index_sensitivity,
         matching_index,
         root_locus,
         simulate,
         stability,
+        study_report,
     )
     from maglev_match.dynamics.system import System  # noqa: F401
     from maglev_match.params import (  # noqa: F401
@@ -69,6 +88,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         load_params,
         load_preset,
     )
+    from maglev_match.plots import figure_of, plot  # noqa: F401
 
 
 def __getattr__(name: str) -> Any:

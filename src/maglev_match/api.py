@@ -1,12 +1,23 @@
 """The public Python API: one function per analysis, re-exported at the package top level.
 
-Every function takes the parameter set the same way:
+Every function has one signature style, ``function(params, ..., **overrides)``:
 
-* ``params`` — a :class:`~maglev_match.params.Params`, the name of a shipped preset
-  (``"turnout-soft"``, ``"alpha1"``, ...) or ``None`` for the default preset;
+* ``params`` (first) — a :class:`~maglev_match.params.Params`, the name of a shipped
+  preset (``"turnout-soft"``, ``"alpha1"``, ...) or ``None`` for the default preset;
+* then what the analysis varies (``param``, ``values``, the axes ``x=("omega1", 40, 190,
+  100)`` of a map ...) and its keyword options (``model="unit"`` or ``"vehicle"`` wherever
+  the command line has ``--model``);
 * ``**overrides`` — parameter values applied on top, validated like ``--set NAME=VALUE``
   on the command line (for example ``kD=120`` or the beam data ``L=18, EI=2.0e10``, from
   which omega1 and sigma are derived).
+
+The earlier forms (``hopf_points("omega1", 30, 300, params)``, ``cycle_branch("omega1",
+params)``, ``root_locus("omega1", values, params)``, ``hopf_curve(params, names=...,
+bounds=...)``, ``design_map("omega1=40:190:100", "sigma=...", preset)``) still work and
+warn (:class:`DeprecationWarning`). The sensitivities, the design search and the report
+are :func:`index_sensitivity`, :func:`design_search` and :func:`study_report`
+(``maglev_match.sensitivity``, ``.design`` and ``.report`` name the modules). Every result
+with a figure has ``.plot(path=None)``; :func:`maglev_match.plots.plot` draws any of them.
 
 The functions call the same library routines as the command line and return its result
 objects (frozen dataclasses carrying their diagnostics). They add nothing numerical; the
@@ -16,7 +27,8 @@ methods and their sources are documented where they are implemented
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import warnings
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,11 +40,14 @@ from maglev_match.params import DEFAULT_PRESET, ParameterError, Params, load_par
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
+    from maglev_match.design import DesignResult
     from maglev_match.dynamics.cycles import CycleBranch
     from maglev_match.dynamics.equilibria import RootLocusResult, StabilityResult
     from maglev_match.dynamics.hopf import HopfCurve, HopfScan
     from maglev_match.dynamics.system import System
     from maglev_match.matching import MatchingIndex
+    from maglev_match.report import ReportResult
+    from maglev_match.sensitivity import IndexSensitivity
     from maglev_match.simulation import MaglevSimulation
 
 __all__ = [
@@ -45,7 +60,10 @@ __all__ = [
     "cycle_branch",
     "simulate",
     "matching_index",
+    "index_sensitivity",
+    "design_search",
     "design_map",
+    "study_report",
     "MODELS",
 ]
 
@@ -54,6 +72,17 @@ MODELS = ("unit", "vehicle")
 HOPF_CURVE_RANGES = {"omega1": (30.0, 400.0), "sigma": (1e-4, 8e-4)}
 DEFAULT_PLANE = {"unit": ("omega1", "sigma"), "vehicle": ("omega1", "kD")}
 
+
+def _deprecated(old: str, new: str) -> None:
+    warnings.warn(f"{old} is deprecated; write {new}", DeprecationWarning, stacklevel=3)
+
+
+def _names_a_preset(value: Any) -> bool:
+    """Whether a positional string is a parameter set (a preset name) rather than the
+    parameter name of an earlier signature."""
+    from maglev_match.params import available_presets
+
+    return isinstance(value, str) and value in available_presets()
 
 
 def resolve_params(params: Params | str | None = None, **overrides: Any) -> Params:
@@ -147,20 +176,20 @@ def stability(params: Params | str | None = None, *, model: str = "unit",
     return _stability(build_system(params, model, **overrides))
 
 
-def root_locus(param: str, values: Sequence[float] | np.ndarray,
-               params: Params | str | None = None, *, model: str = "unit",
+def root_locus(params: Params | str | None = None, param: str = "omega1",
+               values: Sequence[float] | np.ndarray | None = None, *, model: str = "unit",
                **overrides: Any) -> RootLocusResult:
     """Eigenvalues of the equilibrium along one parameter (`maglev-match root-locus`).
 
     Parameters
     ----------
-    param : str
-        The parameter to vary (any parameter of the model).
-    values : array_like
-        Its values, in its SI unit.
     params : Params | str | None
         The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
         preset, or None for the default preset `turnout-soft`.
+    param : str
+        The parameter to vary (any parameter of the model).
+    values : array_like, optional
+        Its values, in its SI unit (default: 151 values from 40 to 190, as the command).
     model : str
         `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
     **overrides : float
@@ -170,11 +199,15 @@ def root_locus(param: str, values: Sequence[float] | np.ndarray,
     -------
     RootLocusResult
         See [`RootLocusResult`][maglev_match.dynamics.equilibria.RootLocusResult];
-        [`root_locus_dataset`][maglev_match.datasets.root_locus_dataset] gives its xarray
-        form.
+        `.plot()` draws it, `.to_xarray()` gives its dataset.
     """
     from maglev_match.dynamics.equilibria import root_locus as _root_locus
 
+    if isinstance(params, str) and not _names_a_preset(params):  # root_locus(param, values, p)
+        _deprecated("root_locus(param, values, params)",
+                    "root_locus(params, param, values)")
+        params, param, values = values, params, param
+    values = np.linspace(40.0, 190.0, 151) if values is None else values
     system = build_system(params, model, **overrides)
     _check_param(system, param, "param")
     return _root_locus(system, param, np.asarray(values, float))
@@ -186,8 +219,8 @@ def _check_param(system: System, name: str, field: str) -> None:
                              + ", ".join(system.param_names))
 
 
-def hopf_points(param: str = "omega1", start: float = 30.0, stop: float = 300.0,
-                params: Params | str | None = None, *, model: str = "unit",
+def hopf_points(params: Params | str | None = None, param: str = "omega1",
+                start: float = 30.0, stop: float = 300.0, *, model: str = "unit",
                 n_scan: int = 200, **overrides: Any) -> HopfScan:
     """Hopf points of the equilibrium along one parameter (`maglev-match hopf`).
 
@@ -198,13 +231,13 @@ def hopf_points(param: str = "omega1", start: float = 30.0, stop: float = 300.0,
 
     Parameters
     ----------
+    params : Params | str | None
+        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        preset, or None for the default preset `turnout-soft`.
     param : str
         The parameter to vary.
     start, stop : float
         The interval searched, in the parameter's SI unit.
-    params : Params | str | None
-        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
-        preset, or None for the default preset `turnout-soft`.
     model : str
         `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
     n_scan : int
@@ -217,8 +250,14 @@ def hopf_points(param: str = "omega1", start: float = 30.0, stop: float = 300.0,
     HopfScan
         `points`: the [`HopfPoint`][maglev_match.dynamics.hopf.HopfPoint]s (value,
         frequency, crossing speed, l1), with the scan itself; see
-        [`HopfScan`][maglev_match.dynamics.hopf.HopfScan].
+        [`HopfScan`][maglev_match.dynamics.hopf.HopfScan]; `.plot()` draws it.
     """
+    if isinstance(params, str) and not _names_a_preset(params):  # (param, start, stop, p)
+        _deprecated("hopf_points(param, start, stop, params)",
+                    "hopf_points(params, param, start, stop)")
+        # old positions: (param, start, stop, params); a number in `stop` is the default
+        old_params = None if isinstance(stop, int | float) else stop
+        params, param, start, stop = old_params, params, param, start
     from maglev_match.dynamics.hopf import locate_hopf_points
 
     if not start < stop:
@@ -240,29 +279,42 @@ def _validate_value(params: Params, name: str, value: float) -> None:
         params.replace(**{name: value})
 
 
-def hopf_curve(params: Params | str | None = None, *, names: tuple[str, str] | None = None,
-               bounds: dict[str, tuple[float, float]] | None = None, model: str = "unit",
-               n_scan: int = 100, max_step: float = 1e-2,
-               progress: Callable[[str], None] | None = None,
+def _plane_axis(axis: Any, field: str) -> tuple[str, tuple[float, float] | None]:
+    """A Hopf-curve axis: a name, or (name, low, high)."""
+    if isinstance(axis, str):
+        return axis, None
+    try:
+        name, lo, hi = axis
+        return str(name), (float(lo), float(hi))
+    except (TypeError, ValueError):
+        raise ParameterError(field, axis, "expected a parameter name or (name, low, high)")\
+            from None
+
+
+def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
+               y: str | tuple | None = None, *, model: str = "unit", n_scan: int = 100,
+               max_step: float = 1e-2, progress: Callable[[str], None] | None = None,
+               names: tuple[str, str] | None = None,
+               bounds: dict[str, tuple[float, float]] | None = None,
                **overrides: Any) -> list[HopfCurve]:
     """Every branch of the Hopf curve in a plane of two parameters (`maglev-match
     hopf-curve`).
 
-    Branches are found by Hopf-point scans of `names[0]` at three values of `names[1]`
-    (the middle, 10 % and 90 % of its range) and continued by pseudo-arclength on the
-    standard defining system (Kuznetsov 2004, ch. 10; Govaerts 2000), with l1 along the
-    curve and its codimension-two points (generalised Hopf with l2, Bogdanov-Takens,
-    zero-Hopf, double Hopf).
+    Branches are found by Hopf-point scans of `x` at three values of `y` (the middle, 10 %
+    and 90 % of its range) and continued by pseudo-arclength on the standard defining
+    system (Kuznetsov 2004, ch. 10; Govaerts 2000), with l1 along the curve and its
+    codimension-two points (generalised Hopf with l2, Bogdanov-Takens, zero-Hopf, double
+    Hopf).
 
     Parameters
     ----------
     params : Params | str | None
         The parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
-    names : tuple of str, optional
-        The plane; default (omega1, sigma) for model A, (omega1, kD) for model B.
-    bounds : dict, optional
-        `{name: (low, high)}`; default omega1 30-400 rad/s, sigma 1e-4 to 8e-4 1/kg, any
-        other parameter 0.5 to 2 times its value.
+    x, y : str or (str, float, float), optional
+        The plane's axes: a parameter name, or `(name, low, high)` with its bounds; default
+        ("omega1", 30, 400) and ("sigma", 1e-4, 8e-4) for model A, ("omega1", 30, 400) and
+        ("kD", 0.5 kD, 2 kD) for model B; a name without bounds gets those defaults (any
+        other parameter 0.5 to 2 times its value).
     model : str
         `"unit"` or `"vehicle"`.
     n_scan : int
@@ -271,14 +323,27 @@ def hopf_curve(params: Params | str | None = None, *, names: tuple[str, str] | N
         Largest continuation step, as a fraction of the ranges.
     progress : callable, optional
         Called with a line of text when a branch starts.
+    names, bounds : deprecated
+        The earlier form of `x` and `y` (`names=(x, y)`, `bounds={name: (low, high)}`).
     **overrides : float
         Parameter values applied on top.
 
     Returns
     -------
     list of HopfCurve
-        One [`HopfCurve`][maglev_match.dynamics.hopf_curve.HopfCurve] per branch.
+        One [`HopfCurve`][maglev_match.dynamics.hopf_curve.HopfCurve] per branch;
+        `maglev_match.plots.plot(curves)` draws them with l1 along the curve.
     """
+    if names is not None or bounds is not None:
+        _deprecated("hopf_curve(params, names=(P1, P2), bounds={...})",
+                    "hopf_curve(params, x=(P1, lo, hi), y=(P2, lo, hi))")
+    if x is not None or y is not None:
+        (nx, bx), (ny, by) = (_plane_axis(x if x is not None else
+                                          DEFAULT_PLANE[_check_model(model)][0], "x"),
+                              _plane_axis(y if y is not None else
+                                          DEFAULT_PLANE[_check_model(model)][1], "y"))
+        names = (nx, ny)
+        bounds = {**(bounds or {}), **{n: b for n, b in ((nx, bx), (ny, by)) if b}}
     from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans
 
     base = resolve_params(params, **overrides)
@@ -308,7 +373,7 @@ def hopf_curve(params: Params | str | None = None, *, names: tuple[str, str] | N
     return curves
 
 
-def cycle_branch(param: str = "omega1", params: Params | str | None = None, *,
+def cycle_branch(params: Params | str | None = None, param: str = "omega1", *,
                  model: str = "unit", start: float | None = None, stop: float | None = None,
                  n_scan: int = 100, ntst: int = 80, ncol: int = 4, max_steps: int = 300,
                  ignore_current: bool = False,
@@ -324,11 +389,11 @@ def cycle_branch(param: str = "omega1", params: Params | str | None = None, *,
 
     Parameters
     ----------
-    param : str
-        The continuation parameter.
     params : Params | str | None
         The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
         preset, or None for the default preset `turnout-soft`.
+    param : str
+        The continuation parameter.
     model : str
         `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
     start, stop : float, optional
@@ -355,6 +420,10 @@ def cycle_branch(param: str = "omega1", params: Params | str | None = None, *,
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.limits_check import cycle_limit_margins
 
+    if isinstance(params, str) and not _names_a_preset(params):  # cycle_branch(param, p)
+        _deprecated("cycle_branch(param, params)", "cycle_branch(params, param)")
+        old_params = param if isinstance(param, Params) or _names_a_preset(param) else None
+        params, param = old_params, params
     if not 2 <= ncol <= 7:
         raise ParameterError("ncol", ncol, "must be between 2 and 7")
     if ntst < 4:
@@ -437,21 +506,25 @@ def simulate(params: Params | str | None = None, *, model: str = "unit",
                            options=SimulationOptions(rtol=rtol, atol=atol))
 
 
-def matching_index(params: Params | str | None = None, *, simulate: bool = True,
-                   **overrides: Any) -> MatchingIndex:
-    """The matching index chi = h / w0 of model A (`maglev-match index`).
+def matching_index(params: Params | str | None = None, *, model: str = "unit",
+                   simulate: bool = True, **overrides: Any) -> MatchingIndex:
+    """The matching index chi = h / w0 of model A or the full vehicle (`maglev-match index
+    [--model vehicle]`).
 
     h = 0 if the equilibrium is unstable; the largest gap deviation of the unstable cycle
-    around the stable equilibrium; or gap_max - c0 when no such cycle lies within the gap
-    range. w0 = sigma (m + M) g / omega1^2 is the static beam deflection.
+    around the stable equilibrium (model B: over all six levitation points); or
+    gap_max - c0 when no such cycle lies within the gap range. w0 is the static beam
+    deflection (model A: sigma (m + M) g / omega1^2; model B: at mid-span under the vehicle).
 
     Parameters
     ----------
     params : Params | str | None
         The parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+    model : str
+        `"unit"` (model A) or `"vehicle"` (model B, 40 states).
     simulate : bool
-        Also compute h_simulation, the critical beam-deflection disturbance found by
-        simulations with the limits on (slower).
+        Also compute h_simulation, the critical disturbance found by simulations with the
+        limits on (slower).
     **overrides : float
         Parameter values applied on top.
 
@@ -463,32 +536,201 @@ def matching_index(params: Params | str | None = None, *, simulate: bool = True,
     """
     from maglev_match.matching import matching_index as _matching_index
 
-    return _matching_index(resolve_params(params, **overrides), simulate=simulate)
+    return _matching_index(resolve_params(params, **overrides), model=_check_model(model),
+                           simulate=simulate)
 
 
-def design_map(x: str = "omega1=40:190:100", y: str = "sigma=2e-4:6e-4:100",
-               preset: str | None = DEFAULT_PRESET, *, params: Params | None = None,
+def index_sensitivity(params: Params | str | None = None, *, model: str = "unit",
+                      boundaries: bool = True, **overrides: Any) -> IndexSensitivity:
+    """Exact d chi / d p for every parameter (`maglev-match sensitivity`): implicit
+    differentiation of the converged cycle that decides h, the elasticities
+    (p / chi) d chi / d p, the stability margin's sensitivities and, with `boundaries`,
+    each parameter's value at the nearest stability boundary.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+    model : str
+        `"unit"` (model A) or `"vehicle"` (model B).
+    boundaries : bool
+        Also solve each parameter's value at the stability boundary.
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    IndexSensitivity
+        See `maglev_match.sensitivity.IndexSensitivity`; `.plot()`
+        draws the tornado figure.
+    """
+    from maglev_match.sensitivity import index_sensitivity as _index_sensitivity
+
+    base = resolve_params(params, **overrides)
+    if not base.w0 > 0:
+        raise ParameterError("sigma", base.sigma, "must be > 0 for the index: chi = h / w0 "
+                             f"needs a beam deflection w0 > 0 (w0 = {base.w0:g} m)")
+    return _index_sensitivity(base, boundaries=boundaries, model=_check_model(model))
+
+
+def design_search(params: Params | str | None = None, *,
+                  vary: Mapping[str, tuple[float, float]],
+                  minimize: str | None = None, maximize: str | None = None,
+                  require: Mapping[str, float] | Sequence[str] = (), model: str = "unit",
+                  grid: int | None = None, starts: int = 2,
+                  progress: Callable[[str], None] | None = None,
+                  **overrides: Any) -> DesignResult:
+    """The cheapest design, or the one with the largest chi, meeting requirements
+    (`maglev-match design`): SLSQP on exact gradients from several grid starts (Nocedal &
+    Wright 2006, ch. 18), every candidate re-checked by the full index.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The base parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+    vary : mapping
+        `{name: (low, high)}` of the varied parameters, e.g. `{"EI": (5e9, 4e10)}`.
+    minimize, maximize : str
+        Exactly one: a varied parameter to make as small as possible, or `"chi"`.
+    require : mapping or sequence of str
+        Lower bounds, `{"chi": 5, "margin": 0.5}` or `["chi>=5", "margin>=0.5"]`
+        (chi, margin (1/s), chi_simulation).
+    model : str
+        `"unit"` or `"vehicle"`.
+    grid, starts : int
+        Start-grid points per varied parameter (default 9 for one, 5 for two) and
+        optimiser runs.
+    progress : callable, optional
+        Called with a line of text at each stage.
+    **overrides : float
+        Parameter values applied on top of the base.
+
+    Returns
+    -------
+    DesignResult
+        See `maglev_match.design.DesignResult`; `.plot()` draws the search.
+    """
+    from maglev_match.design import (
+        DesignProblem,
+        Goal,
+        MaglevEvaluator,
+        optimise_design,
+        parse_requirement,
+        parse_vary,
+    )
+
+    if (minimize is None) == (maximize is None):
+        raise ParameterError("minimize/maximize", minimize or maximize,
+                             "give exactly one of them")
+    if not vary:
+        raise ParameterError("vary", vary, "give at least one parameter range")
+    variables = tuple(parse_vary(f"{n}={float(lo)!r}:{float(hi)!r}")
+                      for n, (lo, hi) in dict(vary).items())
+    texts = ([f"{k}>={float(v)!r}" for k, v in require.items()]
+             if isinstance(require, Mapping) else list(require))
+    reqs = tuple(parse_requirement(r) for r in texts)
+    goal = Goal.MINIMIZE if minimize is not None else Goal.MAXIMIZE
+    problem = DesignProblem(variables, goal, minimize or maximize or "", reqs)
+    base = resolve_params(params, **overrides)
+    for var in variables:  # both ends must be valid parameter values
+        base.replace(**{var.name: var.lo})
+        base.replace(**{var.name: var.hi})
+    evaluator = MaglevEvaluator(base, problem.names, model=_check_model(model))
+    return optimise_design(problem, evaluator, grid=grid, starts=starts, progress=progress)
+
+
+def study_report(params: Params | str | None = None, out: str | Path = "report.html", *,
+                 quick: bool = False, vehicle: bool = True, t_end: float = 3.0,
+                 label: str = "", progress: Callable[[str], None] | None = None,
+                 **overrides: Any) -> ReportResult:
+    """The self-contained HTML study report of one vehicle-beam pair (`maglev-match
+    report`): parameters, stability, root locus, Hopf curve, cycles, time histories, the
+    matching index and its sensitivities; figures embedded (and written as PNG/SVG to
+    `<out stem>_figures/`).
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+    out : str or Path
+        The HTML file.
+    quick : bool
+        Coarse, fast settings (previews).
+    vehicle : bool
+        Also analyse model B (the full vehicle).
+    t_end : float
+        Simulation horizon (s).
+    label : str
+        A name for the study (default: the preset name, or "parameter set").
+    progress : callable, optional
+        Called with each section's title before it runs.
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    ReportResult
+        The written file, its figures and every section's data; see
+        `maglev_match.report.ReportResult`.
+    """
+    from maglev_match.report import ReportSettings
+    from maglev_match.report import study_report as _study_report
+
+    if not t_end > 0:
+        raise ParameterError("t_end", t_end, "the horizon must be > 0 s")
+    base = resolve_params(params, **overrides)
+    settings = ReportSettings.quick_settings() if quick else ReportSettings()
+    settings = ReportSettings(**{**settings.as_dict(), "include_vehicle": vehicle,
+                                 "t_end": t_end})
+    name = label or (params if isinstance(params, str) else "parameter set")
+    return _study_report(base, out, settings, label=name, progress=progress)
+
+
+def _map_axis(axis: Any, field: str) -> str:
+    """A map axis as the command line writes it (NAME=START:STOP:COUNT) from the keyword
+    form (name, start, stop, count); the command-line string itself is the deprecated
+    form. Validation (names, counts, order) is :func:`maglev_match.maps.parse_axis`'s."""
+    if isinstance(axis, str):
+        _deprecated(f'design_map({field}="NAME=START:STOP:COUNT")',
+                    f'design_map(params, {field}=("NAME", START, STOP, COUNT))')
+        return axis
+    try:
+        name, start, stop, count = axis
+    except (TypeError, ValueError):
+        raise ParameterError(field, axis, "expected (name, start, stop, count), e.g. "
+                             '("omega1", 40, 190, 100)') from None
+    if isinstance(count, float) and count.is_integer():
+        count = int(count)
+    if not isinstance(count, int) or isinstance(count, bool):
+        raise ParameterError(field, axis, "the count must be a whole number")
+    try:
+        return f"{name}={float(start)!r}:{float(stop)!r}:{count}"
+    except (TypeError, ValueError):
+        raise ParameterError(field, axis, "start and stop must be numbers") from None
+
+
+def design_map(params: Params | str | None = None,
+               x: tuple | str = ("omega1", 40.0, 190.0, 100),
+               y: tuple | str = ("sigma", 2e-4, 6e-4, 100), *,
                config: str | Path | None = None, workers: int | None = 0,
                scheduler: str | None = None, checkpoint: str | Path | None = None,
                resume: bool = False, rows_per_tile: int = 2, ntst: int = 30,
                progress: Callable[[int, int], None] | None = None,
-               **overrides: Any) -> xr.Dataset:
+               preset: str | None = None, **overrides: Any) -> xr.Dataset:
     """Stability, h, w0 and chi over a grid of two parameters (`maglev-match map`).
 
     Parameters
     ----------
-    x : str
-        The x axis, `NAME=START:STOP:COUNT` as on the command line (`--x`). NAME is any
-        parameter, including the beam data L, EI, mbar, l, k (omega1 and sigma are then
-        derived at every point).
-    y : str
-        The y axis, same syntax (`--y`).
-    preset : str
-        The base point's preset (`--preset`).
-    params : Params, optional
-        A ready base point instead of `preset` and `config`.
+    params : Params | str | None
+        The base point: a [`Params`][maglev_match.params.Params], a preset name or None
+        for the default preset.
+    x, y : tuple
+        The axes, `(name, start, stop, count)`, e.g. `("omega1", 40, 190, 100)`; name is
+        any parameter, including the beam data L, EI, mbar, l, k (omega1 and sigma are then
+        derived at every point). (The command-line strings `"omega1=40:190:100"` still
+        work, with a DeprecationWarning.)
     config : str or Path, optional
-        A TOML file applied on top of the preset (`--config`).
+        A TOML file applied on top of a preset `params` (`--config`).
     workers : int or None
         0 (default): compute in this process; n > 0: a local Dask cluster of n
         single-threaded worker processes; None: one per core.
@@ -505,6 +747,8 @@ def design_map(x: str = "omega1=40:190:100", y: str = "sigma=2e-4:6e-4:100",
         Collocation intervals of the cycles.
     progress : callable, optional
         Called as `progress(done_tiles, total_tiles)`.
+    preset : str, optional
+        Deprecated: the preset name, now given as `params`.
     **overrides : float
         Parameter values applied on top of the base point (`--set`).
 
@@ -514,15 +758,29 @@ def design_map(x: str = "omega1=40:190:100", y: str = "sigma=2e-4:6e-4:100",
         Variables chi, h, w0, stable, max_real_part, hopf_distance, case, omega1_point,
         sigma_point, current_reverses, resolved over the dimensions (y, x), with units and
         long names, the base parameter set and the package version as attributes. Equal,
-        value for value, to the netCDF file `maglev-match map` writes for the same grid.
+        value for value, to the netCDF file `maglev-match map` writes for the same grid;
+        `maglev_match.plots.plot(ds)` draws the map figure.
     """
+    if isinstance(params, str) and "=" in params:  # design_map("NAME=A:B:N", "NAME=...", p)
+        _deprecated('design_map("X=A:B:N", "Y=A:B:N", preset)',
+                    'design_map(params, x=("X", A, B, N), y=("Y", A, B, N))')
+        old_preset = y if isinstance(y, str) and "=" not in y else None
+        params, x, y = None, params, x
+        preset = preset or old_preset
+    if preset is not None:
+        if params is not None and not isinstance(params, str):
+            pass  # a ready Params wins, as before
+        else:
+            _deprecated("design_map(..., preset=NAME)", "design_map(NAME, ...)")
+            params = preset
+    x, y = _map_axis(x, "x"), _map_axis(y, "y")
+    if params is None or isinstance(params, str):
+        base = load_params(params or DEFAULT_PRESET, config, dict(overrides))
+    else:
+        base = resolve_params(params, **overrides)
     from maglev_match.datasets import annotate_map
     from maglev_match.maps import MapSpec, compute_tile, map_dataset, parse_axis, run_map
 
-    if params is not None:
-        base = resolve_params(params, **overrides)
-    else:
-        base = load_params(preset, config, dict(overrides))
     ax, ay = parse_axis(x, "x"), parse_axis(y, "y")
     if rows_per_tile < 1:
         raise ParameterError("rows_per_tile", rows_per_tile, "must be at least 1")

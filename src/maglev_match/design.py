@@ -318,6 +318,14 @@ class DesignResult:
     warnings: tuple[str, ...] = ()
     margin_scale: float = field(default=1.0, repr=False)
 
+    def plot(self, path=None, **kw):
+        """This result's figure, as the command line draws it
+        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
+        (returns the files), else returned."""
+        from maglev_match.plots import plot
+
+        return plot(self, path, **kw)
+
     def as_json(self) -> dict[str, Any]:
         return {
             "status": str(self.status), "design": self.values, "objective": self.objective,

@@ -5,10 +5,12 @@ A report is a list of *sections*. Each section is produced by a small function
 and, if the analysis it needs raises or is not available, renders a clear
 "not available: <reason>" box instead (and logs the reason), so a report always renders.
 
-The HTML file needs no network: figures are embedded as base64 PNG (the SVG and PNG files
-are also written beside the report), styles are inline, and no element refers to an
-``http://`` or ``https://`` address. The footer records the software version and the
-settings that produced the report.
+The HTML comes from Jinja2 templates in ``maglev_match/templates/report/`` (the page, its
+style sheet, the table/figure/note macros and the larger sections), rendered with
+autoescaping, so a value can never inject markup. The file needs no network: figures are
+embedded as base64 PNG (the SVG and PNG files are also written beside the report), styles
+are inline, and no element refers to an ``http://`` or ``https://`` address. The footer
+records the software version and the settings that produced the report.
 
 :func:`study_report` assembles the report for one vehicle-beam pair: parameters with units,
 stability and eigenvalues (models A and B), the root locus along omega1, the Hopf curve in
@@ -22,6 +24,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import datetime as _dt
+import functools
 import html
 import json
 import logging
@@ -38,6 +41,7 @@ import numpy as np
 
 from maglev_match.io import atomic_write_text
 from maglev_match.params import PARAMETER_DOCS, Params
+from maglev_match.units import label as unit_label
 
 log = logging.getLogger(__name__)
 
@@ -169,6 +173,31 @@ def esc(text: Any) -> str:
     return html.escape(str(text), quote=True)
 
 
+TEMPLATES = Path(__file__).parent / "templates" / "report"
+
+
+@functools.cache
+def environment():
+    """The Jinja2 environment of the report templates: autoescaping on, the number format
+    :func:`fmt` and ``mm`` (metres -> millimetres) available in every template."""
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(TEMPLATES)),
+                             autoescape=True, trim_blocks=True, lstrip_blocks=True,
+                             undefined=jinja2.StrictUndefined)
+    env.globals.update(fmt=fmt, mm=lambda v: None if v is None else float(v) * 1e3)
+    return env
+
+
+def render(template: str, **context: Any) -> str:
+    """Render one template of ``templates/report`` with ``context``."""
+    return str(environment().get_template(template).render(**context))
+
+
+def _macros():
+    return environment().get_template("macros.html.j2").module
+
+
 def table_html(
     header: Sequence[str],
     rows: Iterable[Sequence[Any]],
@@ -177,36 +206,26 @@ def table_html(
     row_classes: Sequence[str] | None = None,
     column_classes: dict[int, str] | None = None,
 ) -> str:
-    """An HTML table; cells are escaped except the columns in ``raw_columns``;
-    ``column_classes`` gives a CSS class to the cells of some columns."""
-    cls = f' class="{esc(css_class)}"' if css_class else ""
-    out = [f"<table{cls}>", "<thead><tr>"]
-    out += [f"<th>{esc(h)}</th>" for h in header]
-    out.append("</tr></thead><tbody>")
-    for k, row in enumerate(rows):
-        rc = row_classes[k] if row_classes is not None and k < len(row_classes) else ""
-        out.append(f'<tr class="{esc(rc)}">' if rc else "<tr>")
-        for j, cell in enumerate(row):
-            text = str(cell) if j in raw_columns else esc(fmt(cell))
-            cc = (column_classes or {}).get(j)
-            out.append(f'<td class="{esc(cc)}">{text}</td>' if cc else f"<td>{text}</td>")
-        out.append("</tr>")
-    out.append("</tbody></table>")
-    return "".join(out)
+    """An HTML table (template macro ``table``); cells are formatted by :func:`fmt` and
+    escaped, except the columns in ``raw_columns`` (already HTML); ``column_classes``
+    gives a CSS class to the cells of some columns."""
+    from markupsafe import Markup
+
+    cells = [[Markup(str(c)) if j in raw_columns else fmt(c) for j, c in enumerate(row)]
+             for row in rows]
+    return str(_macros().table(list(header), cells, css_class, list(row_classes or []),
+                               dict(column_classes or {})))
 
 
 def figure_html(png_path: Path, caption: str, alt: str | None = None) -> str:
     """A figure embedded as a base64 PNG (no file reference in the HTML)."""
     data = base64.b64encode(Path(png_path).read_bytes()).decode("ascii")
-    return (
-        f'<figure><img src="data:image/png;base64,{data}" alt="{esc(alt or caption)}">'
-        f"<figcaption>{esc(caption)}</figcaption></figure>"
-    )
+    return str(_macros().figure(data, caption, alt or caption))
 
 
 def note_html(text: str, kind: str = "note") -> str:
     """A highlighted paragraph (kind: 'note', 'warning' or 'unavailable')."""
-    return f'<div class="{esc(kind)}">{esc(text)}</div>'
+    return str(_macros().note(text, kind))
 
 
 def save_and_embed(fig: Any, ctx: ReportContext, stem: str, caption: str
@@ -243,32 +262,7 @@ def run_section(key: str, title: str, fn: SectionFn, params: Params,
     return SectionResult(key, title, box, (), None, False, reason, time.perf_counter() - t0)
 
 
-CSS = """
-body{font-family:system-ui,-apple-system,'Segoe UI',Helvetica,Arial,sans-serif;margin:0;
- color:#1d2733;background:#fff;line-height:1.45}
-main{max-width:1100px;margin:0 auto;padding:1.5em 2em 3em}
-h1{font-size:1.6em;border-bottom:3px solid #2b6cb0;padding-bottom:.3em}
-h2{font-size:1.25em;margin-top:2em;border-bottom:1px solid #cbd5e0;padding-bottom:.2em}
-table{border-collapse:collapse;margin:.8em 0;font-size:.9em}
-th,td{border:1px solid #cbd5e0;padding:.25em .6em;text-align:left;vertical-align:top}
-th{background:#edf2f7}
-tr.agree td.verdict{background:#c6f6d5}
-tr.differ td.verdict{background:#fed7d7}
-tr.partly td.verdict{background:#fefcbf}
-figure{margin:1em 0;text-align:center}
-figure img{max-width:100%;border:1px solid #e2e8f0}
-figcaption{font-size:.85em;color:#4a5568;margin-top:.3em}
-.note{background:#ebf8ff;border-left:4px solid #3182ce;padding:.5em .8em;margin:.8em 0}
-.warning{background:#fffaf0;border-left:4px solid #dd6b20;padding:.5em .8em;margin:.8em 0}
-.unavailable{background:#fff5f5;border:2px dashed #e53e3e;padding:.7em 1em;margin:.8em 0;
- color:#9b2c2c;font-weight:600}
-.verdict-big{font-size:1.3em;font-weight:700}
-footer{font-size:.8em;color:#4a5568;border-top:1px solid #cbd5e0;margin-top:3em;
- padding-top:.8em}
-code,pre{font-family:ui-monospace,Menlo,Consolas,monospace;font-size:.85em}
-pre{background:#f7fafc;padding:.6em;overflow-x:auto;white-space:pre-wrap}
-nav ul{columns:2;font-size:.9em}
-"""
+CSS = (TEMPLATES / "report.css").read_text()  # the page's inline style sheet
 
 
 def software_version() -> dict[str, str]:
@@ -299,15 +293,9 @@ def software_version() -> dict[str, str]:
 
 def assemble_html(title: str, intro_html: str, sections: Sequence[SectionResult],
                   settings: dict[str, Any], params: Params | None = None) -> str:
-    """The complete self-contained HTML document."""
-    nav = "".join(
-        f'<li><a href="#{esc(s.key)}">{esc(s.title)}</a>'
-        + ("" if s.available else " (not available)") + "</li>"
-        for s in sections
-    )
-    body = []
-    for s in sections:
-        body.append(f'<section id="{esc(s.key)}"><h2>{esc(s.title)}</h2>{s.html}</section>')
+    """The complete self-contained HTML document (template ``page.html.j2``)."""
+    from markupsafe import Markup
+
     version = software_version()
     stamp = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     footer_rows = [(k, v) for k, v in version.items()]
@@ -319,13 +307,8 @@ def assemble_html(title: str, intro_html: str, sections: Sequence[SectionResult]
     footer_rows.append(("section run times (s)", ", ".join(
         f"{s.key} {s.seconds:.1f}" for s in sections)))
     footer = table_html(["item", "value"], footer_rows, "footer-table")
-    return (
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-        f"<title>{esc(title)}</title><style>{CSS}</style></head><body><main>"
-        f"<h1>{esc(title)}</h1>{intro_html}<nav><ul>{nav}</ul></nav>"
-        + "".join(body)
-        + f"<footer><h2>Software and settings</h2>{footer}</footer></main></body></html>\n"
-    )
+    return render("page.html.j2", title=title, intro=Markup(intro_html),
+                  sections=sections, footer=Markup(footer)) + "\n"
 
 
 def write_report(path: Path, title: str, intro_html: str, sections: Sequence[SectionResult],
@@ -376,36 +359,38 @@ def stability_summary(params: Params, model: str = "unit") -> dict[str, Any]:
             "warnings": list(res.warnings)}
 
 
-def eigen_table_html(eigenvalues: np.ndarray, limit: int | None = None) -> str:
+def eigen_rows(eigenvalues: np.ndarray, limit: int | None = None) -> list[tuple]:
+    """(Re, Im, f in Hz, damping ratio) of each conjugate pair (Im >= 0) and real
+    eigenvalue, at most ``limit`` of them."""
     rows = []
     for z in eigenvalues:
         if z.imag < -1e-12:
             continue
         zeta = -z.real / abs(z) if abs(z) > 0 else float("nan")
-        rows.append((z.real, z.imag, abs(z.imag) / (2 * np.pi), zeta))
-    if limit is not None:
-        rows = rows[:limit]
-    return table_html(["Re (1/s)", "Im (rad/s)", "f (Hz)", "damping ratio"], rows, "eig")
+        rows.append((fmt(z.real), fmt(z.imag), fmt(abs(z.imag) / (2 * np.pi)), fmt(zeta)))
+    return rows if limit is None else rows[:limit]
+
+
+def eigen_table_html(eigenvalues: np.ndarray, limit: int | None = None) -> str:
+    return table_html(["Re (1/s)", "Im (rad/s)", "f (Hz)", "damping ratio"],
+                      eigen_rows(eigenvalues, limit), "eig")
 
 
 def section_stability(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
     """Stability verdict and eigenvalues, model A and (optionally) model B."""
     models = ["unit"] + (["vehicle"] if ctx.settings.include_vehicle else [])
-    parts, data = [], {}
+    shown, data = [], {}
     for model in models:
         s = stability_summary(params, model)
         data[model] = s
-        label = "Model A (one levitation unit, 9 states)" if model == "unit" else \
-            "Model B (full vehicle on a multi-mode beam)"
-        verdict = "STABLE" if s["stable"] else "UNSTABLE"
-        parts.append(f"<h3>{esc(label)}</h3><p class=\"verdict-big\">{verdict}: max Re(lambda)"
-                     f" = {fmt(s['max_real_part'])} 1/s</p>")
-        parts.append(eigen_table_html(s["eigenvalues"], limit=12 if model == "vehicle" else None))
-        parts.append("<p>One row per conjugate pair (Im &lt; 0 omitted)"
-                     + ("; the 12 least damped shown" if model == "vehicle" else "") + ".</p>")
-        for w in s["warnings"]:
-            parts.append(note_html(w, "warning"))
-    return "".join(parts), [], data
+        limit = 12 if model == "vehicle" else None
+        shown.append({
+            "label": "Model A (one levitation unit, 9 states)" if model == "unit" else
+                     "Model B (full vehicle on a multi-mode beam)",
+            "stable": s["stable"], "max_real_part": s["max_real_part"],
+            "rows": eigen_rows(s["eigenvalues"], limit), "truncated": limit is not None,
+            "warnings": s["warnings"]})
+    return render("stability.html.j2", models=shown), [], data
 
 
 def section_root_locus(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
@@ -634,15 +619,44 @@ def outcome_text(sim: Any) -> str:
             "failed": "integration failed"}.get(sim.outcome, sim.outcome)
 
 
+#: A gap oscillation below this fraction of its peak counts as died out (the same rule as
+#: the simulation figure, :data:`maglev_match.plots.simulate.SETTLED_FRACTION`).
+SETTLED_FRACTION = 0.02
+
+
+def fitted_window(histories: Sequence[Any]) -> tuple[float, float]:
+    """(end of the fitted time axis, horizon) in s for history datasets: 25 % past the
+    latest time any gap deviation exceeds 2 % of its run's peak (a collision ends its run
+    there), at least 0.1 s, at most the horizon."""
+    horizon, latest = 0.0, 0.0
+    for ds in histories:
+        t = ds["time"].values
+        if len(t) == 0:
+            continue
+        horizon = max(horizon, float(t[-1]))
+        g = np.abs(ds["gap_deviation"].values).reshape(len(t), -1).max(axis=1)
+        if not np.any(g > 0):
+            continue
+        above = np.nonzero(g > SETTLED_FRACTION * g.max())[0]
+        latest = max(latest, float(t[min(above[-1] + 1, len(t) - 1)]))
+    horizon = horizon or 1.0
+    return float(min(horizon, max(0.1, 1.25 * latest))), horizon
+
+
 def time_history_figure(runs: Sequence[tuple[str, Any]], params: Params, title: str,
                         points: Sequence[int] | None = None):
-    """Left: gap deviation (mm) against time; right: phase portrait gap deviation against
-    gap rate. ``runs`` = (label, history Dataset) pairs; model B histories show the given
-    levitation points."""
+    """Left: gap deviation (mm) against time, the axis fitted to the motion
+    (:func:`fitted_window`) with the whole run in an inset when the motion ends early;
+    right: phase portrait gap deviation against gap rate (mm/s). ``runs`` = (label, history
+    Dataset) pairs; model B histories show the given levitation points."""
     from maglev_match.plots import new_figure
 
     fig, (ax1, ax2) = new_figure(1, 2, figsize=(11, 4.2))
     styles = ["-", "--", "-.", ":"]
+    t_fit, horizon = fitted_window([ds for _, ds in runs])
+    inset = None
+    if t_fit < 0.8 * horizon:  # the motion is over early: the whole run in an inset
+        inset = ax1.inset_axes([0.58, 0.62, 0.4, 0.34])
     for k, (label, ds) in enumerate(runs):
         t = ds["time"].values
         gd = ds["gap_deviation"].values
@@ -652,17 +666,27 @@ def time_history_figure(runs: Sequence[tuple[str, Any]], params: Params, title: 
             lab = label if len(pts) == 1 else f"{label}, point {pidx + 1}"
             color = f"C{(k * len(pts) + j) % 10}"
             ax1.plot(t, gd[:, pidx] * 1e3, color=color, ls=styles[k % 4], lw=1.2, label=lab)
+            if inset is not None:
+                inset.plot(t, gd[:, pidx] * 1e3, color=color, ls=styles[k % 4], lw=0.8)
             ax2.plot(gd[:, pidx] * 1e3, rate[:, pidx] * 1e3, color=color, ls=styles[k % 4],
                      lw=0.9)
     for g in (params.gap_min - params.c0, params.gap_max - params.c0):
         ax1.axhline(g * 1e3, color="k", ls=":", lw=1)
         ax2.axvline(g * 1e3, color="k", ls=":", lw=1)
-    ax1.set_xlabel("time (s)")
+    ax1.set_xlim(0.0, t_fit)
+    ax1.set_xlabel("time (s)" if inset is None else
+                   f"time (s); shown: 0 to {t_fit:.3g} s, the whole {horizon:g} s run inset")
     ax1.set_ylabel("gap deviation c - c0 (mm)")
     ax1.set_title(title)
-    ax1.legend(fontsize=7, loc="best")
+    ax1.legend(fontsize=7, loc="lower right" if inset is not None else "best")
+    if inset is not None:
+        inset.set_xlim(0.0, horizon)
+        inset.axvspan(0.0, t_fit, color="0.85", lw=0)
+        inset.set_title(f"whole run, 0 to {horizon:g} s", fontsize=7)
+        inset.tick_params(labelsize=6)
+        inset.grid(alpha=0.3)
     ax2.set_xlabel("gap deviation c - c0 (mm)")
-    ax2.set_ylabel("gap rate (mm/s)")
+    ax2.set_ylabel(unit_label("gap_rate", "gap rate dc/dt"))
     ax2.set_title("phase portrait")
     return fig
 
@@ -703,7 +727,9 @@ def matching_rows(mi: Any) -> list[tuple[str, Any, str]]:
         return None if v is None else float(v) * 1e3
 
     return [
-        ("chi = h / w0 (the paper's definition)", mi.chi, "-"),
+        ("chi, the headline index (the one the reading uses)", mi.chi, "-"),
+        ("chi = h / w0 by the paper's definition", _chi_paper(mi), "-"),
+        ("chi_simulation (simulated critical disturbance / w0)", mi.chi_simulation, "-"),
         ("h (basin along the gap)", mm(mi.h), "mm"),
         ("w0 (static deflection, typical disturbance)", mm(mi.w0), "mm"),
         ("case that decided h", mi.case, ""),
@@ -723,7 +749,6 @@ def matching_rows(mi: Any) -> list[tuple[str, Any, str]]:
          None if mi.h_simulation is None and getattr(mi, "h_simulation_up", None) is None
          else " / ".join("-" if v is None else f"{v * 1e3:.4g}"
                          for v in (mi.h_simulation_up, mi.h_simulation_down)), "mm"),
-        ("chi from simulation (the smaller direction)", mi.chi_simulation, "-"),
     ]
 
 
@@ -733,7 +758,8 @@ def side_by_side_rows(unit: Any, vehicle: Any) -> list[tuple[str, Any, Any]]:
         return None if v is None else float(v) * 1e3
 
     return [
-        ("chi (the paper's definition)", unit.chi, vehicle.chi),
+        ("chi (headline)", unit.chi, vehicle.chi),
+        ("chi (the paper's definition)", _chi_paper(unit), _chi_paper(vehicle)),
         ("h (mm)", mm(unit.h), mm(vehicle.h)),
         ("w0 (mm)", mm(unit.w0), mm(vehicle.w0)),
         ("case", unit.case, vehicle.case),
@@ -743,30 +769,44 @@ def side_by_side_rows(unit: Any, vehicle: Any) -> list[tuple[str, Any, Any]]:
     ]
 
 
+BASIS_TEXT = {"paper": "the paper's definition", "simulation": "the simulation, the smaller "
+              "index"}
+
+
 def section_matching(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
-    """h, w0, chi, the case and the reading; with the vehicle included, the
-    full vehicle's index beside model A's for the same beam."""
+    """The headline index chi (the one the reading uses, with its basis), the paper's
+    definition and the simulation beside it, the case, the reading and every warning; with
+    the vehicle included, the full vehicle's index beside model A's for the same beam."""
     from maglev_match.matching import matching_index
 
     mi = ctx.cache.get("matching")
     if mi is None:
         mi = matching_index(params, simulate=not ctx.settings.quick)
         ctx.cache["matching"] = mi
-    parts = [f'<p class="verdict-big">chi = {fmt(mi.chi, 4)}: {esc(mi.reading)}</p>',
-             table_html(["quantity", "value", "unit"], matching_rows(mi), "matching")]
-    for w in mi.warnings:
-        parts.append(note_html(w, "warning"))
     data = mi.as_json() if hasattr(mi, "as_json") else mi
+    mv = None
     if ctx.settings.include_vehicle:
         mv = matching_index(params, model="vehicle", simulate=not ctx.settings.quick)
         ctx.cache["matching_vehicle"] = mv  # the sensitivity section differentiates it
-        parts.append("<h3>Model A and the full vehicle (model B) on the same beam</h3>")
-        parts.append(table_html(["quantity", "model A (one unit)", "model B (full vehicle)"],
-                                side_by_side_rows(mi, mv), "matching-side-by-side"))
-        for w in mv.warnings:
-            parts.append(note_html(f"model B: {w}", "warning"))
         data = {"unit": data, "vehicle": mv.as_json()}
-    return "".join(parts), [], data
+    basis = str(getattr(mi, "reading_basis", "paper"))
+    frag = render("matching.html.j2", mi=mi, rows=_formatted(matching_rows(mi)),
+                  chi_paper=_chi_paper(mi), basis_text=BASIS_TEXT.get(basis, basis),
+                  vehicle=mv,
+                  side_rows=_formatted(side_by_side_rows(mi, mv)) if mv is not None else [])
+    return frag, [], data
+
+
+def _formatted(rows: Iterable[Sequence[Any]]) -> list[tuple[str, ...]]:
+    """Table rows with every cell formatted by :func:`fmt` (the templates' tables escape
+    but do not format)."""
+    return [tuple(fmt(c) for c in r) for r in rows]
+
+
+def _chi_paper(mi: Any) -> float:
+    """chi by the paper's definition (``chi_paper`` when the result carries it)."""
+    v = getattr(mi, "chi_paper", None)
+    return mi.chi if v is None or not np.isfinite(v) else v
 
 
 def sensitivity_rows(sens: Any, top: int = 12) -> list[tuple[Any, ...]]:
@@ -793,36 +833,23 @@ def section_sensitivity(params: Params, ctx: ReportContext) -> tuple[str, list[P
         mi = matching_index(params, simulate=not ctx.settings.quick)
         ctx.cache["matching"] = mi
     sens = index_sensitivity(params, index=mi, boundaries=not ctx.settings.quick)
-    parts = [f"<p>Status of the derivative: <b>{esc(sens.status)}</b> (case {esc(mi.case)}). "
-             "Elasticity = (p / chi) d chi / d p: the % change of chi per % change of p.</p>",
-             table_html(["parameter", "value", "d chi / d p", "elasticity",
-                         "d margin / d p (1/s per unit)", "stability lost at"],
-                        sensitivity_rows(sens), "sensitivity")]
-    if sens.limit_boundary_note:
-        parts.append(note_html(sens.limit_boundary_note))
-    for w in sens.warnings:
-        parts.append(note_html(w, "warning"))
     html, files = save_and_embed(tornado_figure(sens), ctx, "sensitivity_tornado",
                                  "Elasticities of chi and of the stability margin")
-    parts.append(html)
     data = sens.as_json()
     mv = ctx.cache.get("matching_vehicle") if ctx.settings.include_vehicle else None
+    sv = None
     if mv is not None:
         # model B's sensitivities at its own index (one implicit solve on the vehicle's
         # cycle; no stability boundaries: each would scan the 40-state equilibrium)
         sv = index_sensitivity(params, index=mv, boundaries=False, model="vehicle")
-        parts.append("<h3>The full vehicle (model B)</h3>")
-        parts.append(f"<p>Status of the derivative: <b>{esc(sv.status)}</b> (case "
-                     f"{esc(mv.case)}, chi = {fmt(mv.chi, 4)}). The beam enters through EI, "
-                     "L and mbar (the modal frequencies n<sup>2</sup> omega1 and the static "
-                     "deflection of three modes).</p>")
-        parts.append(table_html(["parameter", "value", "d chi / d p", "elasticity",
-                                 "d margin / d p (1/s per unit)", "stability lost at"],
-                                sensitivity_rows(sv), "sensitivity-vehicle"))
-        for w in sv.warnings:
-            parts.append(note_html(f"model B: {w}", "warning"))
         data = {"unit": data, "vehicle": sv.as_json()}
-    return "".join(parts), files, data
+    header = ["parameter", "value", "d chi / d p", "elasticity",
+              "d margin / d p (1/s per unit)", "stability lost at"]
+    frag = render("sensitivity.html.j2", sens=sens, mi=mi, header=header,
+                  rows=_formatted(sensitivity_rows(sens)),
+                  figure=html, vehicle_sens=sv, vehicle_index=mv,
+                  vehicle_rows=_formatted(sensitivity_rows(sv)) if sv is not None else [])
+    return frag, files, data
 
 
 # ---------------------------------------------------------------------------------------

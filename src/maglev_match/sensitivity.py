@@ -264,6 +264,14 @@ class IndexSensitivity:
     _by_name: dict[str, ParameterSensitivity] = field(default_factory=dict, repr=False,
                                                      compare=False)
 
+    def plot(self, path=None, **kw):
+        """This result's figure, as the command line draws it
+        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
+        (returns the files), else returned."""
+        from maglev_match.plots import plot
+
+        return plot(self, path, **kw)
+
     def __post_init__(self) -> None:
         self._by_name.update({r.name: r for r in self.rows})
 

@@ -218,6 +218,14 @@ class MaglevSimulation:
     result: SimulationResult
     warnings: tuple[str, ...] = field(default=())
 
+    def plot(self, path=None, **kw):
+        """This result's figure, as the command line draws it
+        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
+        (returns the files), else returned."""
+        from maglev_match.plots import plot
+
+        return plot(self, path, **kw)
+
     def __repr__(self) -> str:
         """One line: model, limits, horizon and outcome (not the histories)."""
         what = f"outcome={self.outcome!r}"

@@ -1,7 +1,10 @@
 """The ``maglev-match`` command line. Thin: parses options, calls the library, prints/saves.
 
 Each group of commands lives in its own module (``stability``, ``hopf``, ``cycles``,
-``simulate``, ``index``, ``report``) and registers itself on :data:`app`.
+``simulate``, ``index``, ``report``, ``design``) and registers itself on :data:`app`; the
+program imports a module only when one of its commands runs (:class:`LazyGroup`, with the
+table :data:`COMMANDS`), so ``--help``, ``--version``, ``presets`` and usage errors answer
+without loading JAX.
 Conventions shared by every command (see :mod:`maglev_match.cli.common`):
 
 * ``--preset NAME`` / ``--config FILE`` / ``--set NAME=VALUE`` (repeatable) choose the
@@ -34,6 +37,7 @@ import warnings
 from pathlib import Path
 
 import typer
+from typer.core import TyperGroup
 
 from maglev_match.cli.common import UserError, console_err, print_error, print_warnings
 from maglev_match.params import ParameterError
@@ -41,7 +45,101 @@ from maglev_match.params import ParameterError
 # Where unexpected errors should be reported.
 REPORT_TO = "the maglev-match issue tracker"
 
+#: Every command: the module that defines it (``maglev_match.cli.<module>``) and the one
+#: line shown by ``maglev-match --help``. Listing them here lets the program answer
+#: ``--help``, ``--version`` and a usage error of one command without importing the
+#: others (and JAX with them); ``tests/test_cli_startup.py`` checks that this table names
+#: exactly the registered commands, each with the first sentence of its help.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "stability": ("stability", "Equilibrium, eigenvalues and the stability verdict with its "
+                  "margin."),
+    "root-locus": ("stability", "Eigenvalues along one parameter: writes CSV and a PNG/SVG "
+                   "figure."),
+    "presets": ("stability", "List the shipped parameter presets: beam values, a description, "
+                "and what each changes relative to the preset it derives from."),
+    "hopf": ("hopf", "Hopf points of the equilibrium along one parameter: value, frequency, "
+             "crossing speed d Re(lambda)/d param and the first Lyapunov coefficient l1 (> 0 "
+             "subcritical)."),
+    "hopf-curve": ("hopf", "The Hopf curve in two parameters by continuation, with l1 along "
+                   "it and the codimension-two points (GH with l2, BT, ZH, HH); writes CSV and "
+                   "a Fig. 4-style figure."),
+    "cycles": ("cycles", "Cycles born at Hopf points, continued in --param until a physical "
+               "limit (Fig. 5)."),
+    "simulate": ("simulate", "Simulate model A or B from a named or explicit initial state; "
+                 "report collision (time, limit, levitation point), convergence or neither by "
+                 "the horizon."),
+    "index": ("index", "The matching index chi = h / w0 (model A or the full vehicle), with "
+              "the case that decided h, the simulated critical disturbance in both directions "
+              "and the reading; with --scatter, the spread of chi from parameter scatter."),
+    "map": ("index", "Stability, h, w0 and chi over a grid of two parameters (netCDF + "
+            "figure)."),
+    "report": ("report", "Self-contained HTML study report of one vehicle-beam pair (figures "
+               "embedded; the PNG/SVG files are written to <out stem>_figures/ beside it)."),
+    "reproduce": ("report", "Recompute the paper's figures (Figs. 4-8, 11-13) and its claims "
+                  "with the printed defaults; writes reproduce.html, claims.csv, claims.json "
+                  "and figures/ into --out."),
+    "sensitivity": ("design", "Exact d chi / d p, the elasticity (p / chi) d chi / d p and the "
+                    "margin's sensitivity for every parameter of model A or of the vehicle "
+                    "(--model vehicle), sorted by magnitude, with a tornado figure."),
+    "design": ("design", "The cheapest design (or the largest chi) meeting the requirements: "
+               "SLSQP with exact gradients from several grid starts, every candidate re-checked "
+               "by the full index."),
+}
+
+
+class LazyGroup(TyperGroup):
+    """The program's command group, loading a command's module only when it is used.
+
+    ``maglev-match --help`` lists :data:`COMMANDS` from the table (no command module is
+    imported); ``maglev-match NAME ...`` imports ``maglev_match.cli.<module>`` of NAME alone,
+    whose ``@app.command`` registrations are turned into click commands here (the same
+    conversion Typer applies to commands registered before the program starts). A name not
+    in the table (a command module added without a table row) falls back to importing every
+    module of :data:`COMMAND_MODULES`."""
+
+    _listing = False
+
+    def list_commands(self, ctx):
+        names = list(COMMANDS)
+        return names + [n for n in self.commands if n not in COMMANDS]
+
+    def get_command(self, ctx, cmd_name):
+        if cmd_name in self.commands:
+            return self.commands[cmd_name]
+        if self._listing and cmd_name in COMMANDS:  # the root help: name and one line
+            return _Listed(cmd_name, help=COMMANDS[cmd_name][1])
+        if cmd_name in COMMANDS:
+            _import_command_module(COMMANDS[cmd_name][0])
+        else:
+            load_all_commands()
+        self._adopt_registered()
+        return self.commands.get(cmd_name)
+
+    def format_help(self, ctx, formatter):
+        self._listing = True
+        try:
+            return super().format_help(ctx, formatter)
+        finally:
+            self._listing = False
+
+    def _adopt_registered(self) -> None:
+        """Click commands for the ``@app.command`` registrations not yet in the group."""
+        for info in app.registered_commands:
+            name = info.name or typer.main.get_command_name(info.callback.__name__)
+            if name in self.commands:
+                continue
+            _unwrap_info(info)
+            self.commands[name] = typer.main.get_command_from_info(
+                info, pretty_exceptions_short=app.pretty_exceptions_short,
+                rich_markup_mode=app.rich_markup_mode)
+
+
+class _Listed(typer.core.TyperCommand):
+    """A command as the root help lists it (name and one line), without its module."""
+
+
 app = typer.Typer(
+    cls=LazyGroup,
     name="maglev-match",
     help="Stability, Hopf bifurcations, limit cycles and the vehicle-track beam matching "
     "index chi = h / w0 for EMS maglev vehicles on flexible beams.",
@@ -92,11 +190,34 @@ def _flags_without_type() -> None:
 
 _flags_without_type()
 
-COMMAND_MODULES = ("stability", "hopf", "cycles", "simulate", "index", "report", "design")
+#: The modules that define commands (imported on demand, see :class:`LazyGroup`).
+COMMAND_MODULES = tuple(dict.fromkeys(
+    ("stability", "hopf", "cycles", "simulate", "index", "report", "design")
+    + tuple(m for m, _ in COMMANDS.values())))
 _here = Path(__file__).parent
-for _name in COMMAND_MODULES:
-    if (_here / f"{_name}.py").exists():
-        importlib.import_module(f"maglev_match.cli.{_name}")
+
+
+def _import_command_module(name: str) -> None:
+    if (_here / f"{name}.py").exists():
+        importlib.import_module(f"maglev_match.cli.{name}")
+
+
+def load_all_commands() -> None:
+    """Import every command module (for the documentation's command reference and the
+    tests; the program itself loads only the command it runs)."""
+    for name in COMMAND_MODULES:
+        _import_command_module(name)
+    for info in app.registered_commands:
+        _unwrap_info(info)
+
+
+def all_commands() -> dict:
+    """Every command of the program as a click command, by name (imports every module)."""
+    load_all_commands()
+    group = typer.main.get_command(app)
+    for name in group.list_commands(None):  # type: ignore[arg-type]
+        group.get_command(None, name)  # type: ignore[arg-type]
+    return dict(group.commands)
 
 
 def _unwrap_help(text: str) -> str:
@@ -106,10 +227,13 @@ def _unwrap_help(text: str) -> str:
     return "\n\n".join(" ".join(p.split()) for p in paragraphs)
 
 
-for _info in app.registered_commands:
-    _doc = _info.help or (_info.callback.__doc__ if _info.callback else None)
-    if _doc:
-        _info.help = _unwrap_help(_doc)
+def _unwrap_info(info) -> None:
+    if getattr(info, "_maglev_unwrapped", False):
+        return
+    doc = info.help or (info.callback.__doc__ if info.callback else None)
+    if doc:
+        info.help = _unwrap_help(doc)
+    info._maglev_unwrapped = True
 
 
 def _click_exception_types() -> tuple[type[BaseException], ...]:
@@ -193,18 +317,13 @@ def _main(argv: list[str] | None) -> int:
     if debug:
         args = [a for a in args if a != "--debug"]
         args = ["--debug", *args]
-    from maglev_match.checkpoint import CheckpointLocked, MapStopped
-
     old_show = warnings.showwarning
     warnings.showwarning = _show_warning
     try:
         rv = app(args=args, standalone_mode=False, prog_name="maglev-match")
-    except (ParameterError, UserError, CheckpointLocked) as exc:
+    except (ParameterError, UserError) as exc:
         print_error(str(exc))
         return 2
-    except MapStopped as exc:
-        print_error(str(exc), prefix="stopped" if exc.exit_code == 130 else "error")
-        return exc.exit_code
     except typer.Exit as exc:
         return int(exc.exit_code or 0)
     except (typer.Abort, KeyboardInterrupt):
@@ -219,6 +338,20 @@ def _main(argv: list[str] | None) -> int:
         else:
             print_error(text)
         return code
+    except RuntimeError as exc:  # a map's checkpoint errors (their module loads with maps)
+        cp = sys.modules.get("maglev_match.checkpoint")
+        if cp is not None and isinstance(exc, cp.CheckpointLocked):
+            print_error(str(exc))
+            return 2
+        if cp is not None and isinstance(exc, cp.MapStopped):
+            print_error(str(exc), prefix="stopped" if exc.exit_code == 130 else "error")
+            return exc.exit_code
+        if debug:
+            raise
+        print_error(f"internal error: {type(exc).__name__}: {' '.join(str(exc).split())}"
+                    f"{_where(exc)}. This is a bug: please report it to {REPORT_TO} with the "
+                    "command line and the output of the same command with --debug")
+        return 1
     except MemoryError:
         if debug:
             raise

@@ -14,7 +14,6 @@ from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Annotated, Any
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.text import Text
@@ -60,6 +59,12 @@ JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object (SI
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Output file or folder.")]
 
 DEFAULT_PRESET_NAME = DEFAULT_PRESET
+
+#: Help text of a ``--param`` option that accepts beam and vehicle data (the list of those
+#: names is :data:`maglev_match.engineering.ENGINEERING_PARAMS`; kept here so that help
+#: texts need no numerical module).
+PARAM_HELP = ("Parameter to vary: a model parameter (omega1, sigma, kD ...) or beam/vehicle "
+              "data L, EI, mbar, l, k, s, s0 (omega1 and sigma follow).")
 
 
 def params_from_options(preset: str, config: Path | None, sets: list[str] | None) -> Params:
@@ -142,6 +147,8 @@ def unit_of(name: str) -> str:
 def to_jsonable(obj: Any) -> Any:
     """Convert numpy scalars/arrays, complex numbers and dataclasses for json.dumps.
     Complex numbers become [re, im]; non-finite floats become null."""
+    import numpy as np  # (here: `--help` and usage errors need no NumPy)
+
     if is_dataclass(obj) and not isinstance(obj, type):
         return to_jsonable(asdict(obj))
     if isinstance(obj, dict):
@@ -200,6 +207,21 @@ def output_target(out: Path | None, command: str, stem: str) -> tuple[Path, str]
     if path.suffix == "":
         return path, stem
     return path.parent, path.stem
+
+
+def write_result_json(out: Path | None, command: str, stem: str, data: Any,
+                      json_out: bool) -> list[Path]:
+    """Save a command's JSON result as ``<folder>/<stem>.json`` (the folder of
+    :func:`output_target`); with ``--json`` and no ``--out`` nothing is written (stdout
+    holds the same object). Returns the written files."""
+    if json_out and out is None:
+        return []
+    from maglev_match.io import atomic_write_text
+
+    folder, name = output_target(out, command, stem)
+    path = folder / f"{name}.json"
+    atomic_write_text(path, json.dumps(to_jsonable(data), indent=2) + "\n")
+    return [path]
 
 
 def output_path(out: Path | None, default: str) -> Path:
@@ -367,13 +389,31 @@ def check_output_path(path: Path | str | None, option: str = "--out", *,
 
 
 # ----- progress --------------------------------------------------------------------------
+#: Seconds without news after which a plain-line progress report repeats its current stage
+#: ("still ..."), so a log of a long command never falls silent for longer.
+HEARTBEAT_S = 5.0
+
+
+def _duration(seconds: float) -> str:
+    """A time span for people: '42 s', '3 min 05 s', '1 h 02 min'."""
+    seconds = max(0.0, float(seconds))
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)} min {int(seconds % 60):02d} s"
+    return f"{int(seconds // 3600)} h {int(seconds % 3600 // 60):02d} min"
+
+
 class ProgressReport:
     """Progress of a long command on stderr (stdout stays clean for ``--json``).
 
-    On a terminal a Rich spinner (stages) or bar (tiles) is shown and replaced as work
-    advances; off a terminal (a log file, a pipe, CI) each stage or finished tile is one
-    plain line ``maglev-match <command> [  12.3 s] <message>``, flushed at once, so a log
-    shows what a long run is doing. Use as a context manager::
+    On a terminal a Rich spinner (stages) or bar (tiles, with the time left) is shown and
+    replaced as work advances; off a terminal (a log file, a pipe, CI) each stage or finished
+    tile is one plain line ``maglev-match <command> [  12.3 s] <message>``, flushed at once,
+    so a log shows what a long run is doing. A stage that runs longer than
+    :data:`HEARTBEAT_S` seconds repeats itself (``still <stage> (<latest detail>)``), so a
+    log never stays silent for longer; countable work (tiles, chunks, stages numbered
+    ``k/n``) adds an estimate of the time left. Use as a context manager::
 
         with progress_report("cycles") as prog:
             prog.stage("searching Hopf points ...")
@@ -383,20 +423,36 @@ class ProgressReport:
     ----------
     command : the command name printed at the start of each plain line.
     tty : force terminal (True) or plain-line (False) output; None detects stderr.
+    heartbeat : seconds of silence before the current stage is repeated (plain lines only;
+        0 or None: never).
     """
 
-    def __init__(self, command: str, tty: bool | None = None) -> None:
+    def __init__(self, command: str, tty: bool | None = None,
+                 heartbeat: float | None = HEARTBEAT_S) -> None:
+        import threading
+
         self.command = command
         self.tty = console_err.is_terminal if tty is None else tty
+        self.heartbeat = heartbeat
         self.t0 = 0.0
         self._rich: Any = None
         self._task: Any = None
         self._last_done = -1
+        self._stage = ""
+        self._detail = ""
+        self._last_line = 0.0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: Any = None
+        self._tiles_t0: float | None = None
+        self._first_done: tuple[int, float] | None = None
 
     def __enter__(self) -> ProgressReport:
+        import threading
         import time
 
         self.t0 = time.perf_counter()
+        self._last_line = self.t0
         if self.tty:
             from rich.progress import (
                 BarColumn,
@@ -405,16 +461,25 @@ class ProgressReport:
                 SpinnerColumn,
                 TextColumn,
                 TimeElapsedColumn,
+                TimeRemainingColumn,
             )
 
             self._rich = Progress(SpinnerColumn(), TextColumn("{task.description}"),
                                   BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                                  console=console_err, transient=True)
+                                  TimeRemainingColumn(), console=console_err, transient=True)
             self._rich.__enter__()
             self._task = self._rich.add_task(self.command, total=None)
+        elif self.heartbeat:
+            self._thread = threading.Thread(target=self._beat, name="maglev-match-progress",
+                                            daemon=True)
+            self._thread.start()
         return self
 
     def __exit__(self, *exc: Any) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+            self._thread = None
         if self._rich is not None:
             self._rich.__exit__(*exc)
             self._rich = None
@@ -426,33 +491,85 @@ class ProgressReport:
 
         return time.perf_counter() - self.t0
 
+    def _beat(self) -> None:
+        """The heartbeat thread: repeat the stage after ``heartbeat`` seconds of silence.
+        It writes while the main thread computes in compiled code (XLA, LAPACK release the
+        interpreter lock)."""
+        import time
+
+        tick = min(0.5, self.heartbeat / 4)
+        while not self._stop.wait(tick):
+            if self._stage and time.perf_counter() - self._last_line >= self.heartbeat:
+                stage = self._stage.rstrip(". ")
+                detail = f" ({self._detail})" if self._detail else ""
+                self._line(f"still {stage}{detail}")
+
     def _line(self, message: str) -> None:
         import sys
+        import time
 
-        sys.stderr.write(f"maglev-match {self.command} [{self.elapsed:7.1f} s] {message}\n")
-        sys.stderr.flush()
+        with self._lock:
+            sys.stderr.write(f"maglev-match {self.command} [{self.elapsed:7.1f} s] {message}\n")
+            sys.stderr.flush()
+            self._last_line = time.perf_counter()
 
-    def stage(self, message: str) -> None:
-        """A new stage of the work (one line off a terminal)."""
+    def stage(self, message: str, done: int | None = None, total: int | None = None) -> None:
+        """A new stage of the work (one line off a terminal). With ``done`` of ``total``
+        stages finished before this one, the line counts them (``[k/n]``)."""
+        self._detail = ""
+        if done is not None and total:
+            message = f"[{done + 1}/{total}] {message}"
+        self._stage = message
         if self._rich is not None:
-            self._rich.update(self._task, description=message)
+            if done is not None and total:
+                self._rich.update(self._task, description=message, completed=done,
+                                  total=total)
+            else:
+                self._rich.update(self._task, description=message)
         else:
             self._line(message)
 
     def update(self, message: str) -> None:
-        """Fine-grained news (e.g. each continuation step): shown on a terminal only, so a
-        log gets one line per stage, not per step."""
+        """Fine-grained news (e.g. each continuation step): shown on a terminal at once;
+        off a terminal it is the detail of the next heartbeat line, so a log gets a line
+        per stage and one every few seconds, not one per step."""
+        self._detail = message
         if self._rich is not None:
             self._rich.update(self._task, description=message)
 
+    def eta(self, done: int, total: int) -> float | None:
+        """Estimated seconds left when ``done`` of ``total`` equal units are finished: the
+        mean time per unit since the first one finished (the first unit also pays for
+        loading and compiling kernels), or since the start while only one is done; None
+        before the first unit."""
+        import time
+
+        now = time.perf_counter()
+        if self._tiles_t0 is None:
+            self._tiles_t0 = now
+        if done <= 0 or total <= done:
+            return None if done <= 0 else 0.0
+        if self._first_done is None:
+            self._first_done = (done, now)
+        d0, t0 = self._first_done
+        if done > d0:
+            per = (now - t0) / (done - d0)
+        else:
+            per = (now - self._tiles_t0) / done
+        return per * (total - done)
+
     def tiles(self, done: int, total: int, what: str = "tiles") -> None:
         """``done`` of ``total`` units finished (one line per finished unit off a
-        terminal)."""
+        terminal, with the estimated time left)."""
+        left = self.eta(done, total)
+        self._stage = f"computing {what} ({done}/{total} done)"
+        self._detail = ""
         if self._rich is not None:
             self._rich.update(self._task, completed=done, total=total,
                               description=f"{self.command}: {what}")
         elif done != self._last_done:
-            self._line(f"{done}/{total} {what} done")
+            tail = f", about {_duration(left)} left" if left is not None and done < total else ""
+            self._line(f"{done}/{total} {what} done{tail}")
         self._last_done = done
 
 

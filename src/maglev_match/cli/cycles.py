@@ -6,7 +6,7 @@ from __future__ import annotations
 import csv
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
@@ -16,6 +16,7 @@ from rich.table import Table
 from maglev_match.cli import app
 from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,
+    PARAM_HELP,
     SCAN_MAX,
     ConfigOpt,
     JsonOpt,
@@ -39,13 +40,12 @@ from maglev_match.cli.common import (
 )
 from maglev_match.cli.common import params_from_options as _params
 from maglev_match.cli.models import is_model_file, user_cycles
-from maglev_match.dynamics.cycles import CycleBranch, cycle_branch
-from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
-from maglev_match.engineering import PARAM_HELP, engineering_system, is_engineering
 from maglev_match.io import atomic_open, atomic_write_text
-from maglev_match.limits_check import cycle_limit_margins
-from maglev_match.models import build_system
 from maglev_match.params import ParameterError, Params, warn_overridden
+
+if TYPE_CHECKING:  # the numerics (and JAX) are imported when the command runs
+    from maglev_match.dynamics.cycles import CycleBranch
+    from maglev_match.dynamics.hopf import HopfPoint
 
 AtOpt = Annotated[
     list[str] | None,
@@ -181,6 +181,12 @@ def cycles_command(
         "branch point or a special point's label (LPC1, PD1, ...).")] = None,
 ) -> None:
     """Cycles born at Hopf points, continued in --param until a physical limit (Fig. 5)."""
+    from maglev_match.dynamics.cycles import cycle_branch
+    from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.engineering import engineering_system, is_engineering
+    from maglev_match.limits_check import cycle_limit_margins
+    from maglev_match.models import build_system
+
     check_output_path(out)
     if not 2 <= ncol <= 7:
         raise ParameterError("--ncol", ncol, "must be between 2 and 7")

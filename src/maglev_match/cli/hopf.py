@@ -4,7 +4,7 @@ two parameters with l1 and codimension-two points, paper Fig. 4)."""
 from __future__ import annotations
 
 import csv
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -13,6 +13,7 @@ from rich.table import Table
 from maglev_match.cli import app
 from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,
+    PARAM_HELP,
     ConfigOpt,
     JsonOpt,
     ModelOpt,
@@ -35,16 +36,12 @@ from maglev_match.cli.common import (
     unit_of,
     validate_value,
 )
-from maglev_match.cli.models import resolve_model
-from maglev_match.dynamics.hopf import (
-    HopfPoint,
-    locate_hopf_points,
-    stability_grid,
-)
-from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans
-from maglev_match.engineering import PARAM_HELP, engineering_hopf_points, is_engineering
 from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError
+from maglev_match.units import header
+
+if TYPE_CHECKING:  # the numerics (and JAX) are imported when a command runs
+    from maglev_match.dynamics.hopf import HopfPoint
 
 # The plane of the paper's Fig. 4 for model A; model B has no sigma (that is model A's force
 # gain), so its default plane is the beam frequency against the velocity gain.
@@ -79,15 +76,25 @@ def hopf_command(
     config: ConfigOpt = None,
     set_: SetOpt = None,
     model: ModelOpt = "unit",
+    out: OutOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Hopf points of the equilibrium along one parameter: value, frequency, crossing speed
-    d Re(lambda)/d param and the first Lyapunov coefficient l1 (> 0 subcritical)."""
+    d Re(lambda)/d param and the first Lyapunov coefficient l1 (> 0 subcritical).
+
+    Writes the points (CSV) and a figure of max Re(lambda) along the parameter with the
+    Hopf points marked (PNG/SVG) into --out (default maglev-match-out/hopf/)."""
+    from maglev_match.cli.models import resolve_model
+
+    check_output_path(out)
     if steps < 2:
         raise ParameterError("--steps", steps, "must be at least 2")
     if not start < stop:
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
+    from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.engineering import engineering_hopf_points, is_engineering
+
     params, system, model = rm.params, rm.system, rm.label
     engineering = params is not None and is_engineering(param)
     if not engineering:
@@ -95,26 +102,30 @@ def hopf_command(
     for v in (start, stop):
         if params is not None:
             validate_value(params, param, v)
-    if engineering:  # a beam/vehicle quantity: omega1, sigma (model B: geometry) follow it
-        scan, system = engineering_hopf_points(params, model, param, start, stop, steps)
-        names = tuple(dict.fromkeys(DEFAULT_PLANE.get(model, ()) + ("sigma",)))
-        names = tuple(n for n in names if n in system.param_names)
-        records = [{param: hp.value, **_point_record(hp, system, names)}
-                   for hp in scan.points]
-        names = (param, *names)
-    else:
-        scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
-        names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
-        records = [_point_record(hp, system, names) for hp in scan.points]
+    with progress_report("hopf") as prog:
+        prog.stage(f"searching Hopf points along {param} in [{start:g}, {stop:g}] ...")
+        if engineering:  # a beam/vehicle quantity: omega1, sigma (model B: geometry) follow it
+            scan, system = engineering_hopf_points(params, model, param, start, stop, steps)
+            names = tuple(dict.fromkeys(DEFAULT_PLANE.get(model, ()) + ("sigma",)))
+            names = tuple(n for n in names if n in system.param_names)
+            records = [{param: hp.value, **_point_record(hp, system, names)}
+                       for hp in scan.points]
+            names = (param, *names)
+        else:
+            scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
+            names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
+            records = [_point_record(hp, system, names) for hp in scan.points]
     specials = [{"type": str(sp.type), param: sp.value, "located": sp.located,
                  "label": sp.label, "frequency": sp.frequency}
                 for sp in scan.special_points]
+    unit = "" if rm.is_user else unit_of(param)
+    files = ([] if json_out and out is None else  # --json alone: the JSON is the result
+             _write_hopf_points(out, model, param, unit, names, records, scan))
     if json_out:
         emit_json({"param": param, "model": model, "from": start, "to": stop,
                    "points": records, "special_points": specials,
-                   "warnings": list(scan.warnings)})
+                   "files": [str(f) for f in files], "warnings": list(scan.warnings)})
         return
-    unit = "" if rm.is_user else unit_of(param)
     console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit}, "
                   f"model {model}: {len(records)} found")
     if records:
@@ -131,7 +142,29 @@ def hopf_command(
     for sp in folds:
         console.print(f"  {sp['label']}: {sp['type']} of the equilibrium at {param} = "
                       f"{sp[param]:.8g} ({sp['located']})")
+    console.print(f"wrote {', '.join(str(f) for f in files)}", highlight=False)
     print_warnings(list(scan.warnings) + [w for hp in scan.points for w in hp.warnings])
+
+
+def _write_hopf_points(out, model: str, param: str, unit: str, names: tuple[str, ...],
+                       records: list[dict], scan) -> list:
+    """The Hopf points as CSV (units in the headers, SI values) and the figure of the
+    scanned margin max Re(lambda) with the points marked; returns the written files."""
+    folder, stem = output_target(out, "hopf", f"hopf_{model}_{param}")
+    csv_path = folder / f"{stem}.csv"
+    cols = [*names, "frequency", "crossing_speed", "l1", "kind", "others_stable", "converged",
+            "residual"]
+    with atomic_open(csv_path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([header(c) if c != param or unit == "" else f"{c} ({unit})"
+                     for c in cols])
+        for r in records:
+            w.writerow([f"{r[c]:.12g}" if isinstance(r[c], float) else r[c] for c in cols])
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.hopf import hopf_scan_figure
+
+    fig = hopf_scan_figure(scan, param, unit)
+    return [csv_path, *save_figure(fig, folder / stem)]
 
 
 def _parse_ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
@@ -176,6 +209,10 @@ def hopf_curve_command(
 ) -> None:
     """The Hopf curve in two parameters by continuation, with l1 along it and the
     codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
+    from maglev_match.cli.models import resolve_model
+    from maglev_match.dynamics.hopf import stability_grid
+    from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans
+
     check_output_path(out)
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label

@@ -28,6 +28,7 @@ from maglev_match.cli.common import (
     rows_per_tile_option,
     scheduler_option,
     workers_option,
+    write_result_json,
 )
 from maglev_match.cli.design import McOpt, ResumeOpt, ScatterOpt, SeedOpt, WorkersOpt
 from maglev_match.cli.models import MaglevOnlyModelOpt, is_model_file, refuse_model_file
@@ -56,8 +57,8 @@ def index_command(
     resume: ResumeOpt = False,
     seed: SeedOpt = 0,
     out: Annotated[Path | None, typer.Option(
-        "--out", help="Folder for the --monte-carlo chunks (default: "
-        "maglev-match-out/index/).")] = None,
+        "--out", help="Folder for the result (index_MODEL.json, as --json prints it) and "
+        "the --monte-carlo chunks (default: maglev-match-out/index/).")] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """The matching index chi = h / w0 (model A or the full vehicle), with the case that
@@ -66,25 +67,28 @@ def index_command(
     if is_model_file(model):
         refuse_model_file(model, "index")
     from maglev_match.cli.design import print_scatter, scatter_options, scatter_report
-    from maglev_match.matching import matching_index
 
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
+    from maglev_match.matching import matching_index  # (after the checks: JAX loads here)
     with progress_report("index") as prog:
         prog.stage("computing the matching index ...")
         res = matching_index(params, model=model, simulate=not no_simulation)
     spread, mc = scatter_report(params, res, sc, monte_carlo, out, workers, resume, seed, model)
+    data = res.as_json()
+    if sc:
+        data["spread"] = spread
+        data["monte_carlo"] = None if mc is None else mc.as_json()
+    written = write_result_json(out, "index", f"index_{model}", data, json_out)
     if json_out:
-        data = res.as_json()
-        if sc:
-            data["spread"] = spread
-            data["monte_carlo"] = None if mc is None else mc.as_json()
         emit_json(data)
         return
     print_index(res, preset, config, set_)
     print_scatter(spread, mc)
+    for f in written:
+        console.print(f"wrote {f}", highlight=False)
 
 
 def print_index(res, preset: str, config, set_) -> None:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
@@ -27,9 +27,18 @@ from maglev_match.cli.common import (
     params_from_options,
     print_warnings,
 )
-from maglev_match.dynamics.system import System
-from maglev_match.models.user import ModelFileError, UserModel, is_model_file, load_model
 from maglev_match.params import ParameterError, Params
+
+if TYPE_CHECKING:  # the user-model loader and System import JAX: loaded when used
+    from maglev_match.dynamics.system import System
+    from maglev_match.models.user import UserModel
+
+
+def is_model_file(model: str) -> bool:
+    """True when a ``--model`` value names a Python file rather than a built-in model
+    (the same rule as :func:`maglev_match.models.user.is_model_file`, without importing
+    that module: a usage error must not wait for JAX)."""
+    return str(model).endswith(".py")
 
 __all__ = ["ResolvedModel", "is_model_file", "refuse_model_file", "resolve_model"]
 
@@ -80,6 +89,8 @@ def parse_sets(user: UserModel, sets: list[str] | None, option: str = "--set"
 
 def load_user_model(path: str) -> UserModel:
     """:func:`load_model` with its error turned into a command-line error (exit code 2)."""
+    from maglev_match.models.user import ModelFileError, load_model
+
     try:
         return load_model(path)
     except ModelFileError as exc:
@@ -111,9 +122,10 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
                              user=user)
     check_model(model)
     from maglev_match.cli.common import DEFAULT_PRESET_NAME
-    from maglev_match.models import build_system
 
     params = params_from_options(preset or DEFAULT_PRESET_NAME, config, sets)
+    from maglev_match.models import build_system  # (after the checks: JAX loads here)
+
     desc = (f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
             f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg")
     return ResolvedModel(system=build_system(params, model, limited=limited), description=desc,

@@ -32,9 +32,14 @@ QuickOpt = Annotated[
 ]
 
 
-def _progress(prog):
+def _progress(prog, total: int | None = None):
+    """A section callback for :func:`~maglev_match.report.study_report`: one stage line per
+    section, numbered ``[k/n]`` when the number of sections is known."""
+    count = [0]
+
     def show(title: str) -> None:
-        prog.stage(f"{title} ...")
+        prog.stage(f"{title} ...", done=count[0] if total else None, total=total)
+        count[0] += 1
 
     return show
 
@@ -73,8 +78,11 @@ def report_command(
     settings = ReportSettings(**{**base.as_dict(), "include_vehicle": model_b, "t_end": t_end})
     label = preset + (f" + {config}" if config else "") + (
         " + " + ", ".join(set_) if set_ else "")
+    from maglev_match.report import study_sections
+
     with progress_report("report") as prog:
-        res = study_report(params, out, settings, label=label, progress=_progress(prog))
+        res = study_report(params, out, settings, label=label,
+                           progress=_progress(prog, len(study_sections())))
     summary = {
         "report": str(res.path),
         "figures": [str(f) for f in res.figures],
@@ -119,9 +127,10 @@ def reproduce_command(
     html_name = out.name if out is not None and out.suffix else None
     out, _ = output_target(out, "reproduce", "reproduce")
     settings = ReportSettings.quick_settings() if quick else ReportSettings()
+    n_sections = len(only) if only else len(keys)
     with progress_report("reproduce") as prog:
         report, claims = reproduce(out, settings, only=only or None,
-                                   progress=_progress(prog))
+                                   progress=_progress(prog, n_sections + 1))  # + claims
     if html_name is not None and html_name != report.path.name:
         import dataclasses
         import os

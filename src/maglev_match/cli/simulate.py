@@ -34,7 +34,6 @@ from maglev_match.cli.common import (
     tolerance_option,
 )
 from maglev_match.cli.models import is_model_file, user_simulate
-from maglev_match.dynamics.simulate import SimulationOptions
 
 
 def _read_state(text: str) -> np.ndarray:
@@ -93,15 +92,17 @@ def simulate_command(
     n_save: Annotated[int, typer.Option("--n-save", help="Saved time points.",
                                         callback=n_save_option)] = 5001,
     out: Annotated[Path | None, typer.Option(
-        "--out", help="History file (.nc or .csv), or a folder for simulation_MODEL.nc.")
+        "--out", help="History file (.nc or .csv; the figure is written beside it), or a "
+        "folder for simulation_MODEL.nc/.png/.svg (default: maglev-match-out/simulate/).")
     ] = None,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Figure file (PNG; an SVG is written beside it), or a folder for "
-        "simulation_MODEL.png.")] = None,
+        "simulation_MODEL.png, instead of beside the history.")] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Simulate model A or B from a named or explicit initial state; report collision
     (time, limit, levitation point), convergence or neither by the horizon."""
+    from maglev_match.dynamics.simulate import SimulationOptions
     from maglev_match.simulation import initial_state, save_history, simulate_maglev
 
     if not is_model_file(model):
@@ -128,13 +129,18 @@ def simulate_command(
                               options=SimulationOptions(rtol=rtol, atol=atol))
         prog.stage(f"simulation done: {sim.outcome}")
     written: list[str] = []
-    if out is not None:
-        folder, stem = output_target(out, "simulate", f"simulation_{model}")
-        written.append(str(save_history(sim, folder / (stem + (out.suffix or ".nc")))))
-    if plot is not None:
+    if out is not None or plot is not None or not json_out:
+        # the history and its figure go to --out (default maglev-match-out/simulate/);
+        # --plot puts the figure elsewhere. With --json and neither option, nothing is
+        # written (the JSON on stdout is the result).
         from maglev_match.plots.simulate import plot_simulation
 
-        folder, stem = output_target(plot, "simulate", f"simulation_{model}")
+        folder, stem = output_target(out, "simulate", f"simulation_{model}")
+        suffix = out.suffix if out is not None and out.suffix else ".nc"
+        if out is not None or not json_out:
+            written.append(str(save_history(sim, folder / (stem + suffix))))
+        if plot is not None:
+            folder, stem = output_target(plot, "simulate", f"simulation_{model}")
         written += [str(p) for p in plot_simulation(sim, folder / f"{stem}.png")]
     summary = sim.summary()
     if json_out:

@@ -13,6 +13,7 @@ from rich.text import Text
 from maglev_match.cli import app
 from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,
+    PARAM_HELP,
     ConfigOpt,
     JsonOpt,
     ModelOpt,
@@ -27,15 +28,31 @@ from maglev_match.cli.common import (
     finite,
     output_target,
     print_warnings,
+    progress_report,
     scan_option,
     unit_of,
     validate_value,
 )
-from maglev_match.cli.models import resolve_model
-from maglev_match.dynamics.equilibria import root_locus, stability
-from maglev_match.engineering import PARAM_HELP, is_engineering
-from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError, available_presets, load_preset, preset_info
+from maglev_match.units import header, shown
+from maglev_match.units import label as unit_label
+
+# The numerical modules (and JAX with them) are imported inside the commands, so that
+# `presets`, `--help` and a usage error answer without loading them.
+
+
+def stability(system):
+    """:func:`maglev_match.dynamics.equilibria.stability`, imported when first called."""
+    from maglev_match.dynamics.equilibria import stability as _stability
+
+    return _stability(system)
+
+
+def root_locus(system, param, values):
+    """:func:`maglev_match.dynamics.equilibria.root_locus`, imported when first called."""
+    from maglev_match.dynamics.equilibria import root_locus as _root_locus
+
+    return _root_locus(system, param, values)
 
 #: Relative size below which an imaginary part is rounding noise: eigenvalues of a real
 #: matrix computed in float64 (LAPACK dgeev, backward error ~ 1e-16 ||J||) can split a real
@@ -64,12 +81,20 @@ def stability_command(
     config: ConfigOpt = None,
     set_: SetOpt = None,
     model: ModelOpt = "unit",
+    out: OutOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Equilibrium, eigenvalues and the stability verdict with its margin."""
+    """Equilibrium, eigenvalues and the stability verdict with its margin.
+
+    Writes the eigenvalues (CSV) into --out (default maglev-match-out/stability/); with
+    --json and no --out, nothing is written."""
+    from maglev_match.cli.models import resolve_model
+
+    check_output_path(out)
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system = rm.params, rm.system
     res = stability(system)
+    files = [] if json_out and out is None else [_write_eigenvalues(out, rm.label, res)]
     if json_out:
         out = {
             "model": rm.label,
@@ -82,6 +107,7 @@ def stability_command(
             "equilibrium_converged": res.equilibrium.converged,
             "equilibrium_scaled_residual": res.equilibrium.scaled_residual,
             "warnings": list(res.warnings),
+            "files": [str(f) for f in files],
         }
         if rm.is_user:
             out["parameters"] = dict(zip(system.param_names, system.p.tolist(), strict=True))
@@ -102,7 +128,26 @@ def stability_command(
     console.print(table)
     console.print("(one row per conjugate pair, Im > 0; |Im| below "
                   f"{IMAG_RTOL:g} |lambda| is shown as a real eigenvalue)")
+    for f in files:
+        console.print(f"wrote {f}", highlight=False)
     print_warnings(res.warnings)
+
+
+def _write_eigenvalues(out, model: str, res):
+    """Every eigenvalue of the equilibrium as CSV (units in the headers)."""
+    from maglev_match.io import atomic_open
+
+    folder, stem = output_target(out, "stability", f"stability_{model}")
+    path = folder / f"{stem}.csv"
+    with atomic_open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["index", header("re"), header("im"), header("frequency_hz"),
+                    header("damping_ratio")])
+        for k, z in enumerate(np.asarray(res.eigenvalues, complex)):
+            zeta = -z.real / abs(z) if abs(z) > 0 else float("nan")
+            w.writerow([k + 1, f"{z.real:.12g}", f"{z.imag:.12g}",
+                        f"{abs(z.imag) / (2 * np.pi):.12g}", f"{zeta:.12g}"])
+    return path
 
 
 @app.command("root-locus")
@@ -120,6 +165,10 @@ def root_locus_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Eigenvalues along one parameter: writes CSV and a PNG/SVG figure."""
+    from maglev_match.cli.models import resolve_model
+    from maglev_match.engineering import is_engineering
+    from maglev_match.io import atomic_open
+
     check_output_path(out)
     if steps < 2:
         raise ParameterError("--steps", steps, "must be at least 2")
@@ -134,14 +183,16 @@ def root_locus_command(
         if params is not None:
             validate_value(params, param, v)
     values = np.linspace(start, stop, steps)
-    if engineering:  # the path through the model parameters at each value: t = k is exact
-        from maglev_match.dynamics.paths import PATH_PARAM, path_system
-        from maglev_match.engineering import engineering_nodes
+    with progress_report("root-locus") as prog:
+        prog.stage(f"eigenvalues at {steps} values of {param} ...")
+        if engineering:  # the path through the model parameters at each value: t = k exact
+            from maglev_match.dynamics.paths import PATH_PARAM, path_system
+            from maglev_match.engineering import engineering_nodes
 
-        path = path_system(system, engineering_nodes(params, model, param, values))
-        res = root_locus(path, PATH_PARAM, np.arange(steps, dtype=float))
-    else:
-        res = root_locus(system, param, values)
+            path = path_system(system, engineering_nodes(params, model, param, values))
+            res = root_locus(path, PATH_PARAM, np.arange(steps, dtype=float))
+        else:
+            res = root_locus(system, param, values)
     folder, stem = output_target(out, "root-locus", f"root_locus_{model}_{param}")
     csv_path = folder / f"{stem}.csv"
     with atomic_open(csv_path, "w", newline="") as fh:
@@ -193,9 +244,13 @@ def root_locus_command(
 
 
 @app.command("presets")
-def presets_command(json_out: JsonOpt = False) -> None:
+def presets_command(out: OutOpt = None, json_out: JsonOpt = False) -> None:
     """List the shipped parameter presets: beam values, a description, and what each
-    changes relative to the preset it derives from."""
+    changes relative to the preset it derives from.
+
+    Writes the table (CSV, SI units) into --out (default maglev-match-out/presets/); with
+    --json and no --out, nothing is written."""
+    check_output_path(out)
     rows = []
     for name in available_presets():
         p = load_preset(name)
@@ -205,15 +260,18 @@ def presets_command(json_out: JsonOpt = False) -> None:
                      "base": info.base,
                      "changes": {k: {"base": a, "value": b}
                                  for k, (a, b) in info.changes.items()}})
+    files = [] if json_out and out is None else [_write_presets(out, rows)]
     if json_out:
-        emit_json({"presets": rows})
+        emit_json({"presets": rows, "files": [str(f) for f in files]})
         return
-    table = Table("preset", "omega1 (rad/s)", "sigma (1/kg)", "w0 (mm)", "L (m)", "EI (N m^2)")
+    table = Table("preset", *(unit_label(k) for k in ("omega1", "sigma", "w0", "L", "EI")))
     table.columns[0].no_wrap = True
     for r in rows:
         table.add_row(r["name"], f"{r['omega1']:.5g}", f"{r['sigma']:.4g}",
-                      f"{r['w0'] * 1e3:.4g}", f"{r['L']:g}", f"{r['EI']:.4g}")
+                      f"{shown('w0', r['w0']):.4g}", f"{r['L']:g}", f"{r['EI']:.4g}")
     console.print(table)
+    for f in files:
+        console.print(f"wrote {f}", highlight=False)
     for r in rows:
         if r["base"] is None:
             changed = "a base preset"
@@ -224,3 +282,19 @@ def presets_command(json_out: JsonOpt = False) -> None:
             changed = f"same values as {r['base']}"
         console.print(Text.assemble((r["name"], "bold"), f" ({changed})"), highlight=False)
         console.print(f"    {r['description']}", highlight=False, markup=False)
+
+
+def _write_presets(out, rows: list[dict]):
+    """The presets table as CSV: SI values, units in the headers."""
+    from maglev_match.io import atomic_open
+
+    folder, stem = output_target(out, "presets", "presets")
+    path = folder / f"{stem}.csv"
+    cols = ["omega1", "sigma", "w0", "L", "EI", "mbar"]
+    with atomic_open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["name", *(header(c) for c in cols), "base", "description"])
+        for r in rows:
+            w.writerow([r["name"], *(f"{r[c]:.10g}" for c in cols), r["base"] or "",
+                        r["description"]])
+    return path

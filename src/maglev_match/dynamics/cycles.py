@@ -242,6 +242,14 @@ class CycleBranch:
     newton_iterations: int = 0  # corrector iterations over the whole run (linear solves)
     factorizations: int = 0  # factorisations of the bordered Jacobian over the run
 
+    def plot(self, path=None, **kw):
+        """This result's figure, as the command line draws it
+        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
+        (returns the files), else returned."""
+        from maglev_match.plots import plot
+
+        return plot(self, path, **kw)
+
     @property
     def values(self) -> np.ndarray:
         return np.array([c.value for c in self.points])

@@ -107,6 +107,14 @@ class RootLocusResult:
     equilibria: np.ndarray  # (n_values, dim)
     warnings: tuple[str, ...] = field(default=())
 
+    def plot(self, path=None, **kw):
+        """This result's figure, as the command line draws it
+        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
+        (returns the files), else returned."""
+        from maglev_match.plots import plot
+
+        return plot(self, path, **kw)
+
     def to_xarray(self, params: Any = None, state_names: tuple[str, ...] | None = None):
         """The locus as an :class:`xarray.Dataset` over (parameter value, eigenvalue index)
         with units and long names (:func:`maglev_match.datasets.root_locus_dataset`);

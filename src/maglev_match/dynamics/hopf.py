@@ -92,6 +92,14 @@ class HopfScan:
     warnings: tuple[str, ...] = ()
     special_points: tuple = ()  # LP, BP, H of the equilibrium branch (EquilibriumSpecialPoint)
 
+    def plot(self, path=None, **kw):
+        """This result's figure, as the command line draws it
+        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
+        (returns the files), else returned."""
+        from maglev_match.plots import plot
+
+        return plot(self, path, **kw)
+
 
 
 

@@ -113,6 +113,14 @@ class HopfCurve:
     closed: bool = False  # the branch came back to its start
     warnings: tuple[str, ...] = ()
 
+    def plot(self, path=None, **kw):
+        """This result's figure, as the command line draws it
+        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
+        (returns the files), else returned."""
+        from maglev_match.plots import plot
+
+        return plot(self, path, **kw)
+
     def values(self) -> np.ndarray:
         """(n, 2) array of the two parameter values along the branch."""
         return np.array([pt.values for pt in self.points]).reshape(-1, 2)

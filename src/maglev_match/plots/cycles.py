@@ -22,9 +22,22 @@ _UNITS = {"omega1": "rad/s", "sigma": "1/kg"}
 _MARK = {"LPC": ("^", "tab:purple", "fold of cycles (LPC)"),
          "PD": ("s", "tab:brown", "period doubling (PD)"),
          "NS": ("D", "tab:olive", "torus bifurcation (NS)"),
-         "LIMIT": ("X", "tab:red", "cycle touches a physical limit")}  # gap or zero current
+         "LIMIT": ("X", "tab:red", "cycle touches a physical limit")}  # named beside the mark
 _BRANCH_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown",
                    "tab:pink")
+
+
+def limit_touched(detail: str) -> str:
+    """Which extremum of the gap a limit contact concerns: 'low' (gap 0: the cycle's
+    minimum), 'high' (the upper gap limit: its maximum) or 'other' (e.g. the coil current
+    reaching 0, marked at both gap extrema of that cycle)."""
+    from maglev_match.limits_check import GAP_HIGH, GAP_LOW
+
+    if detail == GAP_LOW:
+        return "low"
+    if detail == GAP_HIGH or detail.startswith("gap") and detail != GAP_LOW:
+        return "high"
+    return "other"
 
 
 def branch_label(k: int) -> str:
@@ -110,6 +123,17 @@ def cycle_diagram(
             if sp.type not in types_seen:
                 types_seen.append(sp.type)
             ymax, ymin = sp.extrema[observable]
+            if sp.type == "LIMIT":  # mark where the cycle touches, and name the limit
+                which = limit_touched(sp.detail)
+                ys = ([ymin] if which == "low" else [ymax] if which == "high"
+                      else [ymax, ymin])
+                ax.plot([sp.value] * len(ys), [y * scale for y in ys], mk, color=col, ms=8,
+                        ls="none", zorder=6)
+                ax.annotate(f"touches: {sp.detail}" if sp.detail else "touches a limit",
+                            (sp.value, ys[0] * scale), textcoords="offset points",
+                            xytext=(-8, -12 if which == "low" else 6), ha="right",
+                            fontsize=8, color=col)
+                continue
             ax.plot([sp.value, sp.value], [ymax * scale, ymin * scale], mk, color=col, ms=8,
                     ls="none", zorder=6)
     for s in (True, False):

@@ -56,9 +56,15 @@ def hopf_curve_figure(
     design_point : optional (value of params[0], value of params[1]) of the design,
         marked with a star.
 
+    The lower panel shows the first Lyapunov coefficient l1 along each branch against
+    params[0] (symmetric-log scale: l1 spans decades), with l1 = 0 and the generalised Hopf
+    points (GH, where l1 changes sign) marked.
+
     Returns the figure.
     """
-    fig, ax = new_figure(figsize=(7.5, 5.2))
+    fig, (ax, ax_l1) = new_figure(2, 1, figsize=(7.5, 7.6), sharex=True,
+                                  gridspec_kw={"height_ratios": [3.0, 1.35]})
+    _l1_panel(ax_l1, curves, params, units)
     if grid is not None:
         v1, v2, mr = grid
         region = np.where(np.isfinite(mr), (mr > 0).astype(float), np.nan)
@@ -129,11 +135,88 @@ def hopf_curve_figure(
         ax.plot(*design_point, "*", color="gold", mec="k", ms=15, zorder=6,
                 label=f"design point ({params[0]} = {design_point[0]:.4g}, "
                       f"{params[1]} = {design_point[1]:.4g})")
-    ax.set_xlabel(f"{params[0]} ({units[0]})" if units[0] else params[0])
     ax.set_ylabel(f"{params[1]} ({units[1]})" if units[1] else params[1])
     if grid is not None:
         ax.set_xlim(grid[0].min(), grid[0].max())
         ax.set_ylim(grid[1].min(), grid[1].max())
     ax.set_title(title or "Hopf curve: S stable, U unstable equilibrium")
     ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    fig.tight_layout()
+    return fig
+
+
+def _l1_panel(ax, curves: Sequence[HopfCurve], params: tuple[str, str],
+              units: tuple[str, str]) -> None:
+    """l1 along the Hopf curve against params[0]: red where subcritical (l1 > 0), blue
+    where supercritical (l1 < 0), on a symmetric-log axis; GH points as circles."""
+    values = [abs(v) for c in curves if c.points for v in c.l1() if np.isfinite(v) and v != 0]
+    linthresh = 10.0 ** np.floor(np.log10(min(values))) if values else 1e-6
+    for curve in curves:
+        if not curve.points:
+            continue
+        v, l1 = curve.values(), curve.l1()
+        for kind, _ok, seg_idx in _l1_runs(l1):
+            ax.plot(v[seg_idx, 0], l1[seg_idx], _LINESTYLE[kind], color=_COLOR[kind], lw=1.6)
+        for sp in curve.special_points:
+            if sp.type == "GH":
+                ax.plot(sp.values[0], 0.0, _MARKER["GH"], color="k", ms=6, zorder=5)
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_yscale("symlog", linthresh=float(linthresh))
+    ax.set_ylabel("l1 (symlog)")
+    ax.set_xlabel(f"{params[0]} ({units[0]})" if units[0] else params[0])
+    ax.set_title("first Lyapunov coefficient along the curve (> 0 subcritical, < 0 "
+                 "supercritical)", fontsize=9)
+
+
+def _l1_runs(l1: np.ndarray):
+    """Index runs of equal sign of l1, overlapping by one point so the pieces join."""
+    kind = np.where(l1 > 0, "subcritical", "supercritical")
+    start = 0
+    for j in range(1, len(kind) + 1):
+        if j == len(kind) or kind[j] != kind[start]:
+            yield kind[start], True, np.arange(start, min(j + 1, len(kind)))
+            start = j
+
+
+def hopf_scan_figure(scan, param: str, unit: str = ""):
+    """The equilibrium's margin along one parameter with its Hopf points (``maglev-match
+    hopf``): max Re(lambda) (1/s) of the scanned equilibrium branch against ``param``, zero
+    marked, each refined Hopf point a red (subcritical, l1 > 0) or blue (supercritical,
+    l1 < 0) marker labelled with its value and frequency.
+
+    Parameters
+    ----------
+    scan : a :class:`~maglev_match.dynamics.hopf.HopfScan`.
+    param, unit : the parameter's name and unit.
+
+    Returns the figure.
+    """
+    fig, ax = new_figure(figsize=(7.0, 4.2))
+    vals = np.asarray(scan.scan_values, float)
+    mr = np.asarray(scan.max_real_part, float)
+    if len(vals) == len(mr):
+        order = np.argsort(vals, kind="stable")
+        ax.plot(vals[order], mr[order], color="k", lw=1.4,
+                label="max Re(lambda) of the equilibrium")
+    else:  # a scan along beam data keeps the margin on its own path: points only
+        ax.text(0.02, 0.95, "margin along the scan not drawn (scanned on a parameter path)",
+                transform=ax.transAxes, fontsize=8, va="top")
+        ax.set_xlim(min(vals.min(), scan.start), max(vals.max(), scan.stop))
+    ax.axhline(0.0, color="0.4", lw=0.8)
+    used = set()
+    sign = {"subcritical": " (l1 > 0)", "supercritical": " (l1 < 0)"}
+    for hp in scan.points:
+        color = _COLOR.get(hp.kind, "0.4")
+        label = None
+        if hp.kind not in used:
+            used.add(hp.kind)
+            label = f"Hopf point, {hp.kind}{sign.get(hp.kind, '')}"
+        ax.plot([hp.value], [0.0], "o", color=color, ms=8, mec="k", zorder=5, label=label)
+        ax.annotate(f"{param} = {hp.value:.5g}\nomega = {hp.frequency:.4g} rad/s",
+                    (hp.value, 0.0), textcoords="offset points", xytext=(6, 8), fontsize=8)
+    xl = f"{param} ({unit})" if unit else param
+    ax.set_xlabel(xl)
+    ax.set_ylabel("max Re(lambda) (1/s)")
+    ax.set_title(f"Equilibrium along {param}: unstable above 0")
+    ax.legend(loc="best", fontsize=8)
     return fig

@@ -6,7 +6,7 @@ import numpy as np
 
 from maglev_match.plots import new_figure
 
-__all__ = ["root_locus_figure", "zoom_window", "NEAR_TRACKS"]
+__all__ = ["root_locus_figure", "axis_crossings", "zoom_window", "NEAR_TRACKS"]
 
 # The window shows the eigenvalue tracks nearest the imaginary axis: this many of them
 # (conjugate pairs count twice), i.e. the slowest three modes.
@@ -28,8 +28,39 @@ def zoom_window(eigenvalues: np.ndarray, n_tracks: int = NEAR_TRACKS
     return (re_lo - 0.08 * span, re_hi + 0.08 * span), (-1.08 * im, 1.08 * im)
 
 
+def axis_crossings(values: np.ndarray, eigenvalues: np.ndarray
+                   ) -> list[tuple[float, float, bool]]:
+    """Where the rightmost eigenvalue crosses the imaginary axis between two samples:
+    ``(parameter value, |Im| there (rad/s), Hopf)`` by linear interpolation of max
+    Re(lambda) and of the crossing eigenvalue's |Im|; ``Hopf`` is True for a complex pair
+    (|Im| > 0 on both sides), False for a real eigenvalue (a fold or branch point)."""
+    values = np.asarray(values, float)
+    ev = np.asarray(eigenvalues)
+    k_max = np.argmax(ev.real, axis=1)
+    lead = ev[np.arange(len(values)), k_max]
+    mr = lead.real
+    out = []
+    for k in range(len(values) - 1):
+        if (mr[k] < 0) != (mr[k + 1] < 0):  # (a sample exactly on the axis counts once)
+            # follow the eigenvalue that crossed: the rightmost one on the unstable side
+            # and, on the other side, the eigenvalue of the same track (the nearest one)
+            u, o = (k, k + 1) if mr[k] >= 0 else (k + 1, k)
+            zu = lead[u]
+            zo = ev[o][np.argmin(np.abs(ev[o].real - zu.real)
+                                 + np.abs(np.abs(ev[o].imag) - abs(zu.imag)))]
+            a, b = (zo, zu) if o == k else (zu, zo)  # in parameter order
+            t = a.real / (a.real - b.real) if a.real != b.real else 0.0
+            t = min(max(t, 0.0), 1.0)
+            scale = max(abs(a), abs(b), 1.0)
+            hopf = min(abs(a.imag), abs(b.imag)) > 1e-9 * scale
+            out.append((float(values[k] + t * (values[k + 1] - values[k])),
+                        float(abs(a.imag) + t * (abs(b.imag) - abs(a.imag))), bool(hopf)))
+    return out
+
+
 def root_locus_figure(values: np.ndarray, eigenvalues: np.ndarray, param: str, unit: str = "",
-                      design: tuple[float, np.ndarray] | None = None):
+                      design: tuple[float, np.ndarray] | None = None,
+                      crossings: list[tuple[float, float, bool]] | None = None):
     """Root locus along ``param``.
 
     Left: the eigenvalues in the complex plane, coloured by the parameter value, zoomed on
@@ -44,6 +75,9 @@ def root_locus_figure(values: np.ndarray, eigenvalues: np.ndarray, param: str, u
     param, unit : the parameter's name and unit (unit in parentheses or plain).
     design : optional (design value, its eigenvalues): marked with black crosses on the
         left and a vertical line on the right.
+    crossings : where the equilibrium changes stability, as from :func:`axis_crossings`
+        (the default): a Hopf crossing is marked at +-i omega on the imaginary axis (left)
+        and at max Re = 0 (right), labelled with its value and frequency.
 
     Returns the figure.
     """
@@ -92,5 +126,23 @@ def root_locus_figure(values: np.ndarray, eigenvalues: np.ndarray, param: str, u
                       f"point {param} = {dv:.4g})", fontsize=10)
         ax2.axvline(dv, color="k", ls="--", lw=1.0, label=f"design point {param} = {dv:.4g}")
         ax2.plot([dv], [float(dev.real.max())], "kx", ms=8, mew=1.8)
-    ax2.legend(loc="best", fontsize=8)
+    if crossings is None:
+        crossings = axis_crossings(values, eigenvalues)
+    hopf_label = real_label = True
+    for value, omega, hopf in crossings:
+        if hopf:
+            ax1.plot([0.0, 0.0], [omega, -omega], "o", mfc="none", mec="C3", ms=11, mew=2,
+                     zorder=6, label="Hopf crossing (+-i omega)" if hopf_label else None)
+            ax2.plot([value], [0.0], "o", color="C3", ms=8, zorder=6,
+                     label=(f"Hopf crossing {param} = {value:.5g}, omega = {omega:.4g} "
+                            "rad/s (interpolated)"))
+            hopf_label = False
+        else:
+            ax2.plot([value], [0.0], "s", color="C1", ms=7, zorder=6,
+                     label=(f"real eigenvalue crosses 0 at {param} = {value:.5g}"
+                            if real_label else None))
+            real_label = False
+    if not hopf_label:
+        ax1.legend(loc="upper left", fontsize=8)
+    ax2.legend(loc="upper left", fontsize=8)
     return fig

@@ -17,6 +17,8 @@ import numpy as np
 
 from maglev_match.plots import new_figure, save_figure
 from maglev_match.simulation import MaglevSimulation, equilibrium_state, history_dataset
+from maglev_match.units import label as unit_label
+from maglev_match.units import shown as shown_in
 
 __all__ = ["plot_simulation", "simulation_figure", "describe_initial", "describe_outcome",
            "fitted_time_window", "transient_end"]
@@ -130,7 +132,7 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
 
     Panels: gap deviation c - c0 (mm) with the gap limits dotted; coil current (A) with
     zero current dotted; beam deflection (mm: model A's w, model B's modal coordinates);
-    phase portrait of the gap deviation against the gap rate (m/s). Model B draws every
+    phase portrait of the gap deviation against the gap rate (mm/s). Model B draws every
     levitation point of the first run (points 1-6) and, for further runs, point 1 dashed.
     Collisions are marked with a cross. The time axis ends 25 % after the latest deciding
     event (:func:`fitted_time_window`).
@@ -152,7 +154,7 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
         t = ds.time.values
         gd = ds.gap_deviation.values * 1e3
         cur = ds.current.values
-        rate = ds.gap_rate.values
+        rate = shown_in("gap_rate", ds.gap_rate.values)
         bw = ds.beam_deflection.values * 1e3
         ls = "-" if k == 0 else "--"
         if model == "unit" or k > 0:
@@ -184,8 +186,8 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
     for v in (lo, hi):
         ax_g.axhline(v, **_LIMIT_STYLE)
         ax_p.axvline(v, **_LIMIT_STYLE)
-    ax_g.plot([], [], **_LIMIT_STYLE, label=f"gap limits ({p.gap_min * 1e3:g} and "
-              f"{p.gap_max * 1e3:g} mm)")
+    ax_g.plot([], [], **_LIMIT_STYLE, label=f"gap limits: c - c0 = {lo:g} and {hi:g} mm "
+              f"(gap {p.gap_min * 1e3:g} and {p.gap_max * 1e3:g} mm)")
     if any(s.outcome == "collision" for s in sims):
         ax_g.plot([], [], "kx", ms=7, mew=2, label="collision")
     ax_i.axhline(0.0, **_LIMIT_STYLE, label="zero current (never reverses)")
@@ -207,7 +209,7 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
         ax_w.set_title("beam modal coordinates (undeflected beam = 0)")
         ax_w.legend(fontsize=7, loc="best")
     ax_p.set_xlabel("gap deviation c - c0 (mm)")
-    ax_p.set_ylabel("gap rate dc/dt (m/s)")
+    ax_p.set_ylabel(unit_label("gap_rate", "gap rate dc/dt"))
     horizon = max(s.t_end for s in sims)
     ax_p.set_title(f"phase portrait (0 to {t_max:.3g} s)")
     if t_max < horizon:

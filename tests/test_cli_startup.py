@@ -1,0 +1,96 @@
+"""Start-up: answers that need no computation (``--version``, ``--help``, ``presets``, every
+usage error) come without importing JAX, and the table of commands the program lists
+without loading their modules is the program's real set of commands."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# Runs the program in a fresh interpreter and reports its exit code and which heavy
+# modules it imported.
+PROBE = """
+import contextlib, io, json, sys
+from maglev_match.cli import main
+out, err = io.StringIO(), io.StringIO()
+with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+    code = main(sys.argv[1:])
+heavy = sorted(m for m in ("jax", "scipy", "matplotlib", "xarray", "diffrax", "dask", "numpy")
+               if m in sys.modules)
+print(json.dumps({"code": code, "heavy": heavy, "out": out.getvalue(), "err": err.getvalue()}))
+"""
+
+
+def _probe(*argv: str) -> dict:
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(ROOT / "src"), *filter(None, [os.environ.get("PYTHONPATH")])]), COLUMNS="100")
+    proc = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True,
+                          text=True, env=env, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("argv, code", [
+    (["--version"], 0),
+    (["--help"], 0),
+    (["presets"], 0),
+    (["index", "--set", "nosuch=1"], 2),
+    (["stability", "--set", "kD=-5"], 2),
+    (["cycles", "--ntst", "2"], 2),
+    (["simulate", "--t", "-1"], 2),
+    (["hopf", "--from", "50", "--to", "40"], 2),
+    (["map", "--x", "omega1=1:2"], 2),
+    (["nosuchcommand"], 2),
+    (["report", "--out", "r.txt"], 2),
+], ids=lambda v: " ".join(v) if isinstance(v, list) else str(v))
+def test_answers_without_computing_do_not_import_jax(argv, code):
+    r = _probe(*argv)
+    assert r["code"] == code, r
+    heavy = [m for m in r["heavy"] if m != "numpy" or argv[0] in ("--version", "--help")]
+    assert heavy == [], f"{' '.join(argv)} imported {r['heavy']}"  # (NumPy: 0.1 s, allowed)
+    if code == 2:
+        assert len(r["err"].strip().splitlines()) == 1, r["err"]  # one line, no traceback
+    if argv == ["--version"]:
+        from maglev_match import __version__
+
+        assert r["out"].strip() == f"maglev-match {__version__}"
+
+
+def test_root_help_lists_every_command_with_its_first_sentence():
+    r = _probe("--help")
+    from maglev_match.cli import COMMANDS
+
+    for name in COMMANDS:
+        assert f" {name} " in r["out"], name
+
+
+def test_command_table_matches_the_registered_commands():
+    """COMMANDS (read by --help without importing) names exactly the registered commands,
+    each in the module that defines it, with the first paragraph of its docstring."""
+    from maglev_match.cli import COMMANDS, all_commands, app
+
+    commands = all_commands()
+    assert set(commands) == set(COMMANDS)
+    for info in app.registered_commands:
+        name = info.name
+        module, short = COMMANDS[name]
+        assert info.callback.__module__ == f"maglev_match.cli.{module}", name
+        first = " ".join(inspect.getdoc(info.callback).split("\n\n")[0].split())
+        assert short == first, name
+
+
+def test_a_command_runs_after_lazy_loading(capsys):
+    """The lazily loaded command parses and runs like an eagerly registered one."""
+    from maglev_match.cli import main
+
+    assert main(["presets", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert any(p["name"] == "turnout-soft" for p in data["presets"])
