@@ -19,7 +19,17 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
-from maglev_match.options import NCOL_MAX, NCOL_MIN, NTST_MAX, NTST_MIN, STEPS_MAX, TOL_MAX
+from maglev_match.options import (
+    MC_SAMPLES_MAX,
+    NCOL_MAX,
+    NCOL_MIN,
+    NTST_MAX,
+    NTST_MIN,
+    SEED_MAX,
+    STEPS_MAX,
+    TOL_MAX,
+    WORKERS_MAX,
+)
 from maglev_match.params import (
     DEFAULT_PRESET,
     PARAMETER_DOCS,
@@ -221,7 +231,6 @@ SCAN_MAX = 20_000  # values of an eigenvalue scan (each one an eigenvalue proble
 GRID_MAX = 400  # stability-grid points per axis (GRID_MAX^2 eigenvalue problems)
 N_SAVE_MAX = 1_000_000  # saved time points of a simulation
 HORIZON_MAX = 1e5  # s, simulation horizon
-WORKERS_MAX = 256
 ROWS_PER_TILE_MAX = 10_000
 
 
@@ -285,6 +294,9 @@ grid_option = bounded(0, GRID_MAX, integer=True, why="0: no grid")
 n_save_option = bounded(2, N_SAVE_MAX, integer=True)
 horizon_option = bounded(0.0, HORIZON_MAX, lo_open=True, unit="s")
 workers_option = bounded(0, WORKERS_MAX, integer=True, why="0: compute in this process")
+monte_carlo_option = bounded(2, MC_SAMPLES_MAX, integer=True,
+                             why="samples; each one is an index computation")
+seed_option = bounded(0, SEED_MAX, integer=True)
 rows_per_tile_option = bounded(1, ROWS_PER_TILE_MAX, integer=True)
 fraction_option = bounded(0.0, 1.0, lo_open=True)
 # initial displacements (x5, q1): finite and at most 1 m (gaps are millimetres)

@@ -292,7 +292,7 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     # the full branches (profiles, multipliers, special points, restart data) as netCDF
     from maglev_match.cli.common import unit_of
     from maglev_match.datasets import annotate
-    from maglev_match.io import atomic_write
+    from maglev_match.io import atomic_write_netcdf
     from maglev_match.models import build_system
 
     system = build_system(params, model)
@@ -301,7 +301,7 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
             continue
         nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
         ds = annotate(br.to_xarray(system, param_unit=unit_of(param)), params)
-        atomic_write(nc, lambda tmp, ds=ds: ds.to_netcdf(tmp, engine="h5netcdf"))
+        atomic_write_netcdf(nc, ds)
         files.append(nc)
     lo = min([scan.scan_values[0]] + [float(np.min(b.values)) for b in branches if b.points])
     hi = max([scan.scan_values[-1]] + [float(np.max(b.values)) for b in branches if b.points])

@@ -272,13 +272,13 @@ def hopf_curve_command(
                             design_point=(system.param(names[0]), system.param(names[1])))
     figs = save_figure(fig, folder / stem)
     from maglev_match.datasets import annotate
-    from maglev_match.io import atomic_write
+    from maglev_match.io import atomic_write_netcdf
 
     nc_files = []
     for k, c in enumerate(curves):
         nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
         ds = annotate(c.to_xarray(units, system.state_names), params)
-        atomic_write(nc, lambda tmp, ds=ds: ds.to_netcdf(tmp, engine="h5netcdf"))
+        atomic_write_netcdf(nc, ds)
         nc_files.append(str(nc))
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]

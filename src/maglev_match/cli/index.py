@@ -176,7 +176,7 @@ def map_command(
 ) -> None:
     """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure)."""
     refuse_model_file(model, "map")
-    from maglev_match.io import atomic_write
+    from maglev_match.io import atomic_write_netcdf
     from maglev_match.maps import MapSpec, map_dataset, map_warnings, parse_axis, run_map
     from maglev_match.params import ParameterError
     from maglev_match.plots import save_figure
@@ -207,7 +207,7 @@ def map_command(
     ds = annotate_map(ds, base)
     warnings = map_warnings(ds)
     out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(out, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+    atomic_write_netcdf(out, ds)
     figs = save_figure(map_figure(ds, design_point=(float(getattr(base, ax.name)),
                                                     float(getattr(base, ay.name)))),
                        out.with_suffix(""))
