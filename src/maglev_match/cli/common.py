@@ -107,7 +107,17 @@ def preload(*modules: str) -> None:
     threading.Thread(target=work, name="maglev-match-preload", daemon=True).start()
 
 
+#: The commands that accept a user model file (``--model FILE.py``).
+USER_MODEL_COMMANDS = "stability, root-locus, hopf, hopf-curve, cycles and simulate"
+
+
 def check_model(model: str) -> str:
+    """``--model`` of a command that works on the maglev models: 'unit' or 'vehicle' (a
+    command that accepts a model file branches off before calling this)."""
+    if str(model).endswith(".py"):
+        raise ParameterError("--model", model, "this command works on the maglev models "
+                             "'unit' and 'vehicle' only; user model files are accepted by "
+                             f"{USER_MODEL_COMMANDS}")
     if model not in ("unit", "vehicle"):
         raise ParameterError("--model", model,
                              "must be 'unit', 'vehicle' or a model file ending in .py")
@@ -471,3 +481,35 @@ class ProgressReport:
 def progress_report(command: str, tty: bool | None = None) -> ProgressReport:
     """A :class:`ProgressReport` for ``command`` (see there)."""
     return ProgressReport(command, tty)
+
+
+# ----- options that do not apply -----------------------------------------------------------
+def _current_context() -> Any:
+    """The click context of the running command (typer's bundled click, or click)."""
+    for module in ("typer._click.globals", "click.globals"):
+        try:
+            mod = __import__(module, fromlist=["get_current_context"])
+        except ImportError:
+            continue
+        ctx = mod.get_current_context(silent=True)
+        if ctx is not None:
+            return ctx
+    return None
+
+
+def given(name: str) -> bool:
+    """Whether the option with parameter name ``name`` (the Python name, e.g. ``set_``) was
+    given on the command line, as opposed to left at its default. False outside a command."""
+    ctx = _current_context()
+    if ctx is None:
+        return False
+    source = ctx.get_parameter_source(name)
+    return source is not None and getattr(source, "name", "") in ("COMMANDLINE", "ENVIRONMENT")
+
+
+def refuse_given(options: dict[str, str], why: str) -> None:
+    """Refuse (exit code 2) the first of ``options`` (parameter name -> option as typed,
+    e.g. {"x5": "--x5"}) given on the command line: ``why`` says why it does not apply."""
+    for name, option in options.items():
+        if given(name):
+            raise UserError(f"{option}: {why}")

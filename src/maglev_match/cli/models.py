@@ -26,6 +26,7 @@ from maglev_match.cli.common import (
     output_target,
     params_from_options,
     print_warnings,
+    refuse_given,
 )
 from maglev_match.dynamics.system import System
 from maglev_match.models.user import ModelFileError, UserModel, is_model_file, load_model
@@ -86,6 +87,23 @@ def load_user_model(path: str) -> UserModel:
         raise UserError(str(exc)) from None
 
 
+def user_system(user: UserModel, values: dict[str, float], option: str = "--set") -> System:
+    """The user model's system at ``values``, refused (exit code 2, before any work) when its
+    right-hand side or Jacobian is not finite at X0 there: an overflow such as
+    ``--set rho=1e308`` is a numerical failure to name, not a verdict to print."""
+    problem = user.numerical_problem(values)
+    if problem is not None:
+        given = " ".join(f"{k}={v:g}" for k, v in values.items())
+        raise UserError(f"{option} {given}: numerical failure: {problem}; choose values that "
+                        "keep it finite" if given else f"model file {user.path}: numerical "
+                        f"failure at the defaults: {problem}")
+    return user.system(values)
+
+
+#: Options of the maglev models that a user model file refuses (parameter name -> option).
+MAGLEV_PARAMETER_SETS = {"preset": "--preset"}
+
+
 def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
                   config: Path | None = None, *, limited: bool = False) -> ResolvedModel:
     """The system ``--model`` names, with ``--set`` (and, for the maglev models,
@@ -102,13 +120,15 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
         if config is not None:
             raise UserError(f"--config {config}: maglev parameter files do not apply to a "
                             f"user model ({model}); use --set NAME=VALUE")
+        refuse_given(MAGLEV_PARAMETER_SETS, f"maglev parameter presets do not apply to a user "
+                     f"model ({model}); use --set NAME=VALUE")
         user = load_user_model(model)
         values = parse_sets(user, sets)
         vals = user.values_with(values)
         desc = (f"Model {user.name} ({model}, {len(user.states)} states), "
                 + ", ".join(f"{k} = {v:.6g}" for k, v in vals.items()))
-        return ResolvedModel(system=user.system(values), description=desc, label=user.name,
-                             user=user)
+        return ResolvedModel(system=user_system(user, values), description=desc,
+                             label=user.name, user=user)
     check_model(model)
     from maglev_match.cli.common import DEFAULT_PRESET_NAME
     from maglev_match.models import build_system
@@ -160,7 +180,7 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
 
     user = load_user_model(model)
     values = {**parse_sets(user, sets), **_at_values(user, at)}
-    system = user.system(values)
+    system = user_system(user, values, "--set/--at")
     if param not in system.param_names:
         raise ParameterError("--param", param, f"model file {model} has no such parameter; "
                              f"valid names: {', '.join(system.param_names)}")
@@ -251,7 +271,7 @@ def user_simulate(model: str, sets: list[str] | None, t: float, state: np.ndarra
     from maglev_match.dynamics.simulate import SimulationOptions, simulate
 
     user = load_user_model(model)
-    system = user.system(parse_sets(user, sets))
+    system = user_system(user, parse_sets(user, sets))
     x0 = user.x0 if state is None else np.asarray(state, float)
     if x0.shape != (system.dim,):
         raise UserError(f"--x0: {x0.size} values given, model {user.name} has "
