@@ -27,11 +27,13 @@ JAX (and, through it, NumPy's BLAS) is loaded, unless the caller imported them e
   to the free core when the machine is busy (an empty-cache ``index`` took 62.6 s pinned
   against 11.0 s unpinned at load ~7, 2026-11-25). Child processes of a pinned process
   (Dask workers of a map) get their parent's full CPU set back.
-* **Environment problems** are named, never left to surface as a JAX traceback: a
-  ``JAX_PLATFORMS`` naming a platform this machine cannot start (``gpu`` without a GPU) raises
-  :class:`~maglev_match.errors.EnvironmentProblem` when this module is imported (the command
-  line prints it as one line, exit code 2); a cache folder that cannot be written is an
-  :class:`~maglev_match.errors.EnvironmentWarning` and the run goes on without the cache.
+* **Environment problems** are named in one line on stderr, never left to surface as a JAX
+  traceback, and the run goes on: a ``JAX_PLATFORMS`` naming a platform this machine cannot
+  start (``gpu`` without a GPU) falls back to the CPU (where the package computes anyway),
+  and a cache folder that cannot be written is left out. Each line names the variable and
+  what to set instead. (A line on stderr rather than a Python warning: this module is
+  imported before any caller can arrange how warnings look, and a warning's two-line form
+  with a source line is noise here.)
 """
 
 from __future__ import annotations
@@ -102,27 +104,38 @@ _configure_threads()
 
 import jax  # noqa: E402  (after the thread settings above)
 
-from maglev_match.errors import EnvironmentProblem, EnvironmentWarning  # noqa: E402
-
 jax.config.update("jax_enable_x64", True)
 _PLATFORMS = os.environ.get("JAX_PLATFORMS", "cpu") or "cpu"
 jax.config.update("jax_platforms", _PLATFORMS)
+#: environment problems met while this module was imported (each already reported)
+ENVIRONMENT_PROBLEMS: list[str] = []
+
+
+def _environment_warning(message: str) -> None:
+    """One line on stderr (see the module docstring), remembered for callers."""
+    ENVIRONMENT_PROBLEMS.append(message)
+    try:
+        sys.stderr.write(f"warning: {message}\n")
+        sys.stderr.flush()
+    except (OSError, ValueError, UnicodeError):  # no usable stderr: the list keeps it
+        pass
 
 
 def _check_platforms(platforms: str) -> None:
-    """A platform other than the CPU is started now, so that a missing one is one clear line
-    instead of a RuntimeError deep inside the first computation (the CPU always exists and
-    is started lazily, as before)."""
+    """A platform other than the CPU is started now; one this machine cannot start is
+    reported in one line and replaced by the CPU, instead of a RuntimeError deep inside the
+    first computation (the CPU always exists and is started lazily, as before)."""
     if {p.strip().lower() for p in platforms.split(",") if p.strip()} <= {"cpu"}:
         return
     try:
         jax.devices()
     except RuntimeError as exc:
         detail = " ".join(str(exc).split("(set JAX_PLATFORMS")[0].split())
-        raise EnvironmentProblem(
-            "JAX_PLATFORMS", platforms, f"JAX cannot start that platform on this machine "
-            f"({detail})", "unset JAX_PLATFORMS or set JAX_PLATFORMS=cpu (maglev-match "
-            "computes on the CPU)") from None
+        jax.config.update("jax_platforms", "cpu")
+        _environment_warning(
+            f"JAX_PLATFORMS={platforms}: JAX cannot start that platform on this machine "
+            f"({detail}); computing on the CPU instead: unset JAX_PLATFORMS or set "
+            "JAX_PLATFORMS=cpu to silence this")
 
 
 _check_platforms(_PLATFORMS)
@@ -160,14 +173,12 @@ _cache, _chosen = _cache_setting()
 if _cache:
     _problem = _cache_problem(Path(_cache))
     if _problem is not None:
-        import warnings
-
         _shown = _cache if _chosen else f"{_cache} (the default)"
-        warnings.warn(f"MAGLEV_MATCH_CACHE={_shown}: the compilation cache folder cannot be "
-                      f"written ({_problem}); running without it (every process compiles "
-                      "again, slower start): set MAGLEV_MATCH_CACHE to a writable folder, or "
-                      "to an empty value to switch the cache off", EnvironmentWarning,
-                      stacklevel=2)
+        _environment_warning(
+            f"MAGLEV_MATCH_CACHE={_shown}: the compilation cache folder cannot be written "
+            f"({_problem}); running without it (every process compiles again, slower "
+            "start): set MAGLEV_MATCH_CACHE to a writable folder, or to an empty value to "
+            "switch the cache off")
         _cache = ""
 if _cache:
     try:

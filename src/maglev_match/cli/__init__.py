@@ -200,7 +200,7 @@ def _main(argv: list[str] | None) -> int:
         args = ["--debug", *args]
     from maglev_match.checkpoint import CheckpointLocked, MapStopped
     from maglev_match.cli.terminal import encoding_note, guard_output
-    from maglev_match.errors import EnvironmentProblem, ModelFileError
+    from maglev_match.errors import ModelFileError
     from maglev_match.io import DiskFull, is_disk_full
 
     guard_output()  # a non-UTF-8 terminal: ASCII stand-ins, never a lost result
@@ -208,8 +208,7 @@ def _main(argv: list[str] | None) -> int:
     warnings.showwarning = _show_warning
     try:
         rv = app(args=args, standalone_mode=False, prog_name="maglev-match")
-    except (ParameterError, UserError, CheckpointLocked, ModelFileError,
-            EnvironmentProblem) as exc:
+    except (ParameterError, UserError, CheckpointLocked, ModelFileError) as exc:
         print_error(str(exc))
         return 2
     except DiskFull as exc:
