@@ -168,17 +168,49 @@ def _at_values(user: UserModel, at: list[str] | None) -> dict[str, float]:
     return parse_sets(user, at, option="--at")
 
 
+def _cycle_rows(br, param: str) -> list[dict[str, Any]]:
+    """The rows of a user-model cycle branch (CSV and JSON)."""
+    out_rows = []
+    for c in br.points:
+        r = {param: c.value, "period": c.period, "stable": c.stable,
+             "unstable_multipliers": c.n_unstable,
+             "trivial_multiplier_error": abs(c.trivial_multiplier - 1.0),
+             "max_abs_multiplier": float(np.max(np.abs(c.multipliers)))
+             if len(c.multipliers) else 0.0, "kind": c.kind}
+        for k, (hi, lo) in c.extrema.items():
+            r[f"{k}_max"], r[f"{k}_min"] = hi, lo
+        out_rows.append(r)
+    return out_rows
+
+
+def _special_rows_user(br, param: str) -> list[dict[str, Any]]:
+    return [{"type": s.type, param: s.value, "period": s.period, "located": s.located,
+             "detail": s.detail, "label": s.label} for s in br.special_points]
+
+
 def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param: str,
                 start: float | None, stop: float | None, all_hopf: bool, n_scan: int,
-                ntst: int, ncol: int, max_steps: int, json_out: bool, out: Path | None
-                ) -> None:
+                ntst: int, ncol: int, max_steps: int, json_out: bool, out: Path | None,
+                *, restart: Path | None = None, label: str | None = None) -> None:
     """``cycles`` on a user model: Hopf points along ``param``, then the cycle branch from
     the one nearest the current value (or from all with ``--all``), continued without
-    physical limits; extrema of every state and observable along the branch."""
+    physical limits; extrema of every state and observable along the branch. With
+    ``--out`` the branches are also saved as netCDF (restartable); ``--restart FILE
+    --label L`` continues a saved one (:func:`maglev_match.cli.restart.user_cycles_restart`)."""
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
 
+    refuse_given({"ignore_current": "--ignore-current", "config": "--config",
+                  "preset": "--preset"},
+                 f"applies to the maglev models only; a user model ({model}) has no coil "
+                 "current limit and takes its values from --set/--at")
     user = load_user_model(model)
+    if restart is not None or label is not None:
+        from maglev_match.cli.restart import user_cycles_restart
+
+        return user_cycles_restart(user=user, model=model, restart=restart, label=label,
+                                   param=param, sets=sets, at=at, ntst=ntst, ncol=ncol,
+                                   max_steps=max_steps, json_out=json_out, out=out)
     values = {**parse_sets(user, sets), **_at_values(user, at)}
     system = user_system(user, values, "--set/--at")
     if param not in system.param_names:
@@ -202,28 +234,12 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
         branches.append(cycle_branch(system, h, param, ntst=ntst, ncol=ncol,
                                      max_steps=max_steps, observables=names))
 
-    def rows(br) -> list[dict[str, Any]]:
-        out_rows = []
-        for c in br.points:
-            r = {param: c.value, "period": c.period, "stable": c.stable,
-                 "unstable_multipliers": c.n_unstable,
-                 "trivial_multiplier_error": abs(c.trivial_multiplier - 1.0),
-                 "max_abs_multiplier": float(np.max(np.abs(c.multipliers)))
-                 if len(c.multipliers) else 0.0, "kind": c.kind}
-            for k, (hi, lo) in c.extrema.items():
-                r[f"{k}_max"], r[f"{k}_min"] = hi, lo
-            out_rows.append(r)
-        return out_rows
-
-    def specials(br) -> list[dict[str, Any]]:
-        return [{"type": s.type, param: s.value, "period": s.period, "located": s.located,
-                 "detail": s.detail} for s in br.special_points]
-
     result = {
         "model": user.name, "model_file": str(model), "param": param, "values": values,
         "hopf_points": [{param: h.value, "frequency": h.frequency, "l1": h.l1,
                          "kind": h.kind} for h in hopfs],
-        "branches": [{"hopf": h.value, "branch": rows(br), "special_points": specials(br),
+        "branches": [{"hopf": h.value, "branch": _cycle_rows(br, param),
+                      "special_points": _special_rows_user(br, param),
                       "stopped_reason": br.stopped_reason, "warnings": list(br.warnings)}
                      for h, br in zip(chosen, branches, strict=True)],
         "warnings": list(scan.warnings),
@@ -231,15 +247,26 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     if out is not None:
         import csv
 
+        from maglev_match.io import atomic_open, atomic_write_netcdf
+        from maglev_match.restart import RestartKind, stamp
+
         folder, stem = output_target(out, "cycles", f"cycles_{user.name}_{param}")
         path = folder / f"{stem}.csv"
-        allrows = [{"branch": k, **r} for k, br in enumerate(branches) for r in rows(br)]
-        with path.open("w", newline="") as fh:
+        allrows = [{"branch": k, **r} for k, br in enumerate(branches)
+                   for r in _cycle_rows(br, param)]
+        with atomic_open(path, "w", newline="") as fh:
             if allrows:
                 w = csv.DictWriter(fh, fieldnames=list(allrows[0]))
                 w.writeheader()
                 w.writerows(allrows)
         result["files"] = [str(path)]
+        for k, br in enumerate(branches):  # the full branches, restartable (--restart)
+            if not br.points:
+                continue
+            nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
+            atomic_write_netcdf(nc, stamp(br.to_xarray(system), RestartKind.CYCLE_BRANCH,
+                                          system, user.name, "cycles"))
+            result["files"].append(str(nc))
     if json_out:
         emit_json(result)
         return
@@ -248,7 +275,9 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
                       f"l1 = {h.l1:.4g} ({h.kind}); branch stopped: {br.stopped_reason} after "
                       f"{br.steps} steps", highlight=False)
         pts = br.points
-        for k in sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1])):
+        shown = sorted(set(range(0, len(pts), max(1, len(pts) // 12))) | {len(pts) - 1}) \
+            if pts else []
+        for k in shown:
             c = pts[k]
             console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
                           f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
