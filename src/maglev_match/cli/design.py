@@ -323,6 +323,7 @@ def design_command(
         DesignStatus,
         Goal,
         MaglevEvaluator,
+        check_vary_ranges,
         optimise_design,
         parse_requirement,
         parse_vary,
@@ -346,6 +347,7 @@ def design_command(
     for var in variables:  # both ends must be valid parameter values
         base.replace(**{var.name: var.lo})
         base.replace(**{var.name: var.hi})
+    check_vary_ranges(base, variables)  # valid sets with a meaningful chi throughout
     check_index_params(base)
     sc = scatter_options(base, scatter, monte_carlo, model)
     evaluator = MaglevEvaluator(base, problem.names, model=model)
