@@ -240,6 +240,20 @@ def _attr_number(ds: Any, where: str, name: str, *, allow_nan: bool = False) -> 
     return x
 
 
+def _attr_int(ds: Any, where: str, name: str) -> int | None:
+    """An optional whole-number attribute (None when absent)."""
+    if name not in ds.attrs:
+        return None
+    v = ds.attrs[name]
+    try:
+        x = float(np.asarray(v).item())
+    except (TypeError, ValueError):
+        x = math.nan
+    if not (math.isfinite(x) and x.is_integer()) or isinstance(v, str | bool):
+        raise RestartFileError(where, f"attribute '{name}' = {v!r} is not a whole number"[:200])
+    return int(x)
+
+
 def _check_model(ds: Any, where: str, system: Any, states: list[str],
                  params: list[str]) -> None:
     """The saved model's state and parameter names must be the caller's."""
@@ -371,8 +385,8 @@ def load_cycle_restart(source: Any, label: str, system: Any = None) -> CycleRest
     n = len(states)
     if n == 0:
         raise RestartFileError(where, "has no states")
-    n_attr = ds.attrs.get("n_states")
-    if n_attr is not None and int(np.asarray(n_attr).item()) != n:
+    n_attr = _attr_int(ds, where, "n_states")
+    if n_attr is not None and n_attr != n:
         raise RestartFileError(where, f"attribute n_states = {n_attr} but {n} state names")
     _check_model(ds, where, system, states, params)
     param = _attr_text(ds, where, "param")
@@ -426,8 +440,8 @@ def load_cycle_restart(source: Any, label: str, system: Any = None) -> CycleRest
                                "intervals with 2 to 7 collocation points each")
     ncol = (nodes - 1) // ntst
     for name, attr in (("ntst", ntst), ("ncol", ncol)):
-        v = ds.attrs.get(name)
-        if v is not None and int(np.asarray(v).item()) != attr:
+        v = _attr_int(ds, where, name)
+        if v is not None and v != attr:
             raise RestartFileError(where, f"attribute {name} = {v} but the restart data "
                                    f"have {name} = {attr}")
     if st_all.shape[2] != n or tst_all.shape[1:] != st_all.shape[1:]:
@@ -487,7 +501,7 @@ def load_cycle_restart(source: Any, label: str, system: Any = None) -> CycleRest
                         model=model if isinstance(model, str) else "",
                         branch_values=bv, branch_periods=bT, branch_stable=bs,
                         branch_mesh=bmesh, branch_profiles=bprof,
-                        ncol=int(np.asarray(ds.attrs.get("ncol", ncol)).item()),
+                        ncol=ncol,
                         params_json=pj if isinstance(pj, str) and pj.startswith("{") else None)
 
 

@@ -149,6 +149,22 @@ def scatter_options(params, items: list[str] | None, monte_carlo: int | None,
     return sc
 
 
+def check_monte_carlo_folder(out, command: str, stem: str, monte_carlo: int | None) -> None:
+    """Before any work: the --out of a Monte Carlo study can be written, and its checkpoint
+    folder (``<out>/monte-carlo``) is not in use by another run (the lock is tried and let
+    go; the study holds it while it runs, see :func:`maglev_match.sensitivity.sampled_spread`).
+    A second run on the same folder is thus refused at once, not after its index."""
+    if monte_carlo is None:
+        return
+    from maglev_match.checkpoint import lock_folder
+    from maglev_match.cli.common import check_output_path
+
+    check_output_path(out)
+    folder, _ = output_target(out, command, stem)
+    with lock_folder(folder / "monte-carlo", "Monte Carlo run"):
+        pass
+
+
 def _spread(sens, scatter: dict[str, float]) -> dict | None:
     if not scatter:
         return None
@@ -234,6 +250,7 @@ def sensitivity_command(
     params = params_from_options(preset, config, set_)
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
+    check_monte_carlo_folder(out, "sensitivity", "tornado", monte_carlo)
     with progress_report("sensitivity") as prog:
         prog.stage("computing the index and its sensitivities ...")
         sens = index_sensitivity(params, boundaries=boundaries, model=model)
@@ -350,6 +367,7 @@ def design_command(
     check_vary_ranges(base, variables)  # valid sets with a meaningful chi throughout
     check_index_params(base)
     sc = scatter_options(base, scatter, monte_carlo, model)
+    check_monte_carlo_folder(out, "design", "design-path", monte_carlo)
     evaluator = MaglevEvaluator(base, problem.names, model=model)
     with progress_report("design") as prog:
         prog.stage("searching ...")
@@ -421,4 +439,5 @@ def design_command(
 
 __all__ = ["NO_FEASIBLE_DESIGN", "sensitivity_command", "design_command", "parse_scatter",
            "check_scatter_names", "scatter_options", "scatter_report", "print_scatter",
+           "check_monte_carlo_folder",
            "ScatterOpt", "McOpt", "WorkersOpt", "ResumeOpt", "SeedOpt"]

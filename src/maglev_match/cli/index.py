@@ -65,13 +65,19 @@ def index_command(
     with --scatter, the spread of chi from parameter scatter."""
     if is_model_file(model):
         refuse_model_file(model, "index")
-    from maglev_match.cli.design import print_scatter, scatter_options, scatter_report
+    from maglev_match.cli.design import (
+        check_monte_carlo_folder,
+        print_scatter,
+        scatter_options,
+        scatter_report,
+    )
     from maglev_match.matching import matching_index
 
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
+    check_monte_carlo_folder(out, "index", "index", monte_carlo)
     with progress_report("index") as prog:
         prog.stage("computing the matching index ...")
         res = matching_index(params, model=model, simulate=not no_simulation)

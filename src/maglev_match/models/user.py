@@ -308,9 +308,20 @@ def _import(path: Path, timeout: float | None = None):
         raise ModelFileError(path, f"contains a NUL byte at line {line}: not a Python "
                              "source file (saved in another encoding, or binary?)")
     try:
-        # bytes, not text: Python then honours a UTF-8 byte-order mark and a coding
-        # declaration exactly as its import does
-        code = compile(source, str(path), "exec", dont_inherit=True)
+        # decoded as Python's import decodes a source file: a UTF-8 byte-order mark and a
+        # coding declaration are honoured, any other byte that is not UTF-8 is an error
+        text = importlib.util.decode_source(source)
+    except (UnicodeDecodeError, SyntaxError, LookupError) as exc:
+        try:
+            source.decode("utf-8-sig")
+        except UnicodeDecodeError as bad:  # a byte that is not UTF-8, no declaration
+            line = source[: bad.start].count(b"\n") + 1
+            raise ModelFileError(path, f"is not UTF-8 text (byte 0x{source[bad.start]:02x} "
+                                 f"at line {line}): save it as UTF-8 or declare its encoding "
+                                 "on the first line (# -*- coding: latin-1 -*-)") from None
+        raise ModelFileError(path, f"cannot be decoded: {_first_line(exc)}") from None
+    try:
+        code = compile(text, str(path), "exec", dont_inherit=True)
     except SyntaxError as exc:
         where = f" at line {exc.lineno}" if exc.lineno is not None else ""
         raise ModelFileError(path, f"syntax error{where}: {exc.msg}") from None
