@@ -105,6 +105,14 @@ def test_restart_without_parameter_options_continues_the_saved_branch(capsys, fi
 
     again = next(f for f in files if f.suffix == ".nc")
     assert load_cycle_restart(again, "P0").path == str(again)  # restartable in turn
+    # the Python API's restart: the saved model and values from the file, the same points
+    from maglev_match.restart import restart
+
+    api = restart(nc, "P1", max_steps=2)
+    assert api.branch.values.tolist() == pytest.approx([r["sigma"] for r in doc["branch"]],
+                                                       rel=1e-12)
+    assert [str(s.type) for s in api.branch.special_points] == \
+        [s["type"] for s in doc["special_points"]]
     # the text form says what was done in its first line
     code, out, _ = _run(capsys, ["cycles", "--restart", str(nc), "--label", "P1",
                                  "--max-steps", "1", "--out", str(folder / "again-text")])
@@ -248,6 +256,15 @@ def test_hopf_curve_restart_extends_the_closed_form_curve(capsys, fixtures):
     code, _, err = _run(capsys, ["hopf-curve", "--model", lorenz, "--restart", str(saved),
                                  "--label", "P3", "--scan-steps", "10"])
     assert code == 2 and "--scan-steps" in err
+    # the API's restart finds the model file from the saved curve
+    from maglev_match.restart import restart
+
+    curve, rs = restart(saved, "P3", bounds={"rho": (5.0, 200.0), "sigma": (5.0, 40.0)},
+                        max_step=0.05)
+    assert rs.names == ("rho", "sigma")
+    v = curve.values()
+    np.testing.assert_allclose(v[:, 0], v[:, 1] * (v[:, 1] + beta + 3) / (v[:, 1] - beta - 1),
+                               rtol=1e-8)
 
 
 def test_equilibrium_branch_restart_finds_the_same_special_points(tmp_path):

@@ -146,6 +146,12 @@ def scatter_options(params, items: list[str] | None, monte_carlo: int | None,
     check_scatter_names(params, sc, model)
     if monte_carlo is not None and not sc:
         raise ParameterError("--monte-carlo", monte_carlo, "needs at least one --scatter NAME=PCT")
+    if monte_carlo is None:  # options of the Monte Carlo study would do nothing
+        from maglev_match.cli.common import refuse_given
+
+        refuse_given({"resume": "--resume", "seed": "--seed", "workers": "--workers"},
+                     "applies to a Monte Carlo study only; add --monte-carlo N (with "
+                     "--scatter NAME=PCT)")
     return sc
 
 

@@ -310,7 +310,8 @@ def hopf_curve_command(
     for k, c in enumerate(curves):
         nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
         ds = annotate(c.to_xarray(units, system.state_names), params)
-        _restartable_curve(ds, system, model, names, bounds)
+        _restartable_curve(ds, system, model, names, bounds,
+                           rm.user.path if rm.is_user else None)
         atomic_write_netcdf(nc, ds)
         nc_files.append(str(nc))
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
@@ -350,12 +351,15 @@ def hopf_curve_command(
 
 
 def _restartable_curve(ds, system, model: str, names: tuple[str, str],
-                       bounds: dict[str, tuple[float, float]]) -> None:
+                       bounds: dict[str, tuple[float, float]],
+                       model_file: str | None = None) -> None:
     """What a restart of the saved curve needs (:mod:`maglev_match.restart`): the curve's
     two parameters, their bounds, the full parameter vector and the kind attributes."""
     from maglev_match.restart import RestartKind, stamp
 
     stamp(ds, RestartKind.HOPF_CURVE, system, model, "hopf-curve")
+    if model_file is not None:  # a user model: the API's restart loads it again
+        ds.attrs["model_file"] = str(Path(model_file).resolve())
     ds.attrs["curve_params"] = f"{names[0]},{names[1]}"
     for n in names:
         ds.attrs[f"bounds_{n}"] = np.array(bounds[n], float)

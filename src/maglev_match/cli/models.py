@@ -264,8 +264,10 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
             if not br.points:
                 continue
             nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
-            atomic_write_netcdf(nc, stamp(br.to_xarray(system), RestartKind.CYCLE_BRANCH,
-                                          system, user.name, "cycles"))
+            ds = stamp(br.to_xarray(system), RestartKind.CYCLE_BRANCH, system, user.name,
+                       "cycles")
+            ds.attrs["model_file"] = str(Path(model).resolve())  # (for the API's restart)
+            atomic_write_netcdf(nc, ds)
             result["files"].append(str(nc))
     if json_out:
         emit_json(result)

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import typer
 
 from maglev_match.cli.common import (
     UserError,
@@ -26,6 +27,7 @@ from maglev_match.cli.common import (
     given,
     output_target,
     params_from_options,
+    print_error,
     print_warnings,
     progress_report,
     refuse_given,
@@ -107,6 +109,18 @@ def _restart_point_extrema(rs, system, observable: str) -> tuple[float, float]:
     orbit = PeriodicOrbit(mesh=rs.state.mesh, ncol=rs.ncol, states=rs.state.states,
                           period=rs.state.period, p=rs.p)
     return orbit_extrema(system, orbit, [observable])[observable]
+
+
+def _fail_if_nothing_continued(br, rs) -> None:
+    """A restart whose first point does not converge continued nothing: a numerical
+    failure, exit code 1 (after the result was printed), never a silent exit 0."""
+    if br.points:
+        return
+    why = "; ".join(br.warnings) or str(br.stopped_reason)
+    print_error(f"the restart from {rs.label} of {rs.path} continued nothing: {why} "
+                f"(stopped: {br.stopped_reason}); the saved point does not solve the "
+                "periodic problem of this model with these values")
+    raise typer.Exit(1)
 
 
 def _restart_json(rs, param: str) -> dict[str, Any]:
@@ -220,12 +234,13 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
         result["files"] = [str(f) for f in files]
     if json_out:
         emit_json(result)
-        return
+        return _fail_if_nothing_continued(br, rs)
     from maglev_match.cli.cycles import _print_summary
 
     _print_summary(result, [br], [rs.start], param, files,
                    first_line=f"cycles: {header}; no Hopf search; branch stopped: "
                    f"{br.stopped_reason} after {br.steps} steps")
+    _fail_if_nothing_continued(br, rs)
 
 
 def _restart_figure(br, rs, system, param, params, target: Path, header: str, at) -> list:
@@ -318,11 +333,12 @@ def user_cycles_restart(*, user, model: str, restart: Path | None, label: str | 
             ds = stamp(br.to_xarray(system), RestartKind.CYCLE_BRANCH, system, user.name,
                        "cycles --restart")
             ds.attrs["restart_of"] = f"{label} of {restart}"
+            ds.attrs["model_file"] = str(Path(model).resolve())
             atomic_write_netcdf(folder / f"{stem}.nc", ds)
             result["files"].append(str(folder / f"{stem}.nc"))
     if json_out:
         emit_json(result)
-        return
+        return _fail_if_nothing_continued(br, rs)
     console.print(f"cycles: {header}; no Hopf search", highlight=False, markup=False)
     console.print(f"branch stopped: {br.stopped_reason} after {br.steps} steps",
                   highlight=False)
@@ -340,6 +356,7 @@ def user_cycles_restart(*, user, model: str, restart: Path | None, label: str | 
     for f in result.get("files", []):
         console.print(f"wrote {f}", highlight=False)
     print_warnings(br.warnings)
+    _fail_if_nothing_continued(br, rs)
 
 
 @restart_errors
