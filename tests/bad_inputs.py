@@ -73,6 +73,8 @@ MODEL_FILES: dict[str, bytes] = {
     "bom.py": b"\xef\xbb\xbf" + (_HEAD + _RHS).encode(),
     "nul.py": (_HEAD + _RHS).encode().replace(b"r2 = x", b"r2 = \x00x", 1),
     "latin1.py": b"# caf\xe9\n" + (_HEAD + _RHS).encode(),
+    "greek.py": LORENZ.replace('"sigma"', '"\u03c3"').replace('"rho"', '"\u03c1"')
+                      .replace('"beta"', '"\u03b2"').encode(),
     "nested_x0.py": (b'import jax.numpy as jnp\nSTATES = ["x", "y", "z"]\nPARAMS = {}\n'
                      b"X0 = [[8, 8, 27]]\ndef rhs(x, p):\n    return -x\n"),
 }
@@ -191,6 +193,7 @@ class Case:
     text: str
     env: dict[str, str] = field(default_factory=dict)
     fresh: bool = False  # needs a process of its own (exits, hangs, the environment)
+    slow: bool = False  # a whole index or search: in the script only, not in the tests
     json_stdout: bool = False  # stdout must be exactly one JSON object
     needs_branch: bool = False
 
@@ -349,8 +352,15 @@ CASES: tuple[Case, ...] = (
     Case("unwritable cache", "environment", ("stability", "--json"), 0,
          "MAGLEV_MATCH_CACHE=/proc/maglev-match-cache", fresh=True, json_stdout=True,
          env={"MAGLEV_MATCH_CACHE": "/proc/maglev-match-cache"}),
-    Case("PYTHONIOENCODING=ascii", "environment", ("index", "--no-simulation"), 0,
+    Case("PYTHONIOENCODING=ascii", "environment", ("stability", "--model",
+                                                    "{dir}/greek.py"), 0,
          "PYTHONIOENCODING=ascii", env={"PYTHONIOENCODING": "ascii"}, fresh=True),
+    Case("PYTHONIOENCODING=ascii, index", "environment", ("index", "--no-simulation"), 0,
+         "PYTHONIOENCODING=ascii", env={"PYTHONIOENCODING": "ascii"}, fresh=True, slow=True),
+    Case("PYTHONIOENCODING=ascii, design", "environment",
+         ("design", "--vary", "kD=120:180", "--maximize", "chi", "--grid", "2", "--starts",
+          "1", "--out", "{dir}/design"), 0, "PYTHONIOENCODING=ascii",
+         env={"PYTHONIOENCODING": "ascii"}, fresh=True, slow=True),
 )
 
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import codecs
 import os
 import sys
+import unicodedata
 
 __all__ = ["guard_output", "encoding_note", "ASCII_FALLBACK"]
 
@@ -26,8 +27,6 @@ ASCII_FALLBACK: dict[str, str] = {
     "\u2014": "-", "\u2013": "-", "\u2212": "-", "\u2010": "-", "\u00b1": "+/-",
     "\u2026": "...", "\u2264": "<=", "\u2265": ">=", "\u00d7": "x", "\u00b7": ".",
     "\u00b0": " deg", "\u00b5": "u", "\u03bc": "mu", "\u00b2": "^2", "\u00b3": "^3",
-    "\u03bb": "lambda", "\u03c7": "chi", "\u03c3": "sigma", "\u03c9": "omega",
-    "\u03be": "xi", "\u0394": "Delta", "\u03b4": "delta", "\u03c4": "tau",
     "\u2018": "'", "\u2019": "'", "\u201c": '"', "\u201d": '"', "\u2192": "->",
     "\u2190": "<-", "\u2248": "~", "\u2022": "*", "\u00a0": " ",
     # box drawing (Rich tables and rules)
@@ -38,6 +37,15 @@ ASCII_FALLBACK: dict[str, str] = {
                        "\u2554\u2557\u255a\u255d\u2560\u2563\u2566\u2569\u256c\u250f\u2513"
                        "\u2517\u251b\u2523\u252b\u2533\u253b\u254b\u2521\u2529\u2547\u2548"},
 }
+
+# Greek letters by name (sigma, omega, Lambda ...): parameter names and units use them
+for _cp in range(0x391, 0x3CA):
+    _name = unicodedata.name(chr(_cp), "")
+    if _name.startswith(("GREEK SMALL LETTER ", "GREEK CAPITAL LETTER ")):
+        _word = _name.split(" LETTER ", 1)[1].lower().replace(" ", "_")
+        ASCII_FALLBACK[chr(_cp)] = _word if "SMALL" in _name else _word.capitalize()
+ASCII_FALLBACK.update({"\u03bb": "lambda", "\u039b": "Lambda",  # Unicode spells LAMDA
+                       "\u03c2": "sigma", "\u00b5": "u"})  # final sigma; the micro sign
 
 _replaced: list[str] = []  # the first characters that had to be replaced (for the note)
 
