@@ -174,7 +174,7 @@ def make_branch(folder: Path) -> Path:
 
 #: The saved branch the restart cases use (small: 20 mesh intervals, 4 steps).
 BRANCH_ARGS = ("cycles", "--param", "sigma", "--at", "omega1=100", "--preset", "alpha1",
-               "--from", "5e-4", "--to", "2e-3", "--scan", "15", "--ntst", "20",
+               "--from", "5e-4", "--to", "2e-3", "--scan", "5", "--ntst", "20",
                "--max-steps", "4", "--json")
 
 
