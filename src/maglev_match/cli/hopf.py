@@ -202,7 +202,8 @@ def hopf_curve_command(
                 raise UserError(f"--params '{params_opt}': expected two names P1,P2")
         restarted = hopf_curve_restart(rm=rm, restart=restart, label=label,
                                        given_names=names_given,
-                                       given_bounds=_parse_ranges(ranges), max_step=max_step)
+                                       given_bounds=_parse_ranges(ranges), max_step=max_step,
+                                       sets=set_)
         params_opt = ",".join(restarted[2])
         system, params = restarted[4], restarted[5]  # the saved values unless given
     if params_opt is None and rm.is_user:

@@ -363,8 +363,9 @@ def user_cycles_restart(*, user, model: str, restart: Path | None, label: str | 
 def hopf_curve_restart(*, rm, restart: Path | None, label: str | None,
                        given_names: tuple[str, str] | None,
                        given_bounds: dict[str, tuple[float, float]],
-                       max_step: float) -> tuple[Any, Any, tuple[str, str],
-                                                 dict[str, tuple[float, float]], Any, Any]:
+                       max_step: float, sets: list[str] | None = None,
+                       ) -> tuple[Any, Any, tuple[str, str], dict[str, tuple[float, float]],
+                                  Any, Any]:
     """The Hopf curve continued from a saved point: (curve, restart, names, bounds, system,
     params). The curve parameters are the saved ones (a --params naming others is refused);
     --range widens or narrows the saved bounds; without --preset/--config/--set the saved
@@ -383,6 +384,12 @@ def hopf_curve_restart(*, rm, restart: Path | None, label: str | None,
     if given_names is not None and tuple(given_names) != rs.names:
         raise UserError(f"--params {','.join(given_names)}: the saved curve is in "
                         f"({', '.join(rs.names)}); a restart continues it there")
+    fixed = sorted(set(rs.names) & _named(sets))
+    if fixed:
+        raise UserError(f"--set {fixed[0]}: {fixed[0]} varies along the saved Hopf curve; a "
+                        f"restart starts from the point {rs.label} ({rs.names[0]} = "
+                        f"{rs.values[0]:.8g}, {rs.names[1]} = {rs.values[1]:.8g}); leave it "
+                        "out")
     system, params = rm.system, rm.params
     if not any(given(n) for n in PARAMETER_OPTIONS):  # the saved values
         saved = saved_params(rs) if not rm.is_user else None
