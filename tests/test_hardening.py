@@ -263,6 +263,12 @@ def test_hopf_curve_restart_extends_the_closed_form_curve(capsys, fixtures):
     code, _, err = _run(capsys, ["hopf-curve", "--model", lorenz, "--restart", str(saved),
                                  "--label", "P3", "--scan-steps", "10"])
     assert code == 2 and "--scan-steps" in err
+    code, _, err = _run(capsys, ["hopf-curve", "--model", lorenz, "--restart", str(saved),
+                                 "--label", "P3", "--set", "sigma=7"])
+    assert code == 2 and "sigma varies along the saved Hopf curve" in err
+    code, _, err = _run(capsys, ["hopf-curve", "--model", lorenz, "--restart", str(saved),
+                                 "--label", "P3", "--set", "beta=3"])
+    assert code == 2 and "beta = 3 given, 2.666666667 saved" in err
     # the API's restart finds the model file from the saved curve
     from maglev_match.restart import restart
 
