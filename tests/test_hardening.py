@@ -312,3 +312,25 @@ def test_equilibrium_branch_restart_finds_the_same_special_points(tmp_path):
         assert abs(v - (xs[0] ** 3 - xs[0])) < 1e-8 and abs(xs[1]) < 1e-8
     with pytest.raises(RestartFileError, match="no point 'P9999'"):
         load_equilibrium_restart(path, "P9999", system)
+
+
+def test_design_ranges_refuse_constants_derived_values_and_meaningless_chi():
+    """parse_vary refuses g, mu0 and derived quantities; check_vary_ranges accepts the
+    README's beam range and refuses a range whose static deflection falls below W0_MIN
+    (chi = h / w0 beyond ~1000), naming the point, before any index is computed."""
+    from maglev_match.design import W0_MIN, check_vary_ranges, parse_vary
+    from maglev_match.params import ParameterError, load_params
+
+    for text, rule in (("g=1:20", "constant of nature"), ("mu0=1e-7:2e-6", "constant"),
+                       ("w0=1e-4:1e-3", "derived"), ("i0=10:30", "derived"),
+                       ("chi=1:10", "derived")):
+        with pytest.raises(ParameterError, match=rule):
+            parse_vary(text)
+    base = load_params("turnout-soft")
+    check_vary_ranges(base, [parse_vary("EI=5e9:4e10")])  # w0 0.4 .. 3.3 mm
+    check_vary_ranges(base, [parse_vary("EI=5e9:4e10"), parse_vary("kD=80:250")])
+    w0_at = base.replace(sigma=2e-6).w0
+    assert w0_at < W0_MIN
+    with pytest.raises(ParameterError, match="sigma = 1e-08") as err:
+        check_vary_ranges(base, [parse_vary("sigma=1e-8:1e-3")])
+    assert "has no physical meaning" in str(err.value)
