@@ -300,9 +300,17 @@ def hopf_curve_command(
 
     title = (f"Hopf curve, model {model}" if rm.is_user else
              f"Hopf curve, model {'A' if model == 'unit' else 'B'} ({preset})")
+    if restarted is not None:  # the saved values, not the preset's
+        title = (f"Hopf curve, model {model if rm.is_user else 'A' if model == 'unit' else 'B'}"
+                 f", restarted from {restarted[1].label} of {Path(restarted[1].path).name}")
     units = ("", "") if rm.is_user else (unit_of(names[0]), unit_of(names[1]))
     fig = hopf_curve_figure(curves, names, units, grid_data, title=title,
                             design_point=(system.param(names[0]), system.param(names[1])))
+    if restarted is not None:  # where the restarted curve was continued from
+        from maglev_match.plots.restart import mark_restart_point
+
+        rs = restarted[1]
+        mark_restart_point(fig.axes[0], *rs.values, label=rs.label, source=Path(rs.path).name)
     figs = save_figure(fig, folder / stem)
     from maglev_match.datasets import annotate
     from maglev_match.io import atomic_write_netcdf

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.lines import Line2D
 
-__all__ = ["draw_saved_part"]
+__all__ = ["draw_saved_part", "mark_restart_point"]
 
 SAVED_COLOUR = "0.55"
 
@@ -63,3 +63,13 @@ def draw_saved_part(ax, values: np.ndarray, ymax: np.ndarray, ymin: np.ndarray,
                           label=f"restart point {label}"))
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
               frameon=False)
+
+
+def mark_restart_point(ax, x: float, y: float, *, label: str, source: str) -> None:
+    """Mark the point a restarted curve was continued from (a star) and add it to the
+    legend (kept where the figure placed it)."""
+    ax.plot([x], [y], "*", color="k", ms=13, ls="none", zorder=8,
+            label=f"restart point {label} ({source})")
+    legend = ax.get_legend()
+    loc = legend._loc if legend is not None else "best"  # noqa: SLF001  (keep its place)
+    ax.legend(loc=loc, fontsize=8, framealpha=0.85)
