@@ -215,7 +215,7 @@ def _r(name, extra, code, text, file="branch/cycles_unit_sigma.nc", command="cyc
 
 MC = ("--scatter", "EI=3", "--monte-carlo", "4", "--no-simulation")
 DESIGN = ("design", "--vary", "EI=5e9:4e10", "--minimize", "EI")
-TIMEOUT_ENV = {"MAGLEV_MATCH_MODEL_TIMEOUT": "3"}
+TIMEOUT_ENV = {"MAGLEV_MATCH_MODEL_TIMEOUT": "2"}
 
 CASES: tuple[Case, ...] = (
     # ---- user model files: loading under guard
@@ -224,9 +224,9 @@ CASES: tuple[Case, ...] = (
     _m("os._exit(0) at import", "osexit.py", (), 2, "called os._exit(0)", fresh=True),
     _m("os._exit(0) in rhs", "osexit_rhs.py", (), 2, "rhs called os._exit(0)", fresh=True),
     _m("SystemExit in rhs", "exit_rhs.py", (), 2, "rhs called sys.exit(0)"),
-    _m("endless loop at import", "loop.py", (), 2, "did not finish within 3 s",
+    _m("endless loop at import", "loop.py", (), 2, "did not finish within 2 s",
        env=TIMEOUT_ENV, fresh=True),
-    _m("endless loop in rhs", "loop_rhs.py", (), 2, "rhs did not finish within 3 s",
+    _m("endless loop in rhs", "loop_rhs.py", (), 2, "rhs did not finish within 2 s",
        env=TIMEOUT_ENV, fresh=True),
     _m("print() at import and in rhs, --json", "prints.py", ("--json",), 0, "",
        json_stdout=True),

@@ -62,7 +62,7 @@ def test_bad_input_is_refused_in_one_line(capsys, fixtures, case):
 
 
 def test_bad_inputs_in_fresh_processes(fixtures):
-    """Exits at import or in rhs, endless loops (MAGLEV_MATCH_MODEL_TIMEOUT=3) and the
+    """Exits at import or in rhs, endless loops (MAGLEV_MATCH_MODEL_TIMEOUT=2) and the
     environment: each in a process of its own, with a timeout (two at a time)."""
     from concurrent.futures import ThreadPoolExecutor
 
@@ -175,7 +175,7 @@ def _apply(ds, mutations):
     return d
 
 
-@settings(max_examples=150, deadline=None, derandomize=True,
+@settings(max_examples=100, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(mutations=_mutations(), label=st.sampled_from(["P0", "P1", "P3"]))
 def test_restart_loader_on_mutated_files_gives_a_clean_error_or_the_same_restart(
