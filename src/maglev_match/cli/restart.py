@@ -123,6 +123,13 @@ def _fail_if_nothing_continued(br, rs) -> None:
     raise typer.Exit(1)
 
 
+def _kind(l1: float | None) -> str:
+    """Criticality of the saved Hopf point (as `hopf` and `cycles` print it)."""
+    if l1 is None or not np.isfinite(l1):
+        return "unknown"
+    return "subcritical" if l1 > 0 else "supercritical" if l1 < 0 else "degenerate"
+
+
 def _restart_json(rs, param: str) -> dict[str, Any]:
     return {"file": rs.path, "label": rs.label, "saved_param": rs.param, "param": param,
             "value": rs.value, "period": rs.period, "hopf_search": False,
@@ -203,8 +210,9 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
     result: dict[str, Any] = {
         "model": model, "param": param,
         "restart": _restart_json(rs, param),
-        "hopf": {rs.param: rs.start.value, "l1": rs.start.l1, "frequency": rs.start.frequency,
-                 "from_file": True},
+        "hopf": {rs.param: rs.start.value, "l1": rs.start.l1,
+                 "kind": _kind(rs.start.l1), "frequency": rs.start.frequency,
+                 "period": 2 * np.pi / rs.start.frequency, "from_file": True},
         "label": "b1", "branch": _branch_rows(br, param),
         "special_points": _special_rows(br, param), "stopped_reason": br.stopped_reason,
         "steps": br.steps, "warnings": list(br.warnings), "hopf_points": [],
