@@ -51,7 +51,8 @@ def _run(capsys, argv):
 
 
 IN_PROCESS = [c for c in CASES if not c.fresh and not c.slow]
-FRESH = [c for c in CASES if c.fresh and not c.slow]
+FRESH = [c for c in CASES if c.fresh and not c.slow and c.group != "environment"]
+ENVIRONMENT = [c for c in CASES if c.group == "environment" and not c.slow]
 
 
 @pytest.mark.parametrize("case", IN_PROCESS, ids=[c.name for c in IN_PROCESS])
@@ -62,19 +63,31 @@ def test_bad_input_is_refused_in_one_line(capsys, fixtures, case):
 
 
 def test_bad_inputs_in_fresh_processes(fixtures):
-    """Exits at import or in rhs, endless loops (MAGLEV_MATCH_MODEL_TIMEOUT=2) and the
-    environment: each in a process of its own, with a timeout (two at a time)."""
+    """Exits at import or in rhs and endless loops (MAGLEV_MATCH_MODEL_TIMEOUT=2), each in a
+    process of its own with a timeout (two at a time); the three environment problems
+    together in one more process (each case alone: tests/bad_inputs.py): the result, and
+    one warning line naming each variable."""
     from concurrent.futures import ThreadPoolExecutor
 
+    from bad_inputs import Case
+
     folder, _ = fixtures
+    env = {k: v for c in ENVIRONMENT for k, v in c.env.items()}
+    together = Case("the environment", "environment", ENVIRONMENT[-1].argv, 0, "", env=env,
+                    fresh=True)
     with ThreadPoolExecutor(max_workers=2) as pool:
-        runs = list(pool.map(lambda c: run_fresh(c, folder, timeout=240), FRESH))
-    wrong = [(c.name, judge(c, *r), r) for c, r in zip(FRESH, runs, strict=True)
+        runs = list(pool.map(lambda c: run_fresh(c, folder, timeout=240), [*FRESH, together]))
+    wrong = [(c.name, judge(c, *r), r) for c, r in zip(FRESH, runs[:-1], strict=True)
              if judge(c, *r) != "as expected"]
     assert not wrong, wrong
+    code, out, err = runs[-1]
+    assert code == 0 and "Traceback" not in err, err
+    warnings = [ln for ln in err.splitlines() if ln.startswith("warning:")]
+    for c in ENVIRONMENT:
+        assert sum(c.text in ln for ln in warnings) == 1, (c.text, warnings)
     # the ASCII terminal still shows the result, the Greek parameter names spelt out
-    ascii_run = runs[[c.name for c in FRESH].index("PYTHONIOENCODING=ascii")]
-    assert "sigma = 10, rho = 28" in ascii_run[1] and "Equilibrium: UNSTABLE" in ascii_run[1]
+    assert ENVIRONMENT[-1].name == "PYTHONIOENCODING=ascii"
+    assert "sigma = 10, rho = 28" in out and "Equilibrium: UNSTABLE" in out and out.isascii()
 
 
 def test_table_covers_every_class_of_issue_24():
