@@ -268,3 +268,88 @@ def test_lost_scheduler_stops_with_resume_hint(tmp_path):
     for f in tiles:
         a, b = (int(v) for v in f.stem.split("_")[1:])
         assert check_tile(folder, (a, b), spec_key, MAP_VARIABLES, 6).ok
+
+
+# ---------------------------------------------------------------------------------------
+# the Monte Carlo folder: the map's guarantees (issue 24)
+# ---------------------------------------------------------------------------------------
+def _fake_chunks(monkeypatch, calls):
+    """A stand-in for the index of each sample, a pure function of its values, so that the
+    checkpoint (not the index) is what these tests exercise; counts the samples computed."""
+    import maglev_match.sensitivity as S
+
+    def chunk(base_values, names, rows, model="unit"):
+        calls.append(len(rows))
+        return np.asarray(rows, float) @ np.arange(1.0, rows.shape[1] + 1.0) * 1e-9
+
+    monkeypatch.setattr(S, "mc_chunk", chunk)
+    return S
+
+
+def test_monte_carlo_second_run_on_the_folder_is_refused(tmp_path, monkeypatch):
+    """While one study holds the folder, a second one is refused at once (it used to delete
+    the first one's chunks), both by the library and by the command line before any work."""
+    S = _fake_chunks(monkeypatch, [])
+    folder = tmp_path / "monte-carlo"
+    with lock_folder(folder, "Monte Carlo run"):
+        with pytest.raises(CheckpointLocked, match="in use by another Monte Carlo run"):
+            S.sampled_spread(BASE, {"EI": 3.0}, 4, folder, chunk=2, workers=0)
+        t = time.perf_counter()
+        code = main(["index", "--scatter", "EI=3", "--monte-carlo", "4", "--workers", "0",
+                     "--no-simulation", "--out", str(tmp_path)])
+        assert code == 2 and time.perf_counter() - t < 20  # refused before the index
+    mc = S.sampled_spread(BASE, {"EI": 3.0}, 4, folder, chunk=2, workers=0)  # lock let go
+    assert mc.n == 4 and np.isfinite(mc.chi).all()
+
+
+def test_monte_carlo_truncated_chunk_is_named_and_recomputed(tmp_path, monkeypatch):
+    """A chunk cut short (a crash mid-write of an older version, a damaged disk) is named
+    in a warning on --resume and recomputed; foreign chunks too; the result equals an
+    uninterrupted run bit for bit and only the damaged chunks are computed again."""
+    calls: list[int] = []
+    S = _fake_chunks(monkeypatch, calls)
+    scatter = {"EI": 3.0, "kD": 2.0}
+    ref = S.sampled_spread(BASE, scatter, 7, tmp_path / "ref", chunk=3, workers=0, seed=5)
+    folder = tmp_path / "ck"
+    S.sampled_spread(BASE, scatter, 7, folder, chunk=3, workers=0, seed=5)
+    chunks = sorted(folder.glob("chunk_*.npz"))
+    assert [c.name for c in chunks] == ["chunk_0000000_0000003.npz",
+                                        "chunk_0000003_0000006.npz",
+                                        "chunk_0000006_0000007.npz"]
+    data = chunks[1].read_bytes()
+    chunks[1].write_bytes(data[: len(data) // 2])
+    # a chunk of another study (another seed) under the name of the last one
+    other = tmp_path / "other"
+    S.sampled_spread(BASE, scatter, 7, other, chunk=3, workers=0, seed=6)
+    os.replace(other / chunks[2].name, chunks[2])
+    calls.clear()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        again = S.sampled_spread(BASE, scatter, 7, folder, chunk=3, workers=0, seed=5,
+                                 resume=True)
+    msgs = [str(w.message) for w in caught if w.category is CheckpointWarning]
+    assert any(chunks[1].name in m and "truncated or corrupt" in m for m in msgs), msgs
+    assert any(chunks[2].name in m and "different Monte Carlo study" in m for m in msgs), msgs
+    assert calls == [3, 1]  # the two damaged chunks, nothing else
+    np.testing.assert_array_equal(again.chi, ref.chi)
+    np.testing.assert_array_equal(again.samples, ref.samples)
+    assert (again.mean, again.sd) == (ref.mean, ref.sd)
+    # a fresh (non-resumed) run starts over, an old-format .npy chunk included
+    np.save(folder / "chunk_0000000.npy", np.zeros(3))
+    calls.clear()
+    S.sampled_spread(BASE, scatter, 7, folder, chunk=3, workers=0, seed=5)
+    assert calls == [3, 3, 1] and not list(folder.glob("chunk_*.npy"))
+
+
+def test_monte_carlo_counts_are_checked_by_the_library(tmp_path):
+    import maglev_match.sensitivity as S
+    from maglev_match.params import ParameterError
+
+    for kw, field in (({"n": 10**20}, "--monte-carlo"), ({"n": 1}, "--monte-carlo"),
+                      ({"seed": -1}, "--seed"), ({"workers": -1}, "--workers"),
+                      ({"n": 4.5}, "--monte-carlo")):
+        args = {"n": 4, "seed": 0, "workers": 0, **kw}
+        with pytest.raises(ParameterError) as err:
+            S.sampled_spread(BASE, {"EI": 3.0}, args.pop("n"), tmp_path / "x", **args)
+        assert err.value.field == field
+    assert not (tmp_path / "x").exists()  # refused before the folder is touched

@@ -57,6 +57,19 @@ NUMERIC = [
     (["map", *MAP_AXES], "--rows-per-tile", 1, 10_000, False, True),
     (["map", *MAP_AXES], "--ntst", NTST_MIN, 2000, False, True),
     (["report"], "--t-end", 0.0, 1e5, True, False),
+    # the Monte Carlo and design counts (issue 24: --monte-carlo 99999999999999999999 reached
+    # numpy, --workers -1 hung, --seed -1 was an internal error)
+    (["index", "--scatter", "EI=3"], "--monte-carlo", 2, 1_000_000, False, True),
+    (["index", "--scatter", "EI=3", "--monte-carlo", "4"], "--workers", 0, 256, False, True),
+    (["index", "--scatter", "EI=3", "--monte-carlo", "4"], "--seed", 0, 2**32 - 1, False,
+     True),
+    (["sensitivity", "--scatter", "EI=3", "--monte-carlo", "4"], "--workers", 0, 256, False,
+     True),
+    (["design", "--vary", "EI=5e9:4e10", "--minimize", "EI"], "--workers", 0, 256, False,
+     True),
+    (["design", "--vary", "EI=5e9:4e10", "--minimize", "EI"], "--grid", 2, 50, False, True),
+    (["design", "--vary", "EI=5e9:4e10", "--minimize", "EI"], "--starts", 1, 100, False,
+     True),
 ]
 NOT_A_NUMBER = st.text(alphabet="abcxyz,;:/_ []{}'\"\\", min_size=1, max_size=12).filter(
     lambda s: s.strip() != "")
@@ -348,4 +361,7 @@ def test_disk_full_is_one_line_exit_1(monkeypatch):
     monkeypatch.setattr(stability_cli, "stability", full)
     code, _, err = run(["stability"])
     assert code == 1 and "Traceback" not in err
-    assert err.strip() == "error: system error /data/root_locus.csv: No space left on device"
+    # (issue 24: the message says "disk full" and what is kept, not "system error")
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith("error: disk full: cannot write /data/root_locus.csv (No space left "
+                          "on device); earlier files are unchanged")

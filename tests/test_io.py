@@ -113,3 +113,67 @@ def test_kill_during_write_leaves_the_old_file(tmp_path, how):
     assert target.read_bytes() == old
     # the killed writer's partial data went to a temporary file beside it, never the target
     assert len(_leftovers(tmp_path)) == 1
+
+
+# ---------------------------------------------------------------------------------------
+# a full disk (issue 24)
+# ---------------------------------------------------------------------------------------
+def _enospc(*_a, **_k):
+    raise OSError(28, "No space left on device")
+
+
+@pytest.mark.parametrize("where", ["writer", "replace"])
+def test_full_disk_is_disk_full_with_the_old_file_intact(tmp_path, monkeypatch, where):
+    """ENOSPC inside the writer or at the final rename: DiskFull naming the target, the
+    previous content untouched, no temporary file left."""
+    from maglev_match import io as mio
+    from maglev_match.io import DiskFull, is_disk_full
+
+    target = tmp_path / "map.nc"
+    target.write_bytes(b"old content")
+    if where == "replace":
+        monkeypatch.setattr(mio.os, "replace", _enospc)
+    with pytest.raises(DiskFull) as err:
+        atomic_write(target, (lambda tmp: _enospc()) if where == "writer"
+                     else (lambda tmp: tmp.write_bytes(b"new")))
+    assert str(err.value) == f"disk full: cannot write {target} (No space left on device)"
+    assert not isinstance(err.value, OSError)  # never mistaken for a lost connection
+    assert is_disk_full(err.value) and target.read_bytes() == b"old content"
+    assert _leftovers(tmp_path) == []
+
+
+def test_full_disk_in_atomic_open_and_a_quota(tmp_path, monkeypatch):
+    import errno
+
+    from maglev_match import io as mio
+    from maglev_match.io import DiskFull
+
+    target = tmp_path / "rows.csv"
+    target.write_text("old\n")
+    monkeypatch.setattr(mio.os, "fsync", lambda fd: (_ for _ in ()).throw(
+        OSError(errno.EDQUOT, "Disk quota exceeded")))
+    with pytest.raises(DiskFull, match="Disk quota exceeded"):
+        with atomic_open(target, "w") as fh:
+            fh.write("new\n")
+    assert target.read_text() == "old\n" and _leftovers(tmp_path) == []
+
+
+def test_netcdf_is_written_from_memory_and_reads_back(tmp_path, monkeypatch):
+    """atomic_write_netcdf: the same dataset back (values, attributes), and HDF5 never
+    touches the target path itself (a full disk is then a plain write error)."""
+    import xarray as xr
+
+    from maglev_match import io as mio
+    from maglev_match.io import DiskFull, atomic_write_netcdf
+
+    ds = xr.Dataset({"chi": (("y", "x"), np.arange(6.0).reshape(2, 3), {"units": "1"})},
+                    coords={"x": [1.0, 2.0, 3.0], "y": [4.0, 5.0]}, attrs={"title": "t"})
+    path = tmp_path / "m.nc"
+    atomic_write_netcdf(path, ds)
+    back = xr.load_dataset(path, engine="h5netcdf")
+    xr.testing.assert_identical(back, ds)
+    before = path.read_bytes()
+    monkeypatch.setattr(mio.os, "fsync", _enospc)
+    with pytest.raises(DiskFull):
+        atomic_write_netcdf(path, ds.assign(chi=ds.chi * 2))
+    assert path.read_bytes() == before and _leftovers(tmp_path) == []

@@ -34,7 +34,7 @@ def test_index_scatter_text_and_monte_carlo(capsys, tmp_path):
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "linearised spread: chi = " in text and "sampled (2 sets)" in text
-    assert len(list((tmp_path / "monte-carlo").glob("chunk_*.npy"))) == 1
+    assert len(list((tmp_path / "monte-carlo").glob("chunk_*.npz"))) == 1  # (atomic, fingerprinted)
     assert main(args + ["--json", "--resume"]) == 0
     mc = json.loads(capsys.readouterr().out)["monte_carlo"]
     assert mc["n"] == 2 and mc["failed"] == 0 and mc["invalid"] == 0

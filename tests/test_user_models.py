@@ -275,3 +275,49 @@ def test_builtin_models_still_resolve(capsys):
     assert code == 0 and json.loads(out)["model"] == "unit"
     code, _, err = run(capsys, "stability", "--model", "lorenz")
     assert code == 2 and "a model file ending in .py" in " ".join(err.split())
+
+
+# ---------------------------------------------------------------------------------------
+# the guard around a model file (issue 24); more cases in tests/bad_inputs.py
+# ---------------------------------------------------------------------------------------
+def test_loading_guard_restores_the_process_and_names_the_exit(tmp_path):
+    """A file that calls sys.exit while loading is a ModelFileError naming the call and its
+    line; the stand-in for os._exit and the redirection of stdout end with the load."""
+    import os
+    import sys
+
+    exit_before, stdout_before = os._exit, sys.stdout
+    path = write(tmp_path, "quits.py", "STATES = ['x']\nPARAMS = {}\nimport sys\nsys.exit(3)\n")
+    with pytest.raises(ModelFileError, match=r"called sys.exit\(3\) \(line 4\)"):
+        load_model(path)
+    assert os._exit is exit_before and sys.stdout is stdout_before
+    with pytest.raises(ModelFileError, match="did not finish within 0.5 s"):
+        load_model(write(tmp_path, "spins.py", "while True:\n    pass\n"), timeout=0.5)
+    assert os._exit is exit_before and sys.stdout is stdout_before
+
+
+def test_numerical_problem_names_an_overflow_not_a_verdict(tmp_path):
+    m = load_model(write(tmp_path, "lorenz.py", LORENZ))
+    assert m.numerical_problem() is None and m.numerical_problem({"rho": 20.0}) is None
+    text = m.numerical_problem({"rho": 1e308})
+    assert text.startswith("the right-hand side is not finite at X0 with rho = 1e+308")
+    # a field that is finite at X0 (k sin 0 = 0) with an overflowing Jacobian (2 k)
+    head = "import jax.numpy as jnp\nSTATES = ['x']\nPARAMS = {'k': 1.0}\n"
+    m = load_model(write(tmp_path, "j.py", head + "def rhs(x, p):\n"
+                         "    return p['k'] * (jnp.sin(x) * 2.0)\n"))
+    assert m.numerical_problem({"k": 1e308}).startswith("the Jacobian of the right-hand side "
+                                                        "is not finite at X0 with k = 1e+308")
+
+
+def test_complex_and_locally_undefined_fields_are_refused(tmp_path):
+    head = "import jax.numpy as jnp\nSTATES = ['x', 'y']\nPARAMS = {'a': 1.0}\n"
+    with pytest.raises(ModelFileError, match="returns complex numbers"):
+        load_model(write(tmp_path, "c.py", head + "def rhs(x, p):\n    return 1j * x\n"))
+    # finite at X0 = 0 only: the log of a negative number is NaN everywhere else
+    with pytest.raises(ModelFileError, match="not finite near X0"):
+        load_model(write(tmp_path, "n.py", head + "def rhs(x, p):\n"
+                         "    return jnp.where(x == 0.0, 0.0, jnp.log(-jnp.abs(x)))\n"))
+    # a genuine singularity a little away from X0 is fine (the neighbourhood is small)
+    ok = load_model(write(tmp_path, "s.py", head + "X0 = [1.0, 1.0]\ndef rhs(x, p):\n"
+                          "    return 1.0 / (x - 0.999) - 1000.0\n"))
+    assert ok.system().dim == 2

@@ -349,11 +349,38 @@ class DesignResult:
 # ---------------------------------------------------------------------------------------
 # parsing
 # ---------------------------------------------------------------------------------------
+#: Parameters that are no design choice: a design varies the beam, the vehicle, the magnets
+#: or the controller, never the constants of nature.
+NOT_DESIGN_PARAMETERS: dict[str, str] = {
+    "g": "gravity is a constant of nature, not a design choice",
+    "mu0": "the vacuum permeability is a constant of nature, not a design choice",
+}
+#: Quantities that follow from parameters (what to vary instead).
+DERIVED_QUANTITIES: dict[str, str] = {
+    "i0": "the levitation current follows from m, M, g, N, A and c0: vary those",
+    "w0": "the static deflection follows from sigma, m, M, g and omega1: vary the beam "
+          "(EI, mbar, L) or the vehicle",
+    "chi": "chi is the result: use --maximize chi or --require chi>=X",
+    "h": "h is part of the result chi = h / w0",
+}
+#: Smallest static deflection w0 (m) a design may reach. chi = h / w0 with h at most
+#: gap_max - c0 (10 mm by default): below 10 micrometres chi exceeds 1000, a number no beam
+#: measurement can support (the paper's beams have w0 ~ 0.8 mm); a tiny sigma once gave
+#: chi = 5.7e297.
+W0_MIN = 1e-5
+
+
 def parse_vary(text: str) -> Variable:
-    """``NAME=LO:HI`` -> :class:`Variable`."""
+    """``NAME=LO:HI`` -> :class:`Variable`; the name must be a design parameter (not a
+    constant of nature such as g or mu0, nor a derived quantity such as w0 or i0)."""
     if "=" not in text or ":" not in text:
         raise ParameterError("--vary", text, "expected NAME=LO:HI, e.g. EI=5e9:4e10")
     name, rng = (s.strip() for s in text.split("=", 1))
+    if name in NOT_DESIGN_PARAMETERS:
+        raise ParameterError("--vary", name, NOT_DESIGN_PARAMETERS[name])
+    if name in DERIVED_QUANTITIES:
+        raise ParameterError("--vary", name, f"is derived, not a parameter: "
+                             f"{DERIVED_QUANTITIES[name]}")
     if name not in FIELD_NAMES:
         raise ParameterError("--vary", name, "unknown parameter")
     if name in INTEGER_FIELDS:
@@ -364,6 +391,41 @@ def parse_vary(text: str) -> Variable:
     except ValueError:
         raise ParameterError("--vary", text, "expected NAME=LO:HI with numbers") from None
     return Variable(name, lo, hi)
+
+
+def _samples(var: Variable, n: int = 17) -> np.ndarray:
+    if var.lo > 0:
+        return np.geomspace(var.lo, var.hi, n)
+    return np.linspace(var.lo, var.hi, n)
+
+
+def check_vary_ranges(base: Params, variables: Sequence[Variable]) -> None:
+    """Refuse, before any index is computed, ranges that contain invalid parameter sets or
+    designs whose static deflection w0 falls below :data:`W0_MIN` (where chi = h / w0 is
+    meaningless). Sampled: every corner of the box, and 17 points along each range with the
+    other variables at the base values (w0 is monotone in sigma, omega1, EI, m, M; the
+    samples catch the rest, e.g. L through sin^2 in sigma)."""
+    names = [v.name for v in variables]
+    points = [dict(zip(names, c, strict=True))
+              for c in itertools.product(*[(v.lo, v.hi) for v in variables])]
+    for v in variables:
+        points += [{v.name: float(x)} for x in _samples(v)]
+    for pt in points:
+        where = ", ".join(f"{k} = {x:.6g}" for k, x in pt.items())
+        try:
+            p = base.replace(**pt)
+        except ParameterError as exc:
+            raise ParameterError(f"--vary {' '.join(names)}", where,
+                                 f"this point of the ranges is not a valid parameter set "
+                                 f"({exc}); narrow the ranges") from None
+        w0 = p.w0
+        if not w0 >= W0_MIN:
+            chi_max = (p.gap_max - p.c0) / w0 if w0 > 0 else math.inf
+            raise ParameterError(
+                f"--vary {' '.join(names)}", where,
+                f"the static deflection w0 = {w0:.3g} m there is below {W0_MIN:g} m, where "
+                f"chi = h / w0 (up to {chi_max:.3g}) has no physical meaning; narrow the "
+                "ranges")
 
 
 def parse_requirement(text: str) -> Requirement:

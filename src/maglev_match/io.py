@@ -7,17 +7,25 @@ target. A crash, ``kill -9`` or a full disk during the write leaves the previous
 (if any) untouched and at worst a stray ``.<name>.*.tmp`` file, which is removed when the
 failure is seen in-process.
 
+A full disk (``ENOSPC``, or a quota, ``EDQUOT``) during a write is raised as
+:class:`DiskFull`, one line naming the file, with the previous file untouched. netCDF files
+are written through :func:`atomic_write_netcdf`, which builds the whole file in memory first:
+HDF5 (through h5py) does not survive a write error inside its own file driver (a full disk
+there ended in a segmentation fault), while a plain write of finished bytes fails cleanly.
+
 Usage::
 
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png"))
     with atomic_open(path, "w", newline="") as fh:
         csv.writer(fh).writerow(...)
     atomic_write_text(path, text)
+    atomic_write_netcdf(path, dataset)
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from collections.abc import Callable, Iterator
@@ -25,9 +33,48 @@ from pathlib import Path
 from typing import IO, Any, TypeVar
 
 __all__ = ["atomic_write", "atomic_open", "atomic_write_text", "atomic_write_bytes",
-           "temp_path_for"]
+           "atomic_write_netcdf", "temp_path_for", "DiskFull", "is_disk_full"]
 
 T = TypeVar("T")
+
+#: errno values that mean "no room left": the device is full or the user's quota is used up.
+DISK_FULL_ERRNOS = frozenset(e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None))
+                             if e is not None)
+
+
+class DiskFull(Exception):
+    """A file could not be written because the disk (or the user's quota) is full.
+
+    Deliberately not an :class:`OSError`: callers that treat OSError as a lost connection
+    or a missing file (a Dask client, a checkpoint reader) must not swallow it. The previous
+    content of ``path`` is untouched (the write went to a temporary file, now removed).
+    """
+
+    def __init__(self, path: str | Path, detail: str = ""):
+        self.path = Path(path)
+        self.detail = detail or os.strerror(errno.ENOSPC)
+        super().__init__(f"disk full: cannot write {self.path} ({self.detail})")
+
+
+def is_disk_full(exc: BaseException) -> bool:
+    """Whether ``exc`` (or an exception it was raised from) is a full disk or quota."""
+    seen = 0
+    while exc is not None and seen < 10:
+        if isinstance(exc, DiskFull) or (isinstance(exc, OSError)
+                                         and exc.errno in DISK_FULL_ERRNOS):
+            return True
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return False
+
+
+def _disk_full_or_raise(path: Path, exc: BaseException) -> None:
+    """Re-raise a full-disk error while writing ``path`` as :class:`DiskFull`."""
+    if isinstance(exc, DiskFull):
+        raise exc
+    if is_disk_full(exc):
+        detail = exc.strerror if isinstance(exc, OSError) and exc.strerror else ""
+        raise DiskFull(path, detail) from exc
 
 
 def temp_path_for(path: str | Path) -> Path:
@@ -89,16 +136,21 @@ def atomic_write(path: str | Path, writer: Callable[[Path], T], *, fsync: bool =
     exception propagates; the target is unchanged.
     """
     path = Path(path)
-    tmp = temp_path_for(path)
+    try:
+        tmp = temp_path_for(path)
+    except OSError as exc:
+        _disk_full_or_raise(path, exc)
+        raise
     try:
         result = writer(tmp)
         if fsync:
             _fsync_file(tmp)
         _set_normal_mode(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        _disk_full_or_raise(path, exc)
         raise
     if fsync:
         _fsync_dir(path.parent)
@@ -115,7 +167,11 @@ def atomic_open(path: str | Path, mode: str = "w", **kwargs: Any) -> Iterator[IO
         kwargs.setdefault("encoding", "utf-8")
 
     path = Path(path)
-    tmp = temp_path_for(path)
+    try:
+        tmp = temp_path_for(path)
+    except OSError as exc:
+        _disk_full_or_raise(path, exc)
+        raise
     fh: IO[Any] | None = None
     try:
         fh = open(tmp, mode, **kwargs)  # noqa: SIM115  (closed below)
@@ -125,12 +181,13 @@ def atomic_open(path: str | Path, mode: str = "w", **kwargs: Any) -> Iterator[IO
             os.fsync(fh.fileno())
         _set_normal_mode(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if fh is not None:
             with contextlib.suppress(Exception):
                 fh.close()
         with contextlib.suppress(OSError):
             tmp.unlink()
+        _disk_full_or_raise(path, exc)
         raise
     _fsync_dir(path.parent)
 
@@ -147,3 +204,16 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     with atomic_open(path, "wb") as fh:
         fh.write(data)
     return Path(path)
+
+
+def atomic_write_netcdf(path: str | Path, dataset: Any, engine: str = "h5netcdf") -> Path:
+    """Write an :class:`xarray.Dataset` to ``path`` as netCDF-4, atomically.
+
+    The file is built in memory first (``Dataset.to_netcdf()`` without a path returns its
+    bytes) and then written and renamed like any other file, so a full disk is a clean
+    :class:`DiskFull` with the previous file intact instead of an error inside HDF5's file
+    driver (which crashed the process). Gridded results of this package are at most a few
+    megabytes, so the copy in memory costs nothing worth keeping a second path for.
+    """
+    data = dataset.to_netcdf(engine=engine)
+    return atomic_write_bytes(path, bytes(data))

@@ -27,6 +27,13 @@ JAX (and, through it, NumPy's BLAS) is loaded, unless the caller imported them e
   to the free core when the machine is busy (an empty-cache ``index`` took 62.6 s pinned
   against 11.0 s unpinned at load ~7, 2026-11-25). Child processes of a pinned process
   (Dask workers of a map) get their parent's full CPU set back.
+* **Environment problems** are named in one line on stderr, never left to surface as a JAX
+  traceback, and the run goes on: a ``JAX_PLATFORMS`` naming a platform this machine cannot
+  start (``gpu`` without a GPU) falls back to the CPU (where the package computes anyway),
+  and a cache folder that cannot be written is left out. Each line names the variable and
+  what to set instead. (A line on stderr rather than a Python warning: this module is
+  imported before any caller can arrange how warnings look, and a warning's two-line form
+  with a source line is noise here.)
 """
 
 from __future__ import annotations
@@ -98,16 +105,83 @@ _configure_threads()
 import jax  # noqa: E402  (after the thread settings above)
 
 jax.config.update("jax_enable_x64", True)
-jax.config.update("jax_platforms", os.environ.get("JAX_PLATFORMS", "cpu") or "cpu")
+_PLATFORMS = os.environ.get("JAX_PLATFORMS", "cpu") or "cpu"
+jax.config.update("jax_platforms", _PLATFORMS)
+#: environment problems met while this module was imported (each already reported)
+ENVIRONMENT_PROBLEMS: list[str] = []
+
+
+def _environment_warning(message: str) -> None:
+    """One line on stderr (see the module docstring), remembered for callers."""
+    ENVIRONMENT_PROBLEMS.append(message)
+    try:
+        sys.stderr.write(f"warning: {message}\n")
+        sys.stderr.flush()
+    except (OSError, ValueError, UnicodeError):  # no usable stderr: the list keeps it
+        pass
+
+
+def _check_platforms(platforms: str) -> None:
+    """A platform other than the CPU is started now; one this machine cannot start is
+    reported in one line and replaced by the CPU, instead of a RuntimeError deep inside the
+    first computation (the CPU always exists and is started lazily, as before)."""
+    if {p.strip().lower() for p in platforms.split(",") if p.strip()} <= {"cpu"}:
+        return
+    try:
+        jax.devices()
+    except RuntimeError as exc:
+        detail = " ".join(str(exc).split("(set JAX_PLATFORMS")[0].split())
+        jax.config.update("jax_platforms", "cpu")
+        _environment_warning(
+            f"JAX_PLATFORMS={platforms}: JAX cannot start that platform on this machine "
+            f"({detail}); computing on the CPU instead: unset JAX_PLATFORMS or set "
+            "JAX_PLATFORMS=cpu to silence this")
+
+
+_check_platforms(_PLATFORMS)
 
 # the folder of the persistent caches (XLA executables, and the exported kernels of
 # maglev_match.aot in its "aot" subfolder); None when the cache is switched off or unusable
 CACHE_DIR: Path | None = None
 
-_cache = os.environ.get("MAGLEV_MATCH_CACHE", str(Path.home() / ".cache" / "maglev-match" / "jax"))
+def _cache_problem(folder: Path) -> str | None:
+    """Why ``folder`` cannot hold the cache (created if needed), or None if it can: a file
+    is created and removed there, since a folder can exist and still refuse writes."""
+    import tempfile
+
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, name = tempfile.mkstemp(prefix=".probe-", dir=folder)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
+
+
+def _cache_setting() -> tuple[str, bool]:
+    """The cache folder and whether MAGLEV_MATCH_CACHE chose it."""
+    if "MAGLEV_MATCH_CACHE" in os.environ:
+        return os.environ["MAGLEV_MATCH_CACHE"], True
+    try:
+        return str(Path.home() / ".cache" / "maglev-match" / "jax"), False
+    except RuntimeError:  # no home folder can be determined
+        return "", False
+
+
+_cache, _chosen = _cache_setting()
+if _cache:
+    _problem = _cache_problem(Path(_cache))
+    if _problem is not None:
+        _shown = _cache if _chosen else f"{_cache} (the default)"
+        _environment_warning(
+            f"MAGLEV_MATCH_CACHE={_shown}: the compilation cache folder cannot be written "
+            f"({_problem}); running without it (every process compiles again, slower "
+            "start): set MAGLEV_MATCH_CACHE to a writable folder, or to an empty value to "
+            "switch the cache off")
+        _cache = ""
 if _cache:
     try:
-        Path(_cache).mkdir(parents=True, exist_ok=True)
         jax.config.update("jax_compilation_cache_dir", _cache)
         # cache every compilation: most of the package's kernels compile in 0.01-0.2 s,
         # which a threshold would leave to be redone in every process

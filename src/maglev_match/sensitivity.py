@@ -1089,6 +1089,26 @@ def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarr
     return out
 
 
+def mc_checkpoint(folder: Any, key: str) -> Any:
+    """The Monte Carlo study's checkpoint folder (:class:`maglev_match.checkpoint.Checkpoint`):
+    ``study.json`` and one ``chunk_AAAAAAA_BBBBBBB.npz`` per chunk of samples [A, B), each
+    holding ``chi`` of shape (B - A,) with the study's fingerprint; the map's guarantees (a
+    lock, atomic writes, damaged or foreign chunks named and recomputed)."""
+    from pathlib import Path
+
+    from maglev_match.checkpoint import Checkpoint
+
+    return Checkpoint(folder=Path(folder), spec_key=key,
+                      shapes_of=lambda rows: {"chi": (rows[1] - rows[0],)}, prefix="chunk",
+                      digits=7, spec_name="study.json", what="Monte Carlo study",
+                      noun="chunk", stale=("chunk_*.npy",))
+
+
+def mc_chunks(n: int, chunk: int) -> list[tuple[int, int]]:
+    """The sample ranges [a, b) of the chunks of a study of ``n`` samples."""
+    return [(a, min(a + chunk, n)) for a in range(0, n, chunk)]
+
+
 def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoint: Any, *,
                    seed: int = 0, chunk: int = 16, resume: bool = False,
                    workers: int | None = None, scheduler: str | None = None,
@@ -1097,82 +1117,84 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
                    model: str = "unit") -> SampledSpread:
     """The distribution of chi over ``n`` samples, chunk by chunk on Dask (the map's worker
     set-up: single-threaded processes, glibc's malloc thresholds), each chunk saved in
-    ``checkpoint`` as it finishes; with ``resume`` finished chunks are reused (the chunk
-    files carry a key of base, scatter, n and seed, so a resume cannot mix studies).
-    ``workers == 0`` computes in this process; ``model`` 'unit' or 'vehicle'."""
-    import os
-    from pathlib import Path
+    ``checkpoint`` as it finishes; with ``resume`` finished chunks are reused.
 
+    The folder has the map's guarantees (:func:`mc_checkpoint`): it is locked while the study
+    runs (a second run on it raises :class:`~maglev_match.checkpoint.CheckpointLocked`),
+    chunks are written atomically with the fingerprint of the study (base, scatter, n, seed,
+    chunk size, model), and on resume a chunk of another study, a truncated or otherwise
+    damaged chunk is named in a :class:`~maglev_match.checkpoint.CheckpointWarning` and
+    recomputed. ``workers == 0`` computes in this process; ``model`` 'unit' or 'vehicle'.
+    """
+    import contextlib
+    import os
+
+    from maglev_match.options import MonteCarloOptions
     from maglev_match.params import ParameterError
 
-    if n < 2:
-        raise ParameterError("--monte-carlo", n, "must be at least 2 samples")
+    MonteCarloOptions(samples=n, seed=seed, workers=workers, chunk=chunk)  # checks them
+    n = int(n)
     names = tuple(scatter)
-    X = _sample(base, scatter, n, seed)
-    folder = Path(checkpoint)
-    folder.mkdir(parents=True, exist_ok=True)
-    starts = list(range(0, n, chunk))
-    key0 = _chunk_key(base, scatter, n, seed, chunk, model)
-    keyfile = folder / "study.json"
-    if resume and keyfile.exists() and keyfile.read_text() != key0:
-        raise ParameterError("--resume", str(folder), "the checkpoint belongs to a different "
-                             "study; remove it or drop --resume")
-    if not resume:
-        for f in folder.glob("chunk_*.npy"):
-            f.unlink()
-    keyfile.write_text(key0)
-
-    def path(a: int) -> Path:
-        return folder / f"chunk_{a:07d}.npy"
-
-    todo = [a for a in starts if not path(a).exists()]
-    done = len(starts) - len(todo)
-    if progress:
-        progress(done, len(starts))
+    X = _sample(base, scatter, n, int(seed))
+    pieces = mc_chunks(n, chunk)
+    ck = mc_checkpoint(checkpoint, _chunk_key(base, scatter, n, seed, chunk, model))
     base_values = base.as_input_dict()
-    if todo and workers == 0 and scheduler is None:
-        for a in todo:
-            np.save(path(a), mc_chunk(base_values, names, X[a:a + chunk], model))
-            done += 1
-            if progress:
-                progress(done, len(starts))
-    elif todo:
-        import dask
-        from dask.distributed import Client, LocalCluster, as_completed
-
-        from maglev_match.maps import (
-            MALLOC_MMAP_THRESHOLD,
-            MALLOC_TRIM_THRESHOLD,
-            SINGLE_THREADED_ENV,
-        )
-
-        cluster = None
-        if scheduler is None:
-            with dask.config.set({
-                "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_":
-                    MALLOC_TRIM_THRESHOLD,
-                "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_":
-                    MALLOC_MMAP_THRESHOLD,
-            }):
-                cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
-                                       threads_per_worker=1, processes=True,
-                                       dashboard_address=None, env=SINGLE_THREADED_ENV)
-            client = Client(cluster)
-        else:
-            client = Client(scheduler)
+    with contextlib.ExitStack() as stack:
         try:
-            futs = {client.submit(mc_chunk, base_values, names, X[a:a + chunk], model,
-                                  pure=False, retries=2): a for a in todo}
-            for fut in as_completed(futs):
-                np.save(path(futs[fut]), fut.result())
+            stack.enter_context(ck.locked(resume, run="Monte Carlo run"))
+        except ValueError as exc:
+            raise ParameterError("--resume", str(ck.folder), str(exc)) from None
+        todo = ck.todo(pieces)
+        done = len(pieces) - len(todo)
+        if progress:
+            progress(done, len(pieces))
+        if todo and workers == 0 and scheduler is None:
+            for a, b in todo:
+                ck.save((a, b), {"chi": mc_chunk(base_values, names, X[a:b], model)})
                 done += 1
                 if progress:
-                    progress(done, len(starts))
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-    chi = np.concatenate([np.load(path(a)) for a in starts])
+                    progress(done, len(pieces))
+        elif todo:
+            import dask
+            from dask.distributed import Client, LocalCluster, as_completed
+
+            from maglev_match.maps import (
+                MALLOC_MMAP_THRESHOLD,
+                MALLOC_TRIM_THRESHOLD,
+                SINGLE_THREADED_ENV,
+            )
+
+            cluster = None
+            if scheduler is None:
+                with dask.config.set({
+                    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_":
+                        MALLOC_TRIM_THRESHOLD,
+                    "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_":
+                        MALLOC_MMAP_THRESHOLD,
+                }):
+                    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
+                                           threads_per_worker=1, processes=True,
+                                           dashboard_address=None, env=SINGLE_THREADED_ENV)
+                client = Client(cluster)
+            else:
+                client = Client(scheduler)
+            try:
+                futs = {client.submit(mc_chunk, base_values, names, X[a:b], model,
+                                      pure=False, retries=2): (a, b) for a, b in todo}
+                for fut in as_completed(futs):
+                    ck.save(futs[fut], {"chi": fut.result()})
+                    done += 1
+                    if progress:
+                        progress(done, len(pieces))
+            finally:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+        bad = [t for t in pieces if not ck.check(t).ok]
+        if bad:
+            raise RuntimeError(f"{len(bad)} of {len(pieces)} Monte Carlo chunks are missing "
+                               f"or damaged in {ck.folder} after the run")
+        chi = np.concatenate([ck.load(t)["chi"] for t in pieces])
     invalid = int(np.sum(chi == -np.inf))
     chi = np.where(chi == -np.inf, np.nan, chi)
     failed = int(np.sum(np.isnan(chi))) - invalid

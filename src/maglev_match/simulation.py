@@ -39,7 +39,7 @@ from maglev_match.dynamics.simulate import (
     simulate_batch,
 )
 from maglev_match.dynamics.system import System
-from maglev_match.io import atomic_write
+from maglev_match.io import atomic_write, atomic_write_netcdf
 from maglev_match.models import build_system
 from maglev_match.models import unit as unit_model
 from maglev_match.models import vehicle as vehicle_model
@@ -387,7 +387,7 @@ def save_history(sim: MaglevSimulation, path: str | Path) -> Path:
 
     ds = simulation_dataset(sim)
     if path.suffix == ".nc":
-        atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+        atomic_write_netcdf(path, ds)
         return path
     cols: dict[str, np.ndarray] = {"time": ds["time"].values}
     for name, var in ds.data_vars.items():

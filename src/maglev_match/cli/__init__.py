@@ -44,6 +44,11 @@ from maglev_match.params import ParameterError
 
 # Where unexpected errors should be reported.
 REPORT_TO = "the maglev-match issue tracker"
+# What to do after a full disk: files are written atomically and checkpoints keep their
+# finished tiles and chunks, so nothing already written is lost.
+DISK_FULL_HINT = ("; earlier files are unchanged and finished map tiles or Monte Carlo chunks "
+                  "are kept: free some space and run the same command again (with --resume "
+                  "for a map or a Monte Carlo study)")
 
 #: Every command: the module that defines it (``maglev_match.cli.<module>``) and the one
 #: line shown by ``maglev-match --help``. Listing them here lets the program answer
@@ -317,13 +322,25 @@ def _main(argv: list[str] | None) -> int:
     if debug:
         args = [a for a in args if a != "--debug"]
         args = ["--debug", *args]
+    from maglev_match.checkpoint import CheckpointLocked, MapStopped
+    from maglev_match.cli.terminal import encoding_note, guard_output
+    from maglev_match.errors import ModelFileError
+    from maglev_match.io import DiskFull, is_disk_full
+
+    guard_output()  # a non-UTF-8 terminal: ASCII stand-ins, never a lost result
     old_show = warnings.showwarning
     warnings.showwarning = _show_warning
     try:
         rv = app(args=args, standalone_mode=False, prog_name="maglev-match")
-    except (ParameterError, UserError) as exc:
+    except (ParameterError, UserError, CheckpointLocked, ModelFileError) as exc:
         print_error(str(exc))
         return 2
+    except DiskFull as exc:
+        print_error(f"{exc}{DISK_FULL_HINT}")
+        return 1
+    except MapStopped as exc:
+        print_error(str(exc), prefix="stopped" if exc.exit_code == 130 else "error")
+        return exc.exit_code
     except typer.Exit as exc:
         return int(exc.exit_code or 0)
     except (typer.Abort, KeyboardInterrupt):
@@ -362,17 +379,28 @@ def _main(argv: list[str] | None) -> int:
         if debug:
             raise
         where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
+        if is_disk_full(exc):
+            print_error(f"disk full: cannot write{where} ({exc.strerror or exc})"
+                        f"{DISK_FULL_HINT}")
+            return 1
         print_error(f"system error{where}: {exc.strerror or exc}")
         return 1
     except Exception as exc:
         if debug:
             raise
+        if is_disk_full(exc):  # raised from a full disk through a library's own error
+            print_error(f"disk full: {type(exc).__name__}: {' '.join(str(exc).split())}"
+                        f"{DISK_FULL_HINT}")
+            return 1
         print_error(f"internal error: {type(exc).__name__}: {' '.join(str(exc).split())}"
                     f"{_where(exc)}. This is a bug: please report it to {REPORT_TO} with the "
                     "command line and the output of the same command with --debug")
         return 1
     finally:
         warnings.showwarning = old_show
+        note = encoding_note()
+        if note:
+            print_warnings([note])
     if isinstance(rv, int) and not isinstance(rv, bool):
         if rv == 130:
             print_error("interrupted", prefix="stopped")

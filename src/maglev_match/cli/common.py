@@ -18,7 +18,17 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
-from maglev_match.options import NCOL_MAX, NCOL_MIN, NTST_MAX, NTST_MIN, STEPS_MAX, TOL_MAX
+from maglev_match.options import (
+    MC_SAMPLES_MAX,
+    NCOL_MAX,
+    NCOL_MIN,
+    NTST_MAX,
+    NTST_MIN,
+    SEED_MAX,
+    STEPS_MAX,
+    TOL_MAX,
+    WORKERS_MAX,
+)
 from maglev_match.params import (
     DEFAULT_PRESET,
     PARAMETER_DOCS,
@@ -102,7 +112,17 @@ def preload(*modules: str) -> None:
     threading.Thread(target=work, name="maglev-match-preload", daemon=True).start()
 
 
+#: The commands that accept a user model file (``--model FILE.py``).
+USER_MODEL_COMMANDS = "stability, root-locus, hopf, hopf-curve, cycles and simulate"
+
+
 def check_model(model: str) -> str:
+    """``--model`` of a command that works on the maglev models: 'unit' or 'vehicle' (a
+    command that accepts a model file branches off before calling this)."""
+    if str(model).endswith(".py"):
+        raise ParameterError("--model", model, "this command works on the maglev models "
+                             "'unit' and 'vehicle' only; user model files are accepted by "
+                             f"{USER_MODEL_COMMANDS}")
     if model not in ("unit", "vehicle"):
         raise ParameterError("--model", model,
                              "must be 'unit', 'vehicle' or a model file ending in .py")
@@ -243,7 +263,6 @@ SCAN_MAX = 20_000  # values of an eigenvalue scan (each one an eigenvalue proble
 GRID_MAX = 400  # stability-grid points per axis (GRID_MAX^2 eigenvalue problems)
 N_SAVE_MAX = 1_000_000  # saved time points of a simulation
 HORIZON_MAX = 1e5  # s, simulation horizon
-WORKERS_MAX = 256
 ROWS_PER_TILE_MAX = 10_000
 
 
@@ -307,6 +326,9 @@ grid_option = bounded(0, GRID_MAX, integer=True, why="0: no grid")
 n_save_option = bounded(2, N_SAVE_MAX, integer=True)
 horizon_option = bounded(0.0, HORIZON_MAX, lo_open=True, unit="s")
 workers_option = bounded(0, WORKERS_MAX, integer=True, why="0: compute in this process")
+monte_carlo_option = bounded(2, MC_SAMPLES_MAX, integer=True,
+                             why="samples; each one is an index computation")
+seed_option = bounded(0, SEED_MAX, integer=True)
 rows_per_tile_option = bounded(1, ROWS_PER_TILE_MAX, integer=True)
 fraction_option = bounded(0.0, 1.0, lo_open=True)
 # initial displacements (x5, q1): finite and at most 1 m (gaps are millimetres)
@@ -576,3 +598,35 @@ class ProgressReport:
 def progress_report(command: str, tty: bool | None = None) -> ProgressReport:
     """A :class:`ProgressReport` for ``command`` (see there)."""
     return ProgressReport(command, tty)
+
+
+# ----- options that do not apply -----------------------------------------------------------
+def _current_context() -> Any:
+    """The click context of the running command (typer's bundled click, or click)."""
+    for module in ("typer._click.globals", "click.globals"):
+        try:
+            mod = __import__(module, fromlist=["get_current_context"])
+        except ImportError:
+            continue
+        ctx = mod.get_current_context(silent=True)
+        if ctx is not None:
+            return ctx
+    return None
+
+
+def given(name: str) -> bool:
+    """Whether the option with parameter name ``name`` (the Python name, e.g. ``set_``) was
+    given on the command line, as opposed to left at its default. False outside a command."""
+    ctx = _current_context()
+    if ctx is None:
+        return False
+    source = ctx.get_parameter_source(name)
+    return source is not None and getattr(source, "name", "") in ("COMMANDLINE", "ENVIRONMENT")
+
+
+def refuse_given(options: dict[str, str], why: str) -> None:
+    """Refuse (exit code 2) the first of ``options`` (parameter name -> option as typed,
+    e.g. {"x5": "--x5"}) given on the command line: ``why`` says why it does not apply."""
+    for name, option in options.items():
+        if given(name):
+            raise UserError(f"{option}: {why}")

@@ -101,30 +101,6 @@ def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
     return rows
 
 
-def _load_restart(path: Path | None, label: str | None, param: str):
-    """The restart state and a Hopf-point record of a saved branch (user errors named)."""
-    from types import SimpleNamespace
-
-    from maglev_match.dynamics.cycles import load_restart
-
-    if path is None or label is None:
-        raise UserError("--restart FILE and --label LABEL go together")
-    if not path.is_file():
-        raise UserError(f"--restart {path}: no such file")
-    try:
-        start, state, saved_param = load_restart(path, label)
-    except KeyError as exc:
-        raise UserError(f"--label {label}: {str(exc).strip(chr(34) + chr(39))}") from None
-    except (OSError, ValueError) as exc:
-        raise UserError(f"--restart {path}: not a saved branch ({exc})") from None
-    l1 = float("nan") if start.l1 is None else start.l1
-    kind = "subcritical" if l1 > 0 else "supercritical" if l1 < 0 else "unknown"
-    rec = SimpleNamespace(param=start.param, value=start.value, x=start.x, p=start.p,
-                          frequency=start.frequency, q=start.q, l1=l1, kind=kind,
-                          crossing_speed=float("nan"), others_stable=None, converged=True)
-    return state, rec, saved_param
-
-
 def _hopf_json(h: HopfPoint, param: str) -> dict[str, Any]:
     return {param: h.value, "l1": h.l1, "kind": h.kind, "frequency": h.frequency,
             "period": 2 * np.pi / h.frequency, "crossing_speed": h.crossing_speed,
@@ -173,9 +149,11 @@ def cycles_command(
     json_out: JsonOpt = False,
     out: OutOpt = None,
     restart: Annotated[Path | None, typer.Option(
-        "--restart", help="Continue from a point of a branch saved by --out (netCDF), "
-        "instead of from a Hopf point; give the same --at/--set as for that run. With "
-        "another --param the saved cycle is continued in that parameter.")] = None,
+        "--restart", help="Continue from a point of a branch saved by --out (netCDF) instead "
+        "of from a Hopf point: no Hopf search (--from/--to/--all/--scan are refused), the "
+        "saved model, mesh and parameter values (give no --preset/--config/--set/--at, or the "
+        "saved ones). With another --param the saved cycle is continued in that "
+        "parameter.")] = None,
     label: Annotated[str | None, typer.Option(
         "--label", help="With --restart: the point to continue from, P<k> for the k-th "
         "branch point or a special point's label (LPC1, PD1, ...).")] = None,
@@ -194,7 +172,14 @@ def cycles_command(
         raise ParameterError("--ntst", ntst, "must be at least 4")
     if is_model_file(model):  # a user model file: no maglev limits or read-outs
         return user_cycles(model, set_, at, param, start, stop, all_hopf, n_scan, ntst, ncol,
-                           max_steps, json_out, out)
+                           max_steps, json_out, out, restart=restart, label=label)
+    if restart is not None or label is not None:  # continue a saved branch (cli/restart.py)
+        from maglev_match.cli.restart import cycles_restart
+
+        return cycles_restart(restart=restart, label=label, param=param, model=model,
+                              preset=preset, config=config, set_=set_, at=at, ntst=ntst,
+                              ncol=ncol, max_steps=max_steps, ignore_current=ignore_current,
+                              json_out=json_out, out=out)
     check_model(model)
     params = apply_at(_params(preset, config, set_), at)
     if out is not None or not json_out:  # files at the end: load their writers meanwhile
@@ -224,10 +209,6 @@ def cycles_command(
                             f"[{a:.6g}, {b:.6g}]; widen --from/--to")
         hopfs.sort(key=lambda h: abs(h.value - design))
         chosen = hopfs if all_hopf else hopfs[:1]
-        restart_state, restart_param = None, None
-        if restart is not None or label is not None:
-            restart_state, start, restart_param = _load_restart(restart, label, param)
-            chosen = [start]
         limits = cycle_limit_margins(params, include_current=not ignore_current)
         branches: list[CycleBranch] = []
         for h in chosen:
@@ -239,8 +220,7 @@ def cycles_command(
                             f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm")
 
             br = cycle_branch(system, h, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
-                              limits=limits, progress=report, restart=restart_state,
-                              restart_param=restart_param)
+                              limits=limits, progress=report)
             branches.append(br)
             prog.stage(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
                        f"stopped: {br.stopped_reason}")
@@ -298,8 +278,9 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     # the full branches (profiles, multipliers, special points, restart data) as netCDF
     from maglev_match.cli.common import unit_of
     from maglev_match.datasets import annotate
-    from maglev_match.io import atomic_write
+    from maglev_match.io import atomic_write_netcdf
     from maglev_match.models import build_system
+    from maglev_match.restart import RestartKind, stamp
 
     system = build_system(params, model)
     for k, br in enumerate(branches):
@@ -307,7 +288,8 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
             continue
         nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
         ds = annotate(br.to_xarray(system, param_unit=unit_of(param)), params)
-        atomic_write(nc, lambda tmp, ds=ds: ds.to_netcdf(tmp, engine="h5netcdf"))
+        stamp(ds, RestartKind.CYCLE_BRANCH, system, model, "cycles")  # restartable
+        atomic_write_netcdf(nc, ds)
         files.append(nc)
     lo = min([scan.scan_values[0]] + [float(np.min(b.values)) for b in branches if b.points])
     hi = max([scan.scan_values[-1]] + [float(np.max(b.values)) for b in branches if b.points])
@@ -323,11 +305,15 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     return files
 
 
-def _print_summary(result, branches, chosen, param, files) -> None:
+def _print_summary(result, branches, chosen, param, files, first_line: str | None = None
+                   ) -> None:
     for h, br in zip(chosen, branches, strict=True):
-        console.print(f"Hopf point {param} = {h.value:.8g}, frequency {h.frequency:.6g} rad/s, "
-                      f"l1 = {h.l1:.4g} ({h.kind}); branch stopped: {br.stopped_reason} "
-                      f"after {br.steps} steps")
+        if first_line is not None:  # a restart: its own header, no Hopf point found here
+            console.print(first_line, highlight=False, markup=False)
+        else:
+            console.print(f"Hopf point {param} = {h.value:.8g}, frequency {h.frequency:.6g} "
+                          f"rad/s, l1 = {h.l1:.4g} ({h.kind}); branch stopped: "
+                          f"{br.stopped_reason} after {br.steps} steps")
         table = Table(param, "T (s)", "gap max (mm)", "gap min (mm)", "i min (A)",
                       "stable", "n unst", box=box.SIMPLE)
         pts = br.points

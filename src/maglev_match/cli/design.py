@@ -19,15 +19,20 @@ from maglev_match.cli.common import (
     OutOpt,
     PresetOpt,
     SetOpt,
+    bounded,
     check_index_params,
     check_model,
     console,
     emit_json,
+    monte_carlo_option,
     output_target,
     params_from_options,
     print_warnings,
     progress_report,
+    seed_option,
+    workers_option,
 )
+from maglev_match.options import SCATTER_PCT_MAX, check_scatter_percent
 from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
 
 MODEL_TEXT = {"unit": "model A (one levitation unit)",
@@ -36,25 +41,32 @@ MODEL_TEXT = {"unit": "model A (one levitation unit)",
 # `design` exits with this code when no candidate meets the requirements (the best one found
 # is still printed): distinct from 1 (a failure or a bug) and 2 (a usage error).
 NO_FEASIBLE_DESIGN = 3
+# bounds of the search's counts: the start grid has GRID^d points (d varied parameters), and
+# each optimiser run takes tens of index evaluations
+DESIGN_GRID_MAX = 50
+DESIGN_STARTS_MAX = 100
 
 ScatterOpt = Annotated[
     list[str] | None,
     typer.Option("--scatter", help="NAME=PCT: relative standard deviation of a parameter "
-                 "(repeatable); prints the linearised spread of chi."),
+                 f"in percent, 0 to {SCATTER_PCT_MAX:g} (repeatable); prints the linearised "
+                 "spread of chi."),
 ]
 
 
 McOpt = Annotated[
     int | None,
     typer.Option("--monte-carlo", help="N: also sample chi at N parameter sets drawn with "
-                 "the --scatter spreads (Dask, resumable), beside the linearised estimate."),
+                 "the --scatter spreads (Dask, resumable), beside the linearised estimate.",
+                 callback=monte_carlo_option),
 ]
 WorkersOpt = Annotated[
     int | None, typer.Option("--workers", help="Local Dask workers for --monte-carlo "
-                             "(default: all cores; 0: none).")]
+                             "(default: all cores; 0: none).", callback=workers_option)]
 ResumeOpt = Annotated[bool, typer.Option("--resume", help="Reuse finished Monte Carlo "
                                          "chunks in the output folder.")]
-SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed of the Monte Carlo samples.")]
+SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed of the Monte Carlo samples.",
+                                      callback=seed_option)]
 
 
 def _monte_carlo(params, scatter: dict[str, float], n: int | None, spread: dict | None,
@@ -104,9 +116,9 @@ def parse_scatter(items: list[str] | None) -> dict[str, float]:
             pct = float(raw.rstrip("%"))
         except ValueError:
             raise ParameterError("--scatter", text, "the percentage must be a number") from None
-        if not (math.isfinite(pct) and pct >= 0):
-            raise ParameterError("--scatter", text, "the percentage must be >= 0")
-        out[name] = pct
+        if name in out:
+            raise ParameterError("--scatter", name, "given twice")
+        out[name] = check_scatter_percent(name, pct)
     return out
 
 
@@ -134,7 +146,29 @@ def scatter_options(params, items: list[str] | None, monte_carlo: int | None,
     check_scatter_names(params, sc, model)
     if monte_carlo is not None and not sc:
         raise ParameterError("--monte-carlo", monte_carlo, "needs at least one --scatter NAME=PCT")
+    if monte_carlo is None:  # options of the Monte Carlo study would do nothing
+        from maglev_match.cli.common import refuse_given
+
+        refuse_given({"resume": "--resume", "seed": "--seed", "workers": "--workers"},
+                     "applies to a Monte Carlo study only; add --monte-carlo N (with "
+                     "--scatter NAME=PCT)")
     return sc
+
+
+def check_monte_carlo_folder(out, command: str, stem: str, monte_carlo: int | None) -> None:
+    """Before any work: the --out of a Monte Carlo study can be written, and its checkpoint
+    folder (``<out>/monte-carlo``) is not in use by another run (the lock is tried and let
+    go; the study holds it while it runs, see :func:`maglev_match.sensitivity.sampled_spread`).
+    A second run on the same folder is thus refused at once, not after its index."""
+    if monte_carlo is None:
+        return
+    from maglev_match.checkpoint import lock_folder
+    from maglev_match.cli.common import check_output_path
+
+    check_output_path(out)
+    folder, _ = output_target(out, command, stem)
+    with lock_folder(folder / "monte-carlo", "Monte Carlo run"):
+        pass
 
 
 def _spread(sens, scatter: dict[str, float]) -> dict | None:
@@ -222,6 +256,7 @@ def sensitivity_command(
     params = params_from_options(preset, config, set_)
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
+    check_monte_carlo_folder(out, "sensitivity", "tornado", monte_carlo)
     with progress_report("sensitivity") as prog:
         prog.stage("computing the index and its sensitivities ...")
         sens = index_sensitivity(params, boundaries=boundaries, model=model)
@@ -289,9 +324,13 @@ def design_command(
     config: ConfigOpt = None,
     set_: SetOpt = None,
     model: ModelOpt = "unit",
-    grid: Annotated[int | None, typer.Option("--grid", help="Start-grid points per varied "
-                                             "parameter (default 9 for one, 5 for two).")] = None,
-    starts: Annotated[int, typer.Option("--starts", help="Optimiser runs.")] = 2,
+    grid: Annotated[int | None, typer.Option(
+        "--grid", help="Start-grid points per varied parameter (default 9 for one, 5 for "
+        "two).", callback=bounded(2, DESIGN_GRID_MAX, integer=True,
+                                  why="each point is one index computation"))] = None,
+    starts: Annotated[int, typer.Option("--starts", help="Optimiser runs.",
+                                        callback=bounded(1, DESIGN_STARTS_MAX,
+                                                         integer=True))] = 2,
     scatter: ScatterOpt = None,
     monte_carlo: McOpt = None,
     workers: WorkersOpt = None,
@@ -307,6 +346,7 @@ def design_command(
         DesignStatus,
         Goal,
         MaglevEvaluator,
+        check_vary_ranges,
         optimise_design,
         parse_requirement,
         parse_vary,
@@ -330,8 +370,10 @@ def design_command(
     for var in variables:  # both ends must be valid parameter values
         base.replace(**{var.name: var.lo})
         base.replace(**{var.name: var.hi})
+    check_vary_ranges(base, variables)  # valid sets with a meaningful chi throughout
     check_index_params(base)
     sc = scatter_options(base, scatter, monte_carlo, model)
+    check_monte_carlo_folder(out, "design", "design-path", monte_carlo)
     evaluator = MaglevEvaluator(base, problem.names, model=model)
     with progress_report("design") as prog:
         prog.stage("searching ...")
@@ -403,4 +445,5 @@ def design_command(
 
 __all__ = ["NO_FEASIBLE_DESIGN", "sensitivity_command", "design_command", "parse_scatter",
            "check_scatter_names", "scatter_options", "scatter_report", "print_scatter",
+           "check_monte_carlo_folder",
            "ScatterOpt", "McOpt", "WorkersOpt", "ResumeOpt", "SeedOpt"]

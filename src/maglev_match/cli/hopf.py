@@ -4,6 +4,7 @@ two parameters with l1 and codimension-two points, paper Fig. 4)."""
 from __future__ import annotations
 
 import csv
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
@@ -206,6 +207,13 @@ def hopf_curve_command(
     model: ModelOpt = "unit",
     out: OutOpt = None,
     json_out: JsonOpt = False,
+    restart: Annotated[Path | None, typer.Option(
+        "--restart", help="Continue a curve saved by --out (netCDF) from the point --label, "
+        "in both directions, instead of searching Hopf points (--scan-steps is refused); "
+        "the saved parameters and bounds (--range widens them).")] = None,
+    label: Annotated[str | None, typer.Option(
+        "--label", help="With --restart: P<k> for the k-th curve point or a "
+        "codimension-two point's label (GH1, ...).")] = None,
 ) -> None:
     """The Hopf curve in two parameters by continuation, with l1 along it and the
     codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
@@ -216,6 +224,25 @@ def hopf_curve_command(
     check_output_path(out)
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
+    restarted = None
+    if restart is not None or label is not None:  # continue a saved curve (cli/restart.py)
+        from maglev_match.cli.common import refuse_given
+        from maglev_match.cli.restart import hopf_curve_restart
+
+        refuse_given({"scan_steps": "--scan-steps"}, "a restart searches no Hopf point: it "
+                     "continues the saved curve from --label; leave this option out")
+        names_given = None
+        if params_opt is not None:
+            parts = [t.strip() for t in params_opt.split(",") if t.strip()]
+            names_given = tuple(parts) if len(parts) == 2 else None
+            if names_given is None:
+                raise UserError(f"--params '{params_opt}': expected two names P1,P2")
+        restarted = hopf_curve_restart(rm=rm, restart=restart, label=label,
+                                       given_names=names_given,
+                                       given_bounds=_parse_ranges(ranges), max_step=max_step,
+                                       sets=set_)
+        params_opt = ",".join(restarted[2])
+        system, params = restarted[4], restarted[5]  # the saved values unless given
     if params_opt is None and rm.is_user:
         raise UserError(f"--params: give the two parameters of model {model}, e.g. "
                         f"--params {','.join(system.param_names[:2])}")
@@ -246,12 +273,18 @@ def hopf_curve_command(
                 validate_value(params, n, v)
     a, b = bounds[names[1]]
     scan_values = [a + f * (b - a) for f in (0.5, 0.1, 0.9)]
+    if restarted is not None:  # the saved bounds, widened by --range
+        bounds = restarted[3]
 
     with progress_report("hopf-curve") as prog:
-        prog.stage(f"scanning {names[0]} at {len(scan_values)} values of {names[1]} ...")
-        curves, warnings = hopf_curves_from_scans(system, names, bounds, scan_values,
-                                               n_scan=scan_steps, max_step=max_step,
-                                               progress=prog.stage)
+        if restarted is not None:
+            curves, warnings = [restarted[0]], []
+            prog.stage(restarted[1].describe())
+        else:
+            prog.stage(f"scanning {names[0]} at {len(scan_values)} values of {names[1]} ...")
+            curves, warnings = hopf_curves_from_scans(system, names, bounds, scan_values,
+                                                   n_scan=scan_steps, max_step=max_step,
+                                                   progress=prog.stage)
         grid_data = None
         if grid > 0:
             prog.stage(f"stability grid {grid} x {grid} ...")
@@ -304,28 +337,44 @@ def hopf_curve_command(
 
     title = (f"Hopf curve, model {model}" if rm.is_user else
              f"Hopf curve, model {'A' if model == 'unit' else 'B'} ({preset})")
+    if restarted is not None:  # the saved values, not the preset's
+        title = (f"Hopf curve, model {model if rm.is_user else 'A' if model == 'unit' else 'B'}"
+                 f", restarted from {restarted[1].label} of {Path(restarted[1].path).name}")
     units = ("", "") if rm.is_user else (unit_of(names[0]), unit_of(names[1]))
     fig = hopf_curve_figure(curves, names, units, grid_data, title=title,
                             design_point=(system.param(names[0]), system.param(names[1])))
+    if restarted is not None:  # where the restarted curve was continued from
+        from maglev_match.plots.restart import mark_restart_point
+
+        rs = restarted[1]
+        mark_restart_point(fig.axes[0], *rs.values, label=rs.label, source=Path(rs.path).name)
     figs = save_figure(fig, folder / stem)
     from maglev_match.datasets import annotate
-    from maglev_match.io import atomic_write
+    from maglev_match.io import atomic_write_netcdf
 
     nc_files = []
     for k, c in enumerate(curves):
         nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
         ds = annotate(c.to_xarray(units, system.state_names), params)
-        atomic_write(nc, lambda tmp, ds=ds: ds.to_netcdf(tmp, engine="h5netcdf"))
+        _restartable_curve(ds, system, model, names, bounds,
+                           rm.user.path if rm.is_user else None)
+        atomic_write_netcdf(nc, ds)
         nc_files.append(str(nc))
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]
     if json_out:
         emit_json({"params": list(names), "model": model,
+                   "restart": None if restarted is None else {
+                       "file": restarted[1].path, "label": restarted[1].label,
+                       "values": list(restarted[1].values), "hopf_search": False},
                    "bounds": {n: list(bounds[n]) for n in names}, "points": points,
                    "special_points": special, "branches": branches, "csv": str(csv_path),
                    "special_csv": str(sp_path), "figures": [str(f) for f in figs],
                    "netcdf": nc_files, "warnings": warnings})
         return
+    if restarted is not None:
+        console.print(f"hopf-curve: {restarted[1].describe()}; no Hopf search",
+                      highlight=False, markup=False)
     console.print(f"Hopf curve in ({names[0]}, {names[1]}), model {model}: "
                   f"{len(curves)} branch(es), {len(points)} points")
     for k, c in enumerate(curves):
@@ -345,6 +394,24 @@ def hopf_curve_command(
     console.print(f"wrote {csv_path}, {sp_path}, {', '.join(nc_files)} and "
                   f"{', '.join(str(f) for f in figs)}")
     print_warnings(warnings + [w for c in curves for w in c.warnings])
+
+
+def _restartable_curve(ds, system, model: str, names: tuple[str, str],
+                       bounds: dict[str, tuple[float, float]],
+                       model_file: str | None = None) -> None:
+    """What a restart of the saved curve needs (:mod:`maglev_match.restart`): the curve's
+    two parameters, their bounds, the full parameter vector and the kind attributes."""
+    from maglev_match.restart import RestartKind, stamp
+
+    stamp(ds, RestartKind.HOPF_CURVE, system, model, "hopf-curve")
+    if model_file is not None:  # a user model: the API's restart loads it again
+        ds.attrs["model_file"] = str(Path(model_file).resolve())
+    ds.attrs["curve_params"] = f"{names[0]},{names[1]}"
+    for n in names:
+        ds.attrs[f"bounds_{n}"] = np.array(bounds[n], float)
+    ds["base_p"] = (("parameter",), np.asarray(system.p, float),
+                    {"units": "parameter units", "long_name": "parameter vector of the curve "
+                     "(the two curve parameters vary along it)"})
 
 
 def _runs(signs: np.ndarray) -> list[float]:

@@ -66,12 +66,18 @@ def index_command(
     with --scatter, the spread of chi from parameter scatter."""
     if is_model_file(model):
         refuse_model_file(model, "index")
-    from maglev_match.cli.design import print_scatter, scatter_options, scatter_report
+    from maglev_match.cli.design import (
+        check_monte_carlo_folder,
+        print_scatter,
+        scatter_options,
+        scatter_report,
+    )
 
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
+    check_monte_carlo_folder(out, "index", "index", monte_carlo)
     from maglev_match.matching import matching_index  # (after the checks: JAX loads here)
     with progress_report("index") as prog:
         prog.stage("computing the matching index ...")
@@ -180,7 +186,7 @@ def map_command(
 ) -> None:
     """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure)."""
     refuse_model_file(model, "map")
-    from maglev_match.io import atomic_write
+    from maglev_match.io import atomic_write_netcdf
     from maglev_match.maps import MapSpec, map_dataset, map_warnings, parse_axis, run_map
     from maglev_match.params import ParameterError
     from maglev_match.plots import save_figure
@@ -211,7 +217,7 @@ def map_command(
     ds = annotate_map(ds, base)
     warnings = map_warnings(ds)
     out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(out, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+    atomic_write_netcdf(out, ds)
     figs = save_figure(map_figure(ds, design_point=(float(getattr(base, ax.name)),
                                                     float(getattr(base, ay.name)))),
                        out.with_suffix(""))

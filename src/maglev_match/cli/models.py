@@ -26,6 +26,7 @@ from maglev_match.cli.common import (
     output_target,
     params_from_options,
     print_warnings,
+    refuse_given,
 )
 from maglev_match.params import ParameterError, Params
 
@@ -97,6 +98,23 @@ def load_user_model(path: str) -> UserModel:
         raise UserError(str(exc)) from None
 
 
+def user_system(user: UserModel, values: dict[str, float], option: str = "--set") -> System:
+    """The user model's system at ``values``, refused (exit code 2, before any work) when its
+    right-hand side or Jacobian is not finite at X0 there: an overflow such as
+    ``--set rho=1e308`` is a numerical failure to name, not a verdict to print."""
+    problem = user.numerical_problem(values)
+    if problem is not None:
+        given = " ".join(f"{k}={v:g}" for k, v in values.items())
+        raise UserError(f"{option} {given}: numerical failure: {problem}; choose values that "
+                        "keep it finite" if given else f"model file {user.path}: numerical "
+                        f"failure at the defaults: {problem}")
+    return user.system(values)
+
+
+#: Options of the maglev models that a user model file refuses (parameter name -> option).
+MAGLEV_PARAMETER_SETS = {"preset": "--preset"}
+
+
 def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
                   config: Path | None = None, *, limited: bool = False) -> ResolvedModel:
     """The system ``--model`` names, with ``--set`` (and, for the maglev models,
@@ -113,13 +131,15 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
         if config is not None:
             raise UserError(f"--config {config}: maglev parameter files do not apply to a "
                             f"user model ({model}); use --set NAME=VALUE")
+        refuse_given(MAGLEV_PARAMETER_SETS, f"maglev parameter presets do not apply to a user "
+                     f"model ({model}); use --set NAME=VALUE")
         user = load_user_model(model)
         values = parse_sets(user, sets)
         vals = user.values_with(values)
         desc = (f"Model {user.name} ({model}, {len(user.states)} states), "
                 + ", ".join(f"{k} = {v:.6g}" for k, v in vals.items()))
-        return ResolvedModel(system=user.system(values), description=desc, label=user.name,
-                             user=user)
+        return ResolvedModel(system=user_system(user, values), description=desc,
+                             label=user.name, user=user)
     check_model(model)
     from maglev_match.cli.common import DEFAULT_PRESET_NAME
 
@@ -160,19 +180,51 @@ def _at_values(user: UserModel, at: list[str] | None) -> dict[str, float]:
     return parse_sets(user, at, option="--at")
 
 
+def _cycle_rows(br, param: str) -> list[dict[str, Any]]:
+    """The rows of a user-model cycle branch (CSV and JSON)."""
+    out_rows = []
+    for c in br.points:
+        r = {param: c.value, "period": c.period, "stable": c.stable,
+             "unstable_multipliers": c.n_unstable,
+             "trivial_multiplier_error": abs(c.trivial_multiplier - 1.0),
+             "max_abs_multiplier": float(np.max(np.abs(c.multipliers)))
+             if len(c.multipliers) else 0.0, "kind": c.kind}
+        for k, (hi, lo) in c.extrema.items():
+            r[f"{k}_max"], r[f"{k}_min"] = hi, lo
+        out_rows.append(r)
+    return out_rows
+
+
+def _special_rows_user(br, param: str) -> list[dict[str, Any]]:
+    return [{"type": s.type, param: s.value, "period": s.period, "located": s.located,
+             "detail": s.detail, "label": s.label} for s in br.special_points]
+
+
 def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param: str,
                 start: float | None, stop: float | None, all_hopf: bool, n_scan: int,
-                ntst: int, ncol: int, max_steps: int, json_out: bool, out: Path | None
-                ) -> None:
+                ntst: int, ncol: int, max_steps: int, json_out: bool, out: Path | None,
+                *, restart: Path | None = None, label: str | None = None) -> None:
     """``cycles`` on a user model: Hopf points along ``param``, then the cycle branch from
     the one nearest the current value (or from all with ``--all``), continued without
-    physical limits; extrema of every state and observable along the branch."""
+    physical limits; extrema of every state and observable along the branch. With
+    ``--out`` the branches are also saved as netCDF (restartable); ``--restart FILE
+    --label L`` continues a saved one (:func:`maglev_match.cli.restart.user_cycles_restart`)."""
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
 
+    refuse_given({"ignore_current": "--ignore-current", "config": "--config",
+                  "preset": "--preset"},
+                 f"applies to the maglev models only; a user model ({model}) has no coil "
+                 "current limit and takes its values from --set/--at")
     user = load_user_model(model)
+    if restart is not None or label is not None:
+        from maglev_match.cli.restart import user_cycles_restart
+
+        return user_cycles_restart(user=user, model=model, restart=restart, label=label,
+                                   param=param, sets=sets, at=at, ntst=ntst, ncol=ncol,
+                                   max_steps=max_steps, json_out=json_out, out=out)
     values = {**parse_sets(user, sets), **_at_values(user, at)}
-    system = user.system(values)
+    system = user_system(user, values, "--set/--at")
     if param not in system.param_names:
         raise ParameterError("--param", param, f"model file {model} has no such parameter; "
                              f"valid names: {', '.join(system.param_names)}")
@@ -194,28 +246,12 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
         branches.append(cycle_branch(system, h, param, ntst=ntst, ncol=ncol,
                                      max_steps=max_steps, observables=names))
 
-    def rows(br) -> list[dict[str, Any]]:
-        out_rows = []
-        for c in br.points:
-            r = {param: c.value, "period": c.period, "stable": c.stable,
-                 "unstable_multipliers": c.n_unstable,
-                 "trivial_multiplier_error": abs(c.trivial_multiplier - 1.0),
-                 "max_abs_multiplier": float(np.max(np.abs(c.multipliers)))
-                 if len(c.multipliers) else 0.0, "kind": c.kind}
-            for k, (hi, lo) in c.extrema.items():
-                r[f"{k}_max"], r[f"{k}_min"] = hi, lo
-            out_rows.append(r)
-        return out_rows
-
-    def specials(br) -> list[dict[str, Any]]:
-        return [{"type": s.type, param: s.value, "period": s.period, "located": s.located,
-                 "detail": s.detail} for s in br.special_points]
-
     result = {
         "model": user.name, "model_file": str(model), "param": param, "values": values,
         "hopf_points": [{param: h.value, "frequency": h.frequency, "l1": h.l1,
                          "kind": h.kind} for h in hopfs],
-        "branches": [{"hopf": h.value, "branch": rows(br), "special_points": specials(br),
+        "branches": [{"hopf": h.value, "branch": _cycle_rows(br, param),
+                      "special_points": _special_rows_user(br, param),
                       "stopped_reason": br.stopped_reason, "warnings": list(br.warnings)}
                      for h, br in zip(chosen, branches, strict=True)],
         "warnings": list(scan.warnings),
@@ -223,15 +259,28 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     if out is not None:
         import csv
 
+        from maglev_match.io import atomic_open, atomic_write_netcdf
+        from maglev_match.restart import RestartKind, stamp
+
         folder, stem = output_target(out, "cycles", f"cycles_{user.name}_{param}")
         path = folder / f"{stem}.csv"
-        allrows = [{"branch": k, **r} for k, br in enumerate(branches) for r in rows(br)]
-        with path.open("w", newline="") as fh:
+        allrows = [{"branch": k, **r} for k, br in enumerate(branches)
+                   for r in _cycle_rows(br, param)]
+        with atomic_open(path, "w", newline="") as fh:
             if allrows:
                 w = csv.DictWriter(fh, fieldnames=list(allrows[0]))
                 w.writeheader()
                 w.writerows(allrows)
         result["files"] = [str(path)]
+        for k, br in enumerate(branches):  # the full branches, restartable (--restart)
+            if not br.points:
+                continue
+            nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
+            ds = stamp(br.to_xarray(system), RestartKind.CYCLE_BRANCH, system, user.name,
+                       "cycles")
+            ds.attrs["model_file"] = str(Path(model).resolve())  # (for the API's restart)
+            atomic_write_netcdf(nc, ds)
+            result["files"].append(str(nc))
     if json_out:
         emit_json(result)
         return
@@ -240,7 +289,9 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
                       f"l1 = {h.l1:.4g} ({h.kind}); branch stopped: {br.stopped_reason} after "
                       f"{br.steps} steps", highlight=False)
         pts = br.points
-        for k in sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1])):
+        shown = sorted(set(range(0, len(pts), max(1, len(pts) // 12))) | {len(pts) - 1}) \
+            if pts else []
+        for k in shown:
             c = pts[k]
             console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
                           f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
@@ -263,7 +314,7 @@ def user_simulate(model: str, sets: list[str] | None, t: float, state: np.ndarra
     from maglev_match.dynamics.simulate import SimulationOptions, simulate
 
     user = load_user_model(model)
-    system = user.system(parse_sets(user, sets))
+    system = user_system(user, parse_sets(user, sets))
     x0 = user.x0 if state is None else np.asarray(state, float)
     if x0.shape != (system.dim,):
         raise UserError(f"--x0: {x0.size} values given, model {user.name} has "

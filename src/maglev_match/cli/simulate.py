@@ -31,6 +31,7 @@ from maglev_match.cli.common import (
     params_from_options,
     print_warnings,
     progress_report,
+    refuse_given,
     tolerance_option,
 )
 from maglev_match.cli.models import is_model_file, user_simulate
@@ -120,6 +121,12 @@ def simulate_command(
                         "a folder)")
     state = _read_state(x0) if x0 is not None else None
     if is_model_file(model):  # a user model file: no maglev limits or initial states
+        refuse_given({"x5": "--x5", "q1": "--q1", "initial": "--initial",
+                      "limits": "--limits/--no-limits", "plot": "--plot", "config": "--config",
+                      "preset": "--preset"},
+                     f"applies to the maglev models (unit, vehicle) only; a user model "
+                     f"({model}) starts from --x0 (default: its X0), runs without physical "
+                     "limits and writes its history with --out FILE.csv")
         return user_simulate(model, set_, t, state, n_save, rtol, atol, json_out, out)
     params = params_from_options(preset, config, set_)
     x_init = initial_state(params, model, initial=initial, x5=x5, q1=q1, state=state)

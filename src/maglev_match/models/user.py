@@ -15,17 +15,35 @@ that depends on x or p: use ``jnp.where``). :func:`load_model` checks all of thi
 evaluating and tracing the file's functions at X0 and the defaults, and turns every problem
 into a :class:`ModelFileError` whose one-line message names the file and the problem.
 
+A model file is trusted code: it runs with the rights of the user. What can be caught is
+caught, so that a careless file ends the command with one clear line instead of silence:
+the file runs under a guard (:func:`_guarded`) while it is loaded and every time its
+functions are traced — ``sys.exit`` and ``os._exit`` become a :class:`ModelFileError`,
+anything it prints goes to stderr (stdout stays clean for ``--json``), and the load is given
+``LOAD_TIMEOUT`` seconds (``MAGLEV_MATCH_MODEL_TIMEOUT``) before it is stopped as endless.
+The right-hand side must be real (complex values are refused, not cut to their real part),
+finite with a finite Jacobian at X0 and finite on a small neighbourhood of X0
+(:func:`_check_neighbourhood`), so that no analysis draws a verdict from a field that is
+undefined around the point it studies; :meth:`UserModel.numerical_problem` applies the same
+test to other parameter values (``--set rho=1e308`` overflows, a numerical failure).
+
 The result is a :class:`UserModel`; ``UserModel.system(values)`` gives the model-agnostic
 :class:`~maglev_match.dynamics.system.System` every analysis works on.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import importlib.util
 import math
+import os
+import signal
+import stat
 import sys
+import threading
 import traceback
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from numbers import Real
 from pathlib import Path
@@ -37,8 +55,18 @@ import numpy as np
 
 from maglev_match import jax_setup  # noqa: F401  (float64 on)
 from maglev_match.dynamics.system import System
+from maglev_match.errors import ModelFileError
 
-__all__ = ["ModelFileError", "UserModel", "is_model_file", "load_model"]
+__all__ = ["ModelFileError", "UserModel", "is_model_file", "load_model", "LOAD_TIMEOUT"]
+
+#: Seconds a model file may take to load (run the file, trace and compile its functions
+#: once); ``MAGLEV_MATCH_MODEL_TIMEOUT`` overrides it. An endless loop at import or in
+#: ``rhs`` ends with a message instead of a hang.
+LOAD_TIMEOUT = 60.0
+#: Relative size (in units of SCALES) of the neighbourhood of X0 on which the right-hand
+#: side must be finite: small enough that a genuine singularity of a model is not met, large
+#: enough that a field defined only at X0 itself (NaN elsewhere) is caught.
+NEIGHBOURHOOD = 1e-6
 
 _TRACE_ERRORS = (
     jax.errors.ConcretizationTypeError,
@@ -46,15 +74,6 @@ _TRACE_ERRORS = (
     jax.errors.TracerBoolConversionError,
     jax.errors.TracerIntegerConversionError,
 )
-
-
-class ModelFileError(ValueError):
-    """A user model file that cannot be used; the message is one line naming the file."""
-
-    def __init__(self, path: str | Path, problem: str):
-        self.path = str(path)
-        self.problem = problem
-        super().__init__(f"model file {self.path}: {problem}")
 
 
 def is_model_file(model: str) -> bool:
@@ -74,6 +93,74 @@ def _line_in(path: Path, exc: BaseException) -> str:
         if Path(fr.filename).resolve() == path.resolve():
             line = fr.lineno
     return f" (line {line})" if line is not None else ""
+
+
+# ---------------------------------------------------------------------------------------
+# the guard around the user's code
+# ---------------------------------------------------------------------------------------
+class _ExitRequested(BaseException):
+    """Raised by the stand-in of ``os._exit`` while the user's code runs."""
+
+    def __init__(self, code: Any):
+        self.code = code
+        super().__init__(code)
+
+
+class _LoadTimeout(BaseException):
+    """The load took longer than its timeout (raised by the SIGALRM handler)."""
+
+
+def _no_os_exit(code: Any = 0) -> None:
+    raise _ExitRequested(code)
+
+
+def _load_timeout() -> float:
+    text = os.environ.get("MAGLEV_MATCH_MODEL_TIMEOUT", "").strip()
+    try:
+        value = float(text) if text else LOAD_TIMEOUT
+    except ValueError:
+        value = LOAD_TIMEOUT
+    return value if math.isfinite(value) and value > 0 else LOAD_TIMEOUT
+
+
+@contextlib.contextmanager
+def _guarded(path: Path, what: str, timeout: float | None = None) -> Iterator[None]:
+    """Run the user's code (``what``: "loading", "rhs", ...) so that it cannot end the
+    process or pollute stdout: ``sys.exit`` (SystemExit) and ``os._exit`` become a
+    :class:`ModelFileError`, ``print`` goes to stderr, and with ``timeout`` (seconds; main
+    thread only, where SIGALRM can be handled) an endless loop is stopped."""
+    saved_exit = os._exit
+    os._exit = _no_os_exit  # type: ignore[assignment]
+    alarm = (timeout is not None and hasattr(signal, "SIGALRM")
+             and threading.current_thread() is threading.main_thread())
+    old_handler: Any = None
+    old_timer = (0.0, 0.0)
+    if alarm:
+        def on_alarm(signum, frame):
+            raise _LoadTimeout()
+
+        old_handler = signal.signal(signal.SIGALRM, on_alarm)
+        old_timer = signal.setitimer(signal.ITIMER_REAL, float(timeout))
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+    except SystemExit as exc:
+        raise ModelFileError(path, f"{what} called sys.exit({exc.code!r}){_line_in(path, exc)};"
+                             " a model file must not end the program") from None
+    except _ExitRequested as exc:
+        raise ModelFileError(path, f"{what} called os._exit({exc.code!r}){_line_in(path, exc)};"
+                             " a model file must not end the program") from None
+    except _LoadTimeout as exc:
+        if not alarm:  # an outer guard's timer: its guard reports it
+            raise
+        raise ModelFileError(path, f"{what} did not finish within {timeout:g} s"
+                             f"{_line_in(path, exc)} (an endless loop?); the limit is "
+                             "MAGLEV_MATCH_MODEL_TIMEOUT seconds") from None
+    finally:
+        os._exit = saved_exit  # type: ignore[assignment]
+        if alarm:
+            signal.setitimer(signal.ITIMER_REAL, *old_timer)
+            signal.signal(signal.SIGALRM, old_handler)
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,6 +207,26 @@ class UserModel:
             vals[k] = float(v)
         return vals
 
+    def numerical_problem(self, values: Mapping[str, float] | None = None) -> str | None:
+        """Why the right-hand side cannot be analysed at these parameter values (it or its
+        Jacobian is not finite at X0, e.g. an overflow from ``--set rho=1e308``), or None.
+        A numerical failure to report, never a stability verdict to print."""
+        vals = self.values_with(values)
+        p = jnp.asarray([vals[n] for n in self.param_names], dtype=jnp.float64)
+        x = jnp.asarray(self.x0)
+        with np.errstate(all="ignore"):
+            f = np.asarray(_finite_kernel(self._vector_rhs)(x, p))
+            J = np.asarray(jax.jacfwd(_finite_kernel(self._vector_rhs))(x, p))
+        changed = ", ".join(f"{k} = {v:g}" for k, v in (values or {}).items())
+        at = f" with {changed}" if changed else ""
+        if not np.all(np.isfinite(f)):
+            return (f"the right-hand side is not finite at X0{at} ({_short(f)}): an "
+                    "overflow or a value outside the model's domain")
+        if not np.all(np.isfinite(J)):
+            return (f"the Jacobian of the right-hand side is not finite at X0{at}: an "
+                    "overflow or a value outside the model's domain")
+        return None
+
     def system(self, values: Mapping[str, float] | None = None) -> System:
         """The :class:`System` at the defaults with ``values`` applied. Every System of one
         UserModel shares the same right-hand side function, so it is compiled once."""
@@ -136,23 +243,53 @@ class UserModel:
         )
 
 
-def _vectorised(fn: Callable[..., Any], names: tuple[str, ...]) -> Callable[..., Any]:
+@functools.cache
+def _finite_kernel(g: Callable[..., Any]) -> Callable[..., Any]:
+    return jax.jit(g)
+
+
+def _short(values: np.ndarray) -> str:
+    text = np.array2string(np.asarray(values), precision=4, separator=", ", threshold=8)
+    return " ".join(text.split())
+
+
+def _vectorised(fn: Callable[..., Any], names: tuple[str, ...], path: Path | None = None,
+                what: str = "rhs") -> Callable[..., Any]:
     """``fn(x, mapping)`` as ``g(x, p_vector)`` (the form System expects): the mapping is
-    built from the vector inside the trace, so derivatives in p stay exact."""
+    built from the vector inside the trace, so derivatives in p stay exact. The user's
+    function runs under :func:`_guarded` (it runs only while JAX traces it), and a complex
+    result is refused: the vector field of a real ODE is real, and casting would keep only
+    the real part without a word."""
 
     def g(x, p):
-        return jnp.asarray(fn(x, {n: p[i] for i, n in enumerate(names)}), dtype=jnp.float64)
+        if path is None:
+            out = fn(x, {n: p[i] for i, n in enumerate(names)})
+        else:
+            with _guarded(path, what):
+                out = fn(x, {n: p[i] for i, n in enumerate(names)})
+        if jnp.iscomplexobj(out):
+            raise ModelFileError(path or "?", f"{what} returns complex numbers "
+                                 f"({jnp.result_type(out)}); the vector field must be real "
+                                 "(complex arithmetic inside is fine: return jnp.real(...) "
+                                 "of a quantity that is real)")
+        return jnp.asarray(out, dtype=jnp.float64)
 
     g.__name__ = getattr(fn, "__name__", "user_function")
     return g
 
 
 def _real_vector(path: Path, name: str, value: Any, n: int) -> np.ndarray:
+    if isinstance(value, str | bytes | Mapping):
+        raise ModelFileError(path, f"{name} must be a list of {n} numbers, got "
+                             f"{type(value).__name__}")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise ModelFileError(path, f"{name} must be a list of {n} numbers, got "
                              f"{type(value).__name__}") from None
+    if arr.ndim > 1:
+        raise ModelFileError(path, f"{name} must be a flat list of {n} numbers (one per "
+                             f"state in STATES), got a nested list of shape {arr.shape}")
     if arr.shape != (n,):
         raise ModelFileError(path, f"{name} has {arr.size if arr.ndim else 'a scalar'} "
                              f"entries, expected {n} (one per state in STATES)")
@@ -161,22 +298,45 @@ def _real_vector(path: Path, name: str, value: Any, n: int) -> np.ndarray:
     return arr
 
 
-def _import(path: Path):
+def _import(path: Path, timeout: float | None = None):
     try:
-        source = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
+        source = path.read_bytes()
+    except OSError as exc:
         raise ModelFileError(path, f"cannot be read ({_first_line(exc)})") from None
+    if b"\x00" in source:  # Python refuses these before parsing, without a line number
+        line = source[: source.index(b"\x00")].count(b"\n") + 1
+        raise ModelFileError(path, f"contains a NUL byte at line {line}: not a Python "
+                             "source file (saved in another encoding, or binary?)")
     try:
-        code = compile(source, str(path), "exec")
+        # decoded as Python's import decodes a source file: a UTF-8 byte-order mark and a
+        # coding declaration are honoured, any other byte that is not UTF-8 is an error
+        text = importlib.util.decode_source(source)
+    except (UnicodeDecodeError, SyntaxError, LookupError) as exc:
+        try:
+            source.decode("utf-8-sig")
+        except UnicodeDecodeError as bad:  # a byte that is not UTF-8, no declaration
+            line = source[: bad.start].count(b"\n") + 1
+            raise ModelFileError(path, f"is not UTF-8 text (byte 0x{source[bad.start]:02x} "
+                                 f"at line {line}): save it as UTF-8 or declare its encoding "
+                                 "on the first line (# -*- coding: latin-1 -*-)") from None
+        raise ModelFileError(path, f"cannot be decoded: {_first_line(exc)}") from None
+    try:
+        code = compile(text, str(path), "exec", dont_inherit=True)
     except SyntaxError as exc:
-        raise ModelFileError(path, f"syntax error at line {exc.lineno}: {exc.msg}") from None
+        where = f" at line {exc.lineno}" if exc.lineno is not None else ""
+        raise ModelFileError(path, f"syntax error{where}: {exc.msg}") from None
+    except ValueError as exc:  # e.g. an unknown coding declaration
+        raise ModelFileError(path, f"cannot be compiled: {_first_line(exc)}") from None
     modname = f"maglev_match_user_model_{abs(hash(str(path.resolve())))}"
     spec = importlib.util.spec_from_loader(modname, loader=None, origin=str(path))
     module = importlib.util.module_from_spec(spec)
     module.__file__ = str(path)
     sys.modules[modname] = module  # dataclasses and pickling look their module up
     try:
-        exec(code, module.__dict__)  # noqa: S102  (running the user's model file is the point)
+        with _guarded(path, "the file, while loading,", timeout):
+            exec(code, module.__dict__)  # noqa: S102  (running the user's model file is the point)
+    except ModelFileError:
+        raise
     except Exception as exc:  # anything the file raises while loading
         raise ModelFileError(path, f"error while loading{_line_in(path, exc)}: "
                              f"{_first_line(exc)}") from None
@@ -184,28 +344,59 @@ def _import(path: Path):
 
 
 def _check_traceable(path: Path, what: str, fn: Callable, x: np.ndarray, p: np.ndarray,
-                     ) -> np.ndarray:
-    """Evaluate ``fn(x, p)`` under jit and its x-Jacobian under jacfwd; return the value."""
+                     timeout: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Evaluate ``fn(x, p)`` under jit and its x-Jacobian under jacfwd; return both."""
     hint = ("write it with jax.numpy (jnp.sin, jnp.where ...), not numpy/math, float() or a "
             "Python `if` on values that depend on x or p")
     try:
-        val = jax.jit(fn)(jnp.asarray(x), jnp.asarray(p))
-        jax.jit(jax.jacfwd(fn))(jnp.asarray(x), jnp.asarray(p))
+        with _guarded(path, what, timeout), np.errstate(all="ignore"):
+            val = jax.jit(fn)(jnp.asarray(x), jnp.asarray(p))
+            jac = jax.jit(jax.jacfwd(fn))(jnp.asarray(x), jnp.asarray(p))
+    except ModelFileError:
+        raise
     except _TRACE_ERRORS as exc:
         raise ModelFileError(path, f"{what} is not JAX-traceable{_line_in(path, exc)}: "
                              f"{type(exc).__name__}; {hint}") from None
     except Exception as exc:
         raise ModelFileError(path, f"{what} failed at X0 and the default parameters"
                              f"{_line_in(path, exc)}: {_first_line(exc)}") from None
-    return np.asarray(val)
+    return np.asarray(val), np.asarray(jac)
 
 
-def load_model(path: str | Path) -> UserModel:
+def _check_neighbourhood(path: Path, fn: Callable, x0: np.ndarray, p: np.ndarray,
+                         scales: np.ndarray, names: tuple[str, ...]) -> None:
+    """The right-hand side must be finite on a small neighbourhood of X0: at X0 +- h e_k
+    for every state k and at eight points in random directions, h = NEIGHBOURHOOD SCALES.
+    A field that is finite only at X0 (NaN elsewhere) would otherwise get an exact but
+    meaningless Jacobian there, and with it a stability verdict."""
+    n = x0.size
+    h = NEIGHBOURHOOD * scales
+    dirs = np.vstack([np.eye(n), -np.eye(n),
+                      np.random.default_rng(0).uniform(-1.0, 1.0, (8, n))])
+    pts = x0[None, :] + dirs * h[None, :]
+    with np.errstate(all="ignore"):
+        vals = np.asarray(jax.jit(jax.vmap(fn, in_axes=(0, None)))(jnp.asarray(pts),
+                                                                    jnp.asarray(p)))
+    bad = ~np.all(np.isfinite(vals), axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        where = (f"X0 {'+' if k < n else '-'} {NEIGHBOURHOOD:g} SCALES along "
+                 f"'{names[k % n]}'" if k < 2 * n else
+                 f"a point {NEIGHBOURHOOD:g} SCALES from X0")
+        raise ModelFileError(path, f"rhs is not finite near X0 ({int(bad.sum())} of "
+                             f"{len(pts)} points within {NEIGHBOURHOOD:g} SCALES): at {where} "
+                             f"it is {_short(vals[k])}; the vector field must be defined "
+                             "around the equilibrium guess")
+
+
+def load_model(path: str | Path, timeout: float | None = None) -> UserModel:
     """Load and check a user model file (see the module docstring for the contract).
 
     Parameters
     ----------
     path : the ``.py`` file.
+    timeout : seconds the load may take (default ``MAGLEV_MATCH_MODEL_TIMEOUT`` or
+        :data:`LOAD_TIMEOUT`); only enforced in the main thread.
 
     Returns
     -------
@@ -213,18 +404,32 @@ def load_model(path: str | Path) -> UserModel:
 
     Raises
     ------
-    ModelFileError : the file is missing, a directory, not Python, fails to load, misses
-        STATES/PARAMS/rhs, has values of the wrong type or length, an rhs that is not
-        JAX-traceable, of the wrong shape or not finite at X0, or non-positive SCALES.
+    ModelFileError : the file is missing, a directory or another non-regular file, not
+        Python, fails to load (or exits, or runs past the timeout), misses STATES/PARAMS/rhs,
+        has values of the wrong type or length, an rhs that is not JAX-traceable, complex,
+        of the wrong shape, not finite (or with a non-finite Jacobian) at X0 or not finite
+        near X0, or non-positive SCALES.
     """
     path = Path(path)
     if path.suffix != ".py":
         raise ModelFileError(path, "a model file must be a Python file ending in .py")
-    if not path.exists():
-        raise ModelFileError(path, "no such file")
-    if not path.is_file():
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise ModelFileError(path, "no such file" + (" (a link to a missing file)"
+                                                     if path.is_symlink() else "")) from None
+    except OSError as exc:
+        raise ModelFileError(path, f"cannot be read ({_first_line(exc)})") from None
+    if stat.S_ISDIR(mode):
         raise ModelFileError(path, "is a directory, not a file")
-    mod = _import(path)
+    if not stat.S_ISREG(mode):
+        kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+                "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else
+                "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+        raise ModelFileError(path, f"is {kind}, not a regular file; give the Python file "
+                             "itself")
+    timeout = _load_timeout() if timeout is None else float(timeout)
+    mod = _import(path, timeout)
     missing = [k for k in ("STATES", "PARAMS", "rhs") if not hasattr(mod, k)]
     if missing:
         raise ModelFileError(path, f"missing {', '.join(missing)} (a model file defines "
@@ -264,17 +469,22 @@ def load_model(path: str | Path) -> UserModel:
         raise ModelFileError(path, "OBSERVABLES must be a dict name -> function g(x, p)")
     names = tuple(clean)
     p0 = np.array([clean[k] for k in names], float)
-    vrhs = _vectorised(mod.rhs, names)
-    f0 = _check_traceable(path, "rhs", vrhs, x0, p0)
+    vrhs = _vectorised(mod.rhs, names, path, "rhs")
+    f0, J0 = _check_traceable(path, "rhs", vrhs, x0, p0, timeout)
     if f0.shape != (n,):
         raise ModelFileError(path, f"rhs returns shape {f0.shape}, expected ({n},) "
                              "(one derivative per state in STATES)")
     if not np.all(np.isfinite(f0)):
         raise ModelFileError(path, f"rhs is not finite at X0 = {x0.tolist()}: {f0.tolist()}")
+    if not np.all(np.isfinite(J0)):
+        raise ModelFileError(path, f"the Jacobian of rhs is not finite at X0 = {x0.tolist()} "
+                             "(e.g. sqrt or a power at the edge of its domain); move X0 "
+                             "inside the domain")
+    _check_neighbourhood(path, vrhs, x0, p0, scales, tuple(states))
     vobs = {}
     for k, g in obs_in.items():
-        vg = _vectorised(g, names)
-        val = _check_traceable(path, f"OBSERVABLES['{k}']", vg, x0, p0)
+        vg = _vectorised(g, names, path, f"OBSERVABLES['{k}']")
+        val, _ = _check_traceable(path, f"OBSERVABLES['{k}']", vg, x0, p0, timeout)
         if val.ndim > 1:
             raise ModelFileError(path, f"OBSERVABLES['{k}'] returns shape {val.shape}; "
                                  "expected a scalar or a 1-D array")
