@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from maglev_match.errors import CheckpointLocked, MapStopped  # noqa: F401 (defined JAX- and NumPy-free)
 from maglev_match.io import atomic_write, atomic_write_text
 
 __all__ = ["CheckpointWarning", "CheckpointLocked", "MapStopped", "TileStatus", "TileCheck",
@@ -63,27 +64,6 @@ ShapesFn = Callable[[tuple[int, int]], Mapping[str, tuple[int, ...]]]
 
 class CheckpointWarning(UserWarning):
     """A checkpoint piece that was rejected (and will be recomputed)."""
-
-
-class CheckpointLocked(RuntimeError):
-    """Another process holds the checkpoint folder's lock."""
-
-    def __init__(self, folder: Path, holder: str, what: str = "map"):
-        self.folder = folder
-        self.holder = holder
-        super().__init__(
-            f"the checkpoint folder {folder} is in use by another {what} ({holder}); wait "
-            "for it to finish or choose another --out"
-        )
-
-
-class MapStopped(RuntimeError):
-    """A map stopped before all tiles were computed (interrupt, lost scheduler). Carries the
-    exit code the command line should use (130 for an interrupt) and the resume hint."""
-
-    def __init__(self, message: str, exit_code: int = 1):
-        self.exit_code = exit_code
-        super().__init__(message)
 
 
 class TileStatus(StrEnum):

@@ -322,9 +322,8 @@ def _main(argv: list[str] | None) -> int:
     if debug:
         args = [a for a in args if a != "--debug"]
         args = ["--debug", *args]
-    from maglev_match.checkpoint import CheckpointLocked, MapStopped
     from maglev_match.cli.terminal import encoding_note, guard_output
-    from maglev_match.errors import ModelFileError
+    from maglev_match.errors import CheckpointLocked, MapStopped, ModelFileError
     from maglev_match.io import DiskFull, is_disk_full
 
     guard_output()  # a non-UTF-8 terminal: ASCII stand-ins, never a lost result
