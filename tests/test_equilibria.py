@@ -79,16 +79,23 @@ def test_refine_rejects_a_hopf_point_outside_its_range():
     from maglev_match.params import load_preset
 
     unit = build_system(load_preset("turnout-soft"), "unit")
+    free = dataclasses.replace(unit, param_ranges={})  # the model without its valid ranges
     # from a poor frequency guess Newton lands on a Hopf point at omega1 < 0
-    hp = refine_hopf_point(unit, "omega1", 110.0, unit.x_guess, 50.0)
+    hp = refine_hopf_point(free, "omega1", 110.0, unit.x_guess, 50.0)
     assert hp.value < 0  # a true solution of the defining system, but not physical
     assert hp.converged  # without a range nothing forbids it...
-    hp = refine_hopf_point(unit, "omega1", 110.0, unit.x_guess, 50.0, bounds=(30.0, 400.0))
+    hp = refine_hopf_point(free, "omega1", 110.0, unit.x_guess, 50.0, bounds=(30.0, 400.0))
     assert not hp.converged  # ...with the search bounds it is rejected with the reason
     assert "outside [30, 400]" in hp.message and "outside" in hp.warnings[-1]
     ranged = dataclasses.replace(unit, param_ranges={"omega1": (0.0, math.inf)})
     hp = refine_hopf_point(ranged, "omega1", 110.0, unit.x_guess, 50.0)
     assert not hp.converged and "outside" in hp.message
+    # the shipped model declares omega1 in (0, 1e5]: its Newton path stops where it leaves
+    assert unit.param_ranges["omega1"][0] > 0
+    hp = refine_hopf_point(unit, "omega1", 110.0, unit.x_guess, 50.0)
+    assert not hp.converged
+    assert "the Newton path left the valid range" in hp.message
+    assert "omega1 = -" in hp.message and "(0, 100000]" in hp.message
     # a good guess converges and is validated: +-i omega an eigenvalue pair there
     good = refine_hopf_point(unit, "omega1", 125.0, unit.x_guess, 145.0, bounds=(30, 400))
     assert good.converged and good.message == ""
