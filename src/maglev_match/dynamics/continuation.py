@@ -561,9 +561,10 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
     ``problem.event_tolerance(name)`` (default ``opt.event_tol``), or until the test
     function is within ``problem.event_value_tolerance(name)`` of zero (when the problem
     gives one). The zero is "solved" when either holds, and also when the corrector fails
-    at trials closer to it once its bracket is below :data:`PINNED` of the step (at a
-    branch point the bordered matrix is singular: its neighbourhood cannot be corrected,
-    however it was approached); the located point is the trial with the smallest |g|."""
+    at trials closer to it once its bracket is below :data:`PINNED` of the step, or the
+    best trial's |g| below :data:`PINNED` of |g| at the step's ends (at a branch point the
+    bordered matrix is singular: its neighbourhood cannot be corrected, however it was
+    approached); the located point is the trial with the smallest |g|."""
     tol_hook = getattr(problem, "event_tolerance", None)
     ev_tol = tol_hook(name) if tol_hook is not None else None
     ev_tol = opt.event_tol if ev_tol is None else float(ev_tol)
@@ -598,10 +599,12 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
             else:  # the corrector fails here: try closer to the near end of the bracket
                 sm = lo + 0.5 * (sm - lo)
         if corr is None:
-            if best is not None and (hi - lo) < PINNED * s_step:
-                # the zero is pinned to a bracket far below the step; the corrector only
-                # fails closer to it (at a branch point the bordered matrix is singular):
-                # the best trial is the located point, within the branch's tolerance
+            if best is not None and ((hi - lo) < PINNED * s_step or abs(best[0]) <= PINNED * max(
+                    abs(a.tests[name]), abs(b.tests[name]))):
+                # the zero is pinned (a bracket far below the step, or a test value far below
+                # its values at the ends of the step, which for a simple zero bounds the
+                # distance the same way); the corrector only fails closer to it (at a branch
+                # point the bordered matrix is singular): the best trial is the located point
                 located = SOLVED
             else:
                 located = "not solved: the corrector failed inside the step"
