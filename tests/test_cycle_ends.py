@@ -32,7 +32,7 @@ from maglev_match.dynamics.hopf import locate_hopf_points
 BIFURCATIONS = ("LPC", "PD", "NS", "BP")
 
 
-# ------------------------------------------------------------------ a family between two Hopf points
+# ------------------------------------------------------- a family between two Hopf points
 @pytest.mark.parametrize("start, other", [(0.0, 1.0), (1.0, 0.0)])
 def test_family_from_either_hopf_point_ends_at_the_other(start, other):
     system = two_hopf_system()
@@ -159,7 +159,6 @@ def test_model_a_gap_contact_agrees_with_shooting_and_is_a_true_orbit(alpha1_con
     contact = br.special_points[-1]
     orbit = contact.point.orbit  # in the system's own coordinates (x7 = i - i0)
     chart = system.chart
-    k_w1 = system.param_index("omega1")
     to_chart = jax.jit(jax.vmap(chart.to_chart, (0, None)))
     Y = np.asarray(to_chart(orbit.states, orbit.p))
     gap = orbit.states[:, 0] - orbit.states[:, 4] + params.c0
