@@ -36,12 +36,8 @@ from maglev_match.cli.common import (
     validate_value,
 )
 from maglev_match.cli.models import resolve_model
-from maglev_match.dynamics.hopf import (
-    HopfPoint,
-    locate_hopf_points,
-    stability_grid,
-)
-from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans
+from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
+from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans, stability_grid
 from maglev_match.engineering import PARAM_HELP, engineering_hopf_points, is_engineering
 from maglev_match.io import atomic_open
 from maglev_match.params import ParameterError

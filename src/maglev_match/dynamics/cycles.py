@@ -930,6 +930,13 @@ class CycleProblem:
 
     # --- test functions ---
     def _bp_border(self) -> np.ndarray:
+        key = (self.prob.mesh.tobytes(), self.prob.m, self.prob.n)
+        if getattr(self, "_border_key", None) != key:
+            self._border = self._make_bp_border()
+            self._border_key = key
+        return self._border
+
+    def _make_bp_border(self) -> np.ndarray:
         """The fixed right-hand side b of the BP test: a smooth forcing of the collocation
         rows (the mean and three harmonics with fixed pseudo-random coefficients per state,
         evaluated at
@@ -953,9 +960,8 @@ class CycleProblem:
     def _bp_vector(self, pt: BranchPoint, row: np.ndarray | None = None) -> np.ndarray:
         """v = A^-1 b at a point, A its extended Jacobian with the last row ``row`` (default:
         the row it was corrected with; another row by a rank-one update of the same
-        factorisation, Sherman-Morrison). The factorisation is the point's correction, or
-        the frame correction made after a mesh adaptation (``pt.info["frame"]``)."""
-        corr = pt.info.get("frame") or pt.correction
+        factorisation, Sherman-Morrison)."""
+        corr = pt.correction
         b = self._bp_border()
         v = np.asarray(corr.solve(b), float)
         old = corr.data[3] if corr.data is not None and len(corr.data) > 3 else None
@@ -975,13 +981,19 @@ class CycleProblem:
 
     def _step_local_tests(self, pt: BranchPoint) -> None:
         """Make ``pt`` the reference of the step-local test functions (the BP border c and
-        the first harmonic) for the next step, with its own values in that frame."""
+        the first harmonic) for the next step, with its own values in that frame. The BP
+        frame is v = A^-1 b at ``pt`` with the row of the next step, W t (``bp_v``, computed
+        before a mesh adaptation and remapped with the point)."""
         if self.detect and "BP" in pt.tests and np.isfinite(pt.tests["BP"]):
-            v = self._bp_vector(pt, row=self.weights * pt.t)
+            v = pt.info.pop("bp_v", None)
+            if v is None:
+                v = self._bp_vector(pt, row=self.weights * pt.t)
             nv = math.sqrt(self._wdot(v, v))
             if nv > 0 and np.isfinite(nv):
                 self.bp_c = v / nv
                 pt.tests["BP"] = -1.0 / nv
+            else:
+                pt.tests["BP"] = np.nan  # no frame: no BP located in the next step
         c1 = pt.info.get("c1")
         if c1 is not None:
             self.amp_ref = c1
@@ -1137,8 +1149,9 @@ class CycleProblem:
         c = pt.info.get("cycle")
         if c is not None and c.reliable and not pt.info.get("lazy"):
             self.last_reliable = c
-        pt.info.pop("frame", None)
         self.amp_max = max(self.amp_max, float(pt.info.get("amp", 0.0)))
+        if self.detect and "BP" in pt.tests and np.isfinite(pt.tests["BP"]):
+            pt.info["bp_v"] = self._bp_vector(pt, row=self.weights * pt.t)
         pt = self._adapt(pt)
         self._step_local_tests(pt)
         pt.info["state"] = (self.physical_state(pt), self.accepted)
@@ -1154,26 +1167,19 @@ class CycleProblem:
         new_mesh = _adapt_mesh(old_mesh, prob.m, U, prob.scale)
         U2 = _remesh(old_mesh, prob.m, U, new_mesh)
         Ut2 = _remesh(old_mesh, prob.m, Ut, new_mesh)
+        v = pt.info.get("bp_v")
+        if v is not None:  # the BP frame is remapped like the tangent (a function of time)
+            Uv, Tv, lv = prob.unpack(v)
+            pt.info["bp_v"] = (_remesh(old_mesh, prob.m, Uv, new_mesh), Tv, lv)
         prob.mesh = new_mesh
         self.chord_lu = None  # the kept factorisation belongs to the old mesh
+        if v is not None:
+            pt.info["bp_v"] = prob.pack(*pt.info["bp_v"])
         t = prob.pack(Ut2, Tt, lt)
         t /= math.sqrt(float(np.sum(self.weights * t * t)))
-        new = BranchPoint(u=prob.pack(U2, T, lam), t=t, value=pt.value,
-                          correction=pt.correction, tests=pt.tests, kind=pt.kind,
-                          info=pt.info)
-        pt.info.pop("frame", None)
-        if self.detect and "BP" in pt.tests and np.isfinite(pt.tests["BP"]):
-            # the BP frame on the new mesh: A^-1 b there, from a correction of the remapped
-            # point (its factorisation only: the branch goes on from the remapped point
-            # with no kept factorisation, as without the BP test)
-            row = self.weights * new.t
-            corr = self.correct(new.u, row, float(row @ new.u), self.opt.max_newton + 8)
-            self.chord_lu = None
-            if corr is not None:
-                pt.info["frame"] = corr
-            else:
-                pt.tests["BP"] = np.nan  # no frame: no BP located in the next step
-        return new
+        return BranchPoint(u=prob.pack(U2, T, lam), t=t, value=pt.value,
+                           correction=pt.correction, tests=pt.tests, kind=pt.kind,
+                           info=pt.info)
 
     def rebase(self, a: BranchPoint, corr: Correction) -> BranchPoint | None:
         """Change to the system's regular chart when the corrected next point comes within
@@ -1217,7 +1223,7 @@ class CycleProblem:
             return None
         new = BranchPoint(u=c.u, t=t, value=a.value, correction=c, tests=dict(a.tests),
                           kind=a.kind, info=dict(a.info))
-        new.info.pop("frame", None)
+        new.info.pop("bp_v", None)
         if self.detect and "BP" in new.tests and np.isfinite(new.tests["BP"]):
             new.tests["BP"] = 0.0  # recomputed below in the chart's frame
         Uc, _, _ = prob.unpack(c.u)
@@ -1632,11 +1638,14 @@ def _closing_hopf(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
                      f"; born at the Hopf point {param} = {start.value:.10g}"))
         message = (f"the family of cycles closed at the Hopf point {where}: it joins the "
                    f"Hopf points {param} = {start.value:.10g} and {hp.value:.10g}")
+        at_eq = {}  # the read-outs of the equilibrium where the family ends
+        for name in last.extrema:
+            v = np.ravel(system.observe(name, hp.x, hp.p))
+            at_eq[name] = (float(np.max(v)), float(np.min(v)))
         return SpecialPoint(type=SpecialPointKind.HOPF, value=float(hp.value),
                             step=len(points) - 1, located=SOLVED, detail=detail,
                             x=np.asarray(hp.x), frequency=float(hp.frequency),
-                            period=2.0 * math.pi / hp.frequency,
-                            extrema={k: (v[0], v[1]) for k, v in last.extrema.items()},
+                            period=2.0 * math.pi / hp.frequency, extrema=at_eq,
                             residual=float(hp.residual)), message
     message = (f"the family of cycles shrinks to the equilibrium near {param} ~ {guess:.8g}, "
                f"but the Hopf point there was not solved: {hp.message}")

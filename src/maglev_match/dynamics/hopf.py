@@ -11,8 +11,9 @@ free parameters):
 
 so that q = v1 + i v2 satisfies J q = i omega q. With one free parameter the system is
 square and Newton's method refines a Hopf point to full precision; with two free parameters
-it defines the Hopf curve (:mod:`maglev_match.dynamics.hopf_curve`). The Lyapunov
-coefficients are in :mod:`maglev_match.dynamics.normal_forms`; both are re-exported here.
+it defines the Hopf curve (:mod:`maglev_match.dynamics.hopf_curve`, which imports this
+module; this one does not import it). The Lyapunov coefficients are in
+:mod:`maglev_match.dynamics.normal_forms`, re-exported here.
 """
 
 from __future__ import annotations
@@ -443,33 +444,3 @@ def locate_hopf_points(
 
 def _with_warning(hp: HopfPoint, msg: str) -> HopfPoint:
     return dataclasses.replace(hp, warnings=hp.warnings + (msg,))
-
-
-# ----------------------------------------------------------------------------------------
-# the two-parameter Hopf curve
-# ----------------------------------------------------------------------------------------
-
-
-
-
-
-
-
-
-
-
-
-
-# The curve lives in its own module (which imports this one); its names are re-exported
-# here lazily (PEP 562), so ``from maglev_match.dynamics.hopf import hopf_curve`` works and
-# either module can be imported first.
-_FROM_HOPF_CURVE = ("CodimTwoPoint", "HopfCurve", "HopfCurvePoint", "hopf_curve",
-                    "stability_grid")
-
-
-def __getattr__(name: str):
-    if name in _FROM_HOPF_CURVE:
-        from maglev_match.dynamics import hopf_curve as _hopf_curve_module
-
-        return getattr(_hopf_curve_module, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -205,6 +205,7 @@ class System:
         a continuation that leaves them stops there, reported as not converged.
     chart : optional :class:`RegularChart`, coordinates in which ``rhs`` stays smooth where
         it is singular (used by the continuation of cycles near that set).
+    param_units : optional units of the parameters (for read-outs and files).
     """
 
     __repr__ = compact_repr
@@ -219,6 +220,7 @@ class System:
     name: str = ""
     param_ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     chart: RegularChart | None = None
+    param_units: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         p = np.asarray(self.p, dtype=float).ravel()

@@ -12,7 +12,7 @@ import numpy as np
 
 from maglev_match.dynamics.system import RegularChart, System
 from maglev_match.models.limits import clamp_current, hold_current_rate
-from maglev_match.params import Params, param_ranges
+from maglev_match.params import PARAMETER_DOCS, Params, param_ranges
 
 STATE_NAMES = ("z1", "z1_dot", "z2", "z2_dot", "w", "w_dot", "di", "y1", "v")
 STATE_SCALE = np.array([1e-3, 1e-2, 1e-3, 1e-2, 1e-3, 1e-2, 1.0, 1e-3, 1e-2])
@@ -174,5 +174,6 @@ def unit_system(params: Params, limited: bool = False) -> System:
         },
         name="unit",
         param_ranges=param_ranges(PARAM_NAMES),
+        param_units={n: PARAMETER_DOCS[n][0] for n in PARAM_NAMES if n in PARAMETER_DOCS},
         chart=None if limited else REGULAR_CHART,
     )

@@ -22,7 +22,7 @@ _UNITS = {"omega1": "rad/s", "sigma": "1/kg"}
 _MARK = {"LPC": ("^", "tab:purple", "fold of cycles (LPC)"),
          "PD": ("s", "tab:brown", "period doubling (PD)"),
          "NS": ("D", "tab:olive", "torus bifurcation (NS)"),
-         "LIMIT": ("X", "tab:red", "cycle touches a physical limit")}  # gap or zero current
+         "contact": ("X", "tab:red", "cycle touches a physical limit")}  # gap or zero current
 _BRANCH_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown",
                    "tab:pink")
 
@@ -69,7 +69,7 @@ def cycle_diagram(
     design_value : the design value of ``param``, drawn as a vertical line.
 
     Hopf points are open circles; folds (LPC), period doublings (PD), torus points (NS) and
-    first contacts with a physical limit (LIMIT) are marked at the cycle's max and min.
+    first contacts with a physical limit (contact) are marked at the cycle's max and min.
     The legend lists every element drawn. Returns (fig, ax).
     """
     fig, ax = new_figure(figsize=(8.0, 5.0))
