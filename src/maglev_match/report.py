@@ -545,7 +545,8 @@ def cycle_diagram_table(d: CycleDiagram) -> str:
     rows = []
     for hp, br in d.branches:
         contact = next((sp for sp in br.special_points if sp.type == "contact"), None)
-        others = [f"{sp.type} at {sp.value:.5g}" for sp in br.special_points if sp.type != "contact"]
+        others = [f"{sp.type} at {sp.value:.5g}" for sp in br.special_points
+                  if sp.type != "contact"]
         rows.append((hp.value, hp.frequency, hp.l1, hp.kind, hp.crossing_speed,
                      contact.value if contact else None,
                      "; ".join(others) or "-", br.stopped_reason))
