@@ -331,6 +331,9 @@ class ContinuationProblem(Protocol):
     * ``event_tolerance(name)`` : the relative bracket (of the step) to which this event is
       located, or None for ``options.event_tol`` (a problem that re-solves the point of an
       event exactly anyway, e.g. at a stop value, needs only one secant trial: 1.0).
+    * ``event_tests(name, point)`` : the test functions at a trial point of the location
+      of event ``name`` (at least ``name``'s; default: all of ``test_functions``), so a
+      problem may skip read-outs that the location does not need.
     * ``rebase(a, corr)`` : called with the last accepted point and a successful
       correction of the next step; returns None to go on, or the point ``a`` expressed in
       new unknowns (the problem changed its coordinates, e.g. to a chart in which its
@@ -429,11 +432,17 @@ def continuation(
     rebase = getattr(problem, "rebase", None)
     t0 = np.asarray(t0, float) / math.sqrt(float(np.sum(W * t0 * t0)))
 
-    def make_point(corr: Correction, orient: np.ndarray, kind: str = "step") -> BranchPoint:
+    event_tests = getattr(problem, "event_tests", None)
+
+    def make_point(corr: Correction, orient: np.ndarray, kind: str = "step",
+                   event: str | None = None) -> BranchPoint:
         t = _tangent(corr, W, orient)
         pt = BranchPoint(u=corr.u, t=t, value=float(problem.parameter(corr.u)),
                          correction=corr, kind=kind)
-        pt.tests = dict(problem.test_functions(pt))
+        if event is not None and event_tests is not None:
+            pt.tests = dict(event_tests(event, pt))
+        else:
+            pt.tests = dict(problem.test_functions(pt))
         if opt.param_bounds is not None:
             pt.tests["__lo"] = pt.value - opt.param_bounds[0]
             pt.tests["__hi"] = opt.param_bounds[1] - pt.value
@@ -609,7 +618,7 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
             else:
                 located = "not solved: the corrector failed inside the step"
             break
-        pt = make_point(corr, a.t)
+        pt = make_point(corr, a.t, event=name)
         g = pt.tests.get(name, np.nan)
         if not np.isfinite(g):
             located = "not solved: the test function is not finite inside the step"

@@ -1046,6 +1046,26 @@ class CycleProblem:
             out["STOP"] = c.value - self.stop_at
         return out
 
+    def event_tests(self, name: str, pt: BranchPoint) -> dict[str, float]:
+        """At a trial point of an event's location: the test functions that the location
+        and the classification of that event need. LPC, a contact and the stop value need
+        no Floquet multipliers (the located point gets them afterwards, :meth:`complete`);
+        PD, NS and BP are read out in full."""
+        if name in ("PD", "NS", "BP") or name.startswith("__"):
+            return self.test_functions(pt)
+        c = self.cycle_point(pt, floquet=False)
+        pt.info["cycle"] = c
+        pt.info["phys"] = self.physical_state(pt)
+        out: dict[str, float] = {}
+        if name == "LPC":
+            out["LPC"] = float(pt.t[-1])
+        if self.limits is not None:
+            out["CONTACT"], pt.info["limit"] = _margin(self.limits, self.prob.system,
+                                                       pt.info["orbit_here"])
+        if self.stop_at is not None:
+            out["STOP"] = c.value - self.stop_at
+        return out
+
     def event_kind(self, name: str) -> str:
         return {"LPC": SpecialPointKind.LPC, "CONTACT": SpecialPointKind.CONTACT,
                 "BP": SpecialPointKind.BP, "STOP": "STOP", "AMP": "AMP",
