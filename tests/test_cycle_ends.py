@@ -220,3 +220,17 @@ def test_cycle_options_check_themselves_and_the_keywords_map_onto_them():
         assert br.ntst == 20 and br.ncol == 4
         assert np.array_equal(br.values, a.values)
         assert np.array_equal(br.periods, a.periods)
+
+
+# ------------------------------------------------------------------ the valid range
+def test_a_branch_at_the_end_of_the_valid_range_says_so():
+    import dataclasses
+
+    system = dataclasses.replace(two_hopf_system(), param_ranges={"mu": (0.2, 2.0)})
+    hp = locate_hopf_points(system, "mu", 0.5, 1.5, n_scan=20).points[0]
+    assert hp.value == pytest.approx(1.0, abs=1e-12)
+    br = cycle_branch(system, hp, "mu", ntst=20, ncol=4)
+    assert br.stopped_reason == CycleStop.RANGE
+    assert br.points[-1].value == pytest.approx(0.2, abs=1e-9)
+    assert all(c.value >= 0.2 - 1e-9 for c in br.points)
+    assert "valid range" in br.message and any("valid range" in w for w in br.warnings)

@@ -101,3 +101,20 @@ def test_refine_rejects_a_hopf_point_outside_its_range():
     assert good.converged and good.message == ""
     w = np.linalg.eigvals(unit.jacobian(good.x, good.p))
     assert np.min(np.abs(w - 1j * good.frequency)) < 1e-8 * good.frequency
+
+
+def test_equilibrium_branch_stops_at_the_end_of_the_valid_range():
+    """Model A declares omega1 > 0: a branch asked to run from 50 to -50 rad/s stops at the
+    end of that range (close to omega1 = 0, where the beam loses its stiffness and the
+    equilibrium its uniqueness, so the bound itself cannot be solved) and says so; one
+    asked to start at -50 does not start."""
+    from maglev_match.dynamics.equilibria import equilibrium_branch
+    from maglev_match.models import build_system
+    from maglev_match.params import load_preset
+
+    unit = build_system(load_preset("alpha1"), "unit")
+    br = equilibrium_branch(unit, "omega1", 50.0, -50.0, n_points=20)
+    assert np.all(br.values > 0.0) and br.values[-1] < 1.0
+    assert any("valid range of omega1" in w for w in br.warnings)
+    bad = equilibrium_branch(unit, "omega1", -50.0, 50.0, n_points=20)
+    assert bad.values.size == 0 and "outside its valid range" in bad.message

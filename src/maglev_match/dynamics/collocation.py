@@ -602,10 +602,10 @@ class CondensedLU:
             row = np.zeros(M)
             row[:-2] = coef_nodes[nodes[:, 0].tolist() + [nodes[-1, -1]]].ravel()
             row[-2], row[-1] = coef_T, coef_L
-            np.add.at(row, (np.arange(ntst)[:, None] * n + np.arange(n)[None, :]),
-                      -sub[:, :n])
-            np.add.at(row, ((np.arange(ntst)[:, None] + 1) * n + np.arange(n)[None, :]),
-                      -sub[:, n:2 * n])
+            # node j's entries are row[j n: (j + 1) n]: the left ends of intervals 0..ntst-1
+            # and the right ends of 0..ntst-1 are two runs without repeats
+            row[:ntst * n] -= sub[:, :n].ravel()
+            row[n:(ntst + 1) * n] -= sub[:, n:2 * n].ravel()
             row[-2] -= sub[:, 2 * n].sum()
             row[-1] -= sub[:, 2 * n + 1].sum()
             return row

@@ -777,6 +777,23 @@ def first_harmonic(mesh: np.ndarray, m: int, U: np.ndarray) -> np.ndarray:
     return np.einsum("jl,jln->n", ph, Uz)
 
 
+class _TangentMemo:
+    """A factorisation's solve that remembers its solution for e_last (the tangent's
+    right-hand side, asked for again by the BP test function at the same point)."""
+
+    __slots__ = ("_solve", "_e")
+
+    def __init__(self, solve: Callable[[np.ndarray], np.ndarray]):
+        self._solve, self._e = solve, None
+
+    def __call__(self, b: np.ndarray) -> np.ndarray:
+        if b[-1] == 1.0 and not np.any(b[:-1]):
+            if self._e is None:
+                self._e = self._solve(b)
+            return self._e.copy()
+        return self._solve(b)
+
+
 class CycleProblem:
     """The collocation BVP of periodic orbits in one parameter as a problem for
     :func:`~maglev_match.dynamics.continuation.continuation`: corrector (Newton on the
@@ -848,7 +865,7 @@ class CycleProblem:
                 return None
             self.chord_lu = cr.lu
             return Correction(u=cr.Y, iterations=cr.iterations, residual=cr.residual,
-                              solve=cr.lu.solve,
+                              solve=_TangentMemo(cr.lu.solve),
                               data=(cr.blocks, self.prob.mesh.copy(),
                                     _transfer(self.prob, cr.lu), np.array(row, float)))
         Y, ok, its, res, lu, blocks = _newton(self.prob, u_pred, Uref, row, target,
