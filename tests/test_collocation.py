@@ -253,11 +253,25 @@ def test_multipliers_only_at_the_last_point():
     full = cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4,
                         detect_special_points=False)
     lean = cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4,
-                        detect_special_points=False, multipliers_at="last")
+                        detect_special_points=False, multipliers_at="last",
+                        factor_at_solution=True)  # the same steps as the full run
     ma, mb = (np.sort_complex(np.asarray(x.points[-1].multipliers)) for x in (full, lean))
     assert len(mb) == 4 and np.max(np.abs(ma - mb)) < 1e-12
     assert lean.points[-1].reliable and lean.points[-1].stable
     assert all(len(c.multipliers) == 0 and not c.reliable for c in lean.points[:-1])
+    # by default such a branch also skips the chord corrector's factorisation at each
+    # solution (the tangent and the next corrector use the one in force): fewer
+    # factorisations, the same cycle at the stop value to the discretisation's accuracy
+    # (another step sequence, hence another adapted mesh) and its multipliers (evaluated
+    # at that point itself)
+    auto = cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4,
+                        detect_special_points=False, multipliers_at="last")
+    assert auto.factorizations < lean.factorizations
+    mc = np.sort_complex(np.asarray(auto.points[-1].multipliers))
+    assert np.max(np.abs(ma - mc)) < 1e-9 and auto.points[-1].reliable
+    assert auto.points[-1].max("radius") == pytest.approx(full.points[-1].max("radius"),
+                                                          rel=1e-9)
+    assert auto.points[-1].max("radius") == pytest.approx(math.sqrt(0.4), rel=1e-6)
 
 
 @pytest.mark.parametrize(("kw", "field"), [({"newton": "quasi"}, "newton"),

@@ -786,6 +786,7 @@ def _chord_newton(
     lu0: Any = None,
     solver: str | None = None,
     stats: NewtonStats | None = None,
+    at_solution: bool = True,
 ) -> ChordResult:
     """The chord (simplified Newton) iteration on the bordered collocation system, as AUTO
     runs its corrector with a kept factorisation: Y_(k+1) = Y_k - A^{-1} F(Y_k) with A a
@@ -804,7 +805,11 @@ def _chord_newton(
 
     At the solution the residual and the Jacobian blocks are evaluated and factorised once
     more: that factorisation solves for the tangent, gives the Floquet transfer matrices
-    (:meth:`CondensedLU.transfer_matrices`) and is the next corrector's ``lu0``.
+    (:meth:`CondensedLU.transfer_matrices`) and is the next corrector's ``lu0``. With
+    ``at_solution`` False that last factorisation is skipped: the factorisation in force
+    (at an iterate of this or the previous corrector) is returned for the tangent and the
+    next corrector, and ``blocks`` is None (a caller that needs the Floquet multipliers at
+    the solution evaluates the Jacobian there itself).
     """
     solver = prob.linear_solver if solver is None else solver
     phase = prob.phase_row(Uref)
@@ -858,7 +863,9 @@ def _chord_newton(
             if stats is not None:
                 stats.refactorizations += 1
     lu_out, blocks = None, ()
-    if converged:
+    if converged and not at_solution and lu is not None:
+        lu_out, blocks = lu, None
+    elif converged:
         # the Jacobian at the solution: tangent, Floquet transfer matrices, next chord
         pa = prob.parts(Y, phase, Uref, last_row, last_rhs)
         rnorm = float(np.max(np.abs(pa.resid)))

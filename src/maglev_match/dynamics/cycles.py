@@ -582,6 +582,13 @@ class CycleOptions:
     use_chart : continue in the system's regular chart (:class:`~maglev_match.dynamics.
         system.RegularChart`) once an orbit comes near the set where its equations are
         singular (model A: gap 0). False: never (the earlier behaviour).
+    factor_at_solution : whether the chord corrector factorises the Jacobian once more at
+        each solution (for the tangent, the Floquet transfer matrices and the next
+        corrector). None (default): yes, unless neither special points nor multipliers are
+        wanted along the branch (``detect_special_points`` False and ``multipliers_at``
+        "last", the matching index's route), where the factorisation in force serves the
+        tangent and the next corrector and the last point's Jacobian is evaluated for its
+        multipliers: about one factorisation per step less.
     """
 
     ntst: int = 80
@@ -606,6 +613,7 @@ class CycleOptions:
     multipliers_at: str = MultipliersAt.ALL
     locate_limit: bool = True
     use_chart: bool = True
+    factor_at_solution: bool | None = None
 
     def __post_init__(self) -> None:
         def bad(name, rule):
@@ -659,6 +667,8 @@ class CycleOptions:
         for name in ("detect_special_points", "locate_limit", "use_chart"):
             if not isinstance(getattr(self, name), bool | np.bool_):
                 bad(name, "must be True or False")
+        if self.factor_at_solution not in (None, True, False):
+            bad("factor_at_solution", "must be None, True or False")
 
 
 _OPTION_NAMES = frozenset(f.name for f in dataclasses.fields(CycleOptions))
@@ -844,6 +854,9 @@ class CycleProblem:
         self.chord_lu: Any = None  # the last corrector's factorisation (same mesh)
         self.stats = NewtonStats()
         self.locate_limit = bool(options.locate_limit)
+        self.factor_at_solution = options.factor_at_solution is not False and not (
+            options.factor_at_solution is None and not self.detect
+            and options.multipliers_at == MultipliersAt.LAST)
         # the original system and its regular chart (None: no chart, or not used)
         self.system = prob.system
         self.chart = prob.system.chart if options.use_chart else None
@@ -860,14 +873,17 @@ class CycleProblem:
         Uref, _, _ = self.prob.unpack(u_pred)
         if self.newton == NewtonMode.CHORD:
             cr = _chord_newton(self.prob, u_pred, Uref, row, target, self.tol, max_iter,
-                               lu0=self.chord_lu, stats=self.stats)
+                               lu0=self.chord_lu, stats=self.stats,
+                               at_solution=self.factor_at_solution)
             if not cr.converged:
                 return None
             self.chord_lu = cr.lu
+            at_solution = cr.blocks is not None
             return Correction(u=cr.Y, iterations=cr.iterations, residual=cr.residual,
                               solve=_TangentMemo(cr.lu.solve),
                               data=(cr.blocks, self.prob.mesh.copy(),
-                                    _transfer(self.prob, cr.lu), np.array(row, float)))
+                                    _transfer(self.prob, cr.lu) if at_solution else None,
+                                    np.array(row, float)))
         Y, ok, its, res, lu, blocks = _newton(self.prob, u_pred, Uref, row, target,
                                               self.tol, max_iter, lazy_blocks=True)
         self.stats.correctors += 1
