@@ -19,7 +19,9 @@ def run_job(script: Path, job: str, src: Path, extra: list[str] | None = None,
             timeout: float = 3600) -> dict:
     """Run ``script --job JOB`` with ``src`` first on PYTHONPATH; its last stdout line is a
     JSON object."""
-    env = dict(os.environ, PYTHONPATH=str(src))
+    # one thread in every pool, as the command line runs (set before NumPy loads BLAS)
+    env = dict(os.environ, PYTHONPATH=str(src), OMP_NUM_THREADS="1",
+               OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
     out = subprocess.run([sys.executable, str(script), "--job", job, *(extra or [])], env=env,
                          capture_output=True, text=True, timeout=timeout, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])

@@ -141,6 +141,8 @@ def main() -> None:
     ap.add_argument("--against", type=Path, default=None)
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--skip-cli", action="store_true")
+    ap.add_argument("--jobs", default="factor,index,cli",
+                    help="which interleaved jobs (factor, index, cli)")
     ap.add_argument("--job", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.job:
@@ -149,10 +151,11 @@ def main() -> None:
     from _interleave import interleaved, load, summary
 
     print(f"{os.cpu_count()} cores, load {load()}")
-    parts_breakdown()
+    if "factor" in args.jobs:
+        parts_breakdown()
     if args.against is None:
         return
-    jobs = ["factor", "index"] + ([] if args.skip_cli else ["cli"])
+    jobs = [j for j in args.jobs.split(",") if not (args.skip_cli and j == "cli")]
     for job in jobs:
         res = interleaved(Path(__file__), job, args.against, args.rounds)
         key = "factor_ms" if job == "factor" else "cpu"
