@@ -1896,8 +1896,11 @@ def branch_to_xarray(branch: CycleBranch, system: System | None = None,
     coords["parameter"] = ("parameter", pnames, {"long_name": "parameter name", "units": "1"})
     data["hopf_p"] = (("parameter",), np.asarray(h.p, float),
                       {"units": "parameter units", "long_name": "parameters at the Hopf point"})
+    end = branch.closed_at
     attrs = {"param": pname, "param_unit": param_unit, "ntst": branch.ntst,
              "ncol": branch.ncol, "stopped_reason": str(branch.stopped_reason),
+             "end": branch.message,
+             "closed_at_hopf": np.nan if end is None else float(end.value),
              "hopf_value": h.value, "hopf_frequency": h.frequency,
              "hopf_l1": np.nan if h.l1 is None else h.l1,
              "title": f"branch of periodic orbits in {pname} from a Hopf point"}
