@@ -9,7 +9,15 @@ cost of one Newton iteration and one chord iteration at NTST 80; chi at one poin
 shooting baseline (Newton on the flow map, DOP853 + variational equations) solving the same
 cycles from a warm start (a lower bound on shooting's cost), and the whole CLI command.
 
-    .venv/bin/python bench/bench_cycles.py [--quick] [--skip-shooting]
+    .venv/bin/python bench/bench_cycles.py [--quick] [--skip-shooting] [--against DIR]
+
+``--against DIR`` (a source tree of an earlier commit, e.g. ``git archive <commit> src |
+tar -x -C DIR``) first times the same branch in fresh processes alternating between that
+tree and this one (``--rounds`` pairs, each process: one warm-up branch and the median of
+7), so the before/after ratio is measured under one machine load; CPU time is the number
+to compare on a shared machine. AUTO-07p is not installed here: its timing on this job
+(0.25 s wall, one thread; an earlier measurement 0.166 s) is quoted from issue 25 and
+bench/RESULTS.md.
 """
 
 from __future__ import annotations
@@ -25,12 +33,55 @@ from pathlib import Path
 
 import numpy as np
 
-from maglev_match.dynamics.cycles import cycle_branch
-from maglev_match.dynamics.hopf import locate_hopf_points
-from maglev_match.dynamics.shooting import shoot_periodic_orbit, trajectory_extrema
-from maglev_match.limits_check import cycle_limit_margins
-from maglev_match.models import build_system
-from maglev_match.params import load_preset
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/_interleave.py
+
+from maglev_match.dynamics.cycles import cycle_branch  # noqa: E402
+from maglev_match.dynamics.hopf import locate_hopf_points  # noqa: E402
+from maglev_match.dynamics.shooting import shoot_periodic_orbit, trajectory_extrema  # noqa: E402
+from maglev_match.limits_check import cycle_limit_margins  # noqa: E402
+from maglev_match.models import build_system  # noqa: E402
+from maglev_match.params import load_preset  # noqa: E402
+
+
+def branch_job() -> None:
+    """The benchmark job in this process: warm-up, then the median of 7 branches (JSON)."""
+    params = load_preset("alpha1").replace(sigma=4e-4)
+    system = build_system(params, "unit")
+    hopf = locate_hopf_points(system, "omega1", 110.0, 150.0, n_scan=40).points[0]
+    limits = cycle_limit_margins(params)
+    br = cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits)
+    cs, ws = [], []
+    for _ in range(7):
+        c0, w0 = time.process_time(), time.perf_counter()
+        br = cycle_branch(system, hopf, "omega1", ntst=80, ncol=4, limits=limits)
+        cs.append(time.process_time() - c0)
+        ws.append(time.perf_counter() - w0)
+    import json
+
+    print(json.dumps({"cpu": statistics.median(cs), "cpu_min": min(cs),
+                      "wall": statistics.median(ws), "wall_min": min(ws),
+                      "steps": br.steps, "iterations": br.newton_iterations,
+                      "factorisations": br.factorizations, "end": br.points[-1].value,
+                      "end_kind": br.points[-1].kind}))
+
+
+def against(baseline: Path, rounds: int) -> None:
+    from _interleave import interleaved, load, summary
+
+    print(f"interleaved before/after, {rounds} pairs of fresh processes, load {load()}")
+    res = interleaved(Path(__file__), "branch", baseline, rounds)
+    for tree in ("baseline", "current"):
+        for r in res[tree]:
+            print(f"  {tree}: {r['cpu']:.3f} s CPU (min {r['cpu_min']:.3f}), {r['wall']:.3f} s "
+                  f"wall (min {r['wall_min']:.3f}); {r['steps']} steps, {r['iterations']} "
+                  f"iterations, {r['factorisations']} factorisations; ends at {r['end']:.10g} "
+                  f"({r['end_kind']})")
+    b, c, ratio = summary(res, "cpu")
+    bw, cw, rw = summary(res, "wall")
+    print(f"branch, median CPU: before {b:.3f} s, after {c:.3f} s, {ratio:.2f}x; wall "
+          f"{bw:.3f} -> {cw:.3f} s ({rw:.2f}x); AUTO-07p (quoted, one thread): 0.25 s wall "
+          f"({'faster' if cw < 0.25 else 'not faster'} in wall, "
+          f"{'faster' if c < 0.25 else 'not faster'} in CPU); load after {load()}")
 
 
 def main() -> None:
@@ -38,7 +89,20 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="fewer repeats, shooting on 1/4")
     ap.add_argument("--skip-shooting", action="store_true",
                     help="only the collocation timings (no shooting, no CLI run)")
+    ap.add_argument("--against", type=Path, default=None,
+                    help="source tree of the baseline for the interleaved before/after")
+    ap.add_argument("--rounds", type=int, default=3, help="pairs of processes (--against)")
+    ap.add_argument("--only-against", action="store_true",
+                    help="only the interleaved before/after")
+    ap.add_argument("--job", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.job == "branch":
+        branch_job()
+        return
+    if args.against is not None:
+        against(args.against, args.rounds)
+        if args.only_against:
+            return
     repeats = 2 if args.quick else 5
     params = load_preset("alpha1").replace(sigma=4e-4)
     system = build_system(params, "unit")
@@ -88,8 +152,8 @@ def main() -> None:
             print(f"  {sp.type} at omega1 = {sp.value:.12g} ({sp.detail}, {sp.located})")
     coll = res["current"]
     print(f"branch CPU ratio earlier / current: {res['earlier'] / coll:.2f}x, round 2 / "
-          f"current: {res['round 2'] / coll:.2f}x (AUTO-07p one thread 0.166 s: "
-          f"{'met' if coll < 0.166 else 'not met'})")
+          f"current: {res['round 2'] / coll:.2f}x (AUTO-07p one thread, quoted: 0.25 s: "
+          f"{'faster' if coll < 0.25 else 'not faster'})")
 
     # one Newton iteration at NTST 80: residual + Jacobian blocks, factorisation, solve;
     # and one chord iteration (residual, solve with the kept factorisation)

@@ -23,11 +23,10 @@ import numpy as np
 
 from maglev_match.dynamics.hopf import (
     first_lyapunov_coefficient,
-    hopf_curve,
     hopf_eigenvectors,
     locate_hopf_points,
-    stability_grid,
 )
+from maglev_match.dynamics.hopf_curve import hopf_curve, stability_grid
 from maglev_match.models import build_system
 from maglev_match.params import load_preset
 

@@ -9,6 +9,9 @@
 * :func:`planar_system` - a planar system (PD and NS impossible).
 * :func:`saddle_node`, :func:`pitchfork`, :func:`s_shaped_hopf` - equilibria with a fold,
   a symmetric pitchfork, and an S-shaped curve with a Hopf point on each outer branch.
+* :func:`two_hopf_system` - one family of cycles joining two Hopf points (closed form);
+  :func:`bogdanov_takens_system` - cycles ending at a homoclinic orbit (shooting
+  reference); :func:`pitchfork_cycles_system` - two branch points of cycles near a fold.
 * :func:`lorenz` - the Lorenz system (sigma = 10, beta = 8/3), Hopf of C+ at
   rho = sigma (sigma + beta + 3) / (sigma - beta - 1), subcritical.
 """
@@ -172,6 +175,135 @@ def planar_system() -> System:
     return System(rhs=rhs, p=np.array([0.0]), param_names=("mu",), state_names=("x", "y"),
                   observables={"radius": lambda x, p: jnp.sqrt(x[0] ** 2 + x[1] ** 2)},
                   name="planar")
+
+
+# ------------------------------------------------------------------- ends of cycle branches
+TWO_HOPF_K = 0.3  # amplitude dependence of the frequency
+
+
+def two_hopf_system() -> System:
+    """A planar system whose one family of cycles joins two Hopf points:
+
+        r' = r (mu (1 - mu) - r^2),   theta' = 1 + K r^2       (K = TWO_HOPF_K),
+
+    in Cartesian coordinates (x, y) = r (cos theta, sin theta). The equilibrium 0 has the
+    eigenvalues mu (1 - mu) +- i: Hopf points at mu = 0 and mu = 1 (crossing speeds +1 and
+    -1, both supercritical), and for 0 < mu < 1 the cycle r^2 = mu (1 - mu), period
+    2 pi / (1 + K mu (1 - mu)), multipliers 1 and exp(-2 mu (1 - mu) T), in closed form. The
+    family shrinks to the equilibrium at both ends."""
+
+    def rhs(x, p):
+        mu = p[0]
+        r2 = x[0] ** 2 + x[1] ** 2
+        g = mu * (1.0 - mu) - r2
+        om = 1.0 + TWO_HOPF_K * r2
+        return jnp.stack([g * x[0] - om * x[1], om * x[0] + g * x[1]])
+
+    return System(rhs=rhs, p=np.array([0.5]), param_names=("mu",), state_names=("x", "y"),
+                  observables={"radius": lambda x, p: jnp.sqrt(x[0] ** 2 + x[1] ** 2)},
+                  name="two Hopf points")
+
+
+BT_BETA2 = -1.0
+
+
+def bogdanov_takens_system() -> System:
+    """The Bogdanov-Takens normal form (Kuznetsov 2004, sec. 8.4, s = -1):
+
+        x' = y,   y' = beta1 + beta2 x + x^2 - x y,
+
+    at beta2 = BT_BETA2 = -1, continued in beta1. The equilibrium (0, 0) at beta1 = 0 has
+    trace 0 and determinant -beta2 = 1: a Hopf point (supercritical for s = -1); the stable
+    cycles it sheds for beta1 < 0 grow until they meet the saddle (x = 1 - ..., 0) in a
+    homoclinic orbit near beta1 = -6/25 beta2^2 (the leading-order curve P; the reference
+    value for the tests is solved by shooting the saddle's manifolds,
+    :func:`bt_homoclinic_beta1`). A planar system: no PD or NS, and no fold of the family on
+    the way to the homoclinic orbit."""
+
+    def rhs(x, p):
+        b1, b2 = p[0], p[1]
+        return jnp.stack([x[1], b1 + b2 * x[0] + x[0] ** 2 - x[0] * x[1]])
+
+    return System(rhs=rhs, p=np.array([0.0, BT_BETA2]), param_names=("beta1", "beta2"),
+                  state_names=("x", "y"),
+                  observables={"x": lambda x, p: x[0], "y": lambda x, p: x[1]},
+                  name="Bogdanov-Takens")
+
+
+def bt_homoclinic_beta1(beta2: float = BT_BETA2) -> float:
+    """beta1 of the homoclinic orbit of :func:`bogdanov_takens_system` by shooting: the
+    branch of the saddle's unstable manifold that leaves towards the Hopf equilibrium is
+    integrated until it crosses the line x = x_saddle (below the saddle, y < 0) again, and
+    beta1 is solved (Brent) where that crossing falls on the saddle itself. An independent
+    reference, no collocation involved."""
+    import scipy.integrate
+    import scipy.optimize
+
+    def miss(b1: float) -> float:
+        xs = (-beta2 + math.sqrt(beta2 * beta2 - 4.0 * b1)) / 2.0  # the saddle
+        J = np.array([[0.0, 1.0], [beta2 + 2.0 * xs, -xs]])
+        w, V = np.linalg.eig(J)
+        v = np.real(V[:, int(np.argmax(w.real))])
+        v = v if v[0] < 0 else -v  # towards the other equilibrium
+        y0 = np.array([xs, 0.0]) + 1e-9 * v
+
+        def f(t, z):
+            return [z[1], b1 + beta2 * z[0] + z[0] ** 2 - z[0] * z[1]]
+
+        def back(t, z):  # crossing x = xs again, coming back towards the saddle
+            return z[0] - xs + 1e-12
+        back.terminal, back.direction = True, 1
+        sol = scipy.integrate.solve_ivp(f, (0.0, 200.0), y0, events=back, rtol=1e-12,
+                                        atol=1e-14, method="DOP853")
+        if not sol.t_events[0].size:
+            return -1.0
+        return float(sol.y_events[0][0][1])  # y there: 0 on the homoclinic orbit
+
+    # the leading-order curve -6/25 beta2^2 = -0.24 brackets it with the Hopf value 0 side
+    return float(scipy.optimize.brentq(miss, -0.24 * beta2 * beta2, -0.18 * beta2 * beta2,
+                                       xtol=1e-12))
+
+
+PITCH_NU = 0.0225  # (width of the band of transverse instability)^2
+PITCH_RC2 = 1.05  # r^2 at its centre
+PITCH_OMEGA = 2.0
+
+
+def pitchfork_cycles_system() -> System:
+    """A 3-D system with two branch points of cycles on one branch, near a fold of cycles:
+
+        r' = r (mu + 2 r^2 - r^4),   theta' = OMEGA,   z' = (NU - (r^2 - RC2)^2) z - z^3,
+
+    (x, y) = r (cos theta, sin theta), rotated by a fixed orthogonal 3 x 3 matrix. The cycles
+    z = 0, mu = r^4 - 2 r^2 fold at r = 1 (mu = -1, LPC); their transverse multiplier
+    exp((NU - (r^2 - RC2)^2) T) passes +1 where r^2 = RC2 -+ sqrt(NU) = 0.9 and 1.2, i.e.
+    mu = -0.99 and -0.96 (pitchforks of cycles, z -> -z symmetry): two branch points (BP)
+    on one branch, on either side of the fold and each within 0.04 of it in mu."""
+    R = jnp.asarray(_orthogonal(3, 11))
+
+    def rhs(x, p):
+        mu = p[0]
+        u = R.T @ x
+        r2 = u[0] ** 2 + u[1] ** 2
+        g = mu + 2.0 * r2 - r2 * r2
+        k = PITCH_NU - (r2 - PITCH_RC2) ** 2
+        du = jnp.stack([g * u[0] - PITCH_OMEGA * u[1], PITCH_OMEGA * u[0] + g * u[1],
+                        k * u[2] - u[2] ** 3])
+        return R @ du
+
+    return System(rhs=rhs, p=np.array([0.0]), param_names=("mu",),
+                  state_names=("x1", "x2", "x3"),
+                  observables={"radius": lambda x, p: jnp.sqrt(jnp.sum((R.T @ x)[:2] ** 2)),
+                               "z": lambda x, p: (R.T @ x)[2]},
+                  name="pitchfork of cycles")
+
+
+def pitchfork_bp_values() -> tuple[float, float]:
+    """mu at the two branch points of :func:`pitchfork_cycles_system` (closed form)."""
+    out = []
+    for r2 in (PITCH_RC2 - math.sqrt(PITCH_NU), PITCH_RC2 + math.sqrt(PITCH_NU)):
+        out.append(r2 * r2 - 2.0 * r2)
+    return out[0], out[1]
 
 
 # -------------------------------------------------------------------------------- equilibria

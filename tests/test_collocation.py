@@ -43,11 +43,16 @@ def _problem_near(c, system, ipar: int, m: int, seed: int = 0):
     return prob, Y, prob.parts(Y, phase, o.states, row, float(row @ Y) + 0.01)
 
 
+@pytest.mark.parametrize("blocks", ["inverse", "lu"])
 @pytest.mark.parametrize("m", [2, 4, 7])
-def test_condensed_solve_equals_the_sparse_lu_of_the_whole_system(m):
+def test_condensed_solve_equals_the_sparse_lu_of_the_whole_system(m, blocks, monkeypatch):
     """Newton step, tangent (right-hand side only in the last row) and an arbitrary
     right-hand side: the condensed solver and SuperLU on the whole matrix agree to 1e-12
-    relative, and the condensed solution satisfies the full system to rounding."""
+    relative, and the condensed solution satisfies the full system to rounding; with the
+    interval blocks inverted (small blocks) or LU-factorised (large blocks, forced here)."""
+    from maglev_match.dynamics import collocation
+
+    monkeypatch.setattr(collocation, "LU_BLOCKS_FROM", 10**9 if blocks == "inverse" else 1)
     br = _branch("sparse_lu")
     c = br.points[len(br.points) // 2]
     # re-discretise with NCOL m on the same mesh (the profile is only a starting guess)
@@ -153,17 +158,21 @@ def test_bad_step_and_floquet_options_are_errors_naming_the_field(kw, field):
         cycle_branch(HOPF_NF, start, "mu", stop_at=0.1, **kw)
 
 
-def test_transfer_matrices_from_the_condensation_equal_the_interval_solves():
+@pytest.mark.parametrize("blocks", ["inverse", "lu"])
+def test_transfer_matrices_from_the_condensation_equal_the_interval_solves(blocks,
+                                                                           monkeypatch):
     """The Floquet transfer matrices taken from the Newton step's condensation (no second
     solve) equal the batched interval solves of the variational collocation to 1e-12
     relative, and give the same multipliers (closed form for the normal form: 1 (double,
     the trivial one and the radial direction's exp(-2 mu T)... checked against the
     interval-solve route to 1e-10)."""
+    from maglev_match.dynamics import collocation
     from maglev_match.dynamics.floquet import (
         floquet_multipliers_from_blocks,
         transfer_matrices,
     )
 
+    monkeypatch.setattr(collocation, "LU_BLOCKS_FROM", 10**9 if blocks == "inverse" else 1)
     br = _branch("condensed")
     c = br.points[-1]
     o = c.orbit
@@ -244,11 +253,25 @@ def test_multipliers_only_at_the_last_point():
     full = cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4,
                         detect_special_points=False)
     lean = cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4,
-                        detect_special_points=False, multipliers_at="last")
+                        detect_special_points=False, multipliers_at="last",
+                        factor_at_solution=True)  # the same steps as the full run
     ma, mb = (np.sort_complex(np.asarray(x.points[-1].multipliers)) for x in (full, lean))
     assert len(mb) == 4 and np.max(np.abs(ma - mb)) < 1e-12
     assert lean.points[-1].reliable and lean.points[-1].stable
     assert all(len(c.multipliers) == 0 and not c.reliable for c in lean.points[:-1])
+    # by default such a branch also skips the chord corrector's factorisation at each
+    # solution (the tangent and the next corrector use the one in force): fewer
+    # factorisations, the same cycle at the stop value to the discretisation's accuracy
+    # (another step sequence, hence another adapted mesh) and its multipliers (evaluated
+    # at that point itself)
+    auto = cycle_branch(HOPF_NF, start, "mu", stop_at=0.4, ntst=16, ncol=4,
+                        detect_special_points=False, multipliers_at="last")
+    assert auto.factorizations < lean.factorizations
+    mc = np.sort_complex(np.asarray(auto.points[-1].multipliers))
+    assert np.max(np.abs(ma - mc)) < 1e-9 and auto.points[-1].reliable
+    assert auto.points[-1].max("radius") == pytest.approx(full.points[-1].max("radius"),
+                                                          rel=1e-9)
+    assert auto.points[-1].max("radius") == pytest.approx(math.sqrt(0.4), rel=1e-6)
 
 
 @pytest.mark.parametrize(("kw", "field"), [({"newton": "quasi"}, "newton"),

@@ -74,7 +74,7 @@ def test_fold_of_cycles_located():
     assert all(c.n_unstable == 1 for c in before)
     assert all(c.stable for c in after)
     # the outer cycle reaches radius 1.3 where mu = r^4 - 2 r^2
-    assert br.stopped_reason == "limit"
+    assert br.stopped_reason == "contact with a physical limit"
     assert br.points[-1].value == pytest.approx(1.3**4 - 2 * 1.3**2, rel=1e-7)
 
 
@@ -85,11 +85,11 @@ def test_branch_stops_at_first_limit_contact():
 
     br = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", ntst=20, ncol=4,
                       max_steps=200, limits=limits)
-    assert br.stopped_reason == "limit"
-    lim = [s for s in br.special_points if s.type == "LIMIT"]
+    assert br.stopped_reason == "contact with a physical limit"
+    lim = [s for s in br.special_points if s.type == "contact"]
     assert len(lim) == 1 and lim[0].detail == "radius 0.5"
     assert lim[0].value == pytest.approx(0.25, rel=1e-7)
-    assert br.points[-1].kind == "limit"
+    assert br.points[-1].kind == "contact"
     assert all(c.value <= 0.25 + 1e-9 for c in br.points)  # never stepped past it
 
 
@@ -216,23 +216,27 @@ def test_cli_cycles_json_shape(capsys, tmp_path):
     assert 5e-4 < doc["hopf"]["sigma"] < 2e-3
     assert doc["branch"]
     for row in doc["branch"]:
-        assert set(row) >= {"sigma", "period", "gap_max", "gap_min", "current_min", "stable",
-                            "unstable_multipliers"}
-        assert row["gap_max"] >= row["gap_min"]
-        assert row["stable"] == (row["unstable_multipliers"] == 0)
+        assert set(row) >= {"sigma", "period", "gap_dev_max", "gap_dev_min", "current_min",
+                            "stable", "stability", "unstable_multipliers"}
+        assert row["gap_dev_max"] >= row["gap_dev_min"]
+        if row["stability_reliable"]:
+            assert row["stable"] == (row["stability"] == "stable")
+            assert (row["stability"] == "unstable") == (row["unstable_multipliers"] > 0)
+        else:
+            assert row["stability"] == "unknown"
     types = {s["type"] for s in doc["special_points"]}
-    assert types <= {"LPC", "PD", "NS", "LIMIT"}
+    assert types <= {"LPC", "PD", "NS", "BP", "H", "contact"}
     labels = [s["label"] for s in doc["special_points"]]
     assert len(set(labels)) == len(labels) and all(labels)
     assert all(s["located"] == "solved" or s["located"].startswith(("bracketed", "not "))
                for s in doc["special_points"])
     assert all(isinstance(r["stability_reliable"], bool) for r in doc["branch"])
-    if doc["stopped_reason"] == "limit":
-        lim = [s for s in doc["special_points"] if s["type"] == "LIMIT"][0]
+    if doc["stopped_reason"] == "contact with a physical limit":
+        lim = [s for s in doc["special_points"] if s["type"] == "contact"][0]
         last = doc["branch"][-1]
         assert lim["sigma"] == pytest.approx(last["sigma"])
         # at the contact some limit is reached: gap 0, 18 mm or current 0
-        assert min(last["gap_min"] + 0.008, 0.010 - last["gap_max"],
+        assert min(last["gap_dev_min"] + 0.008, 0.010 - last["gap_dev_max"],
                    last["current_min"] / 26.68) == pytest.approx(0.0, abs=1e-6)
     assert (tmp_path / "cycles_unit_sigma.png").exists()
     assert (tmp_path / "cycles_unit_sigma.csv").read_text().startswith("branch,hopf,sigma")
@@ -320,7 +324,7 @@ def test_lorenz_branch_to_the_homoclinic_end_has_no_pd_or_ns():
     assert hp.l1 > 0  # subcritical
     br = cycle_branch(system, hp, "rho", ntst=60, ncol=4, max_steps=300,
                       max_period_factor=30, lam_scale=1.0)
-    assert br.stopped_reason == "period too large (homoclinic?)"
+    assert br.stopped_reason == "homoclinic approach"
     assert br.points[-1].value == pytest.approx(13.926, abs=2e-3)  # the homoclinic orbit
     assert not [s for s in br.special_points if s.type in ("PD", "NS")]
     # unstable cycles (one multiplier outside) wherever the multipliers are trusted
@@ -464,11 +468,11 @@ def test_limit_contact_only_bracketed_on_request():
     kw = dict(ntst=20, ncol=4, max_steps=200, limits=limits, detect_special_points=False)
     solved = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", **kw)
     rough = cycle_branch(HOPF_NF, _start(HOPF_NF, -1.0), "mu", locate_limit=False, **kw)
-    assert solved.stopped_reason == rough.stopped_reason == "limit"
-    a, b = (next(s for s in br.special_points if s.type == "LIMIT") for br in (solved, rough))
+    assert solved.stopped_reason == rough.stopped_reason == "contact with a physical limit"
+    a, b = (next(s for s in br.special_points if s.type == "contact") for br in (solved, rough))
     assert a.located == "solved" and a.value == pytest.approx(0.25, rel=1e-7)
     assert b.located.startswith("bracketed") and "locate_limit=False" in b.located
     before = rough.points[-2].value  # the last accepted point before the contact
     assert before < 0.25 and abs(b.value - 0.25) <= 0.25 - before
-    assert rough.points[-1].kind == "limit"
+    assert rough.points[-1].kind == "contact"
     assert not any("limit contact" in w for w in rough.warnings)  # asked for: no warning

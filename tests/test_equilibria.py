@@ -79,18 +79,42 @@ def test_refine_rejects_a_hopf_point_outside_its_range():
     from maglev_match.params import load_preset
 
     unit = build_system(load_preset("turnout-soft"), "unit")
+    free = dataclasses.replace(unit, param_ranges={})  # the model without its valid ranges
     # from a poor frequency guess Newton lands on a Hopf point at omega1 < 0
-    hp = refine_hopf_point(unit, "omega1", 110.0, unit.x_guess, 50.0)
+    hp = refine_hopf_point(free, "omega1", 110.0, unit.x_guess, 50.0)
     assert hp.value < 0  # a true solution of the defining system, but not physical
     assert hp.converged  # without a range nothing forbids it...
-    hp = refine_hopf_point(unit, "omega1", 110.0, unit.x_guess, 50.0, bounds=(30.0, 400.0))
+    hp = refine_hopf_point(free, "omega1", 110.0, unit.x_guess, 50.0, bounds=(30.0, 400.0))
     assert not hp.converged  # ...with the search bounds it is rejected with the reason
     assert "outside [30, 400]" in hp.message and "outside" in hp.warnings[-1]
     ranged = dataclasses.replace(unit, param_ranges={"omega1": (0.0, math.inf)})
     hp = refine_hopf_point(ranged, "omega1", 110.0, unit.x_guess, 50.0)
     assert not hp.converged and "outside" in hp.message
+    # the shipped model declares omega1 in (0, 1e5]: its Newton path stops where it leaves
+    assert unit.param_ranges["omega1"][0] > 0
+    hp = refine_hopf_point(unit, "omega1", 110.0, unit.x_guess, 50.0)
+    assert not hp.converged
+    assert "the Newton path left the valid range" in hp.message
+    assert "omega1 = -" in hp.message and "(0, 100000]" in hp.message
     # a good guess converges and is validated: +-i omega an eigenvalue pair there
     good = refine_hopf_point(unit, "omega1", 125.0, unit.x_guess, 145.0, bounds=(30, 400))
     assert good.converged and good.message == ""
     w = np.linalg.eigvals(unit.jacobian(good.x, good.p))
     assert np.min(np.abs(w - 1j * good.frequency)) < 1e-8 * good.frequency
+
+
+def test_equilibrium_branch_stops_at_the_end_of_the_valid_range():
+    """Model A declares omega1 > 0: a branch asked to run from 50 to -50 rad/s stops at the
+    end of that range (close to omega1 = 0, where the beam loses its stiffness and the
+    equilibrium its uniqueness, so the bound itself cannot be solved) and says so; one
+    asked to start at -50 does not start."""
+    from maglev_match.dynamics.equilibria import equilibrium_branch
+    from maglev_match.models import build_system
+    from maglev_match.params import load_preset
+
+    unit = build_system(load_preset("alpha1"), "unit")
+    br = equilibrium_branch(unit, "omega1", 50.0, -50.0, n_points=20)
+    assert np.all(br.values > 0.0) and br.values[-1] < 1.0
+    assert any("valid range of omega1" in w for w in br.warnings)
+    bad = equilibrium_branch(unit, "omega1", -50.0, 50.0, n_points=20)
+    assert bad.values.size == 0 and "outside its valid range" in bad.message

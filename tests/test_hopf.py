@@ -16,12 +16,11 @@ from systems import DIM, OMEGA, bautin_system
 
 from maglev_match.dynamics.hopf import (
     first_lyapunov_coefficient,
-    hopf_curve,
     hopf_eigenvectors,
     locate_hopf_points,
     second_lyapunov_coefficient,
-    stability_grid,
 )
+from maglev_match.dynamics.hopf_curve import hopf_curve, stability_grid
 from maglev_match.dynamics.system import System
 
 
@@ -273,14 +272,14 @@ def test_cli_hopf_curve_rejects_unknown_parameter(capsys):
     assert "nonsense" in err
 
 
-def test_hopf_curve_module_imports_first_and_hopf_reexports_it():
-    """hopf_curve imports hopf; hopf re-exports the curve's names lazily, so either module
-    can be imported first in a fresh interpreter."""
+def test_hopf_curve_module_imports_first():
+    """hopf_curve imports hopf (and hopf does not import hopf_curve): either module can be
+    imported first in a fresh interpreter."""
     import subprocess
     import sys
 
     code = ("import maglev_match.dynamics.hopf_curve as hc\n"
-            "from maglev_match.dynamics.hopf import HopfCurve, hopf_curve\n"
+            "from maglev_match.dynamics.hopf_curve import HopfCurve, hopf_curve\n"
             "assert HopfCurve is hc.HopfCurve and hopf_curve is hc.hopf_curve\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=300)

@@ -12,7 +12,7 @@ import xarray as xr  # noqa: E402
 from matplotlib.collections import PolyCollection  # noqa: E402
 
 import maglev_match as mm  # noqa: E402
-from maglev_match.dynamics.hopf import HopfCurve, HopfCurvePoint  # noqa: E402
+from maglev_match.dynamics.hopf_curve import HopfCurve, HopfCurvePoint  # noqa: E402
 from maglev_match.plots.cycles import branch_label, cycle_diagram  # noqa: E402
 from maglev_match.plots.hopf import hopf_curve_figure  # noqa: E402
 from maglev_match.plots.maps import map_figure  # noqa: E402

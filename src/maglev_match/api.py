@@ -43,7 +43,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from maglev_match.design import DesignResult
     from maglev_match.dynamics.cycles import CycleBranch
     from maglev_match.dynamics.equilibria import RootLocusResult, StabilityResult
-    from maglev_match.dynamics.hopf import HopfCurve, HopfScan
+    from maglev_match.dynamics.hopf import HopfScan
+    from maglev_match.dynamics.hopf_curve import HopfCurve
     from maglev_match.dynamics.system import System
     from maglev_match.matching import MatchingIndex
     from maglev_match.report import ReportResult

@@ -27,10 +27,11 @@ from maglev_match.params import PARAMETER_DOCS, Params
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
-    from maglev_match.dynamics.equilibria import RootLocusResult
-    from maglev_match.simulation import MaglevSimulation
+# This module annotates results; it imports no module that computes them (the simulation
+# imports it, never the other way round; the numerics layer does not import it at all).
 
-__all__ = ["annotate", "annotate_map", "simulation_dataset", "root_locus_dataset",
+__all__ = ["annotate", "annotate_map", "annotate_history", "simulation_dataset",
+           "root_locus_dataset",
            "state_units", "LONG_NAMES", "UNITS"]
 
 # long names of variables shared by several datasets
@@ -158,16 +159,21 @@ def annotate_map(ds: xr.Dataset, params: Params) -> xr.Dataset:
     return annotate(ds, params)
 
 
-def simulation_dataset(sim: MaglevSimulation) -> xr.Dataset:
-    """A simulated run as an :class:`xarray.Dataset` with units and long names.
+def simulation_dataset(sim: Any) -> xr.Dataset:
+    """A simulated run (a :class:`~maglev_match.simulation.MaglevSimulation`) as an
+    :class:`xarray.Dataset` with units and long names: ``sim.to_xarray()``, which builds
+    the history and annotates it with :func:`annotate_history`.
 
     Variables: every state (SI units), ``gap``, ``gap_deviation``, ``gap_rate`` and
     ``current`` per levitation point, ``beam_deflection``; attributes: outcome, collision
     time/limit/point, model, horizon, gap limits, the parameter set and the version.
     """
-    from maglev_match.simulation import history_dataset
+    return sim.to_xarray()
 
-    ds = history_dataset(sim)
+
+def annotate_history(ds: xr.Dataset, sim: Any) -> xr.Dataset:
+    """The history dataset of a simulated run (``simulation.history_dataset``) with units,
+    long names, a title, the parameter set and the version."""
     extra_u, extra_l = {}, {}
     for name in ds.data_vars:
         if name in UNITS:
@@ -179,30 +185,11 @@ def simulation_dataset(sim: MaglevSimulation) -> xr.Dataset:
     return annotate(ds, sim.params, units=extra_u, long_names=extra_l)
 
 
-def root_locus_dataset(res: RootLocusResult, params: Params | None = None,
+def root_locus_dataset(res: Any, params: Params | None = None,
                        state_names: tuple[str, ...] | None = None) -> xr.Dataset:
-    """A root locus as an :class:`xarray.Dataset` over (parameter value, eigenvalue index).
-
-    Variables: ``eigenvalue_real`` (1/s), ``eigenvalue_imag`` (rad/s), ``max_real_part``,
-    ``equilibrium_converged`` and, with ``state_names``, the equilibrium states.
-    """
-    import xarray as xr
-
-    dim = res.param
-    eig = np.asarray(res.eigenvalues)
-    data: dict[str, Any] = {
-        "eigenvalue_real": ((dim, "index"), eig.real),
-        "eigenvalue_imag": ((dim, "index"), eig.imag),
-        "max_real_part": (dim, np.asarray(res.max_real_part)),
-        "equilibrium_converged": (dim, np.asarray(res.converged).astype(np.int8)),
-    }
-    coords: dict[str, Any] = {dim: np.asarray(res.values), "index": np.arange(eig.shape[1])}
-    if state_names is not None:
-        data["equilibrium"] = ((dim, "state"), np.asarray(res.equilibria))
-        coords["state"] = list(state_names)
-    ds = xr.Dataset(data, coords=coords, attrs={"title": f"root locus along {dim}"})
-    if "state" in ds.coords:
-        ds["state"].attrs["units"] = "1"
-        ds["equilibrium"].attrs.update(units="SI (see state)",
-                                       long_name="equilibrium state (units per state)")
-    return annotate(ds, params)
+    """A root locus (:class:`~maglev_match.dynamics.equilibria.RootLocusResult`) as an
+    :class:`xarray.Dataset` over (parameter value, eigenvalue index): its own
+    ``to_xarray`` (``eigenvalue_real`` (1/s), ``eigenvalue_imag`` (rad/s),
+    ``max_real_part``, ``equilibrium_converged`` and, with ``state_names``, the equilibrium
+    states), annotated with the parameter set."""
+    return annotate(res.to_xarray(params, state_names), params)

@@ -30,6 +30,9 @@ __all__ = [
     "ParameterWarning",
     "RANGES",
     "PARAMETER_DOCS",
+    "valid_range",
+    "param_ranges",
+    "format_range",
     "available_presets",
     "load_params",
     "load_preset",
@@ -96,6 +99,54 @@ RANGES: dict[str, tuple[float, float]] = {
     "m_s": (1e-3, 1e8), "j_s": (1e-3, 1e10), "m_b": (1e-3, 1e8), "j_b": (1e-3, 1e10),
     "k2": (1e-6, 1e10), "c2": (0.0, 1e9), "s": (1e-4, 1e4), "s0": (0.0, 1e4),
 }
+# Sign rules of the inputs (checked first, with their own message).
+POSITIVE = ("m", "M", "g", "ks", "mu0", "N", "A", "c0", "omega0", "xi0", "ke",
+            "L", "EI", "mbar", "l", "k", "m_s", "j_s", "m_b", "j_b", "k2", "s")
+NONNEGATIVE = ("cs", "c2", "kP", "kD", "s0", "gap_min")
+# Ranges of the values that may also be set directly (omega1, sigma) or have a rule of their
+# own (xi1): the same rules as _validate_inputs states in words.
+_SPECIAL_RANGES: dict[str, tuple[float, float]] = {
+    "omega1": (math.ulp(0.0), 1e5),  # (0, 1e5] rad/s
+    "sigma": (0.0, 0.1),  # [0, 0.1] 1/kg
+    "xi1": (0.0, math.nextafter(1.0, 0.0)),  # [0, 1)
+}
+
+
+def valid_range(name: str) -> tuple[float, float] | None:
+    """The closed interval [lo, hi] (SI units) in which the value of parameter ``name`` is
+    valid, by the same rules :class:`Params` checks: the finite ranges of :data:`RANGES`,
+    positive quantities (lo the smallest positive double: "> 0"), non-negative ones, a
+    damping ratio in [0, 1), omega1 in (0, 1e5] rad/s, sigma in [0, 0.1] 1/kg. None for a
+    name without a rule (e.g. gap_max's coupling to c0 is not a range of its own).
+
+    Models declare these as their parameters' valid ranges
+    (:attr:`maglev_match.dynamics.system.System.param_ranges`), so that a continuation or a
+    Newton refinement that wanders out of them (e.g. to a negative beam frequency) stops
+    and says so instead of reporting a converged but meaningless point."""
+    if name in _SPECIAL_RANGES:
+        return _SPECIAL_RANGES[name]
+    lo, hi = RANGES.get(name, (-math.inf, math.inf))
+    if name in POSITIVE:
+        lo = max(lo, math.ulp(0.0))
+    elif name in NONNEGATIVE:
+        lo = max(lo, 0.0)
+    if not (math.isfinite(lo) or math.isfinite(hi)):
+        return None
+    return (float(lo), float(hi))
+
+
+def param_ranges(names) -> dict[str, tuple[float, float]]:
+    """:func:`valid_range` of every name that has one (for a model's parameter vector)."""
+    return {n: r for n in names if (r := valid_range(n)) is not None}
+
+
+def format_range(lo: float, hi: float) -> str:
+    """A valid range in words: '(0, 1e+05]' for a positive quantity, '[0, 0.1]', ..."""
+    left = "(0" if lo == math.ulp(0.0) else f"[{lo:g}"
+    right = "1)" if hi == math.nextafter(1.0, 0.0) else f"{hi:g}]"
+    return f"{left}, {right}"
+
+
 # Inputs from which each derived value is computed (named in its error message).
 DERIVED_FROM: dict[str, tuple[str, ...]] = {
     "omega1": ("L", "EI", "mbar"),
@@ -316,9 +367,8 @@ def _validate_inputs(p: Params) -> None:
         v = getattr(p, n)
         if float(v) != int(v):
             raise ParameterError(n, v, "must be a whole number")
-    _positive(p, "m", "M", "g", "ks", "mu0", "N", "A", "c0", "omega0", "xi0", "ke",
-              "L", "EI", "mbar", "l", "k", "m_s", "j_s", "m_b", "j_b", "k2", "s")
-    _nonnegative(p, "cs", "c2", "kP", "kD", "s0", "gap_min")
+    _positive(p, *POSITIVE)
+    _nonnegative(p, *NONNEGATIVE)
     if not 0 <= p.xi1 < 1:
         raise ParameterError("xi1", p.xi1, "a damping ratio must lie in [0, 1)")
     if p.omega1 is not None and not 0 < p.omega1 <= 1e5:

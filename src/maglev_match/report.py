@@ -437,7 +437,7 @@ class CycleDiagram:
         out = []
         for hp, br in self.branches:
             for sp in br.special_points:
-                if sp.type == "LIMIT":
+                if sp.type == "contact":
                     out.append((hp.value, sp.value, sp.extrema["gap_deviation"][0]))
         return out
 
@@ -509,7 +509,7 @@ def cycle_diagram_figure(d: CycleDiagram, design: float | None = None, title: st
         ax.plot([hp.value], [0.0], marker="*", ms=13, color=color, ls="none",
                 label=f"Hopf {hp.value:.4g} ({hp.kind})")
         for sp in br.special_points:
-            if sp.type == "LIMIT":
+            if sp.type == "contact":
                 gx, gn = sp.extrema["gap_deviation"]
                 ax.plot([sp.value, sp.value], [gx * 1e3, gn * 1e3], "o", color=color, mfc="none",
                         ms=8)
@@ -529,8 +529,9 @@ def cycle_diagram_figure(d: CycleDiagram, design: float | None = None, title: st
 def cycle_diagram_table(d: CycleDiagram) -> str:
     rows = []
     for hp, br in d.branches:
-        contact = next((sp for sp in br.special_points if sp.type == "LIMIT"), None)
-        others = [f"{sp.type} at {sp.value:.5g}" for sp in br.special_points if sp.type != "LIMIT"]
+        contact = next((sp for sp in br.special_points if sp.type == "contact"), None)
+        others = [f"{sp.type} at {sp.value:.5g}" for sp in br.special_points
+                  if sp.type != "contact"]
         rows.append((hp.value, hp.frequency, hp.l1, hp.kind, hp.crossing_speed,
                      contact.value if contact else None,
                      "; ".join(others) or "-", br.stopped_reason))
@@ -859,7 +860,8 @@ def hopf_curves(params: Params, settings: ReportSettings) -> list[Any]:
     """Branches of the Hopf curve of model A in the (omega1, sigma) plane, continued from
     the Hopf points found along omega1 at the design sigma and along sigma at the design
     omega1 (duplicates of one branch are kept once)."""
-    from maglev_match.dynamics.hopf import hopf_curve, locate_hopf_points
+    from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.dynamics.hopf_curve import hopf_curve
     from maglev_match.models import build_system
 
     system = build_system(params, "unit")
@@ -896,7 +898,7 @@ def stability_region(params: Params, settings: ReportSettings
     """max Re(lambda) of model A on a grid of (omega1, sigma) (batched Newton and
     eigenvalues): an independent picture of the regions the Hopf curve separates.
     Returns (omega1 values, sigma values, max real part shaped (n_sigma, n_omega1))."""
-    from maglev_match.dynamics.hopf import stability_grid
+    from maglev_match.dynamics.hopf_curve import stability_grid
     from maglev_match.models import build_system
 
     n1, n2 = (50, 40) if settings.quick else (120, 90)

@@ -392,7 +392,7 @@ def _claims_hopf(st: Study) -> list[Claim]:
     contact = [c for c in db.limit_contacts()]
     if contact:
         sig = contact[0][1]
-        sp = next(sp for _, b in db.branches for sp in b.special_points if sp.type == "LIMIT")
+        sp = next(sp for _, b in db.branches for sp in b.special_points if sp.type == "contact")
         gx, gn = sp.extrema["gap_deviation"]
         out.append(_numeric("tangency", "Sec. 4 (Fig. 5b)",
                             "sigma where the unstable cycle touches the gap limit, omega1 = 100",
@@ -441,7 +441,7 @@ def _claims_hopf(st: Study) -> list[Claim]:
     if ca:
         hp_v, val, _ = ca[0]
         br = next(b for h, b in da.branches if h.value == hp_v)
-        sp = next(s for s in br.special_points if s.type == "LIMIT")
+        sp = next(s for s in br.special_points if s.type == "contact")
         gx, gn = sp.extrema["gap_deviation"]
         out.append(_qualitative(
             "b1-b2", "Fig. 5a", "upper and lower amplitudes where the unstable cycle touches "

@@ -238,9 +238,9 @@ class MaglevSimulation:
     def to_xarray(self):
         """The history as an :class:`xarray.Dataset` with units, long names, the parameter
         set and the package version (:func:`maglev_match.datasets.simulation_dataset`)."""
-        from maglev_match.datasets import simulation_dataset
+        from maglev_match.datasets import annotate_history
 
-        return simulation_dataset(self)
+        return annotate_history(history_dataset(self), self)
 
     def summary(self) -> dict[str, Any]:
         """The outcome of the run in machine-readable form (SI units)."""
@@ -383,9 +383,7 @@ def save_history(sim: MaglevSimulation, path: str | Path) -> Path:
     variable and point, e.g. ``gap_deviation_3``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    from maglev_match.datasets import simulation_dataset  # units, long names, parameters
-
-    ds = simulation_dataset(sim)
+    ds = sim.to_xarray()  # units, long names, parameters
     if path.suffix == ".nc":
         atomic_write_netcdf(path, ds)
         return path

@@ -40,6 +40,7 @@ from maglev_match.cli.common import (
 )
 from maglev_match.cli.common import params_from_options as _params
 from maglev_match.cli.models import is_model_file, user_cycles
+from maglev_match.dynamics.continuation import SpecialPointKind  # (NumPy only)
 from maglev_match.io import atomic_open, atomic_write_text
 from maglev_match.params import ParameterError, Params, warn_overridden
 
@@ -79,8 +80,9 @@ def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
         gmax, gmin = c.extrema["gap_deviation"]
         imax, imin = c.extrema["current"]
         rows.append({
-            param: c.value, "period": c.period, "gap_max": gmax, "gap_min": gmin,
+            param: c.value, "period": c.period, "gap_dev_max": gmax, "gap_dev_min": gmin,
             "current_min": imin, "current_max": imax, "stable": c.stable,
+            "stability": c.stability or ("stable" if c.stable else "unstable"),
             "unstable_multipliers": c.n_unstable,
             "max_abs_multiplier": float(np.max(np.abs(c.multipliers))),
             "kind": c.kind,
@@ -93,10 +95,11 @@ def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
 def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
     rows = []
     for s in br.special_points:
-        gmax, gmin = s.extrema["gap_deviation"]
-        rows.append({"type": s.type, param: s.value, "period": s.period, "gap_max": gmax,
-                     "gap_min": gmin, "current_min": s.extrema["current"][1],
-                     "limit": s.detail if s.type == "LIMIT" else "",
+        gmax, gmin = s.extrema.get("gap_deviation", (float("nan"), float("nan")))
+        rows.append({"type": s.type, param: s.value, "period": s.period, "gap_dev_max": gmax,
+                     "gap_dev_min": gmin,
+                     "current_min": s.extrema.get("current", (np.nan, np.nan))[1],
+                     "limit": s.detail if s.type == SpecialPointKind.CONTACT else "",
                      "detail": s.detail, "located": s.located, "label": s.label})
     return rows
 
@@ -223,7 +226,7 @@ def cycles_command(
                               limits=limits, progress=report)
             branches.append(br)
             prog.stage(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
-                       f"stopped: {br.stopped_reason}")
+                       f"ended: {br.stopped_reason}")
     elapsed = time.perf_counter() - t0
 
     main_branch, h0 = branches[0], chosen[0]
@@ -236,6 +239,7 @@ def cycles_command(
         "branch": _branch_rows(main_branch, param),
         "special_points": _special_rows(main_branch, param),
         "stopped_reason": main_branch.stopped_reason,
+        "end": main_branch.message,
         "steps": main_branch.steps,
         "warnings": list(main_branch.warnings) + list(scan.warnings),
         "hopf_points": [_hopf_json(h, param) for h in hopfs],
@@ -312,10 +316,12 @@ def _print_summary(result, branches, chosen, param, files, first_line: str | Non
             console.print(first_line, highlight=False, markup=False)
         else:
             console.print(f"Hopf point {param} = {h.value:.8g}, frequency {h.frequency:.6g} "
-                          f"rad/s, l1 = {h.l1:.4g} ({h.kind}); branch stopped: "
+                          f"rad/s, l1 = {h.l1:.4g} ({h.kind}); branch ended: "
                           f"{br.stopped_reason} after {br.steps} steps")
-        table = Table(param, "T (s)", "gap max (mm)", "gap min (mm)", "i min (A)",
-                      "stable", "n unst", box=box.SIMPLE)
+        if br.message:
+            console.print(f"  {br.message}")
+        table = Table(param, "T (s)", "gap dev max (mm)", "gap dev min (mm)", "i min (A)",
+                      "stability", "n unst", box=box.SIMPLE)
         pts = br.points
         idx = sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1]))
         for k in idx:
@@ -324,20 +330,26 @@ def _print_summary(result, branches, chosen, param, files, first_line: str | Non
                           f"{c.extrema['gap_deviation'][0] * 1e3:.4f}",
                           f"{c.extrema['gap_deviation'][1] * 1e3:.4f}",
                           f"{c.extrema['current'][1]:.3f}",
-                          ("yes" if c.stable else "no") + ("" if c.reliable else "?"),
+                          (c.stability if c.reliable and c.stability else
+                           ("stable" if c.stable else "unstable")) + ("" if c.reliable
+                                                                     else "?"),
                           str(c.n_unstable) + ("" if c.reliable else "?"))
         console.print(table)
         unreliable = [c for c in pts if not c.reliable]
         if unreliable:
             console.print(f"  [yellow]{len(unreliable)} of {len(pts)} cycles have unreliable "
                           "multipliers (trivial multiplier away from 1, marked ?): their "
-                          "stability is not trusted and no PD/NS/BP is declared there[/]")
+                          "stability is not trusted and no LPC/PD/NS/BP is declared "
+                          "there[/]")
         for s in br.special_points:
-            console.print(f"  {s.label or s.type}: {s.type} at {param} = {s.value:.8g} "
-                          f"({s.located})"
-                          f"{': ' + s.detail if s.detail else ''}, gap max "
-                          f"{s.extrema['gap_deviation'][0] * 1e3:.4f} mm, min "
-                          f"{s.extrema['gap_deviation'][1] * 1e3:.4f} mm")
+            what = (f"contact with the physical limit '{s.detail}'"
+                    if s.type == SpecialPointKind.CONTACT else
+                    f"{s.type}{': ' + s.detail if s.detail else ''}")
+            gap = s.extrema.get("gap_deviation")
+            tail = (f", gap dev max {gap[0] * 1e3:.4f} mm, min {gap[1] * 1e3:.4f} mm"
+                    if gap is not None and s.type != SpecialPointKind.HOPF else "")
+            console.print(f"  {s.label or s.type}: {what} at {param} = {s.value:.10g} "
+                          f"({s.located}){tail}")
         for w in br.warnings:
             console.print(f"  [yellow]warning:[/] {w}")
     for f in files:

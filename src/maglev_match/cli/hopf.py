@@ -116,6 +116,8 @@ def hopf_command(
             scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
             names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
             records = [_point_record(hp, system, names) for hp in scan.points]
+        for k, rec in enumerate(records):  # AUTO's and MatCont's label of a Hopf point
+            rec["label"] = f"H{k + 1}"
     specials = [{"type": str(sp.type), param: sp.value, "located": sp.located,
                  "label": sp.label, "frequency": sp.frequency}
                 for sp in scan.special_points]
@@ -130,10 +132,10 @@ def hopf_command(
     console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit}, "
                   f"model {model}: {len(records)} found")
     if records:
-        table = Table(*names, "omega (rad/s)", "dRe/dp", "l1", "type", "others stable",
-                      "converged")
+        table = Table("label", *names, "omega (rad/s)", "dRe/dp", "l1", "type",
+                      "others stable", "converged")
         for hp, r in zip(scan.points, records, strict=True):
-            table.add_row(*[f"{r[n]:.8g}" for n in names], f"{hp.frequency:.6g}",
+            table.add_row(r["label"], *[f"{r[n]:.8g}" for n in names], f"{hp.frequency:.6g}",
                           f"{hp.crossing_speed:.4g}", f"{hp.l1:.4g}", hp.kind,
                           str(hp.others_stable), str(hp.converged))
         console.print(table)

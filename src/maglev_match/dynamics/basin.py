@@ -27,14 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from maglev_match.dynamics.cycles import CycleBranch, CyclePoint, cycle_branch
+from maglev_match.dynamics.cycles import CycleBranch, CyclePoint, CycleStop, cycle_branch
 from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
 from maglev_match.dynamics.system import System
 from maglev_match.reprs import compact_repr
 
 __all__ = ["CycleBound", "bounding_cycle"]
 
-FAILED = ("newton failed", "step too small")
+FAILED = (CycleStop.NEWTON_FAILED, CycleStop.STEP_TOO_SMALL)
 
 
 @dataclass(frozen=True)
@@ -128,7 +128,7 @@ def bounding_cycle(
             warnings.append(f"the cycle born at {hp.param} = {hp.value:.6g} is stable at the "
                             "design point; it does not bound the basin")
             continue
-        if br.stopped_reason == "limit":
+        if br.stopped_reason == CycleStop.CONTACT:
             # only a contact between the Hopf point and the design point means that the
             # surrounding cycle leaves the range; a branch that touched a limit on the far
             # side of its Hopf point (heading away from the design) turned away

@@ -37,6 +37,7 @@ read-out of the parameter, test functions and optional hooks.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -45,9 +46,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from maglev_match.reprs import compact_repr
+
 __all__ = [
     "signed_geometric_mean",
     "SpecialPointKind",
+    "SpecialPoint",
+    "label_points",
     "StopReason",
     "ContinuationOptions",
     "Correction",
@@ -64,20 +69,26 @@ SOLVED = "solved"
 
 
 class SpecialPointKind(StrEnum):
-    """Types of special points (same strings in JSON and files)."""
+    """Types of special points, with the labels of AUTO-07p and MatCont (same strings in
+    JSON and files): LP, BP, H on equilibrium branches; LPC, PD, NS, BP on branches of
+    cycles; GH, BT, ZH, HH on Hopf curves. Two kinds are not bifurcations and are named so
+    that no AUTO or MatCont user reads them as one: ``contact`` (a cycle reaches a physical
+    limit of the model, e.g. the magnet touches the rail; a user-defined zero, AUTO's UZ)
+    and ``bound`` (the parameter reached the end of the search interval)."""
 
     LP = "LP"  # fold (limit point) of equilibria
     BP = "BP"  # branch point (equilibria or cycles)
-    HOPF = "H"  # Hopf point on an equilibrium branch
+    HOPF = "H"  # Hopf point on an equilibrium branch (or where a family of cycles ends)
     LPC = "LPC"  # fold of cycles
     PD = "PD"  # period doubling (real multiplier through -1)
     NS = "NS"  # Neimark-Sacker (complex pair through the unit circle)
-    LIMIT = "LIMIT"  # a physical limit is reached
+    CONTACT = "contact"  # a physical limit is reached (not a bifurcation)
+    LIMIT = "contact"  # the earlier name of CONTACT (an alias, same member)
     GH = "GH"  # generalised Hopf (Bautin), l1 = 0 on the Hopf curve
     BT = "BT"  # Bogdanov-Takens
     ZH = "ZH"  # zero-Hopf
     HH = "HH"  # double Hopf
-    BOUND = "BOUND"  # the parameter reached a bound of the search
+    BOUND = "bound"  # the parameter reached a bound of the search
 
 
 class StopReason(StrEnum):
@@ -167,6 +178,81 @@ class ContinuationOptions:
                                  "must be finite with lo < hi")
 
 
+@dataclass(frozen=True)
+class SpecialPoint:
+    """A special point of a branch, one record for every branch type (equilibria, cycles,
+    the Hopf curve), after BifurcationKit's ``SpecialPoint``: the common fields, and the
+    fields of the branch types that have them (None or empty otherwise).
+
+    Common fields
+    -------------
+    type : the :class:`SpecialPointKind` value (LP, BP, H, LPC, PD, NS, GH, BT, ZH, HH,
+        contact, bound).
+    value : the continuation parameter there (its own unit; the first of the two on a
+        Hopf curve).
+    label : unique along the branch (LPC1, H2, contact1, ...).
+    located : "solved" (a zero of its test function solved on the branch to the branch's
+        tolerance) or the reason it could not be solved.
+    step : index of the accepted branch point just before it (-1: not on a step).
+    detail : e.g. the multiplier at a PD, the name of the limit at a contact, the Hopf
+        point that closes a family of cycles.
+    values : every continuation parameter there ((value,) on one-parameter branches).
+
+    Branch-specific fields
+    ----------------------
+    x, eigenvalues : the equilibrium and its eigenvalues (equilibria, Hopf curve).
+    frequency : omega of the critical pair (rad/s): H, GH, ZH, HH.
+    period, extrema, point : the cycle there (cycles: period in s, observable
+        (max, min), the solved :class:`~maglev_match.dynamics.cycles.CyclePoint`).
+    l2 : second Lyapunov coefficient (GH); other_frequency : the second frequency (HH).
+    residual : the residual of the defining system where one was solved.
+    """
+
+    __repr__ = compact_repr
+
+    type: str
+    value: float
+    label: str = ""
+    located: str = "solved"
+    step: int = -1
+    detail: str = ""
+    values: tuple[float, ...] = ()
+    x: np.ndarray | None = None
+    eigenvalues: np.ndarray | None = None
+    frequency: float = 0.0
+    period: float | None = None
+    extrema: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    point: Any = None
+    l2: float | None = None
+    other_frequency: float | None = None
+    residual: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.values:
+            object.__setattr__(self, "values", (float(self.value),))
+
+    @property
+    def converged(self) -> bool:
+        """Whether the point was solved (``located`` is "solved")."""
+        return self.located == SOLVED
+
+    @property
+    def note(self) -> str:
+        """Why the point is not solved ('' when it is)."""
+        return "" if self.converged else self.located
+
+
+def label_points(points: list[SpecialPoint]) -> list[SpecialPoint]:
+    """The same points with labels unique along a branch: type and running number per
+    type (LPC1, LPC2, BP1, ...), AUTO's and MatCont's labels."""
+    counts: dict[str, int] = {}
+    out = []
+    for sp in points:
+        counts[sp.type] = counts.get(sp.type, 0) + 1
+        out.append(dataclasses.replace(sp, label=f"{sp.type}{counts[sp.type]}"))
+    return out
+
+
 @dataclass
 class Correction:
     """A corrected point: the solution u, Newton diagnostics, and a solver of the bordered
@@ -245,6 +331,13 @@ class ContinuationProblem(Protocol):
     * ``event_tolerance(name)`` : the relative bracket (of the step) to which this event is
       located, or None for ``options.event_tol`` (a problem that re-solves the point of an
       event exactly anyway, e.g. at a stop value, needs only one secant trial: 1.0).
+    * ``event_tests(name, point)`` : the test functions at a trial point of the location
+      of event ``name`` (at least ``name``'s; default: all of ``test_functions``), so a
+      problem may skip read-outs that the location does not need.
+    * ``rebase(a, corr)`` : called with the last accepted point and a successful
+      correction of the next step; returns None to go on, or the point ``a`` expressed in
+      new unknowns (the problem changed its coordinates, e.g. to a chart in which its
+      equations stay regular ahead): the step is then taken again from there.
     """
 
     weights: np.ndarray
@@ -336,13 +429,20 @@ def continuation(
     after_accept = _hook(problem, "after_accept", lambda pt: pt)
     worth = _hook(problem, "worth_locating", lambda name, a, b: True)
     stop_hook = _hook(problem, "stop", lambda pt: None)
+    rebase = getattr(problem, "rebase", None)
     t0 = np.asarray(t0, float) / math.sqrt(float(np.sum(W * t0 * t0)))
 
-    def make_point(corr: Correction, orient: np.ndarray, kind: str = "step") -> BranchPoint:
+    event_tests = getattr(problem, "event_tests", None)
+
+    def make_point(corr: Correction, orient: np.ndarray, kind: str = "step",
+                   event: str | None = None) -> BranchPoint:
         t = _tangent(corr, W, orient)
         pt = BranchPoint(u=corr.u, t=t, value=float(problem.parameter(corr.u)),
                          correction=corr, kind=kind)
-        pt.tests = dict(problem.test_functions(pt))
+        if event is not None and event_tests is not None:
+            pt.tests = dict(event_tests(event, pt))
+        else:
+            pt.tests = dict(problem.test_functions(pt))
         if opt.param_bounds is not None:
             pt.tests["__lo"] = pt.value - opt.param_bounds[0]
             pt.tests["__hi"] = opt.param_bounds[1] - pt.value
@@ -370,8 +470,15 @@ def continuation(
     rejected = 0
     reason, message = StopReason.MAX_STEPS, f"stopped after max_steps = {opt.max_steps}"
     step = 0
+    rebased = 0
     while step < opt.max_steps:
         corr = correct_at(a, s)
+        if corr is not None and rebase is not None and rebased < 4:
+            a_new = rebase(a, corr)
+            if a_new is not None:  # new coordinates: the same step again from a in them
+                a = a_new
+                rebased += 1
+                continue
         if corr is None:
             rejected += 1
             s *= opt.shrink
@@ -439,6 +546,11 @@ def continuation(
                               message=message, rejected=rejected)
 
 
+#: A zero whose bracket has shrunk below this fraction of its step is located, even when
+#: the corrector fails at trial points closer to it (see :func:`_locate`).
+PINNED = 1e-6
+
+
 def _inside_step(u: np.ndarray, ua: np.ndarray, ub: np.ndarray, W: np.ndarray) -> bool:
     """Whether u lies within the step from ua to ub: no farther from either end than the
     chord (with a margin for the curvature of the branch)."""
@@ -455,10 +567,18 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
             ) -> Event | None:
     """Zero of test function ``name`` between a (s = 0) and b (s = s_step): Illinois
     regula falsi on s, every trial re-corrected onto the branch, to the relative bracket
-    ``problem.event_tolerance(name)`` (default ``opt.event_tol``)."""
+    ``problem.event_tolerance(name)`` (default ``opt.event_tol``), or until the test
+    function is within ``problem.event_value_tolerance(name)`` of zero (when the problem
+    gives one). The zero is "solved" when either holds, and also when the corrector fails
+    at trials closer to it once its bracket is below :data:`PINNED` of the step, or the
+    best trial's |g| below :data:`PINNED` of |g| at the step's ends (at a branch point the
+    bordered matrix is singular: its neighbourhood cannot be corrected, however it was
+    approached); the located point is the trial with the smallest |g|."""
     tol_hook = getattr(problem, "event_tolerance", None)
     ev_tol = tol_hook(name) if tol_hook is not None else None
     ev_tol = opt.event_tol if ev_tol is None else float(ev_tol)
+    value_hook = getattr(problem, "event_value_tolerance", None)
+    value_tol = value_hook(name) if value_hook is not None else None
     lo, glo, hi, ghi = 0.0, a.tests[name], s_step, b.tests[name]
     g_start = glo
     best: tuple[float, float, BranchPoint] | None = None
@@ -488,9 +608,17 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
             else:  # the corrector fails here: try closer to the near end of the bracket
                 sm = lo + 0.5 * (sm - lo)
         if corr is None:
-            located = "not solved: the corrector failed inside the step"
+            if best is not None and ((hi - lo) < PINNED * s_step or abs(best[0]) <= PINNED * max(
+                    abs(a.tests[name]), abs(b.tests[name]))):
+                # the zero is pinned (a bracket far below the step, or a test value far below
+                # its values at the ends of the step, which for a simple zero bounds the
+                # distance the same way); the corrector only fails closer to it (at a branch
+                # point the bordered matrix is singular): the best trial is the located point
+                located = SOLVED
+            else:
+                located = "not solved: the corrector failed inside the step"
             break
-        pt = make_point(corr, a.t)
+        pt = make_point(corr, a.t, event=name)
         g = pt.tests.get(name, np.nan)
         if not np.isfinite(g):
             located = "not solved: the test function is not finite inside the step"
@@ -501,7 +629,8 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
                                                       or abs(g) <= abs(best_before[0])):
             best_before = (g, sm, pt)
         if g == 0 or (hi - lo) < ev_tol * s_step or ev_tol >= 1.0 or (
-                s_prev is not None and abs(sm - s_prev) < ev_tol * s_step):
+                s_prev is not None and abs(sm - s_prev) < ev_tol * s_step) or (
+                value_tol is not None and abs(g) <= value_tol):
             located = SOLVED
             break
         s_prev = sm
@@ -521,7 +650,8 @@ def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correc
                      value=float("nan"), terminal=name.startswith("__") or bool(terminal(name)),
                      s=s_step)
     is_terminal = name.startswith("__") or bool(terminal(name))
-    if is_terminal and best_before is not None:
+    on_zero = value_tol is not None and abs(best[0]) <= value_tol
+    if is_terminal and best_before is not None and not on_zero:
         best = best_before  # a branch ends on the near side of its terminal event
     g, sm, pt = best
     if name.startswith("__"):

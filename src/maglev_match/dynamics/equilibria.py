@@ -20,6 +20,7 @@ evaluated at every accepted point by :func:`~maglev_match.dynamics.continuation.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cache
@@ -34,10 +35,12 @@ from maglev_match.dynamics.continuation import (
     SOLVED,
     BranchPoint,
     ContinuationOptions,
+    SpecialPoint,
     SpecialPointKind,
     StopReason,
     continuation,
     dense_bordered_newton,
+    label_points,
 )
 from maglev_match.dynamics.system import System
 from maglev_match.reprs import compact_repr
@@ -106,6 +109,7 @@ class RootLocusResult:
     converged: np.ndarray  # Newton converged at each value
     equilibria: np.ndarray  # (n_values, dim)
     warnings: tuple[str, ...] = field(default=())
+    param_unit: str = ""  # the unit of ``param`` (from the system's param_units)
 
     def plot(self, path=None, **kw):
         """This result's figure, as the command line draws it
@@ -116,12 +120,49 @@ class RootLocusResult:
         return plot(self, path, **kw)
 
     def to_xarray(self, params: Any = None, state_names: tuple[str, ...] | None = None):
-        """The locus as an :class:`xarray.Dataset` over (parameter value, eigenvalue index)
-        with units and long names (:func:`maglev_match.datasets.root_locus_dataset`);
-        ``params`` (a parameter set) is stored as an attribute when given."""
-        from maglev_match.datasets import root_locus_dataset
+        """The locus as an :class:`xarray.Dataset` over (parameter value, eigenvalue index):
+        ``eigenvalue_real`` (1/s), ``eigenvalue_imag`` (rad/s), ``max_real_part``,
+        ``equilibrium_converged`` and, with ``state_names``, the equilibrium states; every
+        variable with ``units`` and ``long_name``. ``params`` (a parameter set: any object
+        with ``as_dict()``) is stored as the JSON attribute ``params`` when given."""
+        import json
 
-        return root_locus_dataset(self, params, state_names)
+        import xarray as xr
+
+        from maglev_match import __version__
+
+        dim = self.param
+        eig = np.asarray(self.eigenvalues)
+        data: dict[str, Any] = {
+            "eigenvalue_real": ((dim, "index"), eig.real,
+                                {"units": "1/s", "long_name": "real part of the eigenvalue"}),
+            "eigenvalue_imag": ((dim, "index"), eig.imag,
+                                {"units": "rad/s",
+                                 "long_name": "imaginary part of the eigenvalue"}),
+            "max_real_part": (dim, np.asarray(self.max_real_part),
+                              {"units": "1/s", "long_name": "largest real part of the "
+                               "eigenvalues of the equilibrium"}),
+            "equilibrium_converged": (dim, np.asarray(self.converged).astype(np.int8),
+                                      {"units": "1", "long_name": "Newton's method converged "
+                                       "at the equilibrium (1) or not (0)"}),
+        }
+        coords: dict[str, Any] = {
+            dim: (dim, np.asarray(self.values), {"units": self.param_unit or "1",
+                                                 "long_name": dim}),
+            "index": ("index", np.arange(eig.shape[1]),
+                      {"units": "1", "long_name": "eigenvalue number, largest real part "
+                       "first"})}
+        if state_names is not None:
+            data["equilibrium"] = ((dim, "state"), np.asarray(self.equilibria),
+                                   {"units": "SI (see state)", "long_name": "equilibrium "
+                                    "state (units per state)"})
+            coords["state"] = ("state", list(state_names), {"units": "1",
+                                                            "long_name": "state name"})
+        attrs = {"title": f"root locus along {dim}", "maglev_match_version": __version__}
+        if params is not None and hasattr(params, "as_dict"):
+            attrs["params"] = json.dumps({k: (v.item() if isinstance(v, np.generic) else v)
+                                          for k, v in params.as_dict().items()})
+        return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
 def find_equilibrium(
@@ -254,31 +295,18 @@ def root_locus(
         converged=np.array(conv),
         equilibria=np.array(eqs),
         warnings=tuple(warnings),
+        param_unit=system.param_units.get(param, ""),
     )
 
 
 # ----------------------------------------------------------------------------------------
 # branches of equilibria by pseudo-arclength continuation
 # ----------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class EquilibriumSpecialPoint:
-    """A special point of an equilibrium branch, located by solving inside its step.
-
-    type : LP (fold), BP (branch point) or H (Hopf).
-    value : the parameter there (its own unit); x the equilibrium; eigenvalues of J there.
-    frequency : omega of the critical pair for H (rad/s), else 0.
-    step : index of the branch point before it; located: "solved" or the reason it was not.
-    label : a short unique label along the branch (LP1, H2, ...).
-    """
-
-    type: SpecialPointKind
-    value: float
-    x: np.ndarray
-    eigenvalues: np.ndarray
-    frequency: float
-    step: int
-    located: str
-    label: str
+#: A special point of an equilibrium branch (LP, BP or H), located by solving inside its
+#: step: the package's one special-point record
+#: (:class:`~maglev_match.dynamics.continuation.SpecialPoint`) with the equilibrium ``x``,
+#: its ``eigenvalues`` and, for H, the ``frequency`` omega of the critical pair (rad/s).
+EquilibriumSpecialPoint = SpecialPoint
 
 
 @dataclass(frozen=True)
@@ -291,7 +319,7 @@ class EquilibriumBranch:
     values: np.ndarray  # parameter at each point (its unit)
     states: np.ndarray  # (n_points, dim) equilibria
     eigenvalues: np.ndarray  # (n_points, dim), each row sorted by real part desc
-    special_points: tuple[EquilibriumSpecialPoint, ...]
+    special_points: tuple[SpecialPoint, ...]
     stop_reason: StopReason
     message: str
     p: np.ndarray  # parameter vector (the continued entry is replaced along the branch)
@@ -490,6 +518,14 @@ def equilibrium_branch(
     lo, hi = sorted((float(start), float(stop)))
     width = hi - lo if hi > lo else max(1.0, abs(lo))
     pk = system.params_with(base, **{param: float(start)})
+    outside = system.range_violation(param, float(start))
+    if outside:  # the model is not defined there
+        return EquilibriumBranch(
+            param=param, values=np.zeros(0), states=np.zeros((0, system.dim)),
+            eigenvalues=np.zeros((0, system.dim), complex), special_points=(),
+            stop_reason=StopReason.NEWTON_FAILED, message=f"the start {outside}", p=base,
+            warnings=(f"the equilibrium branch cannot start: {outside}",))
+    valid = system.valid_bounds(param, None)
     eq = find_equilibrium(system, pk, x0)
     if not eq.converged and eq.scaled_residual > 1e-9:
         return EquilibriumBranch(
@@ -502,6 +538,9 @@ def equilibrium_branch(
     opt = options or ContinuationOptions(ds=0.25 * ds_max, ds_min=1e-7 * ds_max,
                                          ds_max=ds_max, max_steps=50 * int(n_points),
                                          newton_tol=1e-10, param_bounds=(lo, hi))
+    if valid is not None:  # never beyond the valid range (a stop there, with a warning)
+        opt = dataclasses.replace(opt, param_bounds=system.valid_bounds(param,
+                                                                         opt.param_bounds))
     prob = EquilibriumProblem(system, param, base, eq.x, width, opt.newton_tol)
     prob.min_split = 1e3 * opt.ds_min
     u0 = prob.pack(eq.x, float(start))
@@ -521,13 +560,15 @@ def equilibrium_branch(
     states = np.array([prob.unpack(pt.u)[0] for pt in res.points]).reshape(-1, system.dim)
     eigs = np.array([pt.info["eigenvalues"] for pt in res.points])
     specials = []
-    counts: dict[str, int] = {}
     for ev in res.events:
         if ev.kind == SpecialPointKind.BOUND:
+            if valid is not None and res.points and min(
+                    abs(res.points[-1].value - b) for b in (lo, hi)) > 1e-9 * max(
+                    1.0, abs(res.points[-1].value)):
+                warnings.append(f"the equilibrium branch reached the end of the valid range "
+                                f"of {param} at {res.points[-1].value:.8g}")
             continue
         kind = SpecialPointKind(ev.kind)
-        counts[kind] = counts.get(kind, 0) + 1
-        label = f"{kind}{counts[kind]}"
         if ev.point is None:
             warnings.append(f"{kind} between steps {ev.step} and {ev.step + 1}: {ev.located}")
             continue
@@ -537,10 +578,11 @@ def equilibrium_branch(
             _, i, _ = _hopf_test(w)
             om = float(abs(w[i].imag))
         if ev.located != SOLVED:
-            warnings.append(f"{label} at {param} = {ev.point.value:.8g}: {ev.located}")
-        specials.append(EquilibriumSpecialPoint(
+            warnings.append(f"{kind} at {param} = {ev.point.value:.8g}: {ev.located}")
+        specials.append(SpecialPoint(
             type=kind, value=ev.point.value, x=prob.unpack(ev.point.u)[0], eigenvalues=w,
-            frequency=om, step=ev.step, located=ev.located, label=label))
+            frequency=om, step=ev.step, located=ev.located))
+    specials = label_points(specials)
     return EquilibriumBranch(param=param, values=values, states=states, eigenvalues=eigs,
                              special_points=tuple(specials), stop_reason=res.stop_reason,
                              message=res.message, p=base, steps=max(len(res.points) - 1, 0),

@@ -11,8 +11,9 @@ free parameters):
 
 so that q = v1 + i v2 satisfies J q = i omega q. With one free parameter the system is
 square and Newton's method refines a Hopf point to full precision; with two free parameters
-it defines the Hopf curve (:mod:`maglev_match.dynamics.hopf_curve`). The Lyapunov
-coefficients are in :mod:`maglev_match.dynamics.normal_forms`; both are re-exported here.
+it defines the Hopf curve (:mod:`maglev_match.dynamics.hopf_curve`, which imports this
+module; this one does not import it). The Lyapunov coefficients are in
+:mod:`maglev_match.dynamics.normal_forms`, re-exported here.
 """
 
 from __future__ import annotations
@@ -234,7 +235,10 @@ def refine_hopf_point(
     neutral saddles, and Newton may run to a Hopf point of another, unphysical region):
     omega > 0, +-i omega is an eigenvalue pair of the Jacobian there (to 1e-6 relative),
     and the parameter lies inside ``bounds``. Otherwise ``converged`` is False and the
-    reason is the point's ``message`` (and a warning).
+    reason is the point's ``message`` (and a warning). Every Newton iterate must also lie
+    in the system's valid range of ``param`` (:attr:`System.param_ranges`): the model is
+    not defined outside it (a negative frequency or mass), so an iteration that leaves it
+    stops there, not converged, whatever it might have converged to afterwards.
 
     Parameters
     ----------
@@ -263,6 +267,7 @@ def refine_hopf_point(
     converged = False
     res = np.inf
     n_iter = 0
+    left_range = ""
     for n_iter in range(1, max_iter + 1):  # noqa: B007 (n_iter reported below)
         g = np.asarray(G(np.asarray(z), pj, cj))
         A = np.asarray(DG(np.asarray(z), pj, cj))
@@ -275,6 +280,14 @@ def refine_hopf_point(
             warnings.append("non-finite Newton step")
             break
         z = z + dz
+        left = system.range_violation(param, float(z[-1]))
+        if left or not np.all(np.isfinite(z)):
+            # the model is not defined there (e.g. a negative beam frequency): the Newton
+            # path left the valid range, whatever it would converge to afterwards
+            left_range = left or "non-finite Newton iterate"
+            warnings.append(f"the Newton path left the valid range at iteration {n_iter}: "
+                            f"{left_range}")
+            break
         step = float(np.max(np.abs(dz) / scale))
         # converged on a small step, or on a residual at round-off level after a small step
         # (the step may stall slightly above tol when the unknowns are far from unit scale)
@@ -293,7 +306,7 @@ def refine_hopf_point(
                 system.params_with(base, **{param: float(z[-1])}))))
                 @ system.state_scale + 1e-300)))
     res = max(res, float(np.max(np.abs(g[n:]) / (abs(z[3 * n]) + 1.0))))
-    if not converged:
+    if not converged and not left_range:
         warnings.append(f"Newton on the Hopf defining system did not converge in {n_iter} steps")
     xs, v1, v2, om, al = _unpack(z, n)
     if om < 0:
@@ -306,6 +319,8 @@ def refine_hopf_point(
         if message:
             converged = False
             warnings.append(f"not a valid Hopf point: {message}")
+    elif left_range:
+        message = f"the Newton path left the valid range: {left_range}"
     else:
         message = f"Newton on the Hopf defining system did not converge in {n_iter} steps"
     hp = _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings)
@@ -323,16 +338,13 @@ def _hopf_validation(system, param, val, xs, pv, om, omega_guess, bounds) -> str
     if dist > 1e-6 * max(1.0, om):
         return (f"+-i {om:.6g} is not an eigenvalue pair of the Jacobian (nearest "
                 f"eigenvalue {dist:.2e} away)")
-    for rng, what in ((bounds, "the search bounds"),
-                      (system.param_ranges.get(param), "its valid range")):
-        if rng is None:
-            continue
-        lo, hi = sorted(map(float, rng))
+    if bounds is not None:
+        lo, hi = sorted(map(float, bounds))
         slack = 1e-12 * max(1.0, abs(lo) if math.isfinite(lo) else 1.0,
                             abs(hi) if math.isfinite(hi) else 1.0)
         if not lo - slack <= val <= hi + slack:
-            return f"{param} = {val:.8g} lies outside [{lo:g}, {hi:g}] ({what})"
-    return ""
+            return f"{param} = {val:.8g} lies outside [{lo:g}, {hi:g}] (the search bounds)"
+    return system.range_violation(param, val)
 
 
 def _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings) -> HopfPoint:
@@ -440,33 +452,3 @@ def locate_hopf_points(
 
 def _with_warning(hp: HopfPoint, msg: str) -> HopfPoint:
     return dataclasses.replace(hp, warnings=hp.warnings + (msg,))
-
-
-# ----------------------------------------------------------------------------------------
-# the two-parameter Hopf curve
-# ----------------------------------------------------------------------------------------
-
-
-
-
-
-
-
-
-
-
-
-
-# The curve lives in its own module (which imports this one); its names are re-exported
-# here lazily (PEP 562), so ``from maglev_match.dynamics.hopf import hopf_curve`` works and
-# either module can be imported first.
-_FROM_HOPF_CURVE = ("CodimTwoPoint", "HopfCurve", "HopfCurvePoint", "hopf_curve",
-                    "stability_grid")
-
-
-def __getattr__(name: str):
-    if name in _FROM_HOPF_CURVE:
-        from maglev_match.dynamics import hopf_curve as _hopf_curve_module
-
-        return getattr(_hopf_curve_module, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -13,7 +13,6 @@ solving; Bogdanov-Takens (BT) when the frequency falls to zero.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cache
@@ -24,12 +23,15 @@ import numpy as np
 
 from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.continuation import (
+    SOLVED,
     BranchPoint,
     ContinuationOptions,
     Correction,
+    SpecialPoint,
     SpecialPointKind,
     StopReason,
     continuation,
+    label_points,
     signed_geometric_mean,
 )
 from maglev_match.dynamics.hopf import (
@@ -72,30 +74,12 @@ class HopfCurvePoint:
     n_unstable_others: int  # number of other eigenvalues with Re > 0
 
 
-@dataclass(frozen=True)
-class CodimTwoPoint:
-    """A codimension-two point on the Hopf curve.
-
-    type: 'GH' (generalised Hopf / Bautin, l1 = 0), 'BT' (Bogdanov-Takens, omega -> 0),
-    'ZH' (zero-Hopf, a real eigenvalue at 0), 'HH' (double Hopf, a second imaginary pair).
-    """
-
-    __repr__ = compact_repr
-
-    type: SpecialPointKind
-    values: tuple[float, float]
-    frequency: float
-    l2: float | None = None  # second Lyapunov coefficient (GH only)
-    other_frequency: float | None = None  # the second frequency (HH only)
-    converged: bool = True
-    residual: float = 0.0
-    note: str = ""
-    label: str = ""  # unique along the curve: GH1, HH2, ...
-
-    @property
-    def located(self) -> str:
-        """'solved', or why not (the note)."""
-        return "solved" if self.converged else (self.note or "not solved")
+#: A codimension-two point on the Hopf curve: the package's one special-point record
+#: (:class:`~maglev_match.dynamics.continuation.SpecialPoint`) with ``type`` GH
+#: (generalised Hopf / Bautin, l1 = 0), BT (Bogdanov-Takens, omega -> 0), ZH (zero-Hopf, a
+#: real eigenvalue at 0) or HH (double Hopf, a second imaginary pair); ``values`` the two
+#: parameters there, ``l2`` (GH), ``other_frequency`` (HH), ``residual``, ``located``.
+CodimTwoPoint = SpecialPoint
 
 
 @dataclass(frozen=True)
@@ -106,7 +90,7 @@ class HopfCurve:
 
     params: tuple[str, str]
     points: list[HopfCurvePoint]
-    special_points: list[CodimTwoPoint]
+    special_points: list[SpecialPoint]
     converged: bool
     message: str
     steps: int
@@ -334,7 +318,18 @@ class _HopfCurveSolver:
                 z_b = self.land_on_bound(a_pt.u, ev.point.u, prob.c, k)
             if z_b is not None:
                 self.accept(br, z_b, prob.c)
-            br.message = f"reached the bound of {self.params[k]}"
+            user = getattr(self, "user_bounds", None)
+            if user is not None and tuple(sorted(self.bounds[k])) != user[k]:
+                lo, hi = sorted(self.bounds[k])
+                where = z_b[3 * self.n + 1 + k] if z_b is not None else float("nan")
+                end = lo if abs(where - lo) <= abs(where - hi) else hi
+                if end not in user[k]:
+                    br.message = (f"reached the end of the valid range of {self.params[k]} "
+                                  f"({self.params[k]} = {end:.6g})")
+                else:
+                    br.message = f"reached the bound of {self.params[k]}"
+            else:
+                br.message = f"reached the bound of {self.params[k]}"
         elif res.stop_reason == StopReason.PROBLEM:
             br.message = res.message
         elif res.stop_reason == StopReason.MAX_STEPS:
@@ -539,7 +534,14 @@ def hopf_curve(
     base = np.array(start.p if p is None else p, float)
     base[system.param_index(start.param)] = start.value
     n = system.dim
-    solver = _HopfCurveSolver(system, tuple(params), base, bounds, start.frequency, tol)
+    # the curve may not leave the parameters' valid ranges (System.param_ranges)
+    valid = {k: system.valid_bounds(k, bounds[k]) for k in params}
+    if any(lo >= hi for lo, hi in valid.values()):
+        return HopfCurve(params=tuple(params), points=[], special_points=[], converged=False,
+                         message="the bounds lie outside the parameters' valid ranges",
+                         steps=0)
+    solver = _HopfCurveSolver(system, tuple(params), base, valid, start.frequency, tol)
+    solver.user_bounds = [tuple(sorted(map(float, bounds[k]))) for k in params]
     v1, v2 = _normalise_pair(start.q.real, start.q.imag)
     c0 = v1.copy()
     al0 = base[list(solver.idx)]
@@ -565,7 +567,7 @@ def hopf_curve(
         zs = b.zs[:0:-1] + zs
         cs = b.cs[:0:-1] + cs
         info = b.info[:0:-1] + info
-    special: list[CodimTwoPoint] = []
+    special: list[SpecialPoint] = []
     events = (branches[1].events[::-1] if len(branches) > 1 else []) + branches[0].events
     for ev in events:
         special.extend(_codim_two(solver, ev, warnings))
@@ -573,14 +575,11 @@ def hopf_curve(
         if br.bt:
             z = br.zs[-1]
             al = z[3 * n + 1 :]
-            special.append(CodimTwoPoint(
-                type=SpecialPointKind.BT, values=(float(al[0]), float(al[1])),
-                frequency=float(z[3 * n]), converged=False,
-                note="frequency fell to zero; the last solved point of the curve"))
-    counts: dict[str, int] = {}
-    for k, sp in enumerate(special):
-        counts[sp.type] = counts.get(sp.type, 0) + 1
-        special[k] = dataclasses.replace(sp, label=f"{sp.type}{counts[sp.type]}")
+            special.append(SpecialPoint(
+                type=SpecialPointKind.BT, value=float(al[0]),
+                values=(float(al[0]), float(al[1])), frequency=float(z[3 * n]),
+                located="frequency fell to zero; the last solved point of the curve"))
+    special = label_points(special)
     pts = []
     for z, inf in zip(zs, info, strict=True):
         x, _, _, om, al = _unpack(z, n)
@@ -594,7 +593,7 @@ def hopf_curve(
                      closed=any(br.closed for br in branches), warnings=tuple(warnings))
 
 
-def _codim_two(solver: _HopfCurveSolver, ev, warnings: list[str]) -> list[CodimTwoPoint]:
+def _codim_two(solver: _HopfCurveSolver, ev, warnings: list[str]) -> list[SpecialPoint]:
     """The codimension-two point of a located event of the Hopf curve (GH with l2)."""
     n = solver.n
     if ev.point is None:
@@ -612,17 +611,20 @@ def _codim_two(solver: _HopfCurveSolver, ev, warnings: list[str]) -> list[CodimT
             _, l2 = second_lyapunov_coefficient(solver.system, x, solver.full_p(al), om)
         except np.linalg.LinAlgError:
             l2 = float("nan")
-        return [CodimTwoPoint(type=SpecialPointKind.GH, values=(float(al[0]), float(al[1])),
-                              frequency=om, l2=l2, converged=conv, residual=float(res))]
+        return [SpecialPoint(type=SpecialPointKind.GH, value=float(al[0]),
+                             values=(float(al[0]), float(al[1])), frequency=om, l2=l2,
+                             located=SOLVED if conv else "not solved", residual=float(res),
+                             step=ev.step)]
     other = None
     if ev.kind == "HH":
         others = ev.point.info["others"]
         i, j = np.triu_indices(others.size, 1)
         k = int(np.argmin(np.abs(others[i] + others[j])))
         other = float(abs(others[i[k]].imag))
-    return [CodimTwoPoint(type=SpecialPointKind(ev.kind), values=(float(al[0]), float(al[1])),
-                          frequency=om, other_frequency=other, converged=conv,
-                          residual=float(res))]
+    return [SpecialPoint(type=SpecialPointKind(ev.kind), value=float(al[0]),
+                         values=(float(al[0]), float(al[1])), frequency=om,
+                         other_frequency=other, located=SOLVED if conv else "not solved",
+                         residual=float(res), step=ev.step)]
 
 
 @cache

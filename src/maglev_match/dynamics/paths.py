@@ -14,7 +14,7 @@ from functools import cache
 import jax.numpy as jnp
 import numpy as np
 
-from maglev_match.dynamics.system import RHS, System
+from maglev_match.dynamics.system import RHS, RegularChart, System
 
 __all__ = ["path_system", "PATH_PARAM"]
 
@@ -46,9 +46,23 @@ def _path_observable(g, n_nodes: int, n_params: int):
     return g_path
 
 
+@cache
+def _path_chart(chart: RegularChart, n_nodes: int, n_params: int) -> RegularChart:
+    """The system's regular chart along the path (every map and the vector field read the
+    parameters at the path position)."""
+    return RegularChart(
+        rhs=_path_rhs(chart.rhs, n_nodes, n_params),
+        to_chart=_path_observable(chart.to_chart, n_nodes, n_params),
+        from_chart=_path_observable(chart.from_chart, n_nodes, n_params),
+        distance=_path_observable(chart.distance, n_nodes, n_params),
+        state_scale=chart.state_scale, switch_below=chart.switch_below)
+
+
 def path_system(system: System, nodes: np.ndarray, t0: float = 0.0) -> System:
     """The system restricted to the piecewise-linear path through the rows of ``nodes``
-    (shape (n_nodes, n_params), n_nodes >= 2); its parameter vector is [t, nodes...]."""
+    (shape (n_nodes, n_params), n_nodes >= 2); its parameter vector is [t, nodes...]. A
+    regular chart of the system (:class:`~maglev_match.dynamics.system.RegularChart`)
+    comes along, restricted to the same path."""
     nodes = np.asarray(nodes, float)
     if nodes.ndim != 2 or nodes.shape[0] < 2 or nodes.shape[1] != len(system.param_names):
         raise ValueError(
@@ -69,4 +83,5 @@ def path_system(system: System, nodes: np.ndarray, t0: float = 0.0) -> System:
         state_scale=system.state_scale,
         observables={k: _path_observable(g, n, m) for k, g in system.observables.items()},
         name=f"{system.name} along a path of {n} points",
+        chart=None if system.chart is None else _path_chart(system.chart, n, m),
     )

@@ -21,6 +21,7 @@ time (:mod:`maglev_match.aot`), so a new process does not trace them again.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
@@ -37,7 +38,7 @@ from maglev_match.reprs import compact_repr
 Array = Any
 RHS = Callable[[Array, Array], Array]
 
-__all__ = ["System", "compiled"]
+__all__ = ["System", "RegularChart", "chart_kernels", "compiled"]
 
 
 @dataclass(frozen=True)
@@ -105,6 +106,87 @@ def _split(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @dataclass(frozen=True)
+class RegularChart:
+    """Coordinates y = phi(x, p) in which a vector field that is singular on some set of
+    states stays smooth: the same dynamics, written so that numerical methods keep their
+    accuracy near that set.
+
+    Example (model A of the maglev package): the magnet force K (i / c)^2 / 2 and the
+    induction term (i / c) c' make the vector field singular at gap c = 0, but along every
+    trajectory the ratio r = i / c obeys a smooth equation (flux linkage), so a periodic
+    orbit that reaches c = 0 passes it with i = 0 at the same instant. In (c, i) a
+    collocation polynomial cannot keep i / c bounded there (its zeros of i and c do not
+    coincide), Newton's matrices grow like 1 / c and the Floquet multipliers lose their
+    accuracy; in (c, r) nothing is singular. A branch of cycles changes to the chart when
+    an orbit comes within ``switch_below`` of the singular set (in the units of
+    ``distance``) and reports its orbits back in the original coordinates.
+
+    Parameters
+    ----------
+    rhs : the vector field in chart coordinates, y' = rhs(y, p) (pure JAX).
+    to_chart, from_chart : y = phi(x, p) and its inverse x = phi^{-1}(y, p) (pure JAX, one
+        state; they may depend on the parameters).
+    distance : d(x, p), a scalar that measures how far the original coordinates are from
+        their singular set (model A: c / c0, the gap over the rated gap).
+    state_scale : typical magnitudes of the chart's states.
+    switch_below : change to the chart when an orbit's smallest ``distance`` falls below.
+    """
+
+    rhs: RHS
+    to_chart: Callable[[Array, Array], Array]
+    from_chart: Callable[[Array, Array], Array]
+    distance: Callable[[Array, Array], Array]
+    state_scale: np.ndarray
+    switch_below: float = 0.05
+
+    def __hash__(self) -> int:  # functions and the threshold identify the chart
+        return hash((self.rhs, self.to_chart, self.from_chart, self.distance,
+                     self.switch_below))
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, RegularChart) and hash(self) == hash(other) and \
+            np.array_equal(self.state_scale, other.state_scale)
+
+
+@cache
+def chart_kernels(chart: RegularChart) -> dict[str, Callable]:
+    """Compiled maps of a chart over the nodes of an orbit (rows of a (N, n) array):
+    ``to`` / ``from`` the states, ``to_tangent`` / ``from_tangent`` a tangent (states and
+    the direction of the parameter vector, by forward-mode differentiation: the chart may
+    depend on the parameters) and ``distance`` at every node."""
+
+    def to_t(X, V, p, dp):
+        return jax.vmap(lambda x, v: jax.jvp(chart.to_chart, (x, p), (v, dp)), (0, 0))(X, V)
+
+    def from_t(Y, W, p, dp):
+        return jax.vmap(lambda y, w: jax.jvp(chart.from_chart, (y, p), (w, dp)), (0, 0))(Y, W)
+
+    statics = (chart.rhs, chart.to_chart, chart.from_chart, chart.distance)
+    return {
+        "to": cached_kernel(jax.vmap(chart.to_chart, (0, None)), *statics, name="chart.to"),
+        "from": cached_kernel(jax.vmap(chart.from_chart, (0, None)), *statics,
+                              name="chart.from"),
+        "to_tangent": cached_kernel(to_t, *statics, name="chart.to_tangent"),
+        "from_tangent": cached_kernel(from_t, *statics, name="chart.from_tangent"),
+        "distance": cached_kernel(jax.vmap(chart.distance, (0, None)), *statics,
+                                  name="chart.distance"),
+    }
+
+
+def _compose(g: Callable, from_chart: Callable) -> Callable:
+    def composed(y, p):
+        return g(from_chart(y, p), p)
+
+    composed.__qualname__ = f"{getattr(g, '__qualname__', 'g')}_in_chart"
+    return composed
+
+
+@cache
+def _composed_observable(g: Callable, from_chart: Callable) -> Callable:
+    return _compose(g, from_chart)
+
+
+@dataclass(frozen=True)
 class System:
     """An autonomous ODE ``x' = rhs(x, p)`` with named states and parameters.
 
@@ -119,7 +201,11 @@ class System:
     observables : named functions ``g(x, p)`` (scalar or 1-D) for read-outs.
     name : a label for reports.
     param_ranges : optional valid range (lo, hi) of some parameters (e.g. a frequency
-        must be positive); solvers reject solutions outside them.
+        must be positive); solvers reject solutions outside them, and a Newton iteration or
+        a continuation that leaves them stops there, reported as not converged.
+    chart : optional :class:`RegularChart`, coordinates in which ``rhs`` stays smooth where
+        it is singular (used by the continuation of cycles near that set).
+    param_units : optional units of the parameters (for read-outs and files).
     """
 
     __repr__ = compact_repr
@@ -133,6 +219,8 @@ class System:
     observables: Mapping[str, Callable[[Array, Array], Array]] = field(default_factory=dict)
     name: str = ""
     param_ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    chart: RegularChart | None = None
+    param_units: Mapping[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         p = np.asarray(self.p, dtype=float).ravel()
@@ -173,6 +261,48 @@ class System:
 
     def with_params(self, **values: float) -> System:
         return dataclasses.replace(self, p=self.params_with(**values))
+
+    def range_violation(self, name: str, value: float) -> str:
+        """'' when ``value`` lies in the declared valid range of parameter ``name`` (or it has
+        none), else a sentence naming the parameter, the value and the range, e.g.
+        "omega1 = -1.83 lies outside its valid range (0, 1e+05]". A positive quantity
+        declares its lower bound as the smallest positive double (printed "(0")."""
+        rng = self.param_ranges.get(name)
+        if rng is None:
+            return ""
+        lo, hi = float(rng[0]), float(rng[1])
+        if lo <= value <= hi:
+            return ""
+        left = "(0" if lo == math.ulp(0.0) else f"[{lo:g}"
+        right = "1)" if hi == math.nextafter(1.0, 0.0) else f"{hi:g}]"
+        return f"{name} = {value:.6g} lies outside its valid range {left}, {right}"
+
+    def valid_bounds(self, name: str, bounds: tuple[float, float] | None = None
+                     ) -> tuple[float, float] | None:
+        """The intersection of ``bounds`` (lo, hi; None: none) with the declared valid
+        range of ``name``: the interval a continuation in ``name`` may not leave."""
+        rng = self.param_ranges.get(name)
+        if rng is None:
+            return None if bounds is None else (float(min(bounds)), float(max(bounds)))
+        lo, hi = float(rng[0]), float(rng[1])
+        if bounds is not None:
+            lo, hi = max(lo, float(min(bounds))), min(hi, float(max(bounds)))
+        return lo, hi
+
+    def in_chart(self) -> System:
+        """The same system in the coordinates of its :class:`RegularChart`: the chart's
+        vector field, scales and guess, and every observable composed with the inverse map
+        (so an observable means the same quantity in both). The system itself when it has
+        no chart."""
+        ch = self.chart
+        if ch is None:
+            return self
+        xg = np.asarray(ch.to_chart(jnp.asarray(self.x_guess), jnp.asarray(self.p)), float)
+        return dataclasses.replace(
+            self, rhs=ch.rhs, x_guess=xg, state_scale=np.asarray(ch.state_scale, float),
+            observables={k: _composed_observable(g, ch.from_chart)
+                         for k, g in self.observables.items()},
+            name=f"{self.name} (regular chart)", chart=None)
 
     # ----- evaluation ------------------------------------------------------------------
     @property

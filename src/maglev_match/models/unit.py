@@ -10,9 +10,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from maglev_match.dynamics.system import System
+from maglev_match.dynamics.system import RegularChart, System
 from maglev_match.models.limits import clamp_current, hold_current_rate
-from maglev_match.params import Params
+from maglev_match.params import PARAMETER_DOCS, Params, param_ranges
 
 STATE_NAMES = ("z1", "z1_dot", "z2", "z2_dot", "w", "w_dot", "di", "y1", "v")
 STATE_SCALE = np.array([1e-3, 1e-2, 1e-3, 1e-2, 1e-3, 1e-2, 1.0, 1e-3, 1e-2])
@@ -65,6 +65,71 @@ def _rhs(x, p, limited: bool):
     ])
 
 
+def _rhs_regular(y, p):
+    """Model A in the coordinates y = (x1..x6, r - r0, x8, x9), r = i / c the current over
+    the gap (A/m), r0 = i0 / c0: the same equations, with x7 = i - i0 replaced by r. The
+    current equation x7' = r (x2 - x6) + ke c / K (...) is (r c)' = r c' + c r', so
+    r' = ke / K (kP x8 + kD (x9 + x2) - x7) with x7 = r c - i0: a polynomial vector field,
+    smooth at gap c = 0, where the original one is 0/0 (i and c vanish together on every
+    trajectory that reaches c = 0)."""
+    q = _unpack(p)
+    m, M = q["m"], q["M"]
+    K = q["mu0"] * q["N"] ** 2 * q["A"]
+    c0 = q["c0"]
+    i0 = levitation_current(p)
+    r0 = i0 / c0
+    x1, x2, x3, x4, x5, x6, y7, x8, x9 = y
+    c = x1 - x5 + c0
+    r = y7 + r0
+    dF = 0.5 * K * (r - r0) * (r + r0)
+    susp = q["cs"] * (x2 - x4) + q["ks"] * (x1 - x3)
+    w1, xi1, sig = q["omega1"], q["xi1"], q["sigma"]
+    gap_err = x1 - x5 - x8
+    dr = q["ke"] / K * (q["kP"] * x8 + q["kD"] * (x9 + x2) - (r * c - i0))
+    return jnp.stack([
+        x2,
+        -dF / m - susp / m,
+        x4,
+        susp / M,
+        x6,
+        -(w1**2) * x5 - 2.0 * xi1 * w1 * x6 + sig * dF,
+        dr,
+        x9 + x2 + 2.0 * q["xi0"] * q["omega0"] * gap_err,
+        q["omega0"] ** 2 * gap_err,
+    ])
+
+
+def _to_regular(x, p):
+    """y = (x1..x6, (x7 + i0) / c - i0 / c0, x8, x9)."""
+    c0 = p[_IDX["c0"]]
+    i0 = levitation_current(p)
+    c = x[0] - x[4] + c0
+    return x.at[6].set((x[6] + i0) / c - i0 / c0)
+
+
+def _from_regular(y, p):
+    """x = (y1..y6, (y7 + i0 / c0) c - i0, y8, y9)."""
+    c0 = p[_IDX["c0"]]
+    i0 = levitation_current(p)
+    c = y[0] - y[4] + c0
+    return y.at[6].set((y[6] + i0 / c0) * c - i0)
+
+
+def _relative_gap(x, p):
+    """c / c0: the distance of a state from the singular set c = 0 of unit_rhs."""
+    c0 = p[_IDX["c0"]]
+    return (x[0] - x[4] + c0) / c0
+
+
+#: Model A's regular chart (see :func:`_rhs_regular`): cycles that come within 5 % of the
+#: rated gap of gap 0 are continued in it (a contact with the gap limit 0 is then solved).
+REGULAR_CHART = RegularChart(
+    rhs=_rhs_regular, to_chart=_to_regular, from_chart=_from_regular,
+    distance=_relative_gap,
+    state_scale=np.array([1e-3, 1e-2, 1e-3, 1e-2, 1e-3, 1e-2, 125.0, 1e-3, 1e-2]),
+    switch_below=0.05)
+
+
 def unit_rhs(x, p):
     """Model A vector field (smooth: no current clamp)."""
     return _rhs(x, p, limited=False)
@@ -108,4 +173,7 @@ def unit_system(params: Params, limited: bool = False) -> System:
             "beam_deflection": beam_deflection,
         },
         name="unit",
+        param_ranges=param_ranges(PARAM_NAMES),
+        param_units={n: PARAMETER_DOCS[n][0] for n in PARAM_NAMES if n in PARAMETER_DOCS},
+        chart=None if limited else REGULAR_CHART,
     )

@@ -24,7 +24,7 @@ import numpy as np
 
 from maglev_match.dynamics.system import System
 from maglev_match.models.limits import clamp_current, hold_current_rate
-from maglev_match.params import Params
+from maglev_match.params import PARAMETER_DOCS, Params, param_ranges
 
 PARAM_NAMES = (
     "m_s", "j_s", "m_b", "j_b", "k2", "c2", "g", "mu0", "N", "A", "c0",
@@ -210,4 +210,6 @@ def vehicle_system(params: Params, limited: bool = False) -> System:
         state_scale=scale,
         observables=_observables(n),
         name=f"vehicle ({n} modes)",
+        param_ranges=param_ranges(PARAM_NAMES),
+        param_units={n: PARAMETER_DOCS[n][0] for n in PARAM_NAMES if n in PARAMETER_DOCS},
     )

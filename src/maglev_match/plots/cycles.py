@@ -22,7 +22,7 @@ _UNITS = {"omega1": "rad/s", "sigma": "1/kg"}
 _MARK = {"LPC": ("^", "tab:purple", "fold of cycles (LPC)"),
          "PD": ("s", "tab:brown", "period doubling (PD)"),
          "NS": ("D", "tab:olive", "torus bifurcation (NS)"),
-         "LIMIT": ("X", "tab:red", "cycle touches a physical limit")}  # named beside the mark
+         "contact": ("X", "tab:red", "cycle touches a physical limit")}  # named beside the mark
 _BRANCH_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown",
                    "tab:pink")
 
@@ -82,7 +82,7 @@ def cycle_diagram(
     design_value : the design value of ``param``, drawn as a vertical line.
 
     Hopf points are open circles; folds (LPC), period doublings (PD), torus points (NS) and
-    first contacts with a physical limit (LIMIT) are marked at the cycle's max and min.
+    first contacts with a physical limit (contact) are marked at the cycle's max and min.
     The legend lists every element drawn. Returns (fig, ax).
     """
     fig, ax = new_figure(figsize=(8.0, 5.0))
@@ -123,7 +123,7 @@ def cycle_diagram(
             if sp.type not in types_seen:
                 types_seen.append(sp.type)
             ymax, ymin = sp.extrema[observable]
-            if sp.type == "LIMIT":  # mark where the cycle touches, and name the limit
+            if sp.type == "contact":  # mark where the cycle touches, and name the limit
                 which = limit_touched(sp.detail)
                 ys = ([ymin] if which == "low" else [ymax] if which == "high"
                       else [ymax, ymin])

@@ -11,7 +11,7 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 from scipy import ndimage
 
-from maglev_match.dynamics.hopf import HopfCurve
+from maglev_match.dynamics.hopf_curve import HopfCurve
 from maglev_match.plots import new_figure
 
 _LINESTYLE = {"subcritical": "-", "supercritical": "--"}
