@@ -121,8 +121,10 @@ class CriticalSize:
     direction : -1 (beam up / lifted) or +1 (beam down / pushed).
     size : the critical size (m): the solved size (grazing, basin boundary), the bracket's
         midpoint (bisection), the gap range (all_return), 0 (all_collide), or None.
-    mechanism : :class:`Mechanism`; converged : the size is determined (solved, or a
-        conclusive search); reason : the evidence and, where a solve failed, why.
+    mechanism : :class:`Mechanism`; converged : the size is determined and supported
+        (solved inside a bracket whose lower end returned, or a conclusive search); a
+        collision boundary solved above runs that stayed undecided is not; reason : the
+        evidence and, where a solve failed, why.
     t_star : time of the tangency (grazing) (s); limit : the gap limit touched ('upper' or
         'lower'), point : the levitation point (model B; 1 for model A).
     bracket : (largest size that did not collide, smallest that did) of the search (m).
@@ -392,8 +394,12 @@ def _solve_grazing_direction(params: Params, cd: Any, bisect: CriticalSize, *, m
         return _with_reason(bisect, f"{what}; the grazing contact solved at t* = "
                             f"{sol.t_star:.4g} s is not the collision of the bracket (at "
                             f"{t_coll:.4g} s)")
-    res = replace(bisect, size=float(sol.size), mechanism=Mechanism.GRAZING, converged=True,
-                  reason=f"{what}; grazing solved: tangency at t* = {sol.t_star:.5g} s",
+    undecided = ("; the runs below it stayed undecided within the horizon, so no size is "
+                 "confirmed to return" if cd.status != "bracketed" else "")
+    res = replace(bisect, size=float(sol.size), mechanism=Mechanism.GRAZING,
+                  converged=cd.status == "bracketed",
+                  reason=(f"{what}; grazing solved: tangency at t* = {sol.t_star:.5g} s"
+                          + undecided),
                   t_star=float(sol.t_star), iterations=sol.iterations,
                   residual=float(sol.residual), window=win, derivative_available=True)
     if derivative:
@@ -513,7 +519,7 @@ def _solve_basin_direction(params: Params, cd: Any, bisect: CriticalSize, *, mod
     landing = dict(x_star=x_star, left=left, normal=normal, segment=i, node=j * orbit.ncol,
                    distance=sol.distance, crossing=K + 1)
     res = replace(bisect, size=float(sol.size), mechanism=Mechanism.BASIN_BOUNDARY,
-                  converged=True,
+                  converged=cd.status == "bracketed",
                   reason=(f"{what}; solved: the critical run lands on the stable manifold of "
                           f"the clamped system's saddle cycle (period {T:.4g} s, unstable "
                           f"multiplier {mu_u:.4g}, {len(orbit.segments)} segments) at its "

@@ -336,8 +336,13 @@ def extrema_walk(hs: HybridSystem, x0: np.ndarray, w: np.ndarray, t_end: float,
     w = np.asarray(w, float)
     x = np.asarray(x0, float)
     s = np.zeros(hs.n_switches) if s0 is None else np.asarray(s0, float)
-    # the first extremum: whichever kind the rate points to
-    rate = float(w @ hs.f(x, s, pp))
+    # the first extremum: whichever kind the rate points to (the curvature decides where a
+    # run starts at rest, with a zero rate)
+    fx = hs.f(x, s, pp)
+    rate = float(w @ fx)
+    if abs(rate) <= 1e-12 * float(np.max(np.abs(fx) / hs.state_scale) * np.sum(
+            np.abs(w) * hs.state_scale)):
+        rate = _curvature(hs, x, s, pp, w)
     kind = 1 if rate > 0 else -1
     t = 0.0
     out: list[tuple[float, float, int]] = []
