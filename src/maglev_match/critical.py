@@ -133,6 +133,9 @@ class CriticalSize:
         model parameter (per unit of each, in the model's parameter order) or None;
         dsize_dlimit : per metre of the gap limit touched.
     window : (t_arm, t_max) of the solve (s), the warm start of a neighbouring point.
+    evidence : what the bracket's runs point to ('grazing', 'basin_boundary', 'mixed' or
+        None), also where the condition could not be solved (the mechanism then stays
+        'bisection');
     growth : relative growth of the collision time towards the bracket (the evidence);
     margin_below : how close (m) the largest run that did not collide came to the limit the
         smallest collision hits (the tangency evidence).
@@ -161,6 +164,7 @@ class CriticalSize:
     window: tuple[float, float] | None = None
     growth: float | None = None
     margin_below: float | None = None
+    evidence: str | None = None
     cycle_period: float | None = None
     multiplier: float | None = None
     cycle_gap: tuple[float, float] | None = None
@@ -180,7 +184,7 @@ class CriticalSize:
             "iterations": self.iterations, "residual": self.residual,
             "derivative_available": self.derivative_available,
             "dsize_dlimit": self.dsize_dlimit, "growth": self.growth,
-            "margin_below": self.margin_below,
+            "margin_below": self.margin_below, "evidence": self.evidence,
             "cycle_period": self.cycle_period, "multiplier": self.multiplier,
             "cycle_gap": None if self.cycle_gap is None else list(self.cycle_gap),
             "cycle_segments": self.cycle_segments,
@@ -319,8 +323,10 @@ def critical_from_bisection(params: Params, cd: Any, *, model: str = "unit",
     margin = (below.margins[entry] if below is not None and 0 <= entry < len(below.margins)
               else math.nan)
     tangent = math.isfinite(margin) and margin <= TANGENCY * max(hi - lo, cd.tol)
-    bisect = replace(bisect, margin_below=margin)
     growing = growth is not None and growth > GROWTH_BASIN
+    evidence = ("basin_boundary" if growing and not tangent else "grazing" if tangent
+                and not growing else "mixed" if tangent and growing else None)
+    bisect = replace(bisect, margin_below=margin, evidence=evidence)
     if tangent and not (growth is not None and growth > 4 * GROWTH_BASIN):
         res = _solve_grazing_direction(params, cd, bisect, model=model, derivative=derivative)
         if res.solved or not growing:
@@ -399,7 +405,9 @@ def _solve_grazing_direction(params: Params, cd: Any, bisect: CriticalSize, *, m
     res = replace(bisect, size=float(sol.size), mechanism=Mechanism.GRAZING,
                   converged=cd.status == "bracketed",
                   reason=(f"{what}; grazing solved: tangency at t* = {sol.t_star:.5g} s"
-                          + undecided),
+                          + ("; a contact at the singular gap 0 (the magnet force grows "
+                             "without bound there): converged by the bracket of sizes"
+                             if sol.singular else "") + undecided),
                   t_star=float(sol.t_star), iterations=sol.iterations,
                   residual=float(sol.residual), window=win, derivative_available=True)
     if derivative:

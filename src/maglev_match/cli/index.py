@@ -115,8 +115,13 @@ def _direction_line(d: dict, size: float | None, mm: float) -> str:
                 f"clamped system (solved; bisection bracket +/- {d['tolerance'] / 2 * mm:.2g} "
                 f"mm, {d['runs']} runs)")
     extra = ""
+    ev = (crit or {}).get("evidence")
+    ev_text = {"grazing": "; the runs point to a grazing contact, not solved",
+               "basin_boundary": "; the runs point to a basin boundary, not solved",
+               "mixed": "; the runs' evidence is mixed, neither condition solved"}.get(ev, "")
     if d["status"] == "bracketed":  # midpoint of a bracket no wider than the tolerance
-        extra = f" (bisection only: +/- {d['tolerance'] / 2 * mm:.2g} mm, {d['runs']} runs)"
+        extra = (f" (bisection only: +/- {d['tolerance'] / 2 * mm:.2g} mm, {d['runs']} "
+                 f"runs{ev_text})")
     elif d["status"] == "all_return":
         extra = " (every size returned: the whole gap range)"
     elif d["status"] == "all_collide":

@@ -67,7 +67,12 @@ class GrazingSolution:
     steps; residual : w . x(t*) - L at the last iterate (units of g); slope : dG/dd at the
     solution (side * w . dx(t*)/dd: the rate at which the extremum passes the limit per unit
     of d; > 0 for a clean crossing); curvature : d^2 g/dt^2 at t* (units of g per s^2; the
-    tangency is non-degenerate where it is not 0); message : why not converged.
+    tangency is non-degenerate where it is not 0); message : why not converged;
+    singular : the limit is a singularity of the field (e.g. a magnet force growing without
+    bound at gap 0): runs past it have no extremum, the extremum reaches the limit without a
+    finite slope, and the size is converged by closing the bracket of sizes (to ``tol``)
+    with the residual small (|G| <= SINGULAR_RESIDUAL |L|) rather than by the residual
+    alone.
     """
 
     __repr__ = compact_repr
@@ -83,6 +88,12 @@ class GrazingSolution:
     curvature: float
     message: str = ""
     history: tuple[tuple[float, float], ...] = field(default=(), repr=False)
+    singular: bool = False  # a contact at a singular limit: converged by the size bracket
+
+
+#: a contact at a singular limit is accepted with the extremum within this fraction of the
+#: limit's magnitude (8 mm gap deviation: 0.8 um) once the bracket of sizes has closed
+SINGULAR_RESIDUAL = 1e-4
 
 
 def _batch_size(b: int) -> int:
@@ -131,7 +142,7 @@ def solve_grazing(
     p: np.ndarray | None = None,
     s0: np.ndarray | None = None,
     tol: float = 1e-12,
-    max_iter: int = 12,
+    max_iter: int = 30,
     bracket: tuple[Any, Any] | None = None,
     options: FlowOptions | None = None,
 ) -> list[GrazingSolution]:
@@ -151,8 +162,10 @@ def solve_grazing(
         t* (s).
     p, s0 : parameters (np,) or (B, np) and initial modes.
     tol : relative tolerance on d (and |G| <= tol |L| + 1e-15).
-    bracket : (lo, hi) within which each solution is looked for; a Newton step leaving it
-        is replaced by bisection of it.
+    bracket : (lo, hi) within which each solution is looked for, sizes above the solution
+        colliding; a Newton step leaving it is replaced by bisection of it, and an iterate
+        whose run has no extremum in its window (it went through the limit) becomes the
+        bracket's upper end.
     options : integrator settings (tight by default: rtol = atol = 1e-10).
 
     Returns
@@ -189,6 +202,10 @@ def solve_grazing(
     xs = np.full((nb, n), np.nan)
     ss = np.zeros((nb, hs.n_switches))
     tstar = np.full(nb, np.nan)
+    d_ok = np.full(nb, np.nan)  # the last size whose run had its extremum (x*, t* are its)
+    lo_set = np.zeros(nb, bool)
+    hi_set = np.zeros(nb, bool)
+    singular = np.zeros(nb, bool)
     hist: list[list[tuple[float, float]]] = [[] for _ in range(nb)]
     for _ in range(max_iter):
         if not active.any():
@@ -200,11 +217,26 @@ def solve_grazing(
         for b in np.flatnonzero(active):
             its[b] += 1
             if fl.status[b] != FlowStatus.STOPPED:
+                # no extremum: the run went through the limit (or into a singularity of the
+                # field beyond it, e.g. a force that grows without bound at gap 0); within a
+                # bracket that side is the colliding one: bisect back towards it
+                if math.isfinite(lo[b]) and lo[b] < d[b] < hi[b]:
+                    hi[b], hi_set[b] = d[b], True
+                    hist[b].append((float(d[b]), math.nan))
+                    # a contact at a singular limit: the extremum approaches the limit
+                    # without a finite slope, the bracket of sizes closes instead
+                    if (lo_set[b] and hi[b] - lo[b] <= 4 * tol * abs(d[b]) and G[b] < 0
+                            and abs(G[b]) <= SINGULAR_RESIDUAL * abs(L[b]) + 1e-12):
+                        conv[b], singular[b], active[b] = True, True, False
+                        continue
+                    d[b] = 0.5 * (lo[b] + hi[b])
+                    continue
                 msgs[b] = (f"the run at size {d[b]:.10g} has no extremum of the observable "
                            f"between t = {ta[b]:.6g} s and {tm[b]:.6g} s")
                 active[b] = False
                 continue
             xs[b], ss[b], tstar[b] = fl.x[b], fl.s[b], fl.t[b]
+            d_ok[b] = d[b]
             G[b] = sd[b] * (float(W[b] @ fl.x[b]) - L[b])
             dG[b] = sd[b] * float(W[b] @ fl.phi[b][:, 0])
             hist[b].append((float(d[b]), float(G[b])))
@@ -219,14 +251,20 @@ def solve_grazing(
                 continue
             # G < 0: the extremum stays short of the limit; the side of d_c follows dG
             if (G[b] < 0) == (dG[b] > 0):
-                lo[b] = max(lo[b], d[b])
+                lo[b], lo_set[b] = max(lo[b], d[b]), True
             else:
-                hi[b] = min(hi[b], d[b])
+                hi[b], hi_set[b] = min(hi[b], d[b]), True
             d_new = d[b] - G[b] / dG[b]
             if not (lo[b] < d_new < hi[b]) and math.isfinite(lo[b]) and math.isfinite(hi[b]):
                 d_new = 0.5 * (lo[b] + hi[b])
             if abs(d_new - d[b]) <= tol * max(abs(d[b]), 1e-300):
                 conv[b] = abs(G[b]) <= 1e3 * ftol
+                if (not conv[b] and G[b] < 0 and abs(G[b]) <= SINGULAR_RESIDUAL * abs(L[b])
+                        and not (hi_set[b] and hi[b] - d[b] <= 4 * tol * abs(d[b]))):
+                    # the extremum is still short of the limit but barely moves: probe just
+                    # above, where a singular limit has no extremum (closing the bracket)
+                    d[b] = d[b] + 2 * tol * abs(d[b]) * (1 if dG[b] > 0 else -1)
+                    continue
                 if not conv[b]:
                     msgs[b] = f"Newton stalled at size {d[b]:.12g} with residual {G[b]:.3g}"
                 d[b] = d_new
@@ -246,10 +284,12 @@ def solve_grazing(
                 ok = False
                 msg = (f"the extremum at t* = {tstar[b]:.6g} s is not a clean tangency (second "
                        f"derivative {curv:.3g})")
-        out.append(GrazingSolution(size=float(d[b]), t_star=float(tstar[b]), x_star=xs[b],
+        size = float(d_ok[b]) if singular[b] else float(d[b])
+        out.append(GrazingSolution(size=size, t_star=float(tstar[b]), x_star=xs[b],
                                    s_star=ss[b], converged=ok, iterations=int(its[b]),
                                    residual=float(G[b]), slope=float(dG[b]), curvature=curv,
-                                   message=msg, history=tuple(hist[b])))
+                                   message=msg, history=tuple(hist[b]),
+                                   singular=bool(singular[b])))
     return out
 
 

@@ -111,6 +111,9 @@ class HybridSystem:
     p : default parameter vector; param_names, state_names : names; state_scale : typical
         size of each state (error control and scaled norms); observables : named read-outs
         ``g(x, p)``.
+    domain : ``domain(x, p, s) -> scalar``, positive where the vector field of mode s is
+        regular; a run that reaches zero ends there with :attr:`FlowStatus.OUTSIDE` instead
+        of grinding towards a singularity (None: everywhere).
 
     The functions must be stable objects (module-level or cached) so compiled kernels are
     reused.
@@ -128,6 +131,7 @@ class HybridSystem:
     state_scale: np.ndarray | None = None
     observables: Mapping[str, Callable] = field(default_factory=dict)
     name: str = ""
+    domain: Callable | None = None
 
     def __post_init__(self) -> None:
         p = np.asarray(self.p, dtype=float).ravel()
@@ -181,6 +185,10 @@ def _identity_project(x, p, s):
     return x
 
 
+def _whole_space(x, p, s):
+    return jnp.ones((), x.dtype)
+
+
 # ---------------------------------------------------------------------------------------
 # the flow with sensitivities
 # ---------------------------------------------------------------------------------------
@@ -191,6 +199,7 @@ class FlowStatus(IntEnum):
     REACHED = 1  # reached the end time
     STOPPED = 2  # ended at the stop condition
     FAILED = 3  # step budget exhausted, non-finite state or step size underflow
+    OUTSIDE = 4  # left the system's domain (e.g. approached a singularity of the field)
 
 
 @dataclass(frozen=True)
@@ -206,7 +215,7 @@ class FlowOptions:
     rtol: float = 1e-10
     atol: float = 1e-10
     h0: float = 1e-4
-    max_steps: int = 400_000
+    max_steps: int = 100_000
     max_switches: int = 64
 
     def __post_init__(self) -> None:
@@ -322,8 +331,8 @@ def _rk_step(f: Callable, y0, f0, h):
 
 
 @lru_cache(maxsize=32)
-def _flow_kernel(rhs: Callable, guards: Callable, project: Callable, k: int, n_save: int,
-                 max_switches: int):
+def _flow_kernel(rhs: Callable, guards: Callable, project: Callable, domain: Callable, k: int,
+                 n_save: int, max_switches: int):
     """The batched flow kernel (arrays carry the runs on their leading axis; the loop is not
     vmapped, so locating an event is a real branch, taken when any run needs it).
 
@@ -337,7 +346,7 @@ def _flow_kernel(rhs: Callable, guards: Callable, project: Callable, k: int, n_s
                h0, max_steps):
         B, n = z0.shape
         K = s0.shape[1]
-        n_ev = K + 1  # the guards, then the stop condition
+        n_ev = K + 2  # the guards, the stop condition, the domain
         tiny = 64.0 * jnp.finfo(jnp.float64).eps
         rows = jnp.arange(B)
 
@@ -364,7 +373,8 @@ def _flow_kernel(rhs: Callable, guards: Callable, project: Callable, k: int, n_s
         def events_one(z, pp, s, a, b, c):
             x = z * sc
             q = a @ rhs(x, pp, s) + b @ x + c
-            return jnp.concatenate([guards(x, pp, s), q[None]])
+            return jnp.concatenate([guards(x, pp, s), q[None],
+                                    jnp.reshape(domain(x, pp, s), (1,))])
 
         events = jax.vmap(events_one)
 
@@ -467,6 +477,7 @@ def _flow_kernel(rhs: Callable, guards: Callable, project: Callable, k: int, n_s
             # the event is applied where a landing step was taken
             jl = c["j_land"]
             is_stop = landing & (jl == K)
+            is_out = landing & (jl == K + 1)
             is_switch = landing & (jl < K)
             jj = jnp.minimum(jl, K - 1)
             y_sw, s_sw = switch(y1, p, s, Pd, jj)
@@ -499,7 +510,8 @@ def _flow_kernel(rhs: Callable, guards: Callable, project: Callable, k: int, n_s
             done = move & (t_new >= t1 - tiny * (1.0 + jnp.abs(t1)))
             under = active & ~accept & (hh <= tiny * (1.0 + jnp.abs(t)))
             status = jnp.where(is_stop, FlowStatus.STOPPED, c["status"])
-            status = jnp.where(done & ~is_stop, FlowStatus.REACHED, status)
+            status = jnp.where(is_out, FlowStatus.OUTSIDE, status)
+            status = jnp.where(done & ~is_stop & ~is_out, FlowStatus.REACHED, status)
             status = jnp.where(active & ((steps >= max_steps) | under), FlowStatus.FAILED,
                                status)
             h_after = jnp.where(landing | hit, jnp.maximum(c["h"], hh), h_next)
@@ -516,7 +528,7 @@ def _flow_kernel(rhs: Callable, guards: Callable, project: Callable, k: int, n_s
         return dict(t=c["t"], x=x, phi=Phi, s=c["s"], status=c["status"], swt=c["swt"],
                     swk=c["swk"], nsw=c["nsw"], steps=c["steps"], ys=c["ys"])
 
-    return cached_kernel(kernel, rhs, guards, project, k, n_save, max_switches,
+    return cached_kernel(kernel, rhs, guards, project, domain, k, n_save, max_switches,
                          name="hybrid.flow")
 
 
@@ -608,8 +620,9 @@ def hybrid_flow(
         n_pad = SAVE_BUCKET * (-(-n_req // SAVE_BUCKET)) - n_req
         if n_pad:  # padded with the end time (not reached by the loop's saving)
             ts = np.concatenate([ts, np.repeat(t1[:, None], n_pad, axis=1)], axis=1)
-    kern = _flow_kernel(hs.rhs, hs.guards, hs.project or _identity_project, int(k),
-                        int(ts.shape[1]), int(opts.max_switches))
+    kern = _flow_kernel(hs.rhs, hs.guards, hs.project or _identity_project,
+                        hs.domain or _whole_space, int(k), int(ts.shape[1]),
+                        int(opts.max_switches))
     out = kern(jnp.asarray(x0 / sc), jnp.asarray(Zs), jnp.asarray(s), jnp.asarray(pp),
                jnp.asarray(Ps), jnp.asarray(sc), jnp.asarray(t0), jnp.asarray(t1),
                jnp.asarray(a), jnp.asarray(b), jnp.asarray(c),

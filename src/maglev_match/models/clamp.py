@@ -24,6 +24,11 @@ the current exactly onto 0, so the sensitivities lose that direction (the saltat
 of a sliding entry has rank n - 1). These are the conditions the simulator's limited vector
 field approximates step by step; here they are surfaces, so the time of every switch is
 located and the flow is differentiable between switches (:mod:`maglev_match.dynamics.hybrid`).
+
+The free field is singular at gap 0 (the force grows as (i / c)^2): a run whose gap falls to
+1 um while its current flows leaves the flow's domain there (it has gone through the
+limit); while the current is held there is no force and the field stays regular through
+gap 0, so a grazing contact at gap 0 with the current held extends smoothly past it.
 """
 
 from __future__ import annotations
@@ -74,6 +79,17 @@ def unit_clamp_project(x, p, s):
     return jnp.where(s[0] > 0.5, _unit_at_zero_current(x, p), x)
 
 
+#: below this gap (m) the free model's magnet force (~ (i / c)^2) is treated as singular
+SINGULAR_GAP = 1e-6
+
+
+def unit_domain(x, p, s):
+    """Where model A's field is regular: everywhere while the current is held (no force);
+    above a gap of 1 um while it flows (the force grows as (i / c)^2 towards gap 0)."""
+    gap = x[0] - x[4] + p[unit_model.PARAM_NAMES.index("c0")]
+    return jnp.where(s[0] > 0.5, 1.0, (gap - SINGULAR_GAP) / SINGULAR_GAP)
+
+
 def unit_clamped(params: Params) -> HybridSystem:
     """Model A with the current clamp as a :class:`HybridSystem` (one switch)."""
     return HybridSystem(
@@ -82,7 +98,7 @@ def unit_clamped(params: Params) -> HybridSystem:
         state_names=unit_model.STATE_NAMES, state_scale=unit_model.STATE_SCALE,
         observables={"gap_deviation": unit_model.gap_deviation,
                      "current": unit_model.coil_current},
-        name="unit (current clamp)",
+        name="unit (current clamp)", domain=unit_domain,
     )
 
 
@@ -112,19 +128,25 @@ def _vehicle_functions(n_modes: int):
     def project(x, p, s):
         return at_zero(x, s)
 
+    def domain(x, p, s):
+        gaps = vehicle_model.point_kinematics(x, p, n_modes)[2]
+        return jnp.min(jnp.where(s > 0.5, 1.0, (gaps - SINGULAR_GAP) / SINGULAR_GAP))
+
     rhs.__qualname__ = f"vehicle_clamped_rhs_{n_modes}"
     guards.__qualname__ = f"vehicle_clamp_guards_{n_modes}"
     project.__qualname__ = f"vehicle_clamp_project_{n_modes}"
-    return rhs, guards, project
+    domain.__qualname__ = f"vehicle_clamp_domain_{n_modes}"
+    return rhs, guards, project, domain
 
 
 def vehicle_clamped(params: Params) -> HybridSystem:
     """Model B with the current clamp at each of the six levitation points (six switches)."""
     n = params.n_modes
     system = vehicle_model.vehicle_system(params)
-    rhs, guards, project = _vehicle_functions(n)
+    rhs, guards, project, domain = _vehicle_functions(n)
     return HybridSystem(
-        rhs=rhs, guards=guards, project=project, n_switches=vehicle_model.N_POINTS,
+        rhs=rhs, guards=guards, project=project, domain=domain,
+        n_switches=vehicle_model.N_POINTS,
         p=system.p, param_names=system.param_names, state_names=system.state_names,
         state_scale=np.asarray(system.state_scale), observables=dict(system.observables),
         name=f"vehicle ({n} modes, current clamp)",
