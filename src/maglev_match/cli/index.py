@@ -127,7 +127,10 @@ def _direction_line(d: dict, size: float | None, mm: float) -> str:
     elif d["status"] == "all_collide":
         extra = " (even the smallest size collided)"
     elif d["status"] == "open":
-        extra = " (inconclusive: largest size seen to return)"
+        sc = d.get("smallest_collision")
+        coll = "" if sc is None else f"; smallest size seen to collide {sc * mm:.4g} mm"
+        extra = (" (inconclusive: largest size seen to return" if size is not None
+                 else " (inconclusive: no size seen to return") + coll + ")"
     return f"{val}{extra}"
 
 
