@@ -93,9 +93,6 @@ def _cpu_seconds() -> float:
     return t.user + t.system + t.children_user + t.children_system
 
 
-if __name__ == "__main__":
-    main()
-
 
 def sensitivity_timing(repeat: int) -> None:
     """``index_sensitivity`` (the headline index and every derivative, chi_simulation's by
@@ -123,3 +120,7 @@ def sensitivity_timing(repeat: int) -> None:
               f"sensitivity with chi_simulation derivatives {ms:.3f} s CPU "
               f"(status {sens.status}): ratio {ms / mi:.2f}x")
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
