@@ -4,9 +4,13 @@ Prints medians and ratios against baselines run in the same process:
 
 * chi by cycle continuation (``matching_index(..., simulate=False)``) against chi by
   simulation bisection (``critical_disturbance``) at the same parameter points;
-* map throughput (points/s) of a (omega1, sigma) map of model A with 1 and 2 local workers.
+* map throughput (points/s) of a (omega1, sigma) map of model A with 1 and 2 local workers;
+* ``--sensitivity``: the headline index's sensitivities with the chi_simulation derivatives
+  (``index_sensitivity``, the ``sensitivity`` command's computation, boundaries off) against
+  one headline index (``matching_index`` with the simulation and the solved critical
+  disturbance), runs interleaved, CPU time of the process (target: under 2x).
 
-Usage: python bench/bench_index.py [--quick]
+Usage: python bench/bench_index.py [--quick] [--sensitivity]
 """
 
 from __future__ import annotations
@@ -40,7 +44,12 @@ def main() -> None:
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2],
                     help="local worker counts to time the map with")
     ap.add_argument("--skip-index", action="store_true", help="only the map part")
+    ap.add_argument("--sensitivity", action="store_true",
+                    help="only the headline sensitivity timing")
     args = ap.parse_args()
+    if args.sensitivity:
+        sensitivity_timing(1 if args.quick else 5)
+        return
     print(f"machine: {platform.machine()}, {platform.processor() or 'cpu'}, "
           f"python {platform.python_version()}")
     points = ["turnout-soft", "turnout-stiff", "alpha1"]
@@ -82,6 +91,35 @@ def _cpu_seconds() -> float:
 
     t = os.times()
     return t.user + t.system + t.children_user + t.children_system
+
+
+
+def sensitivity_timing(repeat: int) -> None:
+    """``index_sensitivity`` (the headline index and every derivative, chi_simulation's by
+    the implicit function theorem on its solved critical size) against one headline index,
+    interleaved, at the two turnout beams; CPU seconds of this process (medians)."""
+    import os
+
+    from maglev_match.sensitivity import index_sensitivity
+
+    print(f"load average at the start: {os.getloadavg()[0]:.2f}")
+    for name in ("turnout-soft", "turnout-stiff"):
+        p = load_preset(name)
+        index_sensitivity(p, boundaries=False)  # compile and load every kernel
+        t_idx, t_sens = [], []
+        for _ in range(repeat):
+            c = time.process_time()
+            idx = matching_index(p)
+            t_idx.append(time.process_time() - c)
+            c = time.process_time()
+            sens = index_sensitivity(p, boundaries=False)
+            t_sens.append(time.process_time() - c)
+        mi, ms = statistics.median(t_idx), statistics.median(t_sens)
+        print(f"{name:14s} headline chi = {idx.chi:.4g} ({idx.reading_basis}; "
+              f"{idx.mechanism_up}/{idx.mechanism_down}); one index {mi:.3f} s CPU, "
+              f"sensitivity with chi_simulation derivatives {ms:.3f} s CPU "
+              f"(status {sens.status}): ratio {ms / mi:.2f}x")
+    print(f"load average at the end: {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

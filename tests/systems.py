@@ -14,6 +14,13 @@
   reference); :func:`pitchfork_cycles_system` - two branch points of cycles near a fold.
 * :func:`lorenz` - the Lorenz system (sigma = 10, beta = 8/3), Hopf of C+ at
   rho = sigma (sigma + beta + 3) / (sigma - beta - 1), subcritical.
+* :func:`clamped_oscillator` / :func:`clamped_oscillator_limited` - a damped oscillator
+  pulled back by a "current" that may not reverse (held at zero while it would): the same
+  system as a piecewise-smooth flow and as the simulator's limited vector field, with an
+  upper limit the first overshoot grazes; with the coupling a = 0 the first overshoot is
+  d exp(-zeta pi / sqrt(1 - zeta^2)) in closed form.
+* :func:`saturated_oscillator` - a planar oscillator with saturated negative damping,
+  y' = -x - 2 zeta y + k sat(y): a stable limit cycle made of linear and saturated pieces.
 """
 
 from __future__ import annotations
@@ -410,3 +417,141 @@ def normal_form_system(**values: float) -> System:
 def nf_amplitude(mu: float, a: float, l1: float) -> float:
     """Closed-form radius of the unstable cycle."""
     return math.sqrt((a - mu) / l1)
+
+
+# ------------------------------------------------------------------ clamped oscillator
+# x'' = -omega^2 x - 2 zeta omega x' + a (max(i, 0) - i0),  i' = -kc (i - i0) - g x',
+# the current i held at 0 while it would fall below (the maglev models' clamp, in small).
+OSC_NAMES = ("omega", "zeta", "a", "i0", "kc", "g")
+OSC_P = np.array([2.0 * math.pi, 0.05, 20.0, 1.0, 4.0, 6.0])
+OSC_UPPER = 0.25  # the upper limit of x; the lower one is far (-2)
+OSC_LOWER = -2.0
+OSC_SCALE = np.array([0.01, 0.1, 0.01])
+
+
+def _osc_rate(x, p):
+    """The free current rate -kc (i - i0) - g x'."""
+    return -p[4] * (x[2] - p[3]) - p[5] * x[1]
+
+
+def _osc_field(x, p, i_force):
+    return jnp.stack([x[1], -p[0] ** 2 * x[0] - 2.0 * p[1] * p[0] * x[1]
+                      + p[2] * (i_force - p[3])])
+
+
+def clamped_oscillator_limited_rhs(x, p):
+    """The limited vector field (force from max(i, 0), di/dt held at 0 while i <= 0 and
+    falling), as the simulator integrates it."""
+    from maglev_match.models.limits import clamp_current, hold_current_rate
+
+    di = hold_current_rate(x[2], _osc_rate(x, p))
+    return jnp.concatenate([_osc_field(x, p, clamp_current(x[2])), di[None]])
+
+
+def clamped_oscillator_limited() -> System:
+    return System(rhs=clamped_oscillator_limited_rhs, p=OSC_P.copy(), param_names=OSC_NAMES,
+                  state_names=("x", "v", "i"), x_guess=np.array([0.0, 0.0, OSC_P[3]]),
+                  state_scale=OSC_SCALE, name="clamped oscillator (limited)")
+
+
+def oscillator_limit_events(x, p):
+    """x - lower, upper - x: negative is a collision."""
+    return jnp.stack([x[0] - OSC_LOWER, OSC_UPPER - x[0]])
+
+
+def _osc_hybrid_rhs(x, p, s):
+    held = s[0] > 0.5
+    free = jnp.concatenate([_osc_field(x, p, x[2]), _osc_rate(x, p)[None]])
+    hold = jnp.concatenate([_osc_field(x, p, 0.0), jnp.zeros(1)])
+    return jnp.where(held, hold, free)
+
+
+def _osc_guards(x, p, s):
+    # free: the current; held: minus the free rate at i = 0
+    rate0 = p[4] * p[3] - p[5] * x[1]
+    return jnp.reshape(jnp.where(s[0] > 0.5, -rate0, x[2]), (1,))
+
+
+def _osc_project(x, p, s):
+    return jnp.where(s[0] > 0.5, x.at[2].set(0.0), x)
+
+
+def clamped_oscillator(**values: float):
+    """The clamped oscillator as a :class:`~maglev_match.dynamics.hybrid.HybridSystem`."""
+    from maglev_match.dynamics.hybrid import HybridSystem
+
+    p = OSC_P.copy()
+    for k, v in values.items():
+        p[OSC_NAMES.index(k)] = v
+    return HybridSystem(rhs=_osc_hybrid_rhs, guards=_osc_guards, project=_osc_project,
+                        n_switches=1, p=p, param_names=OSC_NAMES,
+                        state_names=("x", "v", "i"), state_scale=OSC_SCALE,
+                        name="clamped oscillator")
+
+
+def damped_first_overshoot(d: float, zeta: float) -> float:
+    """The first maximum of x'' + 2 zeta omega x' + omega^2 x = 0 from x(0) = -d, x'(0) = 0:
+    d exp(-zeta pi / sqrt(1 - zeta^2)) (at t = pi / omega_d)."""
+    return d * math.exp(-zeta * math.pi / math.sqrt(1.0 - zeta * zeta))
+
+
+# --------------------------------------------------------- saturated planar oscillator
+SAT_NAMES = ("zeta", "k")
+SAT_P = np.array([0.1, 1.0])
+
+
+def _sat_rhs(x, p, s):
+    hi, lo = s[0] > 0.5, s[1] > 0.5
+    sat = jnp.where(hi, 1.0, jnp.where(lo, -1.0, x[1]))
+    return jnp.stack([x[1], -x[0] - 2.0 * p[0] * x[1] + p[1] * sat])
+
+
+def _sat_guards(x, p, s):
+    y = x[1]
+    return jnp.stack([jnp.where(s[0] > 0.5, y - 1.0, 1.0 - y),
+                      jnp.where(s[1] > 0.5, -1.0 - y, y + 1.0)])
+
+
+def saturated_oscillator(**values: float):
+    """x' = y, y' = -x - 2 zeta y + k sat(y), sat = clip(y, -1, 1), as a hybrid system with
+    two switches (y saturated above, below). With k > 2 zeta the origin is unstable and a
+    stable limit cycle crosses the linear band |y| < 1 and both saturated regions. The
+    vector field is continuous, so every saltation matrix has determinant 1 and the
+    non-trivial Floquet multiplier is exp(int div f dt) = exp((k - 2 zeta) T_lin -
+    2 zeta T_sat) (Liouville), with T_lin, T_sat the times spent in and out of the band."""
+    from maglev_match.dynamics.hybrid import HybridSystem
+
+    p = SAT_P.copy()
+    for k, v in values.items():
+        p[SAT_NAMES.index(k)] = v
+    return HybridSystem(rhs=_sat_rhs, guards=_sat_guards, n_switches=2, p=p,
+                        param_names=SAT_NAMES, state_names=("x", "y"),
+                        state_scale=np.array([1.0, 1.0]),
+                        observables={"x": lambda x, p: x[0], "y": lambda x, p: x[1]},
+                        name="saturated oscillator")
+
+
+def saturated_oscillator_shooting(zeta: float, k: float) -> tuple[float, float]:
+    """(period, amplitude) of the saturated oscillator's limit cycle by an independent
+    method: SciPy's DOP853 on the continuous field (np.clip, no events at the kinks; the
+    step control shrinks the steps there) and Brent's method on the return map of the
+    section y = 0 crossed downwards (where x is largest)."""
+    import scipy.optimize
+    from scipy.integrate import solve_ivp
+
+    def f(t, z):
+        return [z[1], -z[0] - 2.0 * zeta * z[1] + k * min(max(z[1], -1.0), 1.0)]
+
+    def section(t, z):
+        return z[1] if t > 0.5 else -1.0  # the start (on the section) does not count
+
+    section.direction = -1.0
+    section.terminal = True
+
+    def ret(x0: float) -> tuple[float, float]:
+        sol = solve_ivp(f, (0.0, 100.0), [x0, 0.0], method="DOP853", rtol=1e-13,
+                        atol=1e-13, events=section, max_step=0.01)
+        return float(sol.y_events[0][0][0]), float(sol.t_events[0][0])
+
+    xs = scipy.optimize.brentq(lambda x0: ret(x0)[0] - x0, 1.0, 20.0, xtol=1e-14)
+    return ret(xs)[1], xs

@@ -122,7 +122,7 @@ def test_h_and_h_simulation_shrink_towards_subcritical_hopf():
         hsims.append(res.h_simulation_up)  # x5(0) < 0, the paper's direction
         assert res.simulation["up"]["status"] == "bracketed"
         assert res.h_simulation == min(res.h_simulation_up, res.h_simulation_down)
-        assert res.chi_paper == res.chi
+        assert res.chi == min(res.chi_paper, res.chi_simulation)  # the headline
         if w == 128.0:
             inside = res.simulation["up"]["largest_return"]
             outside = res.simulation["up"]["smallest_collision"]
@@ -178,12 +178,13 @@ def test_reading_uses_the_smaller_index(h_cycle, d_crit):
     res = res.__class__(**{**{k: getattr(res, k) for k in res.__dataclass_fields__},
                            "chi": h_cycle / W0, "chi_paper": h_cycle / W0, "h": h_cycle})
     out = with_simulation(res, _cd("bracketed", d_crit - 5e-6, d_crit + 5e-6))
-    chi_used = min(out.chi, out.chi_simulation)
+    chi_used = min(out.chi_paper, out.chi_simulation)
     assert reading_rank(chi_used) == reading_rank(
-        out.chi if out.reading_basis == "paper" else out.chi_simulation)
+        out.chi_paper if out.reading_basis == "paper" else out.chi_simulation)
     assert out.reading == reading(chi_used)
-    assert out.chi == out.chi_paper == h_cycle / W0  # the paper's index is never altered
-    ratio = max(out.chi, out.chi_simulation) / min(out.chi, out.chi_simulation)
+    assert out.chi_paper == h_cycle / W0  # the paper's index is never altered
+    assert out.chi == chi_used  # the headline is the index the reading uses
+    ratio = max(out.chi_paper, out.chi_simulation) / min(out.chi_paper, out.chi_simulation)
     assert any("differ by more than" in w for w in out.warnings) == (ratio > 1.5)
 
 
@@ -195,7 +196,9 @@ def test_open_simulation_is_a_warning_not_silence():
     assert any("inconclusive" in w for w in out.warnings)
     # nothing seen to return (runs undecided within the horizon): no claim at all
     none = with_simulation(res, _cd("open", None, 0.004))
-    assert none.h_simulation is None and none.reading_basis == "simulation"
+    # the headline then is the paper's number (and says so); the reading claims nothing
+    assert none.h_simulation is None and none.reading_basis == "paper"
+    assert none.chi == none.chi_paper and "inconclusive" in none.headline
     assert none.reading.startswith("unknown")
     assert any("inconclusive" in w for w in none.warnings)
 
@@ -247,11 +250,12 @@ def test_limit_before_design_point_and_escaping_disturbance_claims_no_robustness
     assert bad.simulation["up"]["status"] == "bracketed"
     assert 0 < bad.h_simulation < limit
     assert bad.reading_basis == "simulation"
-    assert reading_rank(bad.chi_simulation) < reading_rank(bad.chi)
+    assert reading_rank(bad.chi_simulation) < reading_rank(bad.chi_paper)
     assert bad.reading == reading(bad.chi_simulation)
     assert "every disturbance" not in bad.reading
     assert any(w.startswith("contradiction") for w in bad.warnings)
-    assert bad.chi == limit / w0  # the paper's index itself is kept
+    assert bad.chi_paper == limit / w0  # the paper's index itself is kept
+    assert bad.chi == bad.chi_simulation  # and the headline is the smaller
     # control: without the coupling every disturbance returns and nothing is contradicted
     good = run(0.0)
     assert good.simulation["up"]["status"] == "all_return"
@@ -263,14 +267,16 @@ def test_cli_index_kd120_text_and_json_agree(capsys):
     """`index --set kD=120` (the issue's case): the cycle branch touches the limit before
     the design point; the simulation shows collisions inside the gap range. The text names
     the reading's basis and prints every warning of the JSON, and never claims every
-    disturbance; the paper's chi is kept as "chi" and "chi_paper"."""
+    disturbance; the paper's chi is kept as "chi_paper", and the headline "chi" is the
+    smaller, chi_simulation."""
     import json
 
     from maglev_match.cli import main
 
     assert main(["index", "--set", "kD=120", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["chi"] == doc["chi_paper"] == pytest.approx(12.051, rel=1e-3)
+    assert doc["chi_paper"] == pytest.approx(12.051, rel=1e-3)
+    assert doc["chi"] == doc["chi_simulation"] < doc["chi_paper"]
     assert doc["case"] == "no_cycle_within_limits"
     assert doc["reading_basis"] == "simulation"
     assert 0 < doc["h_simulation_down"] < doc["h_simulation_up"] < 0.01
@@ -282,4 +288,42 @@ def test_cli_index_kd120_text_and_json_agree(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for w in doc["warnings"]:
         assert " ".join(w.split()) in text
-    assert "reading (from the simulation" in text
+    assert "reading (of the headline chi, from the simulation" in text
+    assert text.index(f"chi = {doc['chi']:.4g}") < text.index("chi_paper")
+
+
+def test_no_simulation_headline_is_the_paper_chi_and_says_so(capsys):
+    """`index --no-simulation`: the headline chi is the paper's number, labelled as such in
+    the text and in JSON (reading_basis "paper", no mechanisms)."""
+    import json
+
+    from maglev_match.cli import main
+
+    assert main(["index", "--no-simulation", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["chi"] == doc["chi_paper"] and doc["chi_simulation"] is None
+    assert doc["reading_basis"] == "paper" and doc["mechanism_up"] is None
+    assert "the paper's number" in doc["headline"]
+    assert main(["index", "--no-simulation"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"chi = {doc['chi']:.4g} (headline: the paper's chi" in text
+    assert "chi_paper = h / w0" in text and "(the paper's definition)" in text
+
+
+def test_turnout_soft_headline_is_the_solved_chi_simulation():
+    """The shipped default: the headline is chi_simulation, beam down decides, and both
+    directions are decided by a grazing contact that was solved (so chi_simulation has a
+    derivative)."""
+    from maglev_match.params import load_preset
+
+    res = matching_index(load_preset("turnout-soft"))
+    assert res.reading_basis == "simulation" and res.chi == res.chi_simulation
+    assert res.chi_paper == pytest.approx(9.562, rel=1e-3)
+    assert res.mechanism_up == res.mechanism_down == "grazing"
+    assert res.h_simulation == res.h_simulation_down == res.critical_down.size
+    assert res.simulation_derivative
+    assert res.simulation["down"]["critical"]["limit"] == "lower"
+    # the solved size lies in the bisection's bracket
+    lo, hi = res.critical_down.bracket
+    assert lo <= res.h_simulation <= hi
+    assert "here: simulation" in res.headline

@@ -97,7 +97,7 @@ def test_derived_map_matches_params_and_beam_formulas():
 @pytest.fixture(scope="module")
 def soft():
     p = load_preset("turnout-soft")
-    return p, index_sensitivity(p, boundaries=False)
+    return p, index_sensitivity(p, boundaries=False, simulate=False)
 
 
 def _fd(params, name, rel=1e-4):
@@ -119,7 +119,7 @@ def test_model_a_dchi_matches_finite_differences(soft, name):
 def test_model_a_dchi_dbeam_modal_values(soft, name):
     p0, _ = soft
     p = p0.replace(omega1=p0.omega1, sigma=p0.sigma)
-    sens = index_sensitivity(p, boundaries=False)
+    sens = index_sensitivity(p, boundaries=False, simulate=False)
     assert sens.index.chi == pytest.approx(soft[1].index.chi, rel=1e-12)
     assert sens.dchi(name) == pytest.approx(_fd(p, name), rel=1e-4)
 
@@ -209,8 +209,8 @@ def test_model_a_derivative_of_the_polynomial_maximum_is_exact_to_1e6(soft):
     # maximum itself, so central differences of that maximum agree much more closely
     p, sens = soft
     d = 1e-4 * p.kD
-    sp = index_sensitivity(p.replace(kD=p.kD + d), boundaries=False)
-    sm = index_sensitivity(p.replace(kD=p.kD - d), boundaries=False)
+    sp = index_sensitivity(p.replace(kD=p.kD + d), boundaries=False, simulate=False)
+    sm = index_sensitivity(p.replace(kD=p.kD - d), boundaries=False, simulate=False)
     fd = (sp.system.h / sp.index.w0 - sm.system.h / sm.index.w0) / (2 * d)
     assert sens.dchi("kD") == pytest.approx(fd, rel=1e-6)
 
@@ -221,7 +221,7 @@ def test_case_rule_boundary_from_the_branch_contact_with_the_gap_limit():
     # without limits; the case boundary in sigma (the branch parameter) is that contact
     base = load_preset("turnout-soft").replace(EI=8.2e9)
     p = base.replace(sigma=base.sigma)  # sigma explicit: it has a row
-    sens = index_sensitivity(p, boundaries=True)
+    sens = index_sensitivity(p, boundaries=True, simulate=False)
     assert sens.status == DerivativeStatus.RULE
     assert "reaches the gap-deviation limit" in sens.limit_boundary_note
     s_c = sens.row("sigma").limit_boundary

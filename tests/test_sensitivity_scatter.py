@@ -15,7 +15,8 @@ def test_index_scatter_is_the_root_sum_of_squares_of_the_sensitivity_table(capsy
     assert main(["index", "--no-simulation", "--scatter", "EI=5", "--scatter", "kD=10",
                  "--scatter", "m=2", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert main(["sensitivity", "--no-boundaries", "--json", "--out", str(tmp_path)]) == 0
+    assert main(["sensitivity", "--no-boundaries", "--no-simulation", "--json", "--out",
+                 str(tmp_path)]) == 0
     rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)["rows"]}
     pct = {"EI": 5.0, "kD": 10.0, "m": 2.0}
     parts = {n: rows[n]["dchi"] * rows[n]["value"] * p / 100 for n, p in pct.items()}

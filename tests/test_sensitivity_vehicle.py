@@ -105,7 +105,7 @@ def test_vehicle_margin_derivative_and_spread(cyc):
 def test_vehicle_case_rule_point_moves_only_through_w0_and_gap_max():
     # a smaller gap range: the same cycle (5.34 mm) no longer fits, the rule sets h
     p = CYCLE_POINT.replace(gap_max=0.012)
-    sens = index_sensitivity(p, model="vehicle", boundaries=True)
+    sens = index_sensitivity(p, model="vehicle", boundaries=True, simulate=False)
     idx = sens.index
     assert idx.case == "no_cycle_within_limits"
     assert sens.status == DerivativeStatus.RULE
@@ -128,7 +128,7 @@ def test_vehicle_case_rule_point_moves_only_through_w0_and_gap_max():
 def test_vehicle_unstable_point_is_zero_with_the_boundary_at_the_hopf_point(cyc):
     _, stable_sens = cyc
     p = CYCLE_POINT.replace(EI=4e10)  # omega1 = 139 rad/s: past the Hopf point
-    sens = index_sensitivity(p, model="vehicle", boundaries=True)
+    sens = index_sensitivity(p, model="vehicle", boundaries=True, simulate=False)
     assert sens.index.case == "unstable_equilibrium" and sens.index.chi == 0.0
     assert sens.status == DerivativeStatus.ZERO
     assert all(r.dchi == 0.0 for r in sens.rows)
@@ -143,6 +143,7 @@ def test_vehicle_unstable_point_is_zero_with_the_boundary_at_the_hopf_point(cyc)
 
 def test_cli_vehicle_sensitivity_text_and_json(capsys, tmp_path):
     args = ["sensitivity", "--model", "vehicle", "--set", "EI=3.2e10", "--no-boundaries",
+            "--no-simulation",
             "--out", str(tmp_path), "--scatter", "EI=2", "--scatter", "kD=5"]
     assert main(args) == 0
     text = capsys.readouterr().out
@@ -163,6 +164,7 @@ def test_cli_vehicle_design_meets_its_requirement_and_1pct_cheaper_does_not(caps
     # limit; the least kD with chi >= 10 is an interior optimum with the chi constraint active
     code = main(["design", "--model", "vehicle", "--set", "EI=3.2e10", "--vary", "kD=140:170",
                  "--minimize", "kD", "--require", "chi>=10", "--grid", "3", "--starts", "1",
+                 "--no-simulation",
                  "--json", "--out", str(tmp_path)])
     assert code == 0
     data = json.loads(capsys.readouterr().out)

@@ -164,6 +164,35 @@ def test_grazing_inside_one_step_is_a_collision():
     assert 5.0 / hit.accepted > 10 * 2 * np.sqrt(2 * depth)
 
 
+def _two_oscillators(x, p):
+    # x1 = cos t and x2 = cos(w t): two uncoupled oscillators (w = p[0])
+    return jnp.stack([x[1], -x[0], x[3], -p[0] ** 2 * x[2]])
+
+
+def _two_dips(x, p):
+    # entry 0: x1 above -(1 - 1e-6); entry 1: x2 above -(1 - p[1])
+    return jnp.stack([x[0] + 1.0 - 1e-6, x[2] + 1.0 - p[1]])
+
+
+TWO_OSC = System(rhs=_two_oscillators, p=np.array([1.0005, 1e-6]), param_names=("w", "depth"),
+                 state_names=("x1", "v1", "x2", "v2"), name="two oscillators")
+
+
+@pytest.mark.parametrize("depth2", [1e-6, 1e-7])
+def test_two_entries_dipping_inside_one_step_give_the_first_collision(depth2):
+    """Both limits are grazed within one step (minima at t = pi / 1.0005 and pi, 1.6e-3 s
+    apart, each excursion ~1e-3 s long): every entry at risk is refined, so the collision is
+    the earlier dip (entry 1), not whichever entry looked closest at the samples."""
+    x0 = np.array([1.0, 0.0, 1.0, 0.0])
+    w = TWO_OSC.p[0]
+    res = simulate(TWO_OSC, x0, 4.0, p=np.array([w, depth2]), event_fn=_two_dips,
+                   options=SimulationOptions(rtol=1e-10, atol=1e-10), n_save=0)
+    assert res.outcome == "collision" and res.event_index == 1
+    # on the limit to integration accuracy (the rate there is only ~sqrt(2 depth))
+    assert abs(np.cos(w * res.event_time) + (1.0 - depth2)) < 1e-8
+    assert res.event_time == pytest.approx(np.arccos(-(1.0 - depth2)) / w, abs=1e-5)
+
+
 def test_current_clamp_keeps_current_nonnegative():
     """A large disturbance drives the smooth model's current far negative; with the limits
     on the current state never drops below zero by more than the integration tolerance."""

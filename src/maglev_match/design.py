@@ -1,5 +1,5 @@
 """The inverse problem: the cheapest beam or the best gains that meet requirements on the
-matching index chi, the stability margin and chi_simulation.
+headline matching index chi, the stability margin and chi_simulation.
 
 Formulation (scaled variables u in [0, 1]^d, v = lo + u (hi - lo) for each varied parameter):
 
@@ -7,14 +7,20 @@ Formulation (scaled variables u in [0, 1]^d, v = lo + u (hi - lo) for each varie
     subject to  chi(v) >= X,   margin(v) = -max Re lambda(v) >= Y,   lo <= v <= hi,
 
 solved by sequential least-squares quadratic programming (SLSQP; Kraft 1988, as in
-``scipy.optimize``) with the exact gradients of :mod:`maglev_match.sensitivity`. chi is not
-convex: it rises, peaks and falls to 0 at the Hopf curve, and it is identically 0 beyond it.
-So the optimiser starts from the best points of a coarse grid over the box, and in the
-unstable region the chi constraint uses the continuous extension chi_ext = -max Re lambda /
-margin_scale (< 0) whose gradient leads back to the stable side (chi -> 0 at the boundary
-from both sides). chi_simulation has no gradient: it is re-checked on the final candidates;
-when it fails, the chi requirement is raised by the ratio found and the optimiser run again
-(at most ``sim_rounds`` times).
+``scipy.optimize``) with the exact gradients of :mod:`maglev_match.sensitivity`. chi is the
+headline index, min(chi_paper, chi_simulation) (the paper's chi alone with
+``simulate=False``), so ``chi >= X`` is the pair of smooth constraints
+chi_paper(v) >= X and chi_simulation(v) >= X, each with its own exact gradient
+(chi_simulation's from the implicit function theorem on the solved critical disturbance,
+:mod:`maglev_match.critical`); a requirement ``chi_simulation >= Z`` is the second alone.
+chi_paper is not convex: it rises, peaks and falls to 0 at the Hopf curve, and it is
+identically 0 beyond it. So the optimiser starts from the best points of a coarse grid over
+the box, and in the unstable region both chi constraints use the continuous extension
+chi_ext = -max Re lambda / margin_scale (< 0) whose gradient leads back to the stable side
+(chi -> 0 at the boundary from both sides). Where chi_simulation has no derivative (its
+critical size only bracketed by bisection) its constraint has no gradient; when a candidate
+then falls short when re-checked, the requirement on chi_paper is raised by the ratio found
+and the optimiser run again (at most ``sim_rounds`` times).
 
 Every candidate is re-checked by the full index (and by simulation when chi_simulation is
 required); the design returned is the best re-checked one, or, when none meets the
@@ -149,7 +155,10 @@ class DesignProblem:
 
 @dataclass(frozen=True)
 class Evaluation:
-    """chi, the margin and their gradients (per unit of each varied parameter) at one point."""
+    """The headline chi, its parts, the margin and their gradients (per unit of each varied
+    parameter) at one point. ``dchi`` is the gradient of chi_paper (the paper's
+    definition, ``chi_paper``); ``dchi_simulation`` that of chi_simulation (None where the
+    simulation was not run or its critical size has no derivative)."""
 
     values: np.ndarray
     chi: float
@@ -159,6 +168,9 @@ class Evaluation:
     status: DerivativeStatus | None
     index: MatchingIndex
     seconds: float = 0.0
+    chi_paper: float = float("nan")
+    chi_simulation: float | None = None
+    dchi_simulation: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -176,9 +188,12 @@ class Evaluator(Protocol):
 
 class MaglevEvaluator:
     """Model A (``model`` 'unit') or the vehicle ('vehicle') at ``base`` with the parameters
-    ``names`` set to the given values."""
+    ``names`` set to the given values; ``simulate`` (default) makes every evaluation the
+    full headline index (the simulated critical disturbance solved, with its derivative),
+    False the paper's chi alone (``--no-simulation``)."""
 
-    def __init__(self, base: Params, names: Sequence[str], model: str = "unit"):
+    def __init__(self, base: Params, names: Sequence[str], model: str = "unit",
+                 simulate: bool = True):
         for n in names:
             if n not in FIELD_NAMES:
                 raise ParameterError("--vary", n, "unknown parameter")
@@ -187,6 +202,7 @@ class MaglevEvaluator:
         self.base = base
         self.names = tuple(names)
         self.model = model
+        self.simulate = bool(simulate)
 
     def params(self, values: np.ndarray) -> Params:
         return self.base.replace(**{n: float(v) for n, v in zip(self.names, values,
@@ -195,19 +211,25 @@ class MaglevEvaluator:
     def evaluate(self, values: np.ndarray, gradient: bool) -> Evaluation:
         t = time.perf_counter()
         p = self.params(values)
-        idx = matching_index(p, model=self.model, simulate=False)
-        dchi = dmargin = None
+        idx = matching_index(p, model=self.model, simulate=self.simulate)
+        dchi = dmargin = dsim = None
         status = None
         if gradient:
             sens = index_sensitivity(p, idx, boundaries=False, model=self.model)
             status = sens.status
-            dchi = np.array([_row(sens, n, "dchi", self.model) for n in self.names])
+            dchi = np.array([_row(sens, n, "dchi_paper", self.model) for n in self.names])
             dmargin = np.array([_row(sens, n, "dmargin", self.model) for n in self.names])
+            rows = [sens.row(n) if n in sens._by_name else None for n in self.names]
+            if all(r is not None and r.dchi_simulation is not None for r in rows):
+                dsim = np.array([r.dchi_simulation for r in rows])
         return Evaluation(np.asarray(values, float), idx.chi, -idx.max_real_part, dchi,
-                          dmargin, status, idx, time.perf_counter() - t)
+                          dmargin, status, idx, time.perf_counter() - t,
+                          chi_paper=idx.chi_paper, chi_simulation=idx.chi_simulation,
+                          dchi_simulation=dsim)
 
     def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex:
-        return matching_index(self.params(values), model=self.model, simulate=simulate)
+        return matching_index(self.params(values), model=self.model,
+                              simulate=simulate and self.simulate)
 
     def scan(self, problem: DesignProblem, n: int) -> tuple[np.ndarray, np.ndarray] | None:
         """chi and the margin on the start grid (``n`` points per varied parameter, in the
@@ -271,7 +293,8 @@ class SystemEvaluator:
             dchi = s.dh_dp[k] / w0 if status != DerivativeStatus.ZERO else np.zeros(len(k))
             dmargin = -s.dmax_re_dp[k]
         return Evaluation(np.asarray(values, float), idx.chi, -idx.max_real_part, dchi,
-                          dmargin, status, idx, time.perf_counter() - t)
+                          dmargin, status, idx, time.perf_counter() - t,
+                          chi_paper=idx.chi_paper)
 
     def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex:
         return self.evaluate(values, gradient=False).index
@@ -293,6 +316,7 @@ class Candidate:
     message: str
     path: np.ndarray  # (k, d) the iterates in parameter units
     path_chi: np.ndarray  # (k,) chi at the iterates
+    chi_paper: float = float("nan")  # the paper's chi at the candidate
 
 
 @dataclass(frozen=True)
@@ -337,7 +361,8 @@ class DesignResult:
             "candidates": [
                 {"start": dict(zip(self.problem.names, c.start.tolist(), strict=True)),
                  "design": dict(zip(self.problem.names, c.values.tolist(), strict=True)),
-                 "chi": c.chi, "margin": c.margin, "chi_simulation": c.chi_simulation,
+                 "chi": c.chi, "chi_paper": c.chi_paper, "margin": c.margin,
+                 "chi_simulation": c.chi_simulation,
                  "feasible": c.feasible, "violation": c.violation,
                  "iterations": c.iterations, "message": c.message}
                 for c in self.candidates
@@ -476,11 +501,15 @@ def _grid(d: int, n: int) -> np.ndarray:
     return np.array(list(itertools.product(*axes)))
 
 
-def _chi_ext(ev: Evaluation, margin_scale: float) -> float:
-    """chi where the equilibrium is stable; -max Re lambda / margin_scale (<= 0) where not."""
+def _chi_ext(ev: Evaluation, margin_scale: float, part: str = "paper") -> float:
+    """chi_paper (``part`` 'paper') or chi_simulation ('simulation') where the equilibrium is
+    stable; -max Re lambda / margin_scale (<= 0) where not. A chi_simulation that could not
+    be computed counts as its paper part (no constraint of its own)."""
     if ev.index.case == "unstable_equilibrium":
         return min(ev.margin, 0.0) / margin_scale
-    return ev.chi
+    if part == "simulation":
+        return ev.chi_simulation if ev.chi_simulation is not None else ev.chi_paper
+    return ev.chi_paper if math.isfinite(ev.chi_paper) else ev.chi
 
 
 def _shortfall(reqs: Sequence[Requirement], chi: float, margin: float,
@@ -544,6 +573,10 @@ def optimise_design(
 
     reqs = list(problem.requirements)
     chi_req = next((r.bound for r in reqs if r.quantity == Quantity.CHI), None)
+    sim = bool(getattr(evaluator, "simulate", False))
+    if problem.needs_simulation and not sim:
+        raise ParameterError("--require", "chi_simulation>=...",
+                             "needs the simulation, which this evaluator does not run")
     candidates: list[Candidate] = []
     cand_index: list[MatchingIndex] = []  # the full index of each candidate
     total_its = 0
@@ -578,20 +611,17 @@ def optimise_design(
                 g[iobj] = 1.0
                 return g
             ev = cache(u)
-            return -_grad(ev, "chi", problem, margin_scale) / max(chi_bound or 1.0, 1.0)
+            return -_grad(ev, "headline", problem, margin_scale) / max(chi_bound or 1.0, 1.0)
 
         cons = []
-        for r in _grad_reqs(reqs, chi_bound):
-            sc = max(abs(r.bound), 1e-3)
-            q = r.quantity
+        for part, bound in _constraints(reqs, chi_bound, sim):
+            sc = max(abs(bound), 1e-3)
 
-            def cf(u, q=q, b=r.bound, sc=sc):
-                ev = cache(u)
-                v = _chi_ext(ev, margin_scale) if q == Quantity.CHI else ev.margin
-                return (v - b) / sc
+            def cf(u, part=part, b=bound, sc=sc):
+                return (_part_value(cache(u), part, margin_scale) - b) / sc
 
-            def cj(u, q=q, sc=sc):
-                return _grad(cache(u), q, problem, margin_scale) / sc
+            def cj(u, part=part, sc=sc):
+                return _grad(cache(u), part, problem, margin_scale) / sc
 
             cons.append({"type": "ineq", "fun": cf, "jac": cj})
 
@@ -602,24 +632,20 @@ def optimise_design(
                                       constraints=cons, callback=cb,
                                       options={"maxiter": maxiter, "ftol": 1e-10})
         u = np.clip(res.x, 0.0, 1.0)
-        u = _polish(u, cache, problem, _grad_reqs(reqs, chi_bound), margin_scale)
+        u = _polish(u, cache, problem, _constraints(reqs, chi_bound, sim), margin_scale)
         path.append(u)
         return u, int(res.nit), str(res.message), path
 
-    chi_bound = chi_req
+    chi_bound = None
     for round_ in range(sim_rounds + 1):
-        for i in rank_starts(chi_bound):
+        for i in rank_starts(chi_bound if chi_bound is not None else chi_req):
             say(f"optimiser from grid point {i + 1}"
                 + (f" (round {round_ + 1})" if round_ else ""))
             u, its, msg, path = run(U[i], chi_bound)
             total_its += its
+            # with the simulation on, each evaluation is the full headline index already
             ev = cache(u, gradient=False)
-            chi_sim = None
-            if problem.needs_simulation and ev.ok:
-                say("re-checking with simulation")
-                full = evaluator.recheck(ev.values, simulate=True)
-                cache.count += 1
-                chi_sim = full.chi_simulation
+            chi_sim = ev.chi_simulation if sim else None
             short = _shortfall(problem.requirements, ev.chi, ev.margin, chi_sim)
             cand_index.append(ev.index)
             candidates.append(Candidate(
@@ -627,37 +653,40 @@ def optimise_design(
                 chi_simulation=chi_sim, feasible=short == 0.0, violation=short,
                 iterations=its, evaluations=cache.count, message=msg,
                 path=np.array([problem.values(x) for x in path]),
-                path_chi=np.array([cache(x, gradient=False).chi for x in path])))
+                path_chi=np.array([cache(x, gradient=False).chi for x in path]),
+                chi_paper=ev.chi_paper))
         feasible = [c for c in candidates if c.feasible]
-        if feasible or not problem.needs_simulation:
+        if feasible or not sim:
             break
-        # raise the chi requirement by the shortfall ratio of the simulated reading
-        sim_req = next(r.bound for r in reqs if r.quantity == Quantity.CHI_SIMULATION)
-        ratios = [sim_req / c.chi_simulation * 1.02 for c in candidates[-starts:]
-                  if c.chi_simulation and c.chi_simulation > 0 and math.isfinite(c.chi)]
+        # chi_simulation short where its critical size has no derivative (bisection only):
+        # raise the requirement on chi_paper by the shortfall ratio and run again
+        sim_bound = max([r.bound for r in reqs
+                         if r.quantity in (Quantity.CHI, Quantity.CHI_SIMULATION)], default=None)
+        ratios = [sim_bound / c.chi_simulation * 1.02 for c in candidates[-starts:]
+                  if sim_bound is not None and c.chi_simulation and c.chi_simulation > 0
+                  and c.chi_simulation < sim_bound and math.isfinite(c.chi_paper)]
         if not ratios:
             break
         last = candidates[-1]
-        chi_bound = max(chi_bound or 0.0, last.chi * min(ratios))
-        warnings.append(f"chi_simulation fell short: chi requirement raised to {chi_bound:.4g}")
+        chi_bound = max(chi_bound or chi_req or 0.0, last.chi_paper * min(ratios))
+        warnings.append(f"chi_simulation fell short where it has no derivative: the "
+                        f"requirement on chi_paper raised to {chi_bound:.4g}")
 
     feasible = [c for c in candidates if c.feasible]
     sign = -1.0 if problem.goal == Goal.MAXIMIZE else 1.0
     if feasible:
         best = min(feasible, key=lambda c: sign * objective_of(c.values, c.chi))
         status = DesignStatus.FEASIBLE
-        message = "the design meets every requirement when re-checked by the full index"
+        message = ("the design meets every requirement when re-checked by the full index"
+                   + (" (the headline: both chi_paper and chi_simulation)" if sim else ""))
     else:
         pool = candidates or []
         best = min(pool, key=lambda c: (c.violation, sign * objective_of(c.values, c.chi)))
         status = DesignStatus.INFEASIBLE
         message = ("no design in the box meets the requirements; the best found "
                    f"misses them by {best.violation:.1%}")
-    if problem.needs_simulation:
-        final = evaluator.recheck(best.values, simulate=True)
-        cache.count += 1
-    else:  # the candidate's own evaluation is already the full index at these values
-        final = cand_index[next(i for i, c in enumerate(candidates) if c is best)]
+    # the candidate's own evaluation is already the full index at these values
+    final = cand_index[next(i for i, c in enumerate(candidates) if c is best)]
     active = _active(problem, best, final, chi_bound)
     return DesignResult(
         problem=problem, status=status,
@@ -671,7 +700,8 @@ def optimise_design(
 
 
 def _grad_reqs(reqs: list[Requirement], chi_bound: float | None) -> tuple[Requirement, ...]:
-    """The requirements with gradients (chi with the possibly raised bound, margin)."""
+    """The requirements on chi_paper and the margin (chi with the possibly raised bound), for
+    ranking the start grid (which has chi_paper only)."""
     out = []
     for r in reqs:
         if r.quantity == Quantity.CHI_SIMULATION:
@@ -684,15 +714,54 @@ def _grad_reqs(reqs: list[Requirement], chi_bound: float | None) -> tuple[Requir
     return tuple(out)
 
 
-def _grad(ev: Evaluation, q: Quantity | str, problem: DesignProblem,
+def _constraints(reqs: Sequence[Requirement], chi_bound: float | None,
+                 sim: bool) -> tuple[tuple[str, float], ...]:
+    """The smooth constraints (part, bound) of the requirements: chi >= X is chi_paper >= X
+    (or the raised bound) and, with the simulation, chi_simulation >= X (the headline is the
+    smaller of the two); chi_simulation >= Z is the second alone; margin >= Y."""
+    out: list[tuple[str, float]] = []
+    for r in reqs:
+        if r.quantity == Quantity.CHI:
+            out.append(("paper", r.bound if chi_bound is None else max(r.bound, chi_bound)))
+            if sim:
+                out.append(("simulation", r.bound))
+        elif r.quantity == Quantity.CHI_SIMULATION:
+            if sim:
+                out.append(("simulation", r.bound))
+        else:
+            out.append(("margin", r.bound))
+    if chi_bound is not None and not any(r.quantity == Quantity.CHI for r in reqs):
+        out.append(("paper", chi_bound))
+    return tuple(out)
+
+
+def _part_value(ev: Evaluation, part: str, margin_scale: float) -> float:
+    if part == "margin":
+        return ev.margin
+    return _chi_ext(ev, margin_scale, part)
+
+
+def _grad(ev: Evaluation, q: str, problem: DesignProblem,
           margin_scale: float) -> np.ndarray:
-    """Gradient in the unit variables u of chi (its extension where unstable) or the margin."""
+    """Gradient in the unit variables u of chi_paper ('paper'), chi_simulation
+    ('simulation'), the headline ('headline', the smaller part's), their extension where
+    unstable, or the margin ('margin')."""
     if ev.dchi is None or ev.dmargin is None:
         return np.zeros(len(problem.variables))
-    if q == Quantity.MARGIN:
+    if q == "headline":
+        q = ("simulation" if ev.chi_simulation is not None and ev.chi_simulation < ev.chi_paper
+             else "paper")
+    if q == "margin":
         g = ev.dmargin
     elif ev.index.case == "unstable_equilibrium":
         g = ev.dmargin / margin_scale  # chi_ext = margin / margin_scale there
+    elif q == "simulation":
+        if ev.chi_simulation is None:
+            g = ev.dchi
+        elif ev.dchi_simulation is None:
+            g = np.zeros(len(problem.variables))
+        else:
+            g = ev.dchi_simulation
     else:
         g = ev.dchi
     g = np.where(np.isfinite(g), g, 0.0)
@@ -700,22 +769,23 @@ def _grad(ev: Evaluation, q: Quantity | str, problem: DesignProblem,
 
 
 def _polish(u: np.ndarray, cache: _Cache, problem: DesignProblem,
-            reqs: tuple[Requirement, ...], margin_scale: float, rounds: int = 4) -> np.ndarray:
-    """Move a point that misses a gradient requirement by a little onto its feasible side:
-    Newton steps on the violated constraint along its gradient, aiming 1e-7 (relative)
+            cons: tuple[tuple[str, float], ...], margin_scale: float,
+            rounds: int = 4) -> np.ndarray:
+    """Move a point that misses a smooth constraint by a little onto its feasible side:
+    Newton steps on the most violated one along its gradient, aiming 1e-7 (relative)
     inside, within the box."""
     for _ in range(rounds):
         ev = cache(u)
         worst = None
-        for r in reqs:
-            v = _chi_ext(ev, margin_scale) if r.quantity == Quantity.CHI else ev.margin
-            target = r.bound + 1e-7 * max(abs(r.bound), 1e-3)
-            if v < r.bound and (worst is None or (r.bound - v) > worst[0]):
-                worst = (r.bound - v, r, v, target)
+        for part, bound in cons:
+            v = _part_value(ev, part, margin_scale)
+            target = bound + 1e-7 * max(abs(bound), 1e-3)
+            if v < bound and (worst is None or (bound - v) > worst[0]):
+                worst = (bound - v, part, v, target)
         if worst is None:
             return u
-        _, r, v, target = worst
-        g = _grad(ev, r.quantity, problem, margin_scale)
+        _, part, v, target = worst
+        g = _grad(ev, part, problem, margin_scale)
         gg = float(g @ g)
         if gg == 0 or not math.isfinite(gg):
             return u

@@ -23,10 +23,15 @@ scaled) that separates return from collision in simulations with the physical li
 in both directions (beam up, beam down; the smaller one counts). It measures a disturbance
 size, not a cycle amplitude, so it is not expected to equal h.
 
-The words a user reads (``reading``) are a monotone function of one number, the index
-used: the smaller of chi (the paper's definition) and chi_simulation when the simulation
-was run (``reading_basis`` says which), so the reading never claims more robustness than the
-simulation shows. Disagreement beyond :data:`DISAGREEMENT_FACTOR`, a cycle branch stopped
+**The headline index** ``chi`` is the one number the product stands behind: the smaller of
+the paper's index ``chi_paper`` and ``chi_simulation`` when the simulation ran and was
+conclusive, else ``chi_paper`` (``reading_basis`` says which of the two it is: "paper" or
+"simulation"). The words a user reads (``reading``) are a monotone function of it, so the
+reading never claims more robustness than the simulation shows. What decided h_simulation
+in each direction (a grazing contact, a basin boundary, or the bisection alone;
+:mod:`maglev_match.critical`) is ``mechanism_up`` / ``mechanism_down``.
+
+Disagreement beyond :data:`DISAGREEMENT_FACTOR`, a cycle branch stopped
 at a limit, closeness to the stability boundary or to a generalised-Hopf point, current
 reversal on the cycle and an inconclusive simulation are warnings (``warnings``).
 
@@ -53,7 +58,7 @@ from maglev_match.reprs import compact_repr
 
 __all__ = ["MatchingIndex", "matching_index", "index_of_system", "reading", "reading_rank",
            "search_ranges", "CASES", "Case", "Basis", "with_simulation", "cycle_settings",
-           "DISAGREEMENT_FACTOR", "NEAR_HOPF", "NEAR_GH"]
+           "DISAGREEMENT_FACTOR", "NEAR_HOPF", "NEAR_GH", "headline_text"]
 
 
 class Case(StrEnum):
@@ -65,7 +70,7 @@ class Case(StrEnum):
 
 
 class Basis(StrEnum):
-    """Which index the reading uses."""
+    """Which index the headline chi (and the reading) is."""
 
     PAPER = "paper"
     SIMULATION = "simulation"
@@ -104,10 +109,17 @@ cycle_settings = CycleSettings()
 class MatchingIndex:
     """The matching index at one parameter point, with what decided it.
 
-    Lengths in metres, rates in 1/s. ``chi`` (equal to ``chi_paper``) is the index by the
-    paper's definition; ``chi_simulation`` the simulated critical disturbance over w0 (the
-    smaller of the two directions); ``reading`` the words for the index named by
-    ``reading_basis`` (the smaller of the two when the simulation ran).
+    Lengths in metres, rates in 1/s. ``chi`` is the HEADLINE index: min(chi_paper,
+    chi_simulation) when the simulation ran and was conclusive, else chi_paper;
+    ``reading_basis`` says which of the two it is ("paper" or "simulation").
+    ``chi_paper`` is the index by the paper's definition (h from the cycle or the case rule,
+    over w0); ``chi_simulation`` the simulated critical disturbance over w0 (the smaller of
+    the two directions); ``reading`` the words for the headline. ``mechanism_up`` /
+    ``mechanism_down``: what decided the critical disturbance of each direction
+    (:class:`maglev_match.critical.Mechanism`); ``critical_up`` / ``critical_down`` the
+    solved results (:class:`maglev_match.critical.CriticalSize`, in JSON as
+    ``simulation.up.critical``); ``simulation_derivative``: whether chi_simulation has a
+    derivative here (its deciding direction was solved).
     """
 
     __repr__ = compact_repr
@@ -143,14 +155,23 @@ class MatchingIndex:
     converged: bool = True
     message: str = ""
     warnings: tuple[str, ...] = ()
+    mechanism_up: str | None = None
+    mechanism_down: str | None = None
+    simulation_derivative: bool = False
+    headline: str = ""
     cycle: CyclePoint | None = field(default=None, repr=False, compare=False)
+    critical_up: Any = field(default=None, repr=False, compare=False)
+    critical_down: Any = field(default=None, repr=False, compare=False)
 
     def as_json(self) -> dict[str, Any]:
         """The machine-readable form (SI units); the cycle's profile is left out."""
-        out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "cycle"}
+        skip = ("cycle", "critical_up", "critical_down")
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__ if k not in skip}
         out["case"] = str(self.case)
         out["reading_basis"] = str(self.reading_basis)
         out["warnings"] = list(self.warnings)
+        for k in ("mechanism_up", "mechanism_down"):
+            out[k] = None if out[k] is None else str(out[k])
         return out
 
 
@@ -198,9 +219,11 @@ def matching_index(
     simulate: bool = True,
     stability_result: StabilityResult | None = None,
     simulation_kwargs: dict[str, Any] | None = None,
+    solve: bool = True,
 ) -> MatchingIndex:
-    """chi = h / w0 at ``params``, with the case that
-    decided h, the simulated critical disturbance in both directions and the reading.
+    """The headline index chi at ``params`` (the smaller of the paper's chi = h / w0 and
+    chi_simulation), with the case that decided h, the simulated critical disturbance in
+    both directions and what decided it, and the reading.
 
     Parameters
     ----------
@@ -213,6 +236,9 @@ def matching_index(
         with the limits on; the equilibrium must be stable for this to be meaningful.
     stability_result : reuse an already computed stability result.
     simulation_kwargs : passed to the critical-disturbance search of the model.
+    solve : also solve the critical disturbance of each direction where a grazing contact or
+        a basin boundary decides it (:mod:`maglev_match.critical`); False keeps the
+        bisection's midpoints.
     """
     from maglev_match.params import ParameterError
 
@@ -245,17 +271,27 @@ def matching_index(
         )
     res = replace(res, model=model)
     if not simulate:
-        return res
+        return replace(res, headline=headline_text(res))
     if not res.stable:
-        return replace(res, simulation={"status": "skipped",
-                                        "reason": "the equilibrium is unstable"})
+        res = replace(res, simulation={"status": "skipped",
+                                       "reason": "the equilibrium is unstable"})
+        return replace(res, headline=headline_text(res))
     from maglev_match.simulation import critical_disturbance, vehicle_critical_disturbance
 
     run = critical_disturbance if model == "unit" else vehicle_critical_disturbance
     kw = simulation_kwargs or {}
     up = run(params, direction=-1, **kw)
     down = run(params, direction=1, **kw)
-    return with_simulation(res, up, down, labels=SIM_LABELS[model], rule=SIM_RULE)
+    solved = None
+    if solve:
+        from maglev_match.critical import critical_from_bisection
+
+        c_up = critical_from_bisection(params, up, model=model)
+        # the saddle cycle of a basin boundary is the same set for both directions
+        c_down = critical_from_bisection(params, down, model=model, orbit_hint=c_up.orbit)
+        solved = (c_up, c_down)
+    return with_simulation(res, up, down, labels=SIM_LABELS[model], rule=SIM_RULE,
+                           solved=solved)
 
 
 SIM_LABELS = {
@@ -374,10 +410,15 @@ def index_of_system(
     )
 
 
-def _supported_size(cd: Any) -> float | None:
-    """The disturbance size a simulation search supports (m): the bracket's midpoint, the
-    whole range when every size returned, 0 when every size collided, and for an open
+def _supported_size(cd: Any, crit: Any = None) -> float | None:
+    """The disturbance size a simulation search supports (m): a solved critical size (the
+    grazing or basin-boundary condition, inside a bracket whose lower end returned), else
+    the bracket's midpoint,
+    the whole range when every size returned, 0 when every size collided, and for an open
     search the largest size seen to return (a lower bound; None if none returned)."""
+    if (crit is not None and getattr(crit, "solved", False) and crit.size is not None
+            and cd.status == "bracketed"):
+        return float(crit.size)
     if cd.status == "all_return":
         return float(cd.gap_range)
     if cd.status == "all_collide":
@@ -387,28 +428,49 @@ def _supported_size(cd: Any) -> float | None:
     return None if cd.largest_return is None else float(cd.largest_return)
 
 
-def _sim_info(cd: Any, label: str) -> dict[str, Any]:
-    return {
+def _sim_info(cd: Any, label: str, crit: Any = None) -> dict[str, Any]:
+    out = {
         "label": label, "status": cd.status, "largest_return": cd.largest_return,
         "smallest_collision": cd.smallest_collision, "collision_time": cd.collision_time,
         "gap_range": cd.gap_range, "runs": cd.runs, "unresolved": cd.unresolved,
+        "largest_undecided": getattr(cd, "largest_undecided", None),
         "direction": cd.direction, "tolerance": cd.tol, "horizon": cd.horizon,
         "warnings": list(cd.warnings),
     }
+    out["critical"] = None if crit is None else crit.as_json()
+    return out
+
+
+def headline_text(res: MatchingIndex) -> str:
+    """One sentence saying what the headline chi is (text output, report)."""
+    if res.simulation is None:
+        return ("the paper's chi: the simulation was not run (--no-simulation), so the "
+                "headline is the paper's number")
+    if res.simulation.get("status") == "skipped":
+        return f"the paper's chi: the simulation was skipped ({res.simulation['reason']})"
+    if res.chi_simulation is None:
+        return ("the paper's chi: the simulation was inconclusive, so the headline is the "
+                "paper's number")
+    which = "simulation" if res.reading_basis == Basis.SIMULATION else "the paper's chi"
+    return f"the smaller of the paper's chi and chi_simulation; here: {which}"
 
 
 def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
                     labels: tuple[str, str] = ("up", "down"), rule: str = "",
-                    factor: float = DISAGREEMENT_FACTOR) -> MatchingIndex:
-    """Combine the paper's index with simulated critical disturbances.
+                    factor: float = DISAGREEMENT_FACTOR,
+                    solved: tuple[Any, Any] | None = None) -> MatchingIndex:
+    """Combine the paper's index with simulated critical disturbances into the headline.
 
     ``up``/``down`` are :class:`~maglev_match.simulation.CriticalDisturbance` results of the
-    two directions (``down`` may be None). h_simulation is the smaller supported size,
-    chi_simulation = h_simulation / w0. The reading uses min(chi, chi_simulation)
-    (``reading_basis`` "simulation" when the simulation's is smaller), so it never claims
-    more than the simulation shows. Warnings: an inconclusive search, a collision inside the
-    gap range where the paper's rule gives the whole range (the contradiction), and chi and
-    chi_simulation differing by more than ``factor``.
+    two directions (``down`` may be None); ``solved`` the matching
+    :class:`~maglev_match.critical.CriticalSize` results (None: the bisection alone).
+    h_simulation is the smaller supported size, chi_simulation = h_simulation / w0. The
+    headline chi is min(chi_paper, chi_simulation) (``reading_basis`` "simulation" when the
+    simulation's is smaller), else chi_paper, and the reading follows it, so it never
+    claims more than the simulation shows. Warnings: an inconclusive search, a collision
+    inside the gap range where the paper's rule gives the whole range (the contradiction),
+    chi_paper and chi_simulation differing by more than ``factor``, and a critical size that
+    could not be solved.
     """
     mm = 1e3
     warnings = list(res.warnings)
@@ -416,18 +478,24 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
     info: dict[str, Any] = {"rule": rule}
     collisions: list[str] = []
     unconfirmed = False  # a direction where no size was seen to return at all
-    for cd, label, key in ((up, labels[0], "up"), (down, labels[1], "down")):
+    chi_paper = res.chi_paper
+    crits = solved if solved is not None else (None, None)
+    for cd, label, key, crit in ((up, labels[0], "up", crits[0]),
+                                 (down, labels[1], "down", crits[1])):
         if cd is None:
             sizes.append(None)
             continue
-        info[key] = _sim_info(cd, label)
-        size = _supported_size(cd)
+        info[key] = _sim_info(cd, label, crit)
+        size = _supported_size(cd, crit)
         sizes.append(size)
         warnings.extend(f"simulation ({label}): {w}" for w in cd.warnings)
         if cd.status == "open":
             lr = "none" if cd.largest_return is None else f"{cd.largest_return * mm:.4g} mm"
             sc = ("none" if cd.smallest_collision is None
                   else f"{cd.smallest_collision * mm:.4g} mm")
+            if crit is not None and crit.solved:
+                sc += (f" (the collision boundary solved at {crit.size * mm:.6g} mm, "
+                       f"{crit.mechanism})")
             slow = ""
             if res.max_real_part < 0 and -1.0 / res.max_real_part > cd.horizon / 4:
                 slow = (f"; the slowest decay time of the equilibrium, "
@@ -437,6 +505,10 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
                 f"simulation ({label}) inconclusive: {cd.unresolved} run(s) undecided, largest "
                 f"return {lr}, smallest collision {sc}{slow}")
             unconfirmed = unconfirmed or cd.largest_return is None
+        if (crit is not None and not crit.solved and cd.status in ("bracketed", "open")
+                and crit.reason):
+            warnings.append(f"simulation ({label}): critical size not solved, the bisection "
+                            f"stays and no derivative is available: {crit.reason}")
         if (res.case == Case.NO_CYCLE_WITHIN_LIMITS and res.stable
                 and cd.smallest_collision is not None and cd.smallest_collision < cd.gap_range):
             collisions.append(f"{cd.smallest_collision * mm:.4g} mm ({label})")
@@ -449,26 +521,36 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
     known = [s for s in sizes if s is not None]
     h_sim = None if unconfirmed or not known else min(known)
     chi_sim = None if h_sim is None else h_sim / res.w0
-    chi_used, basis = res.chi, Basis.PAPER
-    if chi_sim is not None and math.isfinite(res.chi) and chi_sim < res.chi:
+    chi_used, basis = chi_paper, Basis.PAPER
+    if chi_sim is not None and math.isfinite(chi_paper) and chi_sim < chi_paper:
         chi_used, basis = chi_sim, Basis.SIMULATION
-    if chi_sim is not None and math.isfinite(res.chi) and res.chi > 0:
-        hi, lo = max(res.chi, chi_sim), min(res.chi, chi_sim)
+    if chi_sim is not None and math.isfinite(chi_paper) and chi_paper > 0:
+        hi, lo = max(chi_paper, chi_sim), min(chi_paper, chi_sim)
         if lo == 0 or hi / lo > factor:
             warnings.append(
-                f"chi (paper) = {res.chi:.4g} and chi_simulation = {chi_sim:.4g} differ by more "
-                f"than a factor {factor:g}; the reading uses the smaller ({basis})")
+                f"chi (paper) = {chi_paper:.4g} and chi_simulation = {chi_sim:.4g} differ by "
+                f"more than a factor {factor:g}; the headline and the reading use the smaller "
+                f"({basis})")
     text = reading(chi_used, res.case, res.stable)
     if unconfirmed:
         # nothing was seen to return: the simulation supports no claim at all
-        basis = Basis.SIMULATION
         text = ("unknown: no simulated disturbance was seen to return within the horizon, so "
                 f"no robustness is claimed (the paper's definition alone gives chi = "
-                f"{res.chi:.4g}: {reading(res.chi, res.case, res.stable).split(':')[0]})")
+                f"{chi_paper:.4g}: {reading(chi_paper, res.case, res.stable).split(':')[0]})")
     every = (res.case == Case.NO_CYCLE_WITHIN_LIMITS and down is not None
              and all(cd is not None and cd.status == "all_return" for cd in (up, down)))
     if every:
         text += "; every disturbance tried within the gap range returned"
-    return replace(res, h_simulation=h_sim, h_simulation_up=sizes[0],
-                   h_simulation_down=sizes[1], chi_simulation=chi_sim, simulation=info,
-                   reading=text, reading_basis=basis, warnings=tuple(warnings))
+    mech = [None if c is None else str(c.mechanism) for c in crits]
+    # chi_simulation has a derivative where the direction deciding h_simulation was solved
+    deriv = False
+    if h_sim is not None:
+        k = 0 if (sizes[0] is not None and sizes[0] == h_sim) else 1
+        c = crits[k]
+        deriv = bool(c is not None and c.solved and c.derivative_available)
+    out = replace(res, chi=chi_used, h_simulation=h_sim, h_simulation_up=sizes[0],
+                  h_simulation_down=sizes[1], chi_simulation=chi_sim, simulation=info,
+                  reading=text, reading_basis=basis, warnings=tuple(warnings),
+                  mechanism_up=mech[0], mechanism_down=mech[1], simulation_derivative=deriv,
+                  critical_up=crits[0], critical_down=crits[1])
+    return replace(out, headline=headline_text(out))

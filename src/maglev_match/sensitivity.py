@@ -101,12 +101,15 @@ Array = Any
 
 
 class DerivativeStatus(StrEnum):
-    """How d h / d p was obtained."""
+    """How d h / d p (of the headline index: d h_simulation / d p where chi_simulation is
+    the headline) was obtained."""
 
     EXACT = "exact"  # implicit differentiation of the converged cycle
     ZERO = "zero"  # chi = 0 on an open set (unstable equilibrium): derivative exactly 0
     RULE = "rule"  # h = gap_max - c0 by the case rule: only those two move h
     UNDEFINED = "undefined"  # the index itself failed; no derivative
+    SOLVED = "solved"  # implicit function theorem on the solved critical-disturbance condition
+    UNAVAILABLE = "unavailable"  # chi_simulation only bracketed by bisection: no derivative
 
 
 # ---------------------------------------------------------------------------------------
@@ -237,7 +240,7 @@ class ParameterSensitivity:
     name: str
     value: float
     unit: str
-    dchi: float  # d chi / d p
+    dchi: float  # d chi / d p of the headline index (NaN where not available)
     elasticity: float  # (p / chi) d chi / d p (dimensionless); nan when chi = 0
     dmargin: float  # d (-max Re lambda) / d p (1/s per unit)
     dhopf_distance: float | None  # d (relative Hopf distance) / d p
@@ -247,6 +250,12 @@ class ParameterSensitivity:
     # (the boundary between cases unstable_cycle and no_cycle_within_limits)
     limit_boundary: float | None = None
     note: str = ""
+    dchi_paper: float = float("nan")  # d chi_paper / d p (the paper's definition)
+    dchi_simulation: float | None = None  # d chi_simulation / d p (None: not available)
+    # one-sided derivatives of the headline where it switches between its parts (or
+    # h_simulation between directions): (for a decrease of p, for an increase of p)
+    dchi_left: float | None = None
+    dchi_right: float | None = None
 
 
 @dataclass(frozen=True)
@@ -261,6 +270,9 @@ class IndexSensitivity:
     system: SystemSensitivity
     limit_boundary_note: str = ""
     warnings: tuple[str, ...] = ()
+    paper_status: DerivativeStatus | None = None  # how d chi_paper / dp was obtained
+    simulation_status: str = ""  # how d chi_simulation / dp was obtained (or why not)
+    switch_note: str = ""  # the headline at a switch between its parts: one-sided values
     _by_name: dict[str, ParameterSensitivity] = field(default_factory=dict, repr=False,
                                                      compare=False)
 
@@ -293,7 +305,12 @@ class IndexSensitivity:
 
     def as_json(self) -> dict[str, Any]:
         return {
-            "chi": self.index.chi, "h": self.index.h, "w0": self.index.w0,
+            "chi": self.index.chi, "chi_paper": self.index.chi_paper,
+            "chi_simulation": self.index.chi_simulation,
+            "reading_basis": str(self.index.reading_basis), "headline": self.index.headline,
+            "paper_status": None if self.paper_status is None else str(self.paper_status),
+            "simulation_status": self.simulation_status, "switch_note": self.switch_note,
+            "h": self.index.h, "w0": self.index.w0,
             "case": self.index.case, "status": str(self.status),
             "max_real_part": self.index.max_real_part,
             "hopf_param": self.index.hopf_param, "hopf_value": self.index.hopf_value,
@@ -762,7 +779,8 @@ def _values(params: Params, names: tuple[str, ...]) -> np.ndarray:
 
 
 def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
-                      boundaries: bool = True, model: str | None = None) -> IndexSensitivity:
+                      boundaries: bool = True, model: str | None = None,
+                      simulate: bool = True) -> IndexSensitivity:
     """d chi / d p, the elasticity (p / chi) d chi / d p, d margin / d p and the derivative of
     the relative Hopf distance for every parameter of model A or model B at ``params``.
 
@@ -778,9 +796,19 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
         points on the cycle (the envelope theorem picks the point and the time of the
         maximum) and w0 the static mid-span deflection (:func:`derived_map`).
 
-    chi = h / w0 gives d chi = (dh - chi dw0) / w0 with dh = (dh/dp_model)(dp_model/dq) in
-    the cycle case and dh = d(gap_max - c0) in case ``no_cycle_within_limits``. No
-    simulation is needed: the vehicle's sensitivities take one implicit solve on its cycle.
+    simulate : when ``index`` is not given, compute it with the simulation (the headline is
+        then the smaller of chi_paper and chi_simulation) or without (the paper's chi).
+
+    The derivative is that of the headline ``index.chi``. chi_paper = h / w0 gives
+    d chi_paper = (dh - chi_paper dw0) / w0 with dh = (dh/dp_model)(dp_model/dq) in the
+    cycle case and dh = d(gap_max - c0) in case ``no_cycle_within_limits``; the vehicle's
+    take one implicit solve on its cycle. chi_simulation = h_simulation / w0 with
+    h_simulation the solved critical size of the deciding direction: its derivative comes
+    from the implicit function theorem on the solved grazing or basin-boundary condition
+    (:func:`maglev_match.critical.critical_derivative`), so it exists only where that
+    direction was solved. Where the headline sits at a switch between its two parts (or
+    h_simulation between its two directions) the one-sided derivatives are given
+    (``dchi_left``, ``dchi_right``).
     """
     model = model or (index.model if index is not None else "unit")
     _model_names(model)
@@ -789,13 +817,45 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
 
         # small dense blocks: BLAS threads only contend (as in matching_index)
         with threadpool_limits(1):
-            return _index_sensitivity(params, index, boundaries, model)
-    return _index_sensitivity(params, index, boundaries, model)
+            return _index_sensitivity(params, index, boundaries, model, simulate)
+    return _index_sensitivity(params, index, boundaries, model, simulate)
+
+
+#: two parts of the headline (or two directions of h_simulation) within this relative
+#: distance are treated as a switch: one-sided derivatives
+SWITCH_TOL = 1e-6
+
+
+def _simulation_derivative(params: Params, idx: MatchingIndex, Pq: np.ndarray,
+                           names: tuple[str, ...]) -> tuple[dict[str, np.ndarray], str]:
+    """d h_simulation / dq of each direction whose critical size was solved (keys 'up',
+    'down'), in the engineering parameters q, and a text on how (or why not)."""
+    from maglev_match.critical import critical_derivative
+
+    out: dict[str, np.ndarray] = {}
+    why = []
+    for key, crit in (("up", idx.critical_up), ("down", idx.critical_down)):
+        if crit is None or not crit.solved:
+            if crit is not None:
+                why.append(f"{key}: {crit.mechanism} (no derivative)")
+            continue
+        c = crit if crit.dsize_dp is not None else critical_derivative(params, crit)
+        if c.dsize_dp is None:
+            why.append(f"{key}: {c.mechanism}, derivative run failed")
+            continue
+        dq = c.dsize_dp @ Pq
+        if c.limit == "upper" and "gap_max" in names:
+            dq = dq + (c.dsize_dlimit or 0.0) * np.array([1.0 if n == "gap_max" else 0.0
+                                                          for n in names])
+        out[key] = dq
+        why.append(f"{key}: implicit function theorem on the solved {c.mechanism} condition")
+    return out, "; ".join(why)
 
 
 def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: bool,
-                       model: str) -> IndexSensitivity:
-    idx = index if index is not None else matching_index(params, model=model, simulate=False)
+                       model: str, simulate: bool = True) -> IndexSensitivity:
+    idx = index if index is not None else matching_index(params, model=model,
+                                                         simulate=simulate)
     if model == "vehicle":
         from maglev_match.models.vehicle import vehicle_system
 
@@ -817,15 +877,59 @@ def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: 
         warnings.append(f"the static deflection of the beam formulas, {w0:.10g} m, differs "
                         f"from the index's w0 {idx.w0:.10g} m")
     status = sens.h_status
+    paper_status = status
     if status == DerivativeStatus.RULE:
         dh_q = Hq
     else:
         dh_q = sens.dh_dp @ Pq
-    chi = idx.chi
+    chi_p = idx.chi_paper
     if status == DerivativeStatus.ZERO:
-        dchi = np.zeros(len(names))
+        dchi_paper = np.zeros(len(names))
     else:
-        dchi = (dh_q - chi * W0q) / w0
+        dchi_paper = (dh_q - chi_p * W0q) / w0
+    # the headline: chi_paper, chi_simulation, or a switch between them
+    chi = idx.chi
+    dchi = dchi_paper
+    dchi_sim = None
+    left = right = None
+    sim_status = ""
+    switch_note = ""
+    if idx.chi_simulation is not None and idx.h_simulation is not None:
+        dh_sims, sim_status = _simulation_derivative(params, idx, Pq, names)
+        sizes = {"up": idx.h_simulation_up, "down": idx.h_simulation_down}
+        near = [k for k, v in sizes.items() if v is not None
+                and abs(v - idx.h_simulation) <= SWITCH_TOL * idx.h_simulation]
+        if all(k in dh_sims for k in near):
+            parts = [(dh_sims[k] - idx.chi_simulation * W0q) / w0 for k in near]
+            dchi_sim = parts[0] if len(parts) == 1 else np.minimum(parts[0], parts[1])
+            if len(parts) == 2:
+                switch_note = ("h_simulation is at a switch between its two directions: "
+                               "one-sided derivatives")
+                left, right = np.maximum(parts[0], parts[1]), np.minimum(parts[0], parts[1])
+        tie = (math.isfinite(chi_p) and abs(chi_p - idx.chi_simulation)
+               <= SWITCH_TOL * max(abs(chi_p), 1e-300))
+        if tie:
+            switch_note = ("the headline is at a switch between chi_paper and chi_simulation: "
+                           "one-sided derivatives")
+            if dchi_sim is not None and status != DerivativeStatus.UNDEFINED:
+                left = np.maximum(dchi_paper, dchi_sim if left is None else left)
+                right = np.minimum(dchi_paper, dchi_sim if right is None else right)
+                dchi = right
+            else:
+                dchi = np.full(len(names), np.nan)
+                status = DerivativeStatus.UNAVAILABLE
+        elif idx.reading_basis == "simulation":
+            if dchi_sim is not None:
+                dchi = dchi_sim if right is None else right
+                status = DerivativeStatus.SOLVED
+            else:
+                dchi = np.full(len(names), np.nan)
+                status = DerivativeStatus.UNAVAILABLE
+            if left is not None and right is not None and not switch_note:
+                switch_note = "one-sided derivatives"
+        elif left is not None:  # the switch is in the non-deciding part: headline smooth
+            left = right = None
+            switch_note = ""
     dmargin = -(sens.dmax_re_dp @ Pq)
     ddist = None
     if sens.dhopf_dp is not None and idx.hopf_param is not None:
@@ -843,12 +947,12 @@ def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: 
     # the other case boundary: the branch's extreme gap deviation reaching a gap limit
     limit_b = np.full(len(names), np.nan)
     limit_note = ""
-    if boundaries and status in (DerivativeStatus.EXACT, DerivativeStatus.RULE):
+    if boundaries and paper_status in (DerivativeStatus.EXACT, DerivativeStatus.RULE):
         ubound = unlimited_bound(system, np.asarray(pm), search)
         ext = branch_extremes(system, np.asarray(pm), search, bound=ubound)
         lo_lim = params.gap_min - params.c0
         contact = (limit_contact(system, ubound, float(hmax), lo_lim)
-                   if ext is None and status == DerivativeStatus.RULE else None)
+                   if ext is None and paper_status == DerivativeStatus.RULE else None)
         if ext is None and contact is None:
             limit_note = "no surrounding cycle without the gap limit either: no cycle-limit " \
                          "boundary"
@@ -923,15 +1027,23 @@ def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: 
         if bnote:
             note = (note + "; " if note else "") + bnote
         ela = q[i] / chi * dchi[i] if chi and math.isfinite(chi) else float("nan")
+        if status == DerivativeStatus.UNAVAILABLE and not note:
+            note = "d chi_simulation not available: its critical size is only bracketed"
         rows.append(ParameterSensitivity(
             name=n, value=float(q[i]), unit=PARAMETER_DOCS.get(n, ("", ""))[0],
             dchi=float(dchi[i]), elasticity=float(ela), dmargin=float(dmargin[i]),
+            dchi_paper=float(dchi_paper[i]),
+            dchi_simulation=None if dchi_sim is None else float(dchi_sim[i]),
+            dchi_left=None if left is None else float(left[i]),
+            dchi_right=None if right is None else float(right[i]),
             dhopf_distance=None if ddist is None else float(ddist[i]),
             boundary=b, boundary_relative=None if b is None else (b - q[i]) / q[i], note=note,
             limit_boundary=float(limit_b[i]) if np.isfinite(limit_b[i]) else None,
         ))
     return IndexSensitivity(index=idx, status=status, rows=tuple(rows), system=sens,
-                            limit_boundary_note=limit_note, warnings=tuple(warnings))
+                            limit_boundary_note=limit_note, warnings=tuple(warnings),
+                            paper_status=paper_status, simulation_status=sim_status,
+                            switch_note=switch_note)
 
 
 @cache

@@ -51,6 +51,7 @@ __all__ = [
     "INITIAL_CONDITIONS",
     "MaglevSimulation",
     "CriticalDisturbance",
+    "Run",
     "gap_limit_events",
     "describe_event",
     "equilibrium_state",
@@ -405,6 +406,24 @@ def save_history(sim: MaglevSimulation, path: str | Path) -> Path:
 # basin read-out
 # ---------------------------------------------------------------------------------------
 @dataclass(frozen=True)
+class Run:
+    """One simulated size of a critical-disturbance search.
+
+    size : disturbance size (m); outcome : 'collision' | 'return' | 'undecided';
+    time : collision time, or the start of the final stretch near the equilibrium for a
+    return (s), None when undecided; margins : the smallest value of each gap-limit margin
+    seen over the run (m; entries as :func:`gap_limit_events`); event : the margin entry
+    that went negative (collisions) or -1.
+    """
+
+    size: float
+    outcome: str
+    time: float | None
+    margins: tuple[float, ...]
+    event: int = -1
+
+
+@dataclass(frozen=True)
 class CriticalDisturbance:
     """The beam-deflection disturbance of model A that separates return from collision.
 
@@ -412,11 +431,14 @@ class CriticalDisturbance:
 
     direction : -1 (x5 < 0, the paper's case: the gap opens) or +1.
     largest_return : largest size (m) seen to return (converge) below ``smallest_collision``,
-        or None. smallest_collision : smallest size (m) seen to collide, or None.
+        or None. smallest_collision : smallest size (m) seen to collide, or None: the search
+        narrows the bracket between it and the largest size below it that did *not* collide
+        (returned or stayed undecided), so it is the smallest colliding size to within
+        ``tol`` even where runs below it stay undecided.
     critical : midpoint of the bracket (m), or None when there is no bracket.
     status : 'bracketed' (both ends found, width <= tol), 'all_collide' (no size down to tol
         returned), 'all_return' (every size up to the gap range returned), 'open' (the
-        bracket did not shrink to tol: unresolved runs or round limit).
+        bracket did not shrink to tol, or its lower end is an undecided run).
     gap_range : the largest meaningful size (m): the disturbance that puts the gap on
         its limit at t = 0.
     runs : number of simulated runs; unresolved : runs that neither collided nor converged
@@ -425,6 +447,9 @@ class CriticalDisturbance:
     collision_time : collision time (s) of the run at ``smallest_collision``.
     nonmonotone : True if some size returned above a colliding one (the basin along this
         line is not an interval); warnings : messages.
+    largest_undecided : the largest undecided size below ``smallest_collision`` (m) or None.
+    samples : every run of the search (:class:`Run`, by size), the evidence the solved
+        critical size is classified from (:mod:`maglev_match.critical`).
     """
 
     __repr__ = compact_repr
@@ -444,10 +469,16 @@ class CriticalDisturbance:
     collision_time: float | None
     nonmonotone: bool
     warnings: tuple[str, ...] = field(default=())
+    largest_undecided: float | None = None
+    samples: tuple[Run, ...] = field(default=(), repr=False, compare=False)
 
     @property
     def converged(self) -> bool:
         return self.status in ("bracketed", "all_collide", "all_return")
+
+    def run_at(self, size: float | None) -> Run | None:
+        """The recorded run at ``size`` (exact match), or None."""
+        return next((r for r in self.samples if r.size == size), None)
 
 
 def critical_disturbance(
@@ -598,6 +629,7 @@ def critical_disturbance_of_system(
     opts = dataclasses.replace(opts, stop_on_converged=True)
 
     sizes_seen: dict[float, tuple[str, float]] = {}
+    margins_seen: dict[float, tuple[tuple[float, ...], int]] = {}
     unresolved: list[float] = []
     runs = 0
     horizon = float(t_max)
@@ -617,6 +649,8 @@ def critical_disturbance_of_system(
             undecided = []
             for k, d in enumerate(pending):
                 code = int(b.outcome_code[k])
+                margins_seen[float(d)] = (tuple(float(v) for v in b.min_event_value[k]),
+                                          int(b.event_index[k]))
                 if code == COLLISION:
                     sizes_seen[float(d)] = ("collision", float(b.event_time[k]))
                 elif code == CONVERGED:
@@ -628,28 +662,35 @@ def critical_disturbance_of_system(
                 t *= 2.0
         unresolved.extend(float(d) for d in pending)
 
-    def bracket() -> tuple[float | None, float | None]:
+    def bracket() -> tuple[float | None, float | None, float | None]:
+        """(largest return below hi, smallest collision hi, largest non-colliding size
+        below hi: a return or an undecided run)."""
         coll = [d for d, (o, _) in sizes_seen.items() if o == "collision"]
         hi = min(coll) if coll else None
         ret = [d for d, (o, _) in sizes_seen.items() if o == "return" and (hi is None or d < hi)]
         lo = max(ret) if ret else None
-        return lo, hi
+        below = ret + [d for d in unresolved if hi is None or d < hi]
+        lo_any = max(below) if below else None
+        return lo, hi, lo_any
 
     # round 1: spread over the whole range (the last size just inside the limit)
     first = gap_range * np.arange(1, batch + 1) / (batch + 1)
     run(first)
     rounds = 1
-    lo, hi = bracket()
+    lo, hi, lo_any = bracket()
     while rounds < max_rounds:
-        a = 0.0 if lo is None else lo
+        # narrow between the smallest collision and the largest size below it that did not
+        # collide (an undecided run included: the collision boundary is then still located,
+        # so the smallest collision quoted is the smallest size that collides)
+        a = 0.0 if lo_any is None else lo_any
         b = gap_range if hi is None else hi
         if hi is None or b - a <= tol:
             break
-        if lo is None and b <= tol:
+        if lo_any is None and b <= tol:
             break
         run(a + (b - a) * np.arange(1, batch + 1) / (batch + 1))
         rounds += 1
-        lo, hi = bracket()
+        lo, hi, lo_any = bracket()
 
     nonmonotone = any(o == "return" and hi is not None and d > hi
                       for d, (o, _) in sizes_seen.items())
@@ -659,14 +700,28 @@ def critical_disturbance_of_system(
     if unresolved:
         warnings.append(f"{len(unresolved)} run(s) neither collided nor converged within "
                         f"{horizon:g} s; left out of the bracket")
+    undecided_below = lo_any is not None and (lo is None or lo_any > lo)
     if hi is None:
         status = "all_return" if lo is not None else "open"
-    elif lo is None:
+    elif lo is None and not undecided_below:
         status = "all_collide" if hi <= tol * 1.0000001 else "open"
+    elif undecided_below:
+        status = "open"
     else:
         status = "bracketed" if hi - lo <= tol * 1.0000001 else "open"
     if status == "open":
-        warnings.append("the bracket did not shrink to tol (round limit or unresolved runs)")
+        if undecided_below and hi is not None and hi - lo_any <= tol * 1.0000001:
+            warnings.append(f"the smallest collision is located to {tol:g}, but the size just "
+                            "below it neither collided nor converged within the horizon")
+        else:
+            warnings.append("the bracket did not shrink to tol (round limit or unresolved "
+                            "runs)")
+    samples = []
+    for d in sorted(set(sizes_seen) | set(unresolved)):
+        o, tt = sizes_seen.get(d, ("undecided", None))
+        mg, ev = margins_seen.get(d, ((), -1))
+        samples.append(Run(size=d, outcome=o, time=tt, margins=mg,
+                           event=ev if o == "collision" else -1))
     return CriticalDisturbance(
         direction=direction,
         largest_return=lo,
@@ -683,4 +738,6 @@ def critical_disturbance_of_system(
         collision_time=None if hi is None else sizes_seen[hi][1],
         nonmonotone=nonmonotone,
         warnings=tuple(warnings),
+        largest_undecided=lo_any if undecided_below else None,
+        samples=tuple(samples),
     )

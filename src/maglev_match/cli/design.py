@@ -67,6 +67,9 @@ ResumeOpt = Annotated[bool, typer.Option("--resume", help="Reuse finished Monte 
                                          "chunks in the output folder.")]
 SeedOpt = Annotated[int, typer.Option("--seed", help="Random seed of the Monte Carlo samples.",
                                       callback=seed_option)]
+NoSimOpt = Annotated[bool, typer.Option(
+    "--no-simulation", help="The paper's chi only: no simulated critical disturbance, so the "
+    "headline chi is the paper's number.")]
 
 
 def _monte_carlo(params, scatter: dict[str, float], n: int | None, spread: dict | None,
@@ -243,11 +246,13 @@ def sensitivity_command(
     resume: ResumeOpt = False,
     seed: SeedOpt = 0,
     out: OutOpt = None,
+    no_simulation: NoSimOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Exact d chi / d p, the elasticity (p / chi) d chi / d p and the margin's sensitivity
-    for every parameter of model A or of the vehicle (--model vehicle), sorted by magnitude,
-    with a tornado figure."""
+    """Exact d chi / d p of the headline index (the smaller of the paper's chi and
+    chi_simulation; --no-simulation: the paper's chi), the elasticity (p / chi) d chi / d p
+    and the margin's sensitivity for every parameter of model A or of the vehicle
+    (--model vehicle), sorted by magnitude, with a tornado figure."""
     from maglev_match.plots import save_figure
     from maglev_match.plots.design import tornado_figure
     from maglev_match.sensitivity import DerivativeStatus, index_sensitivity
@@ -259,7 +264,8 @@ def sensitivity_command(
     check_monte_carlo_folder(out, "sensitivity", "tornado", monte_carlo)
     with progress_report("sensitivity") as prog:
         prog.stage("computing the index and its sensitivities ...")
-        sens = index_sensitivity(params, boundaries=boundaries, model=model)
+        sens = index_sensitivity(params, boundaries=boundaries, model=model,
+                                 simulate=not no_simulation)
     spread = _spread(sens, sc)
     folder, stem = output_target(out, "sensitivity", "tornado")
     figs = save_figure(tornado_figure(sens), folder / stem)
@@ -276,8 +282,12 @@ def sensitivity_command(
     console.print(f"[bold]maglev-match sensitivity[/] — {MODEL_TEXT[model]}, preset {preset}"
                   + (f", config {config}" if config else "")
                   + (f", set {' '.join(set_)}" if set_ else ""))
-    console.print(f"  chi = {idx.chi:.5g} ({idx.case}), h = {idx.h * 1e3:.4g} mm, "
-                  f"w0 = {idx.w0 * 1e3:.4g} mm, margin = {-idx.max_real_part:.4g} 1/s"
+    console.print(f"  chi = {idx.chi:.5g} (headline: {idx.headline})", highlight=False)
+    sim_part = ("" if idx.chi_simulation is None
+                else f", chi_simulation = {idx.chi_simulation:.5g}")
+    console.print(f"  chi_paper = {idx.chi_paper:.5g} ({idx.case}, the paper's definition)"
+                  f"{sim_part}, h = {idx.h * 1e3:.4g} mm, w0 = {idx.w0 * 1e3:.4g} mm, "
+                  f"margin = {-idx.max_real_part:.4g} 1/s"
                   + (f", Hopf point {idx.hopf_param} = {idx.hopf_value:.6g} "
                      f"({idx.hopf_distance:.1%} away)" if idx.hopf_param else ""))
     status_text = {
@@ -288,20 +298,40 @@ def sensitivity_command(
         DerivativeStatus.RULE: "case rule: h = gap_max - c0, chi moves only through w0 "
                                "(and gap_max, c0)",
         DerivativeStatus.UNDEFINED: "undefined: the index did not converge",
+        DerivativeStatus.SOLVED: "exact: implicit function theorem on the solved critical "
+                                 "disturbance of chi_simulation",
+        DerivativeStatus.UNAVAILABLE: "not available: chi_simulation's critical size is only "
+                                      "bracketed by bisection here",
     }[sens.status]
-    console.print(f"  derivatives: {status_text}")
+    console.print(f"  derivatives of the headline: {status_text}")
+    if sens.simulation_status:
+        console.print(f"  chi_simulation: {sens.simulation_status}", highlight=False)
+    if sens.switch_note:
+        console.print(f"  [yellow]{sens.switch_note}[/] (columns 'left' and 'right': for a "
+                      "decrease and an increase of the parameter)")
     if sens.status == DerivativeStatus.UNDEFINED:
         console.print(f"[bold red]numerical failure:[/] {idx.message}")
     table = Table(show_edge=False, header_style="bold")
-    for col in ("parameter", "value", "unit", "d chi/dp", "elasticity", "d margin/dp",
-                "d hopf dist/dp", "stability boundary", "cycle-limit boundary"):
+    cols = ["parameter", "value", "unit", "d chi/dp", "elasticity", "d chi_paper/dp"]
+    if idx.chi_simulation is not None:
+        cols.append("d chi_sim/dp")
+    if sens.switch_note:
+        cols += ["left", "right"]
+    cols += ["d margin/dp", "d hopf dist/dp", "stability boundary", "cycle-limit boundary"]
+    for col in cols:
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
     for r in sens.sorted_rows():
         b = ("-" if r.boundary is None else f"{r.boundary:.4g} ({r.boundary_relative:+.0%})")
         lb = ("-" if r.limit_boundary is None or r.limit_boundary <= 0 else
               f"{r.limit_boundary:.4g} ({r.limit_boundary / r.value - 1:+.0%})")
-        table.add_row(r.name, _fmt(r.value), r.unit, _fmt(r.dchi), _fmt(r.elasticity, "+.3f"),
-                      _fmt(r.dmargin), _fmt(r.dhopf_distance), b, lb)
+        row = [r.name, _fmt(r.value), r.unit, _fmt(r.dchi), _fmt(r.elasticity, "+.3f"),
+               _fmt(r.dchi_paper)]
+        if idx.chi_simulation is not None:
+            row.append(_fmt(r.dchi_simulation))
+        if sens.switch_note:
+            row += [_fmt(r.dchi_left), _fmt(r.dchi_right)]
+        row += [_fmt(r.dmargin), _fmt(r.dhopf_distance), b, lb]
+        table.add_row(*row)
     console.print(table)
     if sens.limit_boundary_note:
         console.print(f"  note: {sens.limit_boundary_note}")
@@ -337,10 +367,12 @@ def design_command(
     resume: ResumeOpt = False,
     seed: SeedOpt = 0,
     out: OutOpt = None,
+    no_simulation: NoSimOpt = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """The cheapest design (or the largest chi) meeting the requirements: SLSQP with exact
-    gradients from several grid starts, every candidate re-checked by the full index."""
+    """The cheapest design (or the largest chi) meeting the requirements on the headline
+    chi (both the paper's chi and chi_simulation; --no-simulation: the paper's chi alone):
+    SLSQP with exact gradients from several grid starts, every candidate the full index."""
     from maglev_match.design import (
         DesignProblem,
         DesignStatus,
@@ -364,6 +396,12 @@ def design_command(
         raise ParameterError("--grid", grid, "must be at least 2")
     variables = tuple(parse_vary(v) for v in vary)
     reqs = tuple(parse_requirement(r) for r in require or [])
+    if no_simulation:
+        for r, text in zip(reqs, require or [], strict=True):
+            if r.quantity == "chi_simulation":
+                raise ParameterError(f"--require {text}", "--no-simulation",
+                                     "chi_simulation is switched off by --no-simulation: drop "
+                                     "one of the two")
     goal = Goal.MINIMIZE if minimize is not None else Goal.MAXIMIZE
     problem = DesignProblem(variables, goal, minimize or maximize or "", reqs)
     base = params_from_options(preset, config, set_)
@@ -374,7 +412,7 @@ def design_command(
     check_index_params(base)
     sc = scatter_options(base, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "design", "design-path", monte_carlo)
-    evaluator = MaglevEvaluator(base, problem.names, model=model)
+    evaluator = MaglevEvaluator(base, problem.names, model=model, simulate=not no_simulation)
     with progress_report("design") as prog:
         prog.stage("searching ...")
         res = optimise_design(problem, evaluator, grid=grid, starts=starts,
@@ -412,12 +450,14 @@ def design_command(
     for n, v in res.values.items():
         var = next(x for x in variables if x.name == n)
         console.print(f"  [bold]{n} = {v:.6g}[/] (range {var.lo:g} .. {var.hi:g})")
-    console.print(f"  full index there: chi = {idx.chi:.5g} ({idx.case}), h = "
-                  f"{idx.h * 1e3:.4g} mm, w0 = {idx.w0 * 1e3:.4g} mm, margin = "
+    console.print(f"  full index there: chi = {idx.chi:.5g} (headline: {idx.headline}); "
+                  f"chi_paper = {idx.chi_paper:.5g} ({idx.case}, the paper's definition)"
+                  + (f", chi_simulation = {idx.chi_simulation:.5g}"
+                     if idx.chi_simulation is not None else "")
+                  + f"; h = {idx.h * 1e3:.4g} mm, w0 = {idx.w0 * 1e3:.4g} mm, margin = "
                   f"{-idx.max_real_part:.4g} 1/s, omega1 = {idx.omega1:.5g} rad/s"
-                  + (f", sigma = {idx.sigma:.4g} 1/kg" if model == "unit" else "")
-                  + (f", chi_simulation = {idx.chi_simulation:.4g}"
-                     if idx.chi_simulation is not None else ""))
+                  + (f", sigma = {idx.sigma:.4g} 1/kg" if model == "unit" else ""),
+                  highlight=False)
     console.print("  active: " + (", ".join(res.active) if res.active else "none"))
     if goal == Goal.MAXIMIZE and idx.case == "no_cycle_within_limits":
         console.print("  note: chi is at the ceiling (gap_max - c0) / w0 of the case rule (no "
@@ -428,7 +468,8 @@ def design_command(
                   f"evaluations, {res.seconds:.1f} s")
     for k, c in enumerate(res.candidates, 1):
         d = ", ".join(f"{n} = {v:.5g}" for n, v in zip(problem.names, c.values, strict=True))
-        console.print(f"    run {k}: {d}: chi = {c.chi:.5g}, margin = {c.margin:.4g}"
+        console.print(f"    run {k}: {d}: chi = {c.chi:.5g} (paper {c.chi_paper:.5g}), "
+                      f"margin = {c.margin:.4g}"
                       + (f", chi_simulation = {c.chi_simulation:.4g}"
                          if c.chi_simulation is not None else "")
                       + (" (meets the requirements)" if c.feasible
@@ -446,4 +487,4 @@ def design_command(
 __all__ = ["NO_FEASIBLE_DESIGN", "sensitivity_command", "design_command", "parse_scatter",
            "check_scatter_names", "scatter_options", "scatter_report", "print_scatter",
            "check_monte_carlo_folder",
-           "ScatterOpt", "McOpt", "WorkersOpt", "ResumeOpt", "SeedOpt"]
+           "ScatterOpt", "McOpt", "WorkersOpt", "ResumeOpt", "SeedOpt", "NoSimOpt"]

@@ -97,9 +97,57 @@ def index_command(
         console.print(f"wrote {f}", highlight=False)
 
 
+MECHANISM_WORDS = {
+    "grazing": "grazing",
+    "basin_boundary": "basin boundary",
+    "bisection": "bisection only",
+    "all_return": "every size returned",
+    "all_collide": "even the smallest size collided",
+    "unresolved": "unresolved",
+}
+
+
+def _direction_line(d: dict, size: float | None, mm: float) -> str:
+    """One direction of the simulated critical disturbance: the size, what decided it and
+    how it was found."""
+    crit = d.get("critical")
+    val = "unknown" if size is None else f"{size * mm:.6g} mm" if (
+        crit and crit["mechanism"] in ("grazing", "basin_boundary")) else (
+        "unknown" if size is None else f"{size * mm:.4g} mm")
+    if crit and crit["mechanism"] == "grazing":
+        where = crit["limit"] + " gap limit" + (f" of point {crit['point']}"
+                                                if crit.get("point", 1) not in (None, 1) else "")
+        return (f"{val}: grazing, the critical run touches the {where} tangentially at "
+                f"t* = {crit['t_star']:.4g} s (solved, Newton {crit['iterations']} steps; "
+                f"bisection bracket +/- {d['tolerance'] / 2 * mm:.2g} mm, {d['runs']} runs)")
+    if crit and crit["mechanism"] == "basin_boundary":
+        return (f"{val}: basin boundary, the critical run lands on a saddle cycle of the "
+                f"clamped system (solved; bisection bracket +/- {d['tolerance'] / 2 * mm:.2g} "
+                f"mm, {d['runs']} runs)")
+    extra = ""
+    ev = (crit or {}).get("evidence")
+    ev_text = {"grazing": "; the runs point to a grazing contact, not solved",
+               "basin_boundary": "; the runs point to a basin boundary, not solved",
+               "mixed": "; the runs' evidence is mixed, neither condition solved"}.get(ev, "")
+    if d["status"] == "bracketed":  # midpoint of a bracket no wider than the tolerance
+        extra = (f" (bisection only: +/- {d['tolerance'] / 2 * mm:.2g} mm, {d['runs']} "
+                 f"runs{ev_text})")
+    elif d["status"] == "all_return":
+        extra = " (every size returned: the whole gap range)"
+    elif d["status"] == "all_collide":
+        extra = " (even the smallest size collided)"
+    elif d["status"] == "open":
+        sc = d.get("smallest_collision")
+        coll = "" if sc is None else f"; smallest size seen to collide {sc * mm:.4g} mm"
+        extra = (" (inconclusive: largest size seen to return" if size is not None
+                 else " (inconclusive: no size seen to return") + coll + ")"
+    return f"{val}{extra}"
+
+
 def print_index(res, preset: str, config, set_) -> None:
     """The text form of a :class:`~maglev_match.matching.MatchingIndex` (every warning
-    of the JSON form is printed here too)."""
+    of the JSON form is printed here too): the headline chi first, then the paper's
+    definition, the simulation and the reading."""
     mm = 1e3
     verdict = "[bold green]stable[/]" if res.stable else "[bold red]unstable[/]"
     name = "model A (one levitation unit)" if res.model == "unit" else \
@@ -107,6 +155,8 @@ def print_index(res, preset: str, config, set_) -> None:
     console.print(f"[bold]maglev-match index[/] — {name}, preset {preset}"
                   + (f", config {config}" if config else "")
                   + (f", set {' '.join(set_)}" if set_ else ""), highlight=False)
+    chi_text = "nan" if res.chi != res.chi else f"{res.chi:.4g}"
+    console.print(f"  [bold]chi = {chi_text}[/] (headline: {res.headline})", highlight=False)
     console.print(f"  beam: omega1 = {res.omega1:.5g} rad/s, sigma = {res.sigma:.4g} 1/kg")
     console.print(f"  equilibrium: {verdict}, max Re(lambda) = {res.max_real_part:.4g} 1/s")
     if res.hopf_param is not None:
@@ -119,11 +169,11 @@ def print_index(res, preset: str, config, set_) -> None:
     w0_text = ("static beam deflection" if res.model == "unit"
                else "static mid-span beam deflection under the vehicle")
     console.print(f"    w0 = {res.w0 * mm:.4g} mm ({w0_text})")
-    console.print(f"    chi = {res.chi:.4g}")
+    console.print(f"    chi_paper = h / w0 = {res.chi_paper:.4g} (the paper's definition)")
     sim = res.simulation
     if sim is None:
-        console.print("  by simulation: not run (--no-simulation); the reading rests on the "
-                      "paper's definition alone")
+        console.print("  by simulation: not run (--no-simulation); the headline chi is the "
+                      "paper's number")
     elif sim.get("status") == "skipped":
         console.print(f"  by simulation: not run ({sim['reason']})")
     else:
@@ -133,25 +183,15 @@ def print_index(res, preset: str, config, set_) -> None:
             d = sim.get(key)
             if d is None:
                 continue
-            val = "unknown" if size is None else f"{size * mm:.4g} mm"
-            extra = ""
-            if d["status"] == "bracketed":  # midpoint of a bracket no wider than the tolerance
-                extra = f" (+/- {d['tolerance'] / 2 * mm:.2g} mm, {d['runs']} runs)"
-            elif d["status"] == "all_return":
-                extra = " (every size returned: the whole gap range)"
-            elif d["status"] == "open":
-                extra = " (inconclusive: largest size seen to return)"
-            console.print(f"    {d['label']}: {val}{extra}", highlight=False)
+            console.print(f"    {d['label']}: {_direction_line(d, size, mm)}", highlight=False)
         chi_s = "unknown" if res.chi_simulation is None else f"{res.chi_simulation:.4g}"
         h_s = "unknown" if res.h_simulation is None else f"{res.h_simulation * mm:.4g} mm"
         console.print(f"    h_simulation = {h_s} (the smaller), chi_simulation = {chi_s}")
         console.print(f"    rule: {sim.get('rule', '')}", markup=False, highlight=False)
-    used = res.chi if res.reading_basis == "paper" else res.chi_simulation
     basis = ("the paper's definition" if res.reading_basis == "paper"
-             else "the simulation, the smaller index")
-    used_text = "" if used is None else f", index {used:.4g}"
-    console.print(f"  [bold]reading[/] (from {basis}{used_text}): [bold]{res.reading}[/]",
-                  highlight=False)
+             else "the simulation")
+    console.print(f"  [bold]reading[/] (of the headline chi, from {basis}): "
+                  f"[bold]{res.reading}[/]", highlight=False)
     if res.warnings:
         console.print(f"  [yellow]warnings ({len(res.warnings)}):[/]")
         for w in res.warnings:

@@ -8,13 +8,12 @@ through the solver's dense interpolant:
 * **Limit events.** An event function ``g(x, p) -> array`` (m entries) describes limits;
   a negative entry means "this limit has been left" and ends the run. Inside every
   accepted step ``[t_a, t_b]`` the interpolant is sampled at ``samples + 1`` equally spaced
-  times; if no sample is negative, the entry closest to its limit (sampled minimum
-  relative to its variation over the step, and only if that minimum is below the
-  variation) has its minimum refined by zooming in on the two sub-intervals around its
+  times; every entry whose sampled minimum is not negative but below its variation over
+  the step has its minimum refined by zooming in on the two sub-intervals around its
   smallest sample (6 rounds of 8-section), so an entry that dips below zero and comes back
-  *within one step* (grazing) is still caught. The first crossing is
-  then located by repeated 16-section of ``g(interpolant(t))`` (keeping the first negative
-  point each round) to about 1e-15 of the step length.
+  *within one step* (grazing) is still caught, for every levitation point at once. The
+  first crossing is then located by repeated 16-section of ``g(interpolant(t))`` (keeping
+  the first negative point each round) to about 1e-15 of the step length.
 * **Convergence.** With a reference state ``x_ref`` (an equilibrium), the scaled distance
   ``d(t) = max_i |x_i - x_ref_i| / scale_i`` is checked at the end of every accepted step.
   Being close is not enough: near an unstable equilibrium a small disturbance stays small
@@ -449,45 +448,46 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
                 return g_of_z(interp.evaluate(tt))[j]
 
             # Grazing: an entry can dip below zero between samples only if its sampled
-            # minimum is smaller than its variation within the step. The entry most at
-            # risk (smallest ratio) gets its minimum refined by zooming in on
-            # the two sub-intervals around its smallest sample. unvmap_any keeps this a
-            # real branch under vmap (taken if any run of a batch needs it).
-            risk = g_lo / jnp.maximum(spread, 1e-300)
+            # minimum is smaller than its variation within the step. Every entry at risk
+            # gets its minimum refined by zooming in on the two sub-intervals around its
+            # smallest sample. unvmap_any keeps this a real branch under vmap (taken if
+            # any run of a batch needs it).
             near = (g_lo <= spread) & ~any_neg & active
-            j_r = jnp.argmin(jnp.where(near, risk, jnp.inf))
 
             def refine_min():
-                # zoom: sample 8 sub-intervals at once, keep the two around the smallest
-                # value (bracket shrinks 4x per round, 4^6 ~ 4e3 in all)
-                k = kmin[j_r]
-                lo = s[jnp.maximum(k - 1, 0)]
-                hi = s[jnp.minimum(k + 1, samples)]
+                # every entry at risk at once (model B: two points may graze in one step):
+                # zoom, sampling 8 sub-intervals at once and keeping the two around the
+                # smallest value (the bracket shrinks 4x per round, 4^6 ~ 4e3 in all)
+                def one(j):
+                    k = kmin[j]
+                    lo = s[jnp.maximum(k - 1, 0)]
+                    hi = s[jnp.minimum(k + 1, samples)]
 
-                def body(_, carry):
-                    lo, hi, best_t, best_g = carry
-                    tt = jnp.linspace(lo, hi, 9)
-                    vals = jax.vmap(lambda u: gj(j_r, u))(tt)
-                    kk = jnp.argmin(vals)
-                    better = vals[kk] < best_g
-                    return (tt[jnp.maximum(kk - 1, 0)], tt[jnp.minimum(kk + 1, 8)],
-                            jnp.where(better, tt[kk], best_t),
-                            jnp.where(better, vals[kk], best_g))
+                    def body(_, carry):
+                        lo, hi, best_t, best_g = carry
+                        tt = jnp.linspace(lo, hi, 9)
+                        vals = jax.vmap(lambda u: gj(j, u))(tt)
+                        kk = jnp.argmin(vals)
+                        better = vals[kk] < best_g
+                        return (tt[jnp.maximum(kk - 1, 0)], tt[jnp.minimum(kk + 1, 8)],
+                                jnp.where(better, tt[kk], best_t),
+                                jnp.where(better, vals[kk], best_g))
 
-                _, _, tm, gm = jax.lax.fori_loop(
-                    0, 6, body, (lo, hi, s[k], g_lo[j_r]))
-                return tm, gm
+                    _, _, tm, gm = jax.lax.fori_loop(0, 6, body, (lo, hi, s[k], g_lo[j]))
+                    return tm, gm
+
+                return jax.vmap(one)(jnp.arange(m))
 
             t_min, g_min = jax.lax.cond(
                 eqxi.unvmap_any(jnp.any(near)), refine_min,
-                lambda: (s[kmin[j_r]], g_lo[j_r]))
-            graze = jnp.any(near) & (g_min < 0)
+                lambda: (s[kmin], g_lo))
+            graze = near & (g_min < 0)
             # candidate brackets [a_j, b_j] with g_j(a_j) >= 0 > g_j(b_j)
             a_j = s[jnp.maximum(first - 1, 0)]
             b_j = jnp.where(any_neg, s[first], jnp.inf)
-            a_j = a_j.at[j_r].set(jnp.where(graze, s[jnp.maximum(kmin[j_r] - 1, 0)], a_j[j_r]))
-            b_j = b_j.at[j_r].set(jnp.where(graze, t_min, b_j[j_r]))
-            hit = any_neg | (graze & (jnp.arange(m) == j_r))
+            a_j = jnp.where(graze, s[jnp.maximum(kmin - 1, 0)], a_j)
+            b_j = jnp.where(graze, t_min, b_j)
+            hit = any_neg | graze
             # the earliest bracket holds the first crossing (entries that cross inside the
             # same sub-interval are told apart by their order in g only)
             j_hit = jnp.argmin(b_j)
@@ -511,7 +511,7 @@ def _make_kernel(rhs, event_fn, solver_name: str, samples: int, n_save: int,
             any_hit = jnp.any(hit) & active
             t_cross = jax.lax.cond(eqxi.unvmap_any(any_hit), bisect, lambda: jnp.inf)
             t_cross = jnp.where(any_hit, t_cross, jnp.inf)
-            g_seen = g_lo.at[j_r].set(jnp.minimum(g_lo[j_r], g_min))
+            g_seen = jnp.where(near, jnp.minimum(g_lo, g_min), g_lo)
             return t_cross, j_hit, g_seen, d_seen
 
         def save_until(c, interp, t_stop, keep):
