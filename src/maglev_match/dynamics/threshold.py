@@ -9,10 +9,10 @@ larger ones collide. This module brackets d*_k for every line by batched simulat
 * **Warm lines** have a guess g_k (e.g. the threshold at a neighbouring parameter point,
   extrapolated) and a spread e_k (how far off the guess may be). The first round tries
   g - tol/2 and g + tol/2, plus g -/+ (tol/2 + 2 e) when e > tol/2; when the threshold lies
-  between the two inner sizes, two runs settle the line. A miss widens geometrically
-  (steps d, 3d, 9d beyond the last size of the same outcome, d growing 27-fold per
-  round), and a bracket wider than ``tol`` is cut into equal parts, at most
-  ``warm_sizes + 1`` per round.
+  between the two inner sizes, two runs settle the line. A miss widens: sizes d, 2d, 3d
+  beyond the last size of the same outcome, d = tol at first and 4 times larger each
+  round (small misses, the common case, are bracketed to ``tol`` at once); a bracket wider
+  than ``tol`` is cut into equal parts, at most ``warm_sizes + 1`` per round.
 * **Cold lines** (no guess) follow the point-wise bisection of
   :func:`maglev_match.simulation.critical_disturbance_of_system`: ``cold_sizes`` sizes spread
   over the range, then the bracket cut into ``cold_sizes + 1`` parts per round.
@@ -84,7 +84,8 @@ class ThresholdOptions:
     top_fraction : the largest size searched, as a fraction of the line's range.
     chunk : runs per compiled batch call (one compiled shape; short rounds are padded).
     slice_time, slice_steps : runs advance in slices of at most this many seconds and
-        steps, regrouped between slices (:func:`_run_lanes`).
+        steps, regrouped between slices (:func:`_run_lanes`); the first slice of a round
+        is at most ``first_slice_steps`` steps.
     max_unresolved : a line with this many unresolved runs is given up (``open``): its
         sizes near the threshold linger beyond the longest horizon, and every further
         run there costs that horizon.
@@ -100,6 +101,7 @@ class ThresholdOptions:
     chunk: int = 32
     slice_time: float = 5.0
     slice_steps: int = 400
+    first_slice_steps: int = 100
     max_unresolved: int = 2
 
     def __post_init__(self) -> None:
@@ -114,6 +116,7 @@ class ThresholdOptions:
                                 ("warm_sizes", self.warm_sizes, 1),
                                 ("chunk", self.chunk, 1),
                                 ("slice_steps", self.slice_steps, 1),
+                                ("first_slice_steps", self.first_slice_steps, 1),
                                 ("max_unresolved", self.max_unresolved, 1)):
             if isinstance(value, bool) or not isinstance(value, int) or value < lo:
                 raise ValueError(f"ThresholdOptions.{name} = {value!r}: must be a whole "
@@ -219,7 +222,7 @@ def _plan(line: _Line, first: bool, opts: ThresholdOptions) -> list[float]:
         if line.spread > tol / 2:
             w = tol / 2 + 2.0 * line.spread
             sizes = [g - w, *sizes, g + w]
-        line.step = max(tol, 2.0 * line.spread)
+        line.step = tol
         sizes = [min(max(s, tol), line.top) for s in sizes]
     elif lo is not None and hi is not None:
         need = math.ceil((hi - lo) / tol - 1e-9)  # parts that reach tol in one round
@@ -233,11 +236,11 @@ def _plan(line: _Line, first: bool, opts: ThresholdOptions) -> list[float]:
         if hi is None and lo is not None:
             sizes.append(line.top)
     elif hi is None and lo is not None:  # every size so far returned: widen upwards
-        sizes = [min(lo + line.step * f, line.top) for f in (1.0, 3.0, 9.0)]
-        line.step *= 27.0
+        sizes = [min(lo + line.step * f, line.top) for f in (1.0, 2.0, 3.0)]
+        line.step *= 4.0
     elif lo is None and hi is not None:  # every size so far collided: widen downwards
-        sizes = [max(hi - line.step * f, tol) for f in (1.0, 3.0, 9.0)]
-        line.step *= 27.0
+        sizes = [max(hi - line.step * f, tol) for f in (1.0, 2.0, 3.0)]
+        line.step *= 4.0
     else:
         return []  # every run so far unresolved
     new = sorted({float(s) for s in sizes if s > 0 and float(s) not in line.seen})
@@ -387,9 +390,14 @@ def _run_lanes(system, P, x0_of, idx, sizes, events, x_ref, opts, sim, stats
     used = np.zeros(m, dtype=int)
     total = float(opts.t_max) * 2.0 ** opts.max_extend
     elapsed = np.zeros(m)
-    sim = dataclasses.replace(sim, max_steps=int(opts.slice_steps))
     todo = np.arange(m)
+    first = True
     while todo.size:
+        # a short first slice: most collisions come within it, and the runs still going
+        # are regrouped before the long slices
+        budget = opts.first_slice_steps if first else opts.slice_steps
+        sim = dataclasses.replace(sim, max_steps=int(budget))
+        first = False
         # runs of similar progress share a chunk (stable: the caller's order within ties)
         todo = todo[np.argsort(elapsed[todo], kind="stable")]
         for a in range(0, todo.size, opts.chunk):
@@ -406,7 +414,7 @@ def _run_lanes(system, P, x0_of, idx, sizes, events, x_ref, opts, sim, stats
             # undecided at the slice's end, or out of steps in this slice: go on from
             # where the run stopped; other failures (a non-finite state, a step size at
             # the resolution of t) stay unresolved
-            out_of_steps = (c == FAILED) & (steps >= opts.slice_steps)
+            out_of_steps = (c == FAILED) & (steps >= budget)
             going = (~(hit | conv) & ((c != FAILED) | out_of_steps)
                      & np.all(np.isfinite(x_end), axis=1) & (t_end > 0))
             x0[lanes[going]] = x_end[going]
@@ -418,8 +426,8 @@ def _run_lanes(system, P, x0_of, idx, sizes, events, x_ref, opts, sim, stats
 
 
 def _integrate(system, x0, p, horizon, events, x_ref, chunk, sim, stats):
-    """simulate_batch over the runs in chunks of ``chunk`` (the last one padded, to
-    ``chunk // 4`` runs when it holds no more than that)."""
+    """simulate_batch over the runs in chunks of ``chunk`` runs, a remainder of at most
+    ``chunk // 4`` runs in one small chunk (the last chunk padded)."""
     m = len(x0)
     code = np.empty(m, dtype=int)
     t = np.full(m, np.nan)
@@ -427,12 +435,17 @@ def _integrate(system, x0, p, horizon, events, x_ref, chunk, sim, stats):
     t_end = np.empty(m)
     steps = np.empty(m, dtype=int)
     small = max(1, chunk // 4)
-    for a in range(0, m, chunk):
-        b = min(a + chunk, m)
+    # full chunks, then the remainder: in a small kernel call (a second compiled shape)
+    # when it fits, rather than in a chunk of mostly padding (a call's cost per step is
+    # a fixed part plus a part per run: one chunk beats two small calls above that)
+    full, rem = divmod(m, chunk)
+    bounds = [(k * chunk, (k + 1) * chunk, chunk) for k in range(full)]
+    if rem and rem > small:
+        bounds.append((full * chunk, m, chunk))
+    elif rem:
+        bounds += [(a, min(a + small, m), small) for a in range(full * chunk, m, small)]
+    for a, b, width in bounds:
         xs, ps = x0[a:b], p[a:b]
-        # a short remainder goes into the small kernel (a second compiled shape) rather
-        # than a chunk of mostly padding
-        width = small if b - a <= small else chunk
         pad = width - (b - a)
         if pad:
             xs = np.concatenate([xs, np.repeat(xs[-1:], pad, axis=0)])
