@@ -470,10 +470,12 @@ def design_map(x: str = "omega1=40:190:100", y: str = "sigma=2e-4:6e-4:100",
                preset: str | None = DEFAULT_PRESET, *, params: Params | None = None,
                config: str | Path | None = None, workers: int | None = 0,
                scheduler: str | None = None, checkpoint: str | Path | None = None,
-               resume: bool = False, rows_per_tile: int = 2, ntst: int = 30,
+               resume: bool = False, rows_per_tile: int = 4, ntst: int = 30,
                progress: Callable[[int, int], None] | None = None,
+               simulate: bool = True,
                **overrides: Any) -> xr.Dataset:
-    """Stability, h, w0 and chi over a grid of two parameters (`maglev-match map`).
+    """The headline index chi = min(chi_paper, chi_simulation), its parts and stability
+    over a grid of two parameters (`maglev-match map`).
 
     Parameters
     ----------
@@ -505,16 +507,23 @@ def design_map(x: str = "omega1=40:190:100", y: str = "sigma=2e-4:6e-4:100",
         Collocation intervals of the cycles.
     progress : callable, optional
         Called as `progress(done_tiles, total_tiles)`.
+    simulate : bool
+        Simulate the critical disturbances (default), so that chi is the headline index;
+        False: the paper's index only (`--no-simulation`; chi is then chi_paper).
     **overrides : float
         Parameter values applied on top of the base point (`--set`).
 
     Returns
     -------
     xarray.Dataset
-        Variables chi, h, w0, stable, max_real_part, hopf_distance, case, omega1_point,
-        sigma_point, current_reverses, resolved over the dimensions (y, x), with units and
-        long names, the base parameter set and the package version as attributes. Equal,
-        value for value, to the netCDF file `maglev-match map` writes for the same grid.
+        Variables chi (the headline index), chi_paper, chi_simulation, h,
+        h_simulation_up, h_simulation_down, chi_basis, w0, stable, max_real_part,
+        hopf_distance, case, omega1_point, sigma_point, current_reverses, resolved, reason
+        over the dimensions (y, x) (index variables NaN where unstable or unresolved), the
+        rows' Hopf points hopf_x and, for two model parameters as axes, the continued Hopf
+        curve; units and long names, the base parameter set and the package version as
+        attributes. Equal, value for value, to the netCDF file `maglev-match map` writes
+        for the same grid (see `maglev_match.maps.map_dataset`).
     """
     from maglev_match.datasets import annotate_map
     from maglev_match.maps import MapSpec, compute_tile, map_dataset, parse_axis, run_map
@@ -527,7 +536,7 @@ def design_map(x: str = "omega1=40:190:100", y: str = "sigma=2e-4:6e-4:100",
     if rows_per_tile < 1:
         raise ParameterError("rows_per_tile", rows_per_tile, "must be at least 1")
     spec = MapSpec(base=base.as_input_dict(), x=ax, y=ay, rows_per_tile=rows_per_tile,
-                   ntst=ntst)
+                   ntst=ntst, simulate=simulate)
     spec.validate()
     if checkpoint is not None:
         data = run_map(spec, Path(checkpoint), resume=resume, scheduler=scheduler,
