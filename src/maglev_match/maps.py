@@ -1149,8 +1149,10 @@ def spot_check(spec: MapSpec, data: dict[str, np.ndarray], *,
       allowed the search tolerance (both are brackets of that width around the critical
       size, so their midpoints differ by less);
     * the headline index chi = min(chi_paper, chi_simulation) against the point-wise
-      min(chi_paper, chi_simulation): allowed the larger of the two parts' allowances
-      (min is 1-Lipschitz in each part).
+      min(chi_paper, chi_simulation): allowed the allowance of the part that decided it on
+      both sides (the search tolerance / w0, or the relative tolerance of chi_paper), the
+      larger of the two where the sides disagree on the part (min is 1-Lipschitz in each
+      part).
 
     Unresolved map points are skipped (counted). ``budget`` (s): stop after the point
     during which the check's time exceeded it (at least one point is always checked); the
@@ -1208,7 +1210,18 @@ def spot_check(spec: MapSpec, data: dict[str, np.ndarray], *,
                     worst_sim, worst_sim_at = dd, (rec[:2], key, d_map, d_pt)
             chi_map = float(data["chi"][i, j])
             chi_pt = _headline(pt)
-            allowed = max(tol * abs(pt.chi_paper), sim_tol / float(pt.w0))
+            # the part that decided the headline on both sides sets the allowance; where
+            # the two sides disagree on it, the larger allowance (min is 1-Lipschitz)
+            paper_allowed, sim_allowed = tol * abs(pt.chi_paper), sim_tol / float(pt.w0)
+            by_sim_map = int(data["chi_basis"][i, j]) == BASIS_CODES["simulation"]
+            by_sim_pt = (pt.chi_simulation is not None
+                         and float(pt.chi_simulation) < float(pt.chi_paper))
+            if by_sim_map and by_sim_pt:
+                allowed = sim_allowed
+            elif not by_sim_map and not by_sim_pt:
+                allowed = paper_allowed
+            else:
+                allowed = max(paper_allowed, sim_allowed)
             if not stable_map and not pt.stable:
                 dh = 0.0
             else:
