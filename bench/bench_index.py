@@ -18,6 +18,7 @@ Usage: python bench/bench_index.py [--quick] [--grid N] [--workers 2] [--rows-pe
 from __future__ import annotations
 
 import argparse
+import os
 import platform
 import statistics
 import tempfile
@@ -100,19 +101,26 @@ def headline_against_paper(base, n: int, workers_list, rows_per_tile: int) -> No
                     simulate=False)
     headline = dataclasses.replace(paper, simulate=True)
     for workers in workers_list:
-        times = {}
-        for name, spec in (("paper-only (--no-simulation)", paper),
-                           ("headline", headline)):
+        wall: dict[str, list[float]] = {"paper": [], "headline": []}
+        cpu: dict[str, list[float]] = {"paper": [], "headline": []}
+        # paper, headline, paper: the paper-only map before and after, so that a load that
+        # changes during the run shows (the machine is shared)
+        for name, spec in (("paper", paper), ("headline", headline), ("paper", paper)):
             with tempfile.TemporaryDirectory() as d:
                 t, c = time.perf_counter(), _cpu_seconds()
                 data = run_map(spec, Path(d) / "tiles", workers=workers)
                 dt, dc = time.perf_counter() - t, _cpu_seconds() - c
-            times[name] = dt
+            wall[name].append(dt)
+            cpu[name].append(dc)
             unresolved = int((~data["resolved"].astype(bool)).sum())
-            print(f"{name} map {n}x{n}, {rows_per_tile} rows per tile, {workers} worker(s): "
-                  f"{dt:.1f} s wall, CPU {dc:.1f} s; {unresolved} unresolved point(s)")
-        ratio = times["headline"] / times["paper-only (--no-simulation)"]
-        print(f"headline / paper-only with {workers} worker(s): {ratio:.2f}x (target <= 3x)")
+            label = "headline" if spec.simulate else "paper-only (--no-simulation)"
+            print(f"{label} map {n}x{n}, {rows_per_tile} rows per tile, {workers} worker(s): "
+                  f"{dt:.1f} s wall, CPU {dc:.1f} s; {unresolved} unresolved point(s); load "
+                  f"{os.getloadavg()[0]:.1f}", flush=True)
+        pw, pc = statistics.mean(wall["paper"]), statistics.mean(cpu["paper"])
+        print(f"headline / paper-only (mean of the two) with {workers} worker(s): wall "
+              f"{wall['headline'][0] / pw:.2f}x, CPU {cpu['headline'][0] / pc:.2f}x "
+              "(target <= 3x)")
     # where a headline tile's time goes (one tile from the middle, warm, this process)
     a = (n // 2 // rows_per_tile) * rows_per_tile
     rows = (a, min(a + rows_per_tile, n))
