@@ -34,6 +34,7 @@ which worker ran them, so a resumed map equals a map computed in one go bit for 
 from __future__ import annotations
 
 import contextlib
+import functools
 import inspect
 import json
 import logging
@@ -571,9 +572,10 @@ def critical_sizes_batch(P: np.ndarray, directions: np.ndarray,
     (runs left undecided) and the bracket.
     """
     from maglev_match.dynamics.threshold import ThresholdBatch, bracket_thresholds
-    from maglev_match.models.unit import PARAM_NAMES
+    from maglev_match.models.unit import PARAM_NAMES, STATE_NAMES
     from maglev_match.simulation import gap_limit_events
 
+    w_state = STATE_NAMES.index("w")  # x5, the beam deflection
     P = np.atleast_2d(np.asarray(P, float))
     n = len(P)
     directions = np.broadcast_to(np.asarray(directions, float), (n,))
@@ -592,7 +594,7 @@ def critical_sizes_batch(P: np.ndarray, directions: np.ndarray,
 
         def x0_of(idx, sizes, dirs=dirs):
             x0 = np.zeros((len(idx), system.dim))
-            x0[:, 4] = dirs[idx] * sizes
+            x0[:, w_state] = dirs[idx] * sizes
             return x0
 
         parts.append((sel, bracket_thresholds(
@@ -617,6 +619,7 @@ def critical_sizes_batch(P: np.ndarray, directions: np.ndarray,
         warnings=tuple(w for _, b in parts for w in b.warnings))
 
 
+@functools.cache
 def _limited_unit_system():
     """Model A with the current clamp (its parameter vector is replaced per run)."""
     from maglev_match.models.unit import unit_system
