@@ -171,9 +171,12 @@ def test_design_map_in_memory_equals_cli_map_bit_for_bit(tmp_path):
             == {k: v for k, v in disk.attrs.items() if k not in timing})
     assert timing <= set(ds.attrs) and timing <= set(disk.attrs)
     assert ds["chi"].dims == ("sigma", "omega1") and ds["chi"].shape == (2, 3)
-    # chi is h / w0 wherever it is defined, and 0 exactly where unstable
+    # the headline index is the smaller of its parts where stable; no index where unstable
     st = ds["stable"].values == 1
-    assert np.all(ds["chi"].values[~st] == 0.0)
+    assert st.any() and (~st).any()
+    assert np.all(np.isnan(ds["chi"].values[~st]))
+    np.testing.assert_array_equal(
+        ds["chi"].values[st], np.minimum(ds["chi_paper"], ds["chi_simulation"]).values[st])
     # with a checkpoint folder the same map comes back
     again = mm.design_map(x, y, preset="alpha1", workers=0, kD=150.0,
                           checkpoint=tmp_path / "tiles")

@@ -1,10 +1,12 @@
-"""Design maps: input errors before work, resume equals one go bit for bit, the map agrees
-with the point-wise index, and the distributed path on a real Dask scheduler."""
+"""Design maps: input errors before work, resume equals one go bit for bit (headline index
+included), the map agrees with the point-wise index, unstable points are their own
+category, and the distributed path on a real Dask scheduler."""
 
 import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,9 +17,10 @@ from maglev_match.params import ParameterError, load_preset
 BASE = load_preset("alpha1")
 
 
-def small_spec(rows_per_tile=1):
+def small_spec(rows_per_tile=1, simulate=False):
     return MapSpec(base=BASE.as_input_dict(), x=Axis("omega1", 110.0, 140.0, 4),
-                   y=Axis("sigma", 3e-4, 5e-4, 3), rows_per_tile=rows_per_tile, ntst=30)
+                   y=Axis("sigma", 3e-4, 5e-4, 3), rows_per_tile=rows_per_tile, ntst=30,
+                   simulate=simulate)
 
 
 @pytest.mark.parametrize(
@@ -61,7 +64,7 @@ def test_engineering_axes_derive_omega1_and_sigma():
 
 
 def test_resumed_map_equals_one_go_bit_for_bit(tmp_path):
-    spec = small_spec()
+    spec = small_spec(rows_per_tile=2, simulate=True)  # tiles (0, 2), (2, 3)
     one_go = run_map(spec, tmp_path / "a", workers=0)
     partial_dir = tmp_path / "b"
     run_map_partial = None
@@ -75,11 +78,28 @@ def test_resumed_map_equals_one_go_bit_for_bit(tmp_path):
     for k in one_go:
         np.testing.assert_array_equal(one_go[k], resumed[k], err_msg=k)
     # the map has both stable and unstable points and an unstable-cycle case in between
-    assert one_go["stable"].any() and (~one_go["stable"]).any()
-    assert np.all(one_go["chi"][~one_go["stable"]] == 0.0)
-    ds = map_dataset(spec, one_go)
-    for name in ("chi", "h", "w0", "stable", "max_real_part"):
+    stable = one_go["stable"].astype(bool)
+    assert stable.any() and (~stable).any()
+    # unstable points are their own category: no index there (not chi = 0)
+    for name in ("chi", "chi_paper", "chi_simulation", "h", "h_simulation_up",
+                 "h_simulation_down"):
+        assert np.all(np.isnan(one_go[name][~stable])), name
+    # the headline index is the smaller of its two parts at every resolved stable point
+    ok = stable & one_go["resolved"].astype(bool)
+    assert np.array_equal(ok, stable) and ok.sum() >= 6
+    sim = np.minimum(one_go["h_simulation_up"], one_go["h_simulation_down"]) / one_go["w0"]
+    np.testing.assert_array_equal(one_go["chi_simulation"][ok], sim[ok])
+    np.testing.assert_array_equal(one_go["chi_paper"][ok], (one_go["h"] / one_go["w0"])[ok])
+    np.testing.assert_array_equal(
+        one_go["chi"][ok], np.minimum(one_go["chi_paper"], one_go["chi_simulation"])[ok])
+    by_sim = one_go["chi_simulation"] < one_go["chi_paper"]
+    np.testing.assert_array_equal(one_go["chi_basis"][ok], by_sim[ok].astype(np.int8))
+    ds = map_dataset(spec, one_go, check=False)
+    for name in ("chi", "chi_paper", "chi_simulation", "h_simulation_up", "h", "w0",
+                 "stable", "max_real_part"):
         assert ds[name].dims == ("sigma", "omega1")
+    assert ds["h_simulation_down"].attrs["units"] == "m" and ds["chi"].attrs["long_name"]
+    assert "min(chi_paper, chi_simulation)" in ds.attrs["index_definition"]
     path = tmp_path / "m.nc"
     ds.to_netcdf(path, engine="h5netcdf")
     assert path.stat().st_size > 0
@@ -91,7 +111,8 @@ def test_map_row_agrees_with_pointwise_index(tmp_path):
     from maglev_match.matching import matching_index
 
     spec = MapSpec(base=BASE.as_input_dict(), x=Axis("omega1", 118.0, 130.0, 5),
-                   y=Axis("sigma", 4e-4, 4.5e-4, 2), rows_per_tile=1, ntst=40)
+                   y=Axis("sigma", 4e-4, 4.5e-4, 2), rows_per_tile=1, ntst=40,
+                   simulate=False)
     data = run_map(spec, tmp_path / "c", workers=0)
     j = 2  # omega1 = 124 at sigma = 4e-4
     assert data["case"][0, j] == 1
@@ -211,3 +232,158 @@ def test_spot_check_catches_a_wrong_map(tmp_path):
     assert "spot check" in bad["warnings"]
     ds = map_dataset(spec, data)
     assert "reason" in ds and "spot_check_max_rel_diff" in ds.attrs
+
+
+# ---------------------------------------------------------------------------------------
+# the headline index: min(chi_paper, chi_simulation), checked against the point-wise index
+# ---------------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_headline_map_equals_pointwise_index_at_every_spot_point():
+    """A 20 x 20 map of the headline index: at every spot point the map's headline chi
+    equals the point-wise index's min(chi_paper, chi_simulation) within the stated search
+    tolerance, and each direction's simulated critical disturbance equals the point-wise
+    search's within that tolerance (both bracket the critical size to it)."""
+    import json
+
+    from maglev_match.maps import compute_tile, simulation_settings
+
+    base = load_preset("turnout-soft")
+    spec = MapSpec(base=base.as_input_dict(), x=Axis("omega1", 60.0, 80.0, 20),
+                   y=Axis("sigma", 3e-4, 4e-4, 20), rows_per_tile=5)
+    parts = [compute_tile(spec, t) for t in spec.tiles]
+    data = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    assert data["resolved"].all() and data["stable"].all()
+    tol = simulation_settings().tol
+    ds = map_dataset(spec, data, seed=3, fraction=0.01)
+    a = ds.attrs
+    cols = json.loads(a["spot_check_columns"])
+    recs = [dict(zip(cols, r, strict=True)) for r in json.loads(a["spot_check_records"])]
+    assert len(recs) == 4 and a["spot_check_points"] == 4
+    for r in recs:
+        for key in ("up", "down"):
+            assert abs(r[f"h_simulation_{key}_map"] - r[f"h_simulation_{key}_point"]) <= tol
+        assert abs(r["chi_map"] - r["chi_point"]) <= r["chi_allowed_diff"]
+        # both decided by the simulation here: the allowance is the search tolerance / w0
+        i, j = list(ds["sigma"].values).index(r["y"]), list(ds["omega1"].values).index(r["x"])
+        assert r["chi_allowed_diff"] == pytest.approx(tol / float(ds["w0"][i, j]), rel=1e-9)
+    assert a["spot_check_headline_passed"] == 1 and a["spot_check_passed"] == 1
+    assert a["spot_check_simulation_max_diff"] <= tol
+    # here the simulation gives the smaller index everywhere (no cycle within the gap range)
+    assert np.all(data["chi_basis"] == 1)
+    assert np.all(data["chi"] < data["chi_paper"])
+
+
+def test_no_simulation_map_is_the_papers_index_and_says_so():
+    from maglev_match.maps import compute_tile
+
+    spec = small_spec()
+    data = compute_tile(spec, (1, 2))
+    stable = data["stable"].astype(bool)
+    np.testing.assert_array_equal(data["chi"][stable], data["chi_paper"][stable])
+    assert np.all(np.isnan(data["chi_simulation"])) and np.all(np.isnan(data["h_simulation_up"]))
+    assert np.all(np.isnan(data["chi"][~stable]))
+    ds = map_dataset(spec, {k: np.repeat(v, 3, axis=0) for k, v in data.items()}, check=False)
+    assert "paper's definition only" in ds.attrs["index_definition"]
+    assert "not run" in ds.attrs["simulation"]
+    # old tiles cannot be reused: the fingerprint names the simulation and the variables
+    on = small_spec(simulate=True)
+    assert spec.key() != on.key()
+    assert '"variables"' in on.key() and "chi_simulation" in on.key()
+
+
+@pytest.mark.parametrize("undecided,code", [(True, 5), (False, 6)])
+def test_unresolved_critical_disturbance_is_marked_with_its_reason(monkeypatch, undecided,
+                                                                   code):
+    """A critical disturbance the search cannot resolve leaves the point unresolved with
+    its reason code; the headline is NaN there, never filled in; the paper's part stays."""
+    import maglev_match.maps as maps_mod
+    from maglev_match.dynamics.threshold import ThresholdBatch, ThresholdStatus
+    from maglev_match.maps import REASON_CODES, compute_tile
+
+    def nothing(P, directions, guesses=None, spreads=None, *, gap_limits, cost=None):
+        n = len(P)
+        nan = np.full(n, np.nan)
+        return ThresholdBatch(
+            status=np.array([ThresholdStatus.OPEN] * n, dtype=object), size=nan,
+            largest_return=nan, smallest_collision=nan, collision_time=nan,
+            runs=np.full(n, 4), unresolved=np.full(n, 2 if undecided else 0),
+            nonmonotone=np.zeros(n, bool), steps=np.zeros(n, int), tol=1e-5, rounds=3)
+
+    monkeypatch.setattr(maps_mod, "critical_sizes_batch", nothing)
+    data = compute_tile(small_spec(simulate=True), (1, 2))
+    stable = data["stable"].astype(bool)
+    assert stable.any()
+    assert not data["resolved"][stable].any()
+    assert np.all(data["reason"][stable] == code) and np.all(data["reason"][~stable] == 0)
+    assert np.all(np.isnan(data["chi"][stable]))
+    assert np.all(np.isfinite(data["chi_paper"][stable]))
+    assert "critical disturbance" in REASON_CODES[code]
+
+
+def test_dask_messages_go_to_the_log_not_the_terminal(tmp_path):
+    """Dask's warnings (a port in use) and log records (a worker killed at shutdown) land in
+    the map's log file while a map runs, not on the terminal (here: a stand-in for Dask's
+    stderr handler and for the terminal's warning hook); with echo (--debug) they reach
+    the terminal as well."""
+    import io
+    import logging
+    import warnings
+
+    import distributed
+
+    from maglev_match.maps import dask_log_capture
+
+    node = str(Path(distributed.__file__).parent / "node.py")
+    log = tmp_path / "map.log"
+    terminal = io.StringIO()
+    dask_handler = logging.StreamHandler(terminal)  # as Dask's own handler on stderr
+    logging.getLogger("distributed").addHandler(dask_handler)
+    shown: list[str] = []
+
+    def chatter():
+        warnings.warn_explicit("Port 8787 is already in use.", UserWarning, node, 195)
+        warnings.warn_explicit("a warning of this package", UserWarning, __file__, 1)
+        logging.getLogger("distributed.nanny").warning(
+            "Worker process still alive after 4.0 seconds, killing")
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            warnings.showwarning = lambda m, *a, **k: shown.append(str(m))
+            with dask_log_capture(log):
+                chatter()
+            quiet, shown[:] = list(shown), []
+            quiet_text = terminal.getvalue()
+            with dask_log_capture(log, echo=True):
+                chatter()
+            loud = list(shown)
+    finally:
+        logging.getLogger("distributed").removeHandler(dask_handler)
+    assert quiet == ["a warning of this package"]  # other warnings still shown
+    assert "still alive" not in quiet_text
+    assert any("8787" in w for w in loud) and "still alive" in terminal.getvalue()
+    text = log.read_text()
+    assert text.count("Port 8787 is already in use") == 2
+    assert text.count("Worker process still alive") == 2
+    assert "a warning of this package" not in text
+    # outside the block the loggers are as before
+    assert dask_handler not in logging.getLogger("distributed").handlers
+    assert not any(isinstance(h, logging.FileHandler)
+                   for h in logging.getLogger("distributed").handlers)
+
+
+def test_map_command_removes_its_tiles_after_success_unless_kept(tmp_path, capsys):
+    from maglev_match.cli import main
+
+    args = ["map", "--x", "omega1=120:140:2", "--y", "sigma=3e-4:4e-4:2", "--workers", "0",
+            "--no-simulation"]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert (tmp_path / "a" / "map_omega1_sigma.nc").is_file()
+    assert not (tmp_path / "a" / "map_omega1_sigma.nc.tiles").exists()
+    assert "paper's definition only" in out
+    assert main([*args, "--out", str(tmp_path / "b"), "--keep-tiles"]) == 0
+    out = capsys.readouterr().out
+    kept = tmp_path / "b" / "map_omega1_sigma.nc.tiles"
+    assert kept.is_dir() and list(kept.glob("tile_*.npz"))
+    assert f"checkpoint tiles kept in {kept}" in out

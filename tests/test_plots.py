@@ -133,18 +133,19 @@ def _toy_map():
     y = np.linspace(2e-4, 6e-4, 5)
     X, _ = np.meshgrid(x, y)
     stable = (X < 130).astype(np.int8)
-    chi = np.where(stable == 1, 0.02 * (140 - X), 0.0)  # small chi next to the boundary
+    chi = np.where(stable == 1, 0.02 * (140 - X), np.nan)  # small chi next to the boundary
     resolved = np.ones_like(stable)
     resolved[0, 0] = 0
     return xr.Dataset(
         {"chi": (("sigma", "omega1"), chi), "stable": (("sigma", "omega1"), stable),
          "max_real_part": (("sigma", "omega1"), (X - 130.0) / 100.0),
-         "resolved": (("sigma", "omega1"), resolved)},
+         "resolved": (("sigma", "omega1"), resolved),
+         "hopf_x": (("sigma", "hopf"), np.full((len(y), 1), 130.0))},
         coords={"omega1": ("omega1", x, {"units": "rad/s"}),
                 "sigma": ("sigma", y, {"units": "1/kg"})})
 
 
-def test_map_draws_chi_zero_grey_hatched_apart_from_small_chi():
+def test_map_draws_unstable_points_grey_hatched_apart_from_small_chi():
     ds = _toy_map()
     fig = map_figure(ds, design_point=(97.3, 4.7e-4))
     fig.canvas.draw()  # colours are mapped at draw time
@@ -161,7 +162,7 @@ def test_map_draws_chi_zero_grey_hatched_apart_from_small_chi():
     mask = np.ma.getmaskarray(meshes[0].get_array()).reshape(ds["chi"].shape)
     assert np.array_equal(mask, ds["stable"].values == 0)
     texts = _legend_texts(ax)
-    assert "unstable equilibrium: chi = 0" in texts
+    assert any(t.startswith("unstable equilibrium: no index") for t in texts)
     assert any(t.startswith("design point") for t in texts)
     assert any(t.startswith("unresolved: 1 point") for t in texts)
     assert any("stability boundary" in t for t in texts)

@@ -542,9 +542,11 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
 
 
 def index_sensitivity(params: Params | str | None = None, *, model: str = "unit",
-                      boundaries: bool = True, **overrides: Any) -> IndexSensitivity:
-    """Exact d chi / d p for every parameter (`maglev-match sensitivity`): implicit
-    differentiation of the converged cycle that decides h, the elasticities
+                      boundaries: bool = True, simulate: bool = True,
+                      **overrides: Any) -> IndexSensitivity:
+    """Exact d chi / d p of the headline index for every parameter (`maglev-match
+    sensitivity`): implicit differentiation of the converged cycle that decides h, or of
+    the solved critical disturbance where chi_simulation is the headline, the elasticities
     (p / chi) d chi / d p, the stability margin's sensitivities and, with `boundaries`,
     each parameter's value at the nearest stability boundary.
 
@@ -556,6 +558,9 @@ def index_sensitivity(params: Params | str | None = None, *, model: str = "unit"
         `"unit"` (model A) or `"vehicle"` (model B).
     boundaries : bool
         Also solve each parameter's value at the stability boundary.
+    simulate : bool
+        Differentiate the headline index (default); False: the paper's chi only
+        (`--no-simulation`).
     **overrides : float
         Parameter values applied on top.
 
@@ -571,14 +576,15 @@ def index_sensitivity(params: Params | str | None = None, *, model: str = "unit"
     if not base.w0 > 0:
         raise ParameterError("sigma", base.sigma, "must be > 0 for the index: chi = h / w0 "
                              f"needs a beam deflection w0 > 0 (w0 = {base.w0:g} m)")
-    return _index_sensitivity(base, boundaries=boundaries, model=_check_model(model))
+    return _index_sensitivity(base, boundaries=boundaries, model=_check_model(model),
+                              simulate=simulate)
 
 
 def design_search(params: Params | str | None = None, *,
                   vary: Mapping[str, tuple[float, float]],
                   minimize: str | None = None, maximize: str | None = None,
                   require: Mapping[str, float] | Sequence[str] = (), model: str = "unit",
-                  grid: int | None = None, starts: int = 2,
+                  grid: int | None = None, starts: int = 2, simulate: bool = True,
                   progress: Callable[[str], None] | None = None,
                   **overrides: Any) -> DesignResult:
     """The cheapest design, or the one with the largest chi, meeting requirements
@@ -601,6 +607,9 @@ def design_search(params: Params | str | None = None, *,
     grid, starts : int
         Start-grid points per varied parameter (default 9 for one, 5 for two) and
         optimiser runs.
+    simulate : bool
+        Constrain the headline index (default: both chi_paper and chi_simulation meet a
+        requirement on chi); False: the paper's chi only (`--no-simulation`).
     progress : callable, optional
         Called with a line of text at each stage.
     **overrides : float
@@ -630,13 +639,20 @@ def design_search(params: Params | str | None = None, *,
     texts = ([f"{k}>={float(v)!r}" for k, v in require.items()]
              if isinstance(require, Mapping) else list(require))
     reqs = tuple(parse_requirement(r) for r in texts)
+    if not simulate:
+        for r, text in zip(reqs, texts, strict=True):
+            if r.quantity == "chi_simulation":
+                raise ParameterError(f"require {text}", "simulate=False",
+                                     "chi_simulation is switched off by simulate=False: drop "
+                                     "one of the two")
     goal = Goal.MINIMIZE if minimize is not None else Goal.MAXIMIZE
     problem = DesignProblem(variables, goal, minimize or maximize or "", reqs)
     base = resolve_params(params, **overrides)
     for var in variables:  # both ends must be valid parameter values
         base.replace(**{var.name: var.lo})
         base.replace(**{var.name: var.hi})
-    evaluator = MaglevEvaluator(base, problem.names, model=_check_model(model))
+    evaluator = MaglevEvaluator(base, problem.names, model=_check_model(model),
+                                simulate=simulate)
     return optimise_design(problem, evaluator, grid=grid, starts=starts, progress=progress)
 
 
@@ -715,10 +731,12 @@ def design_map(params: Params | str | None = None,
                y: tuple | str = ("sigma", 2e-4, 6e-4, 100), *,
                config: str | Path | None = None, workers: int | None = 0,
                scheduler: str | None = None, checkpoint: str | Path | None = None,
-               resume: bool = False, rows_per_tile: int = 2, ntst: int = 30,
+               resume: bool = False, rows_per_tile: int = 4, ntst: int = 30,
                progress: Callable[[int, int], None] | None = None,
-               preset: str | None = None, **overrides: Any) -> xr.Dataset:
-    """Stability, h, w0 and chi over a grid of two parameters (`maglev-match map`).
+               simulate: bool = True, preset: str | None = None,
+               **overrides: Any) -> xr.Dataset:
+    """The headline index chi = min(chi_paper, chi_simulation), its parts and stability
+    over a grid of two parameters (`maglev-match map`).
 
     Parameters
     ----------
@@ -748,6 +766,9 @@ def design_map(params: Params | str | None = None,
         Collocation intervals of the cycles.
     progress : callable, optional
         Called as `progress(done_tiles, total_tiles)`.
+    simulate : bool
+        Simulate the critical disturbances (default), so that chi is the headline index;
+        False: the paper's index only (`--no-simulation`; chi is then chi_paper).
     preset : str, optional
         Deprecated: the preset name, now given as `params`.
     **overrides : float
@@ -756,10 +777,14 @@ def design_map(params: Params | str | None = None,
     Returns
     -------
     xarray.Dataset
-        Variables chi, h, w0, stable, max_real_part, hopf_distance, case, omega1_point,
-        sigma_point, current_reverses, resolved over the dimensions (y, x), with units and
-        long names, the base parameter set and the package version as attributes. Equal,
-        value for value, to the netCDF file `maglev-match map` writes for the same grid;
+        Variables chi (the headline index), chi_paper, chi_simulation, h,
+        h_simulation_up, h_simulation_down, chi_basis, w0, stable, max_real_part,
+        hopf_distance, case, omega1_point, sigma_point, current_reverses, resolved, reason
+        over the dimensions (y, x) (index variables NaN where unstable or unresolved), the
+        rows' Hopf points hopf_x and, for two model parameters as axes, the continued Hopf
+        curve; units and long names, the base parameter set and the package version as
+        attributes. Equal, value for value, to the netCDF file `maglev-match map` writes
+        for the same grid (see `maglev_match.maps.map_dataset`);
         `maglev_match.plots.plot(ds)` draws the map figure.
     """
     if isinstance(params, str) and "=" in params:  # design_map("NAME=A:B:N", "NAME=...", p)
@@ -786,7 +811,7 @@ def design_map(params: Params | str | None = None,
     if rows_per_tile < 1:
         raise ParameterError("rows_per_tile", rows_per_tile, "must be at least 1")
     spec = MapSpec(base=base.as_input_dict(), x=ax, y=ay, rows_per_tile=rows_per_tile,
-                   ntst=ntst)
+                   ntst=ntst, simulate=simulate)
     spec.validate()
     if checkpoint is not None:
         data = run_map(spec, Path(checkpoint), resume=resume, scheduler=scheduler,

@@ -200,6 +200,7 @@ def print_index(res, preset: str, config, set_) -> None:
 
 @app.command("map")
 def map_command(
+    ctx: typer.Context,
     x: Annotated[str, typer.Option("--x", help="NAME=START:STOP:COUNT, e.g. omega1=40:190:100")],
     y: Annotated[str, typer.Option("--y", help="NAME=START:STOP:COUNT, e.g. sigma=2e-4:6e-4:100")],
     preset: PresetOpt = DEFAULT_PRESET_NAME,
@@ -217,17 +218,33 @@ def map_command(
         int | None, typer.Option("--workers", help="Local workers (default: all cores; 0: none).",
                                  callback=workers_option)
     ] = None,
-    rows_per_tile: Annotated[int, typer.Option("--rows-per-tile",
-                                               callback=rows_per_tile_option)] = 2,
+    rows_per_tile: Annotated[int, typer.Option(
+        "--rows-per-tile", help="Rows per task; within a tile each row's critical "
+        "disturbances start from the row below.", callback=rows_per_tile_option)] = 4,
     ntst: Annotated[int, typer.Option("--ntst", help="Collocation intervals for cycles.",
                                       callback=ntst_option)] = 30,
+    no_simulation: Annotated[bool, typer.Option(
+        "--no-simulation", help="The paper's index only: chi is then the paper's chi, and "
+        "no critical disturbance is simulated.")] = False,
+    keep_tiles: Annotated[bool, typer.Option(
+        "--keep-tiles", help="Keep the checkpoint folder <out>.tiles/ after a successful "
+        "map (default: removed once the map is saved).")] = False,
     json_out: JsonOpt = False,
     model: MaglevOnlyModelOpt = None,
 ) -> None:
-    """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure)."""
+    """The headline matching index chi = min(chi_paper, chi_simulation), its two parts,
+    h, the simulated critical disturbances and stability over a grid of two parameters
+    (netCDF + figure)."""
     refuse_model_file(model, "map")
     from maglev_match.io import atomic_write_netcdf
-    from maglev_match.maps import MapSpec, map_dataset, map_warnings, parse_axis, run_map
+    from maglev_match.maps import (
+        MapSpec,
+        map_dataset,
+        map_warnings,
+        parse_axis,
+        remove_checkpoint,
+        run_map,
+    )
     from maglev_match.params import ParameterError
     from maglev_match.plots import save_figure
     from maglev_match.plots.maps import map_figure
@@ -239,15 +256,18 @@ def map_command(
     if rows_per_tile < 1:
         raise ParameterError("--rows-per-tile", rows_per_tile, "must be at least 1")
     spec = MapSpec(base=base.as_input_dict(), x=ax, y=ay, rows_per_tile=rows_per_tile,
-                   ntst=ntst)
+                   ntst=ntst, simulate=not no_simulation)
     spec.validate()  # every grid point, before any work starts
     out = folder / f"{stem}.nc"
     checkpoint = out.with_name(out.name + ".tiles")
+    log = out.with_suffix(".log")
+    debug = bool(ctx.find_root().params.get("debug", False))
     with progress_report("map") as prog:
-        prog.stage(f"map {ax.name} x {ay.name}: {len(spec.tiles)} tiles ...")
+        what = "headline index" if spec.simulate else "paper's index only (--no-simulation)"
+        prog.stage(f"map {ax.name} x {ay.name}, {what}: {len(spec.tiles)} tiles ...")
         started = time.perf_counter()
         data = run_map(spec, checkpoint, resume=resume, scheduler=scheduler, workers=workers,
-                       progress=prog.tiles)
+                       progress=prog.tiles, log=log, echo_dask=debug)
         elapsed = time.perf_counter() - started
         # the self-check gets 10 % of the map's time (at least one point is checked)
         prog.stage("spot check: recomputing sample points one by one ...")
@@ -261,24 +281,88 @@ def map_command(
     figs = save_figure(map_figure(ds, design_point=(float(getattr(base, ax.name)),
                                                     float(getattr(base, ay.name)))),
                        out.with_suffix(""))
-    summary = {
-        "netcdf": str(out), "figures": [str(f) for f in figs], "x": ax.name, "y": ay.name,
-        "shape": [ay.count, ax.count], "stable_fraction": float(ds["stable"].mean()),
-        "chi_max": float(ds["chi"].max()), "unresolved": int((ds["resolved"] == 0).sum()),
-        "spot_check": {"points": int(ds.attrs["spot_check_points"]),
-                       "max_rel_diff": float(ds.attrs["spot_check_max_rel_diff"]),
-                       "tolerance": float(ds.attrs["spot_check_tolerance"]),
-                       "passed": bool(ds.attrs["spot_check_passed"])},
-        "warnings": warnings,
-    }
+    tiles_left = keep_tiles or not remove_checkpoint(checkpoint)
+    summary = _map_summary(ds, spec, out, figs, warnings,
+                           str(checkpoint) if tiles_left else None,
+                           str(log) if log.exists() else None)
     if json_out:
         emit_json(summary)
         return
-    console.print(f"wrote {out} and {', '.join(str(f) for f in figs)}")
-    console.print(f"stable at {summary['stable_fraction']:.0%} of the points; chi up to "
-                  f"{summary['chi_max']:.3g}; {summary['unresolved']} unresolved points")
+    _print_map(summary)
+
+
+def _map_summary(ds, spec, out, figs, warnings, tiles, log) -> dict:
+    """The JSON form of a finished map (every number as stored in the netCDF file)."""
+    import math
+
+    import numpy as np
+
+    stable = ds["stable"].values == 1
+    resolved = ds["resolved"].values == 1
+
+    def top(name):
+        v = ds[name].values
+        return float(np.nanmax(v)) if np.isfinite(v).any() else None
+
+    a = ds.attrs
+    spot = {"points": int(a["spot_check_points"]),
+            "max_rel_diff": float(a["spot_check_max_rel_diff"]),
+            "tolerance": float(a["spot_check_tolerance"]),
+            "passed": bool(a["spot_check_passed"])}
+    if spec.simulate:
+        spot.update({"simulation_max_diff": float(a["spot_check_simulation_max_diff"]),
+                     "simulation_tolerance": float(a["spot_check_simulation_tolerance"]),
+                     "headline_max_diff": float(a["spot_check_headline_max_diff"]),
+                     "headline_passed": bool(a["spot_check_headline_passed"])})
+    by_sim = int(np.sum((ds["chi_basis"].values == 1) & stable & resolved))
+    return {
+        "netcdf": str(out), "figures": [str(f) for f in figs], "x": spec.x.name,
+        "y": spec.y.name, "shape": [spec.y.count, spec.x.count],
+        "index_definition": a["index_definition"], "simulation": bool(spec.simulate),
+        "stable_fraction": float(stable.mean()),
+        "chi_max": top("chi"), "chi_paper_max": top("chi_paper"),
+        "chi_simulation_max": top("chi_simulation"),
+        "points_decided_by_simulation": by_sim,
+        "unresolved": int((~resolved).sum()),
+        "spot_check": spot,
+        "hopf_curve": a.get("hopf_curve", ""),
+        "tiles": tiles, "log": log,
+        "warnings": warnings,
+        "simulation_tolerance": (None if not spec.simulate
+                                 or not math.isfinite(a["simulation_tolerance"])
+                                 else float(a["simulation_tolerance"])),
+    }
+
+
+def _print_map(summary: dict) -> None:
+    """The text form of :func:`_map_summary` (every warning of the JSON form too)."""
+    def num(v):
+        return "-" if v is None else f"{v:.3g}"
+
+    console.print(f"wrote {summary['netcdf']} and {', '.join(summary['figures'])}",
+                  highlight=False)
+    console.print(f"index: {summary['index_definition']}", highlight=False)
+    console.print(f"stable at {summary['stable_fraction']:.0%} of the points (index NaN at "
+                  f"unstable ones); chi up to {num(summary['chi_max'])} (paper's definition up "
+                  f"to {num(summary['chi_paper_max'])}"
+                  + (f", simulation up to {num(summary['chi_simulation_max'])}; the "
+                     f"simulation gives the smaller index at "
+                     f"{summary['points_decided_by_simulation']} point(s)"
+                     if summary["simulation"] else "") + f"); {summary['unresolved']} "
+                  "unresolved point(s)", highlight=False)
     sc = summary["spot_check"]
-    console.print(f"spot check: {sc['points']} point(s) recomputed one by one, largest relative "
-                  f"difference of h {sc['max_rel_diff']:.3g} (tolerance {sc['tolerance']:g})")
-    for w in warnings:
+    text = (f"spot check: {sc['points']} point(s) recomputed one by one: paper's h within "
+            f"{sc['max_rel_diff']:.3g} relative (tolerance {sc['tolerance']:g})")
+    if summary["simulation"]:
+        text += (f", critical disturbances within {sc['simulation_max_diff'] * 1e3:.3g} mm "
+                 f"(search tolerance {sc['simulation_tolerance'] * 1e3:g} mm), headline chi "
+                 f"within {sc['headline_max_diff']:.3g} "
+                 f"({'passed' if sc['headline_passed'] else 'FAILED'})")
+    console.print(text + ("" if sc["passed"] else " - FAILED"), highlight=False)
+    console.print(f"stability boundary: Hopf curve {summary['hopf_curve']}", highlight=False)
+    if summary["tiles"]:
+        console.print(f"checkpoint tiles kept in {summary['tiles']}", highlight=False)
+    if summary["log"]:
+        console.print(f"Dask's messages: {summary['log']}", highlight=False)
+    for w in summary["warnings"]:
         console.print(f"  - {w}", style="yellow", markup=False, highlight=False)
