@@ -40,7 +40,6 @@ from maglev_match.cli.common import (
 )
 from maglev_match.cli.common import params_from_options as _params
 from maglev_match.cli.models import is_model_file, user_cycles
-from maglev_match.dynamics.continuation import SpecialPointKind  # (NumPy only)
 from maglev_match.io import atomic_open, atomic_write_text
 from maglev_match.params import ParameterError, Params, warn_overridden
 
@@ -93,6 +92,8 @@ def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
 
 
 def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
+    from maglev_match.dynamics.continuation import SpecialPointKind
+
     rows = []
     for s in br.special_points:
         gmax, gmin = s.extrema.get("gap_deviation", (float("nan"), float("nan")))
@@ -311,6 +312,8 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
 
 def _print_summary(result, branches, chosen, param, files, first_line: str | None = None
                    ) -> None:
+    from maglev_match.dynamics.continuation import SpecialPointKind
+
     for h, br in zip(chosen, branches, strict=True):
         if first_line is not None:  # a restart: its own header, no Hopf point found here
             console.print(first_line, highlight=False, markup=False)
