@@ -92,7 +92,8 @@ def _flags_without_type() -> None:
 
 _flags_without_type()
 
-COMMAND_MODULES = ("stability", "hopf", "cycles", "simulate", "index", "report", "design")
+COMMAND_MODULES = ("stability", "hopf", "cycles", "simulate", "index", "report", "design",
+                   "speed")
 _here = Path(__file__).parent
 for _name in COMMAND_MODULES:
     if (_here / f"{_name}.py").exists():
