@@ -101,3 +101,30 @@ def span_run_figure(run):
                       f"({run.outcome})")
     fig.tight_layout()
     return fig
+
+
+def speed_map_figure(ds):
+    """A map at speed (:func:`maglev_match.speed.run_speed_map`): chi(v) as colour at stable
+    points, unstable points crossed, the speed axis in km/h. Returns the figure."""
+    yname, xname = ds["chi"].dims
+    x, y = ds[xname].values.astype(float), ds[yname].values.astype(float)
+    xl, yl = xname, yname
+    if xname == "v":
+        x, xl = x * KMH, "speed v (km/h)"
+    if yname == "v":
+        y, yl = y * KMH, "speed v (km/h)"
+    chi = np.ma.masked_invalid(ds["chi"].values)
+    fig, ax = new_figure(figsize=(8.0, 5.5))
+    if chi.count():
+        mesh = ax.pcolormesh(x, y, chi, shading="nearest", cmap="viridis")
+        fig.colorbar(mesh, ax=ax, label="chi(v) = h(v) / w0")
+    unstable = ds["stable"].values == 0
+    if unstable.any():
+        X, Y = np.meshgrid(x, y)
+        ax.plot(X[unstable], Y[unstable], "rx", ms=7, label="periodic response unstable")
+        ax.legend(fontsize=8)
+    ax.set_xlabel(xl)
+    ax.set_ylabel(yl)
+    ax.set_title(f"At speed ({ds.attrs.get('model', '')}): chi(v) over {xname} and {yname}")
+    fig.tight_layout()
+    return fig
