@@ -174,7 +174,13 @@ def map_command(
     json_out: JsonOpt = False,
     model: MaglevOnlyModelOpt = None,
 ) -> None:
-    """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure)."""
+    """Stability, h, w0 and chi over a grid of two parameters (netCDF + figure). An axis
+    v=START:STOP:COUNT (km/h) maps the read-outs at speed instead (see `speed`)."""
+    from maglev_match.cli.speed import has_speed_axis, speed_map_command
+
+    if has_speed_axis(x, y):
+        return speed_map_command(x, y, preset, config, set_, out, resume, scheduler, workers,
+                                 json_out, model)
     refuse_model_file(model, "map")
     from maglev_match.io import atomic_write
     from maglev_match.maps import MapSpec, map_dataset, map_warnings, parse_axis, run_map
