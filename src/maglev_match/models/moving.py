@@ -269,26 +269,26 @@ def coupling(t, p_kin, lay_front, lay_length, L, n_modes: int, point: bool):
     return jnp.stack([shape_a, shape_b])
 
 
-def _slots_dynamics(x, p_beam, G, Gdot, forces, sl, n_modes, active):
-    """Deflection and its rate at each load, and the slot accelerations.
+def _slots(x, nv: int, m: int):
+    """(q (2, m), q' (2, m), t) of slots A and B from the state."""
+    q = jnp.stack([x[nv:nv + m], x[nv + 2 * m:nv + 3 * m]])
+    qd = jnp.stack([x[nv + m:nv + 2 * m], x[nv + 3 * m:nv + 4 * m]])
+    return q, qd, x[nv + 4 * m]
+
+
+def _slots_dynamics(q, qd, p_beam, G, Gdot, forces, n_modes, active):
+    """Deflection rate at each load, and the slot velocities and accelerations (frozen
+    slots: zero).
 
     p_beam = (xi1, L, mbar, omega1); G, Gdot (2, n_modes, n_loads); forces (n_loads,) (N,
     downward on the guideway)."""
     xi1, L, mbar, omega1 = p_beam
-    q = jnp.stack([x[sl["qA"]], x[sl["qB"]]])  # (2, n_modes)
-    qd = jnp.stack([x[sl["qA_dot"]], x[sl["qB_dot"]]])
-    w = jnp.einsum("snj,sn->j", G, q)
     wd = jnp.einsum("snj,sn->j", G, qd) + jnp.einsum("snj,sn->j", Gdot, q)
     omega = jnp.arange(1, n_modes + 1, dtype=jnp.float64) ** 2 * omega1
     modal = 2.0 / (mbar * L) * jnp.einsum("snj,j->sn", G, forces)
     qdd = -2.0 * xi1 * omega[None, :] * qd - omega[None, :] ** 2 * q + modal
     act = jnp.asarray(active)[:, None]
-    return w, wd, qd * act, qdd * act
-
-
-@cache
-def _layout_arrays(kind: MovingModel):
-    return None
+    return wd, qd * act, qdd * act
 
 
 def _kin(p, n_base: int, n_loads: int):
@@ -302,123 +302,172 @@ def _coupling_and_rate(t, p_kin, front, length, L, n_modes, point):
     return jax.jvp(g, (t,), (jnp.ones_like(t),))
 
 
+_NA = len(unit_model.PARAM_NAMES)
+_NB_UNIT = len(UNIT_PARAM_NAMES)
+_NB_VEH = len(VEHICLE_PARAM_NAMES)
+_NB_FORCE = len(FORCE_PARAM_NAMES)
+
+
+def _named(p, names: tuple[str, ...]) -> dict:
+    return {n: p[k] for k, n in enumerate(names)}
+
+
+def _vehicle_offsets(s, s0):
+    b = jnp.asarray(vehicle_model.FRAME_SIGN) * s0
+    a = jnp.asarray(vehicle_model.POINT_SIGN) * s
+    off = b[vehicle_model.POINT_FRAME] + a
+    return b, a, off - jnp.max(off)
+
+
+def _unit_rhs(x, p, n_modes: int, limited: bool):
+    """The unit at speed (module docstring): model A's unit equations with the beam
+    deflection x5 = w (the mean deflection under the vehicle) and x6 = w'."""
+    q_ = _named(p[:_NA], unit_model.PARAM_NAMES)
+    L, mbar, length, k = p[_NA], p[_NA + 1], p[_NA + 2], p[_NA + 3]
+    pk = _kin(p, _NB_UNIT, 1)
+    q, qd, t = _slots(x, 7, n_modes)
+    G, Gdot = _coupling_and_rate(t, pk, jnp.zeros(1), jnp.reshape(length, (1,)), L, n_modes,
+                                 False)
+    K = q_["mu0"] * q_["N"] ** 2 * q_["A"]
+    i0 = unit_model.levitation_current(p[:_NA])
+    w = jnp.einsum("snj,sn->j", G, q)[0]
+    c = q_["c0"] + x[0] - w
+    i = x[4] + i0
+    r = (clamp_current(i) if limited else i) / c
+    force = k * 0.5 * K * r**2  # the k units' force on the guideway (N)
+    wd, dq, ddq = _slots_dynamics(q, qd, (q_["xi1"], L, mbar, q_["omega1"]), G, Gdot,
+                                  jnp.reshape(force, (1,)), n_modes, pk[2:4])
+    xa = jnp.stack([x[0], x[1], x[2], x[3], w, wd[0], x[4], x[5], x[6]])
+    fa = unit_model._rhs(xa, p[:_NA], limited)
+    veh = jnp.stack([fa[0], fa[1], fa[2], fa[3], fa[6], fa[7], fa[8]])
+    return jnp.concatenate([veh, dq[0], ddq[0], dq[1], ddq[1], jnp.ones(1)])
+
+
+def _vehicle_rhs(x, p, n_modes: int, limited: bool):
+    """Model B at speed: six levitation points, each acting on the span under it."""
+    q_ = _named(p[:_NB_VEH], VEHICLE_PARAM_NAMES)
+    pk = _kin(p, _NB_VEH, 6)
+    b, a, front = _vehicle_offsets(q_["s"], q_["s0"])
+    q, qd, t = _slots(x, 34, n_modes)
+    G, Gdot = _coupling_and_rate(t, pk, front, jnp.zeros(6), q_["L"], n_modes, True)
+    K = q_["mu0"] * q_["N"] ** 2 * q_["A"]
+    weight = (q_["m_s"] / 2 + q_["m_b"] / 6) * q_["g"]
+    i0 = q_["c0"] * jnp.sqrt(weight / K)
+    body, body_dot = x[0:8], x[8:16]
+    i, y1, vv = x[16:22], x[22:28], x[28:34]
+    z, th = body[0:6:2], body[1:6:2]
+    zd, thd = body_dot[0:6:2], body_dot[1:6:2]
+    u = z[vehicle_model.POINT_FRAME] + a * th[vehicle_model.POINT_FRAME]
+    ud = zd[vehicle_model.POINT_FRAME] + a * thd[vehicle_model.POINT_FRAME]
+    w = jnp.einsum("snj,sn->j", G, q)
+    c = q_["c0"] + u - w
+    r0 = i0 / q_["c0"]
+    r = (clamp_current(i) if limited else i) / c
+    f = K * (r - r0) * (r + r0)  # net upward force per point (N), without cancellation
+    wd, dq, ddq = _slots_dynamics(q, qd, (q_["xi1"], q_["L"], q_["mbar"], q_["omega1"]), G,
+                                  Gdot, K * r**2, n_modes, pk[2:4])
+    cd = ud - wd
+    z0, th0, z0d, th0d = body[6], body[7], body_dot[6], body_dot[7]
+    d = z - z0 - b * th0
+    dd = zd - z0d - b * th0d
+    susp = q_["k2"] * d + q_["c2"] * dd
+    fp = f.reshape(3, 2)
+    z_acc = (-(fp[:, 0] + fp[:, 1]) - susp) / q_["m_s"]
+    th_acc = q_["s"] * (fp[:, 0] - fp[:, 1]) / q_["j_s"]
+    body_acc = jnp.stack([z_acc[0], th_acc[0], z_acc[1], th_acc[1], z_acc[2], th_acc[2],
+                          jnp.sum(susp) / q_["m_b"], jnp.sum(b * susp) / q_["j_b"]])
+    gap_err = c - q_["c0"] - y1
+    di = r * cd + q_["ke"] * c / K * (q_["kP"] * y1 + q_["kD"] * (vv + ud) - i + i0)
+    if limited:
+        di = hold_current_rate(i, di)
+    dy1 = vv + ud + 2.0 * q_["xi0"] * q_["omega0"] * gap_err
+    dv = q_["omega0"] ** 2 * gap_err
+    return jnp.concatenate([body_dot, body_acc, di, dy1, dv, dq[0], ddq[0], dq[1], ddq[1],
+                            jnp.ones(1)])
+
+
+def _force_rhs(x, p, n_modes: int, limited: bool):
+    """A constant point force P crossing the spans (no levitation dynamics)."""
+    P, xi1, L, mbar, omega1 = p[0], p[1], p[2], p[3], p[4]
+    pk = _kin(p, _NB_FORCE, 1)
+    q, qd, t = _slots(x, 0, n_modes)
+    G, Gdot = _coupling_and_rate(t, pk, jnp.zeros(1), jnp.zeros(1), L, n_modes, True)
+    _, dq, ddq = _slots_dynamics(q, qd, (xi1, L, mbar, omega1), G, Gdot,
+                                 jnp.reshape(P, (1,)), n_modes, pk[2:4])
+    return jnp.concatenate([dq[0], ddq[0], dq[1], ddq[1], jnp.ones(1)])
+
+
+_RHS = {MovingModel.UNIT: _unit_rhs, MovingModel.VEHICLE: _vehicle_rhs,
+        MovingModel.FORCE: _force_rhs}
+
+
 @cache
 def moving_rhs(kind: MovingModel, n_modes: int, limited: bool = False):
     """The vector field x' = f(x, p) of a model at speed (cached per model, number of modes
-    and limits, so compiled code is shared by every speed and segment)."""
+    and limits, so compiled code is shared by every speed and segment, and exported ahead
+    of time: the closure holds plain values only)."""
     kind = MovingModel(kind)
-    sl = slot_slices(kind, n_modes)
-    nv = n_vehicle_states(kind)
+    field_ = _RHS[kind]
+    n_modes = int(n_modes)
+    limited = bool(limited)
 
-    if kind is MovingModel.UNIT:
-        nb = len(UNIT_PARAM_NAMES)
-        na = len(unit_model.PARAM_NAMES)
-        iA = {n: k for k, n in enumerate(unit_model.PARAM_NAMES)}
-
-        def rhs(x, p):
-            L, mbar, length, k = p[na], p[na + 1], p[na + 2], p[na + 3]
-            pk = _kin(p, nb, 1)
-            G, Gdot = _coupling_and_rate(x[sl["t"]][0], pk, jnp.zeros(1),
-                                         jnp.reshape(length, (1,)), L, n_modes, False)
-            act = pk[2:4]
-            # the force of the k units on the guideway, from the unit's current and gap
-            K = p[iA["mu0"]] * p[iA["N"]] ** 2 * p[iA["A"]]
-            i0 = unit_model.levitation_current(p[:na])
-            q = jnp.stack([x[sl["qA"]], x[sl["qB"]]])
-            w = jnp.einsum("snj,sn->j", G, q)[0]
-            c = p[iA["c0"]] + x[0] - w
-            i = x[4] + i0
-            r = (clamp_current(i) if limited else i) / c
-            force = k * 0.5 * K * r**2
-            w_, wd, dq, ddq = _slots_dynamics(
-                x, (p[iA["xi1"]], L, mbar, p[iA["omega1"]]), G, Gdot,
-                jnp.reshape(force, (1,)), sl, n_modes, act)
-            # model A's unit with the beam deflection x5 = w and its rate x6 = w'
-            xa = jnp.stack([x[0], x[1], x[2], x[3], w_[0], wd[0], x[4], x[5], x[6]])
-            fa = unit_model._rhs(xa, p[:na], limited)
-            veh = jnp.stack([fa[0], fa[1], fa[2], fa[3], fa[6], fa[7], fa[8]])
-            return jnp.concatenate([veh, dq[0], ddq[0], dq[1], ddq[1], jnp.ones(1)])
-
-    elif kind is MovingModel.VEHICLE:
-        nb = len(VEHICLE_PARAM_NAMES)
-        iB = {n: k for k, n in enumerate(VEHICLE_PARAM_NAMES)}
-
-        def rhs(x, p):
-            q_ = {n: p[k] for n, k in iB.items()}
-            pk = _kin(p, nb, 6)
-            b = jnp.asarray(vehicle_model.FRAME_SIGN) * q_["s0"]
-            a = jnp.asarray(vehicle_model.POINT_SIGN) * q_["s"]
-            off = b[vehicle_model.POINT_FRAME] + a
-            front = off - jnp.max(off)
-            G, Gdot = _coupling_and_rate(x[sl["t"]][0], pk, front, jnp.zeros(6), q_["L"],
-                                         n_modes, True)
-            K = q_["mu0"] * q_["N"] ** 2 * q_["A"]
-            weight = (q_["m_s"] / 2 + q_["m_b"] / 6) * q_["g"]
-            i0 = q_["c0"] * jnp.sqrt(weight / K)
-            body, body_dot = x[0:8], x[8:16]
-            i, y1, vv = x[16:22], x[22:28], x[28:34]
-            z, th = body[0:6:2], body[1:6:2]
-            zd, thd = body_dot[0:6:2], body_dot[1:6:2]
-            u = z[vehicle_model.POINT_FRAME] + a * th[vehicle_model.POINT_FRAME]
-            ud = zd[vehicle_model.POINT_FRAME] + a * thd[vehicle_model.POINT_FRAME]
-            qs = jnp.stack([x[sl["qA"]], x[sl["qB"]]])
-            w = jnp.einsum("snj,sn->j", G, qs)
-            c = q_["c0"] + u - w
-            r0 = i0 / q_["c0"]
-            r = (clamp_current(i) if limited else i) / c
-            f = K * (r - r0) * (r + r0)  # net upward force per point (N), no cancellation
-            _, wd, dq, ddq = _slots_dynamics(
-                x, (q_["xi1"], q_["L"], q_["mbar"], q_["omega1"]), G, Gdot, K * r**2, sl,
-                n_modes, pk[2:4])
-            cd = ud - wd
-            z0, th0, z0d, th0d = body[6], body[7], body_dot[6], body_dot[7]
-            d = z - z0 - b * th0
-            dd = zd - z0d - b * th0d
-            susp = q_["k2"] * d + q_["c2"] * dd
-            fp = f.reshape(3, 2)
-            z_acc = (-(fp[:, 0] + fp[:, 1]) - susp) / q_["m_s"]
-            th_acc = q_["s"] * (fp[:, 0] - fp[:, 1]) / q_["j_s"]
-            body_acc = jnp.stack([z_acc[0], th_acc[0], z_acc[1], th_acc[1], z_acc[2],
-                                  th_acc[2], jnp.sum(susp) / q_["m_b"],
-                                  jnp.sum(b * susp) / q_["j_b"]])
-            gap_err = c - q_["c0"] - y1
-            di = r * cd + q_["ke"] * c / K * (q_["kP"] * y1 + q_["kD"] * (vv + ud) - i + i0)
-            if limited:
-                di = hold_current_rate(i, di)
-            dy1 = vv + ud + 2.0 * q_["xi0"] * q_["omega0"] * gap_err
-            dv = q_["omega0"] ** 2 * gap_err
-            return jnp.concatenate([body_dot, body_acc, di, dy1, dv, dq[0], ddq[0], dq[1],
-                                    ddq[1], jnp.ones(1)])
-
-    else:
-        nb = len(FORCE_PARAM_NAMES)
-
-        def rhs(x, p):
-            P, xi1, L, mbar, omega1 = p[0], p[1], p[2], p[3], p[4]
-            pk = _kin(p, nb, 1)
-            G, Gdot = _coupling_and_rate(x[sl["t"]][0], pk, jnp.zeros(1), jnp.zeros(1), L,
-                                         n_modes, True)
-            _, _, dq, ddq = _slots_dynamics(x, (xi1, L, mbar, omega1), G, Gdot,
-                                            jnp.reshape(P, (1,)), sl, n_modes, pk[2:4])
-            return jnp.concatenate([dq[0], ddq[0], dq[1], ddq[1], jnp.ones(1)])
+    def rhs(x, p):
+        return field_(x, p, n_modes, limited)
 
     rhs.__name__ = f"moving_rhs_{kind.value}_{n_modes}{'_limited' if limited else ''}"
-    del nv
     return rhs
 
 
 # ---------------------------------------------------------------------------------------
 # read-outs
 # ---------------------------------------------------------------------------------------
-def _n_base(kind: MovingModel) -> int:
-    return {MovingModel.UNIT: len(UNIT_PARAM_NAMES), MovingModel.VEHICLE: len(VEHICLE_PARAM_NAMES),
-            MovingModel.FORCE: len(FORCE_PARAM_NAMES)}[kind]
+def _midspan(x, p, nv: int, n_modes: int):
+    mid = jnp.sin(jnp.arange(1, n_modes + 1, dtype=jnp.float64) * jnp.pi / 2.0)
+    q, _, _ = _slots(x, nv, n_modes)
+    return q @ mid
+
+
+def _loads_deflection(x, p, kind: str, n_modes: int):
+    """The deflection each load feels (m): the mean under the unit's footprint, or the
+    deflection at each of model B's points."""
+    if kind == MovingModel.VEHICLE:
+        q_ = _named(p[:_NB_VEH], VEHICLE_PARAM_NAMES)
+        _, _, front = _vehicle_offsets(q_["s"], q_["s0"])
+        G = coupling(x[34 + 4 * n_modes], _kin(p, _NB_VEH, 6), front, jnp.zeros(6), q_["L"],
+                     n_modes, True)
+        q, _, _ = _slots(x, 34, n_modes)
+    else:
+        G = coupling(x[7 + 4 * n_modes], _kin(p, _NB_UNIT, 1), jnp.zeros(1),
+                     jnp.reshape(p[_NA + 2], (1,)), p[_NA], n_modes, False)
+        q, _, _ = _slots(x, 7, n_modes)
+    return jnp.einsum("snj,sn->j", G, q)
+
+
+def _gap_deviation(x, p, kind: str, n_modes: int):
+    if kind == MovingModel.VEHICLE:
+        s = p[VEHICLE_PARAM_NAMES.index("s")]
+        a = jnp.asarray(vehicle_model.POINT_SIGN) * s
+        u = x[0:6:2][vehicle_model.POINT_FRAME] + a * x[1:6:2][vehicle_model.POINT_FRAME]
+    else:
+        u = x[0:1]
+    return u - _loads_deflection(x, p, kind, n_modes)
+
+
+def _current(x, p, kind: str):
+    if kind == MovingModel.VEHICLE:
+        return x[16:22]
+    return jnp.reshape(x[4] + unit_model.levitation_current(p[:_NA]), (1,))
+
+
+def _body_acceleration(x, p, kind: str, n_modes: int):
+    f = _RHS[MovingModel(kind)](x, p, n_modes, False)
+    return f[14] if kind == MovingModel.VEHICLE else f[3]
 
 
 @cache
 def observables(kind: MovingModel, n_modes: int) -> dict:
     """Named read-outs g(x, p) of a model at speed (module-level per model, so compiled code
-    is reused):
+    is reused; their closures hold plain values only, so they are exported ahead of time):
 
     * ``gap_deviation`` c_j - c0 at every levitation point (m) (unit: one entry);
     * ``current`` i_j (A);
@@ -428,81 +477,47 @@ def observables(kind: MovingModel, n_modes: int) -> dict:
       downward positive: unit z2'', vehicle z0'').
 
     The force model has ``midspan`` only."""
-    kind = MovingModel(kind)
-    sl = slot_slices(kind, n_modes)
-    rhs = moving_rhs(kind, n_modes, False)
-    nb = _n_base(kind)
-    n = np.arange(1, n_modes + 1)
-    mid = jnp.asarray(np.sin(n * np.pi / 2.0))
+    kind_s = MovingModel(kind).value
+    m = int(n_modes)
+    nv = n_vehicle_states(MovingModel(kind))
 
     def midspan(x, p):
-        return jnp.stack([x[sl["qA"]] @ mid, x[sl["qB"]] @ mid])
+        return _midspan(x, p, nv, m)
 
     out = {"midspan": midspan}
-    if kind is MovingModel.FORCE:
+    if kind_s == MovingModel.FORCE:
         return out
-    point = kind is MovingModel.VEHICLE
 
-    def deflection_at_loads(x, p):
-        pk = _kin(p, nb, 6 if point else 1)
-        if point:
-            iB = {nm: k for k, nm in enumerate(VEHICLE_PARAM_NAMES)}
-            b = jnp.asarray(vehicle_model.FRAME_SIGN) * p[iB["s0"]]
-            a = jnp.asarray(vehicle_model.POINT_SIGN) * p[iB["s"]]
-            off = b[vehicle_model.POINT_FRAME] + a
-            front, length, L = off - jnp.max(off), jnp.zeros(6), p[iB["L"]]
-        else:
-            na = len(unit_model.PARAM_NAMES)
-            front, length, L = jnp.zeros(1), jnp.reshape(p[na + 2], (1,)), p[na]
-        G = coupling(x[sl["t"]][0], pk, front, length, L, n_modes, point)
-        q = jnp.stack([x[sl["qA"]], x[sl["qB"]]])
-        return jnp.einsum("snj,sn->j", G, q)
+    def gap_deviation(x, p):
+        return _gap_deviation(x, p, kind_s, m)
 
-    if kind is MovingModel.UNIT:
-        iA = {nm: k for k, nm in enumerate(unit_model.PARAM_NAMES)}
-        na = len(unit_model.PARAM_NAMES)
+    def current(x, p):
+        return _current(x, p, kind_s)
 
-        def gap_deviation(x, p):
-            return x[0:1] - deflection_at_loads(x, p)
-
-        def current(x, p):
-            return jnp.reshape(x[4] + unit_model.levitation_current(p[:na]), (1,))
-
-        def body_acceleration(x, p):
-            return rhs(x, p)[3]
-
-        del iA
-    else:
-        iB = {nm: k for k, nm in enumerate(VEHICLE_PARAM_NAMES)}
-
-        def gap_deviation(x, p):
-            a = jnp.asarray(vehicle_model.POINT_SIGN) * p[iB["s"]]
-            z, th = x[0:6:2], x[1:6:2]
-            u = z[vehicle_model.POINT_FRAME] + a * th[vehicle_model.POINT_FRAME]
-            return u - deflection_at_loads(x, p)
-
-        def current(x, p):
-            return x[16:22]
-
-        def body_acceleration(x, p):
-            return rhs(x, p)[14]
+    def body_acceleration(x, p):
+        return _body_acceleration(x, p, kind_s, m)
 
     out.update(gap_deviation=gap_deviation, current=current,
                body_acceleration=body_acceleration)
     return out
 
 
+def _gap_margins(x, p, limits, kind: str, n_modes: int, ic0: int):
+    return jnp.reshape(gap_margins(p[ic0] + _gap_deviation(x, p, kind, n_modes), limits[0],
+                                   limits[1]), (-1,))
+
+
 @cache
 def gap_events(kind: MovingModel, n_modes: int):
     """``g(x, p, (gap_min, gap_max))``: gap_j - gap_min and gap_max - gap_j per levitation
     point (entries 2(j-1), 2(j-1)+1); negative is a collision."""
-    obs = observables(MovingModel(kind), n_modes)["gap_deviation"]
-    kind = MovingModel(kind)
-    ic0 = (unit_model.PARAM_NAMES.index("c0") if kind is MovingModel.UNIT
+    kind_s = MovingModel(kind).value
+    m = int(n_modes)
+    ic0 = (unit_model.PARAM_NAMES.index("c0") if kind_s == MovingModel.UNIT
            else VEHICLE_PARAM_NAMES.index("c0"))
 
     def events(x, p, limits):
-        return jnp.reshape(gap_margins(p[ic0] + obs(x, p), limits[0], limits[1]), (-1,))
+        return _gap_margins(x, p, limits, kind_s, m, ic0)
 
     return events
 
