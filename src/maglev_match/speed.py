@@ -63,6 +63,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.passage import (
     PassageOptions,
     PassageProblem,
@@ -297,14 +298,34 @@ def quasi_static_state(params: Params, model: str, x_front: float, *, tol: float
 # read-outs of one passage
 # ---------------------------------------------------------------------------------------
 @cache
-def _observe_kernel(g: Callable, rhs: Callable):
-    """(X (k, dim), p) -> (g(X), dg/dt(X)) batched: the observable and its rate along the
-    flow (one JVP)."""
-
+def _observe_chunk(g: Callable, rhs: Callable):
     def one(x, p):
         return jax.jvp(lambda y: g(y, p), (x,), (rhs(x, p),))
 
-    return jax.jit(jax.vmap(one, in_axes=(0, None)))
+    return cached_kernel(jax.vmap(one, in_axes=(0, None)), g, rhs, name="speed.observe")
+
+
+def _observe_kernel(g: Callable, rhs: Callable) -> Callable:
+    """(X (k, dim), p) -> (g(X), dg/dt(X)) batched: the observable and its rate along the
+    flow (one JVP), evaluated CHUNK states at a time (the last chunk padded), so one
+    compiled kernel serves every number of states."""
+    ker = _observe_chunk(g, rhs)
+
+    def call(X, p):
+        X = np.asarray(X, float)
+        k = X.shape[0]
+        vals, rates = [], []
+        for a in range(0, max(k, 1), CHUNK):
+            blk = X[a:a + CHUNK]
+            pad = CHUNK - blk.shape[0]
+            if pad:
+                blk = np.concatenate([blk, np.repeat(blk[-1:], pad, axis=0)])
+            v, r = ker(jnp.asarray(blk), jnp.asarray(p))
+            vals.append(np.asarray(v)[:CHUNK - pad])
+            rates.append(np.asarray(r)[:CHUNK - pad])
+        return np.concatenate(vals)[:k], np.concatenate(rates)[:k]
+
+    return call
 
 
 def _fast_frequency(params: Params) -> float:

@@ -59,6 +59,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.floquet import periodic_eigenvalues
 from maglev_match.dynamics.simulate import (
     COLLISION,
@@ -360,8 +361,7 @@ def _variational_solver(rhs: Callable, n: int, r: int) -> Callable:
     def solve_static(z0, Psi0, p, sc, duration, rtol, atol):
         return solve(z0, Psi0, p, sc, duration, rtol, atol, 1_000_000)
 
-    del r
-    return jax.jit(solve_static)
+    return cached_kernel(solve_static, rhs, n, r, name="passage.variational")
 
 
 @dataclass(frozen=True)
@@ -413,8 +413,8 @@ def reduced_factors(problem: PassageProblem, starts: np.ndarray,
     for k, seg in enumerate(problem.segments):
         z0 = np.asarray(starts[k], float) / sc_all
         z, Psi, st, ok = solve(jnp.asarray(z0), jnp.asarray(Q), jnp.asarray(seg.p),
-                               jnp.asarray(sc_all), float(seg.duration), opts.tangent_rtol,
-                               opts.tangent_atol)
+                               jnp.asarray(sc_all), jnp.asarray(float(seg.duration)),
+                               jnp.asarray(opts.tangent_rtol), jnp.asarray(opts.tangent_atol))
         Psi = np.asarray(Psi)
         steps += int(st)
         if not bool(ok) or not np.all(np.isfinite(Psi)):
