@@ -65,6 +65,7 @@ import numpy as np
 
 from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.passage import (
+    SAVE_SLOTS,
     PassageOptions,
     PassageProblem,
     PeriodicPassage,
@@ -90,6 +91,9 @@ __all__ = [
     "StabilityChange",
     "check_speed_setup",
     "passage_problem",
+    "passage_readouts",
+    "simulate_over_spans",
+    "SpanRun",
     "quasi_static_state",
     "periodic_response",
     "speed_point",
@@ -101,7 +105,7 @@ __all__ = [
 ]
 
 KMH = 1.0 / 3.6  # m/s per km/h
-CHUNK = 256  # saved times per integrator call (one compiled kernel for every read-out)
+CHUNK = SAVE_SLOTS  # saved times per integrator call: one compiled kernel for every run
 SPEED_MAX = 250.0  # m/s (900 km/h): beyond any maglev line; keeps passages resolvable
 
 
@@ -298,34 +302,37 @@ def quasi_static_state(params: Params, model: str, x_front: float, *, tol: float
 # read-outs of one passage
 # ---------------------------------------------------------------------------------------
 @cache
-def _observe_chunk(g: Callable, rhs: Callable):
+def _observe_chunk(fns: tuple[Callable, ...]):
     def one(x, p):
-        return jax.jvp(lambda y: g(y, p), (x,), (rhs(x, p),))
+        return jnp.concatenate([jnp.ravel(f(x, p)) for f in fns])
 
-    return cached_kernel(jax.vmap(one, in_axes=(0, None)), g, rhs, name="speed.observe")
+    return cached_kernel(jax.vmap(one, in_axes=(0, None)), *fns, name="speed.observe")
 
 
-def _observe_kernel(g: Callable, rhs: Callable) -> Callable:
-    """(X (k, dim), p) -> (g(X), dg/dt(X)) batched: the observable and its rate along the
-    flow (one JVP), evaluated CHUNK states at a time (the last chunk padded), so one
-    compiled kernel serves every number of states."""
-    ker = _observe_chunk(g, rhs)
-
-    def call(X, p):
-        X = np.asarray(X, float)
-        k = X.shape[0]
-        vals, rates = [], []
-        for a in range(0, max(k, 1), CHUNK):
-            blk = X[a:a + CHUNK]
-            pad = CHUNK - blk.shape[0]
-            if pad:
-                blk = np.concatenate([blk, np.repeat(blk[-1:], pad, axis=0)])
-            v, r = ker(jnp.asarray(blk), jnp.asarray(p))
-            vals.append(np.asarray(v)[:CHUNK - pad])
-            rates.append(np.asarray(r)[:CHUNK - pad])
-        return np.concatenate(vals)[:k], np.concatenate(rates)[:k]
-
-    return call
+def observe_all(system, X: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
+    """Every named observable of ``system`` at the states X (k, dim), as arrays (k, m): one
+    compiled kernel for all of them, CHUNK states at a time (the last chunk padded), so the
+    same kernel serves every number of states."""
+    names = tuple(system.observables)
+    fns = tuple(system.observables[n] for n in names)
+    X = np.asarray(X, float)
+    k = X.shape[0]
+    sizes = [int(np.prod(jax.eval_shape(f, jnp.zeros(system.dim), jnp.asarray(p)).shape))
+             for f in fns]
+    ker = _observe_chunk(fns)
+    vals = []
+    for a in range(0, max(k, 1), CHUNK):
+        blk = X[a:a + CHUNK]
+        pad = CHUNK - blk.shape[0]
+        if pad:
+            blk = np.concatenate([blk, np.repeat(blk[-1:], pad, axis=0)])
+        vals.append(np.asarray(ker(jnp.asarray(blk), jnp.asarray(p)))[:CHUNK - pad])
+    flat = np.concatenate(vals)[:k]
+    out, at = {}, 0
+    for n, m in zip(names, sizes, strict=True):
+        out[n] = flat[:, at:at + m]
+        at += m
+    return out
 
 
 def _fast_frequency(params: Params) -> float:
@@ -394,25 +401,20 @@ def _sample_passage(problem: PassageProblem, x0_run, params: Params, opts: Speed
     return _Samples(t, X, seg, problem, x0_run.starts)
 
 
-def _observe(samples: _Samples, name: str, idx: np.ndarray | None = None
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """Values and rates of a named observable at the samples (k, m)."""
+def _observe(samples: _Samples, name: str) -> np.ndarray:
+    """Values of a named observable at the samples (k, m), each with its segment's
+    parameters."""
     sys_ = samples.problem.system
-    g = sys_.observables[name]
-    ker = _observe_kernel(g, sys_.rhs)
-    sel = np.arange(samples.t.size) if idx is None else idx
-    vals = np.empty((sel.size,) + np.shape(np.asarray(g(jnp.asarray(samples.X[0]),
-                                                         jnp.asarray(sys_.p))))).reshape(
-        sel.size, -1)
-    rates = np.empty_like(vals)
+    vals = None
     for k, sg in enumerate(samples.problem.segments):
-        m = samples.seg[sel] == k
+        m = samples.seg == k
         if not np.any(m):
             continue
-        v, r = ker(jnp.asarray(samples.X[sel[m]]), jnp.asarray(sg.p))
-        vals[m] = np.asarray(v).reshape(int(m.sum()), -1)
-        rates[m] = np.asarray(r).reshape(int(m.sum()), -1)
-    return vals, rates
+        v = observe_all(sys_, samples.X[m], sg.p)[name]
+        if vals is None:
+            vals = np.empty((samples.t.size, v.shape[1]))
+        vals[m] = v
+    return vals  # type: ignore[return-value]
 
 
 def _refine_extreme(samples: _Samples, name: str, comp: int, sign: float, values: np.ndarray,
@@ -430,7 +432,6 @@ def _refine_extreme(samples: _Samples, name: str, comp: int, sign: float, values
     best_v, best_t = float(v[order[0]]), float(samples.t[order[0]])
     bounds = np.concatenate([samples.problem.starts, [samples.problem.period]])
     sys_ = samples.problem.system
-    g = sys_.observables[name]
     for i in order:
         k = int(samples.seg[i])
         a = max(samples.t[max(i - 1, 0)], bounds[k])
@@ -443,9 +444,7 @@ def _refine_extreme(samples: _Samples, name: str, comp: int, sign: float, values
             x_start, t_start = samples.starts[k], bounds[k]
         ts = np.linspace(a, b, CHUNK)
         Xz = _integrate_saving(sys_, x_start, ts - t_start, samples.problem.segments[k].p, sim)
-        gv, _ = _observe_kernel(g, sys_.rhs)(jnp.asarray(Xz),
-                                             jnp.asarray(samples.problem.segments[k].p))
-        gz = sign * np.asarray(gv).reshape(CHUNK, -1)[:, comp]
+        gz = sign * observe_all(sys_, Xz, samples.problem.segments[k].p)[name][:, comp]
         j = int(np.argmax(gz))
         val, tt = float(gz[j]), float(ts[j])
         if 0 < j < CHUNK - 1:  # parabola through the best three
@@ -483,16 +482,16 @@ def passage_readouts(problem: PassageProblem, run, params: Params, kind: MovingM
     sim = SimulationOptions(rtol=opts.rtol, atol=opts.atol, max_steps=1_000_000)
     samples = _sample_passage(problem, run, params, opts, sim)
     n_pts = mv.layout_of(params, kind).n_loads if kind is not MovingModel.FORCE else 0
-    mid, _ = _observe(samples, "midspan")
+    mid = _observe(samples, "midspan")
     comp = int(np.argmax(np.max(mid, axis=0)))
     midspan_max, _ = _refine_extreme(samples, "midspan", comp, 1.0, mid, sim)
     if kind is MovingModel.FORCE:
         empty = np.zeros(0)
         return PassageReadouts(empty, empty, empty, empty, float(midspan_max), float("nan"),
                                float("nan"), samples.t.size), samples
-    gap, _ = _observe(samples, "gap_deviation")
-    cur, _ = _observe(samples, "current")
-    acc, _ = _observe(samples, "body_acceleration")
+    gap = _observe(samples, "gap_deviation")
+    cur = _observe(samples, "current")
+    acc = _observe(samples, "body_acceleration")
     gmax = np.array([_refine_extreme(samples, "gap_deviation", j, 1.0, gap, sim)[0]
                      for j in range(n_pts)])
     gmin = np.array([_refine_extreme(samples, "gap_deviation", j, -1.0, gap, sim)[0]
@@ -570,7 +569,7 @@ def critical_disturbance_at_speed(params: Params, kind: MovingModel, v: float,
     events = EventsWithArgs(mv.gap_events(kind, params.n_modes),
                             (float(params.gap_min), float(params.gap_max)))
     sim = SimulationOptions(rtol=opts.critical_rtol, atol=opts.critical_rtol,
-                            max_steps=1_000_000)
+                            max_steps=1_000_000, unroll_stages=False)
     sl = mv.slot_slices(kind, params.n_modes)
     iq = sl["qB"].start  # first mode of the span being entered
     n = problem.n
@@ -1549,7 +1548,6 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
         grid = np.linspace(0.0, T, max(64, max_samples // (spans + 1)) + 1)
     x = mv.rigid_equilibrium(params, kind)
     n_pts = mv.layout_of(params, kind).n_loads if kind is not MovingModel.FORCE else 0
-    obs = sys_.observables
     t_all, gaps, curs, accs, mids = [], [], [], [], []
     starts_all: list[np.ndarray] = []
     outcome, t_hit, p_hit, lim_hit = "ok", None, None, None
@@ -1574,19 +1572,13 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
                 kept = kept[:idx.size]
             ids = idx[:kept.shape[0]]
             if ids.size:
-                pj = jnp.asarray(seg.p)
                 t_all.append((k - 1) * T + grid[ids])
-                kj = jnp.asarray(kept)
-
-                def val(name, kj=kj, pj=pj):
-                    return np.asarray(_observe_kernel(obs[name], sys_.rhs)(kj, pj)[0]
-                                      ).reshape(kj.shape[0], -1)
-
+                vals = observe_all(sys_, kept, seg.p)
                 if n_pts:
-                    gaps.append(val("gap_deviation"))
-                    curs.append(val("current"))
-                    accs.append(val("body_acceleration").ravel())
-                ms = val("midspan")
+                    gaps.append(vals["gap_deviation"])
+                    curs.append(vals["current"])
+                    accs.append(vals["body_acceleration"].ravel())
+                ms = vals["midspan"]
                 if k >= 2:
                     mid[ids, k - 2] = ms[:, 0]
                 if k <= spans:
@@ -1631,8 +1623,8 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
                         X[idx] = _integrate_saving(pt.problem.system, pt.run.starts[j],
                                                    grid[idx] - bounds[j], sg.p, sim)
                 samples = _Samples(grid, X, seg, pt.problem, pt.run.starts)
-            pgap, _ = _observe(samples, "gap_deviation")
-            pacc, _ = _observe(samples, "body_acceleration")
+            pgap = _observe(samples, "gap_deviation")
+            pacc = _observe(samples, "body_acceleration")
             rel = np.mod(t, T)
             kk = np.clip(np.rint(rel / (grid[1] - grid[0])).astype(int), 0, grid.size - 1)
             pg, pa = pgap[kk], pacc[kk, 0]

@@ -73,6 +73,7 @@ from maglev_match.dynamics.system import System
 from maglev_match.reprs import compact_repr
 
 __all__ = [
+    "SAVE_SLOTS",
     "Segment",
     "PassageProblem",
     "PassageOptions",
@@ -88,6 +89,10 @@ __all__ = [
     "solve_periodic_passage",
     "finite_difference_jacobian",
 ]
+
+
+#: Saved times per integrator call of a passage (see :func:`run_passage`).
+SAVE_SLOTS = 256
 
 
 @dataclass(frozen=True)
@@ -230,9 +235,9 @@ def run_passage(problem: PassageProblem, x0: np.ndarray, options: PassageOptions
     ``system`` replaces the problem's system (e.g. its version with physical limits; same
     states and parameters), ``events`` ends the run at a collision
     (:func:`~maglev_match.dynamics.simulate.simulate`), ``t_save`` gives per segment the
-    saved times measured from the segment's start (give arrays of one length, so that one
-    compiled integrator serves every segment), ``simulation`` overrides the integrator
-    options."""
+    saved times measured from the segment's start (give arrays of :data:`SAVE_SLOTS` times,
+    so that one compiled integrator serves every run), ``simulation`` overrides the
+    integrator options."""
     opts = options or PassageOptions()
     sim_opts = simulation or opts.simulation()
     sys_ = system or problem.system
@@ -243,9 +248,11 @@ def run_passage(problem: PassageProblem, x0: np.ndarray, options: PassageOptions
     for k, (seg, t0) in enumerate(zip(problem.segments, problem.starts, strict=True)):
         starts.append(x.copy())
         save = None if t_save is None else np.asarray(t_save[k], float)
+        # without saved times the integrator still gets SAVE_SLOTS of them (all at 0), so one
+        # compiled kernel serves the runs that save and those that do not
         res: SimulationResult = simulate(
             sys_, x, seg.duration, p=seg.p, event_fn=events, x_ref=x, options=sim_opts,
-            n_save=0 if save is None else save.size, t_save=save)
+            t_save=np.zeros(SAVE_SLOTS) if save is None else save)
         steps += res.steps
         if save is not None and save.size:
             keep = np.all(np.isfinite(res.x), axis=1)
