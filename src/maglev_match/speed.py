@@ -92,6 +92,8 @@ __all__ = [
     "check_speed_setup",
     "passage_problem",
     "passage_readouts",
+    "passage_states",
+    "observe_all",
     "simulate_over_spans",
     "SpanRun",
     "quasi_static_state",
@@ -374,6 +376,26 @@ def _integrate_saving(system, x_start: np.ndarray, t_rel: np.ndarray, p: np.ndar
         t_now = float(chunk[-1])
         k += chunk.size
     return out
+
+
+def passage_states(problem: PassageProblem, starts: np.ndarray, times: np.ndarray,
+                   options: SpeedOptions | None = None) -> np.ndarray:
+    """The states at the passage times ``times`` (s, in [0, L / v]) of the passage whose
+    segment start states are ``starts`` (e.g. ``periodic_response(...).run.starts``)."""
+    opts = options or SpeedOptions()
+    sim = SimulationOptions(rtol=opts.rtol, atol=opts.atol, max_steps=1_000_000)
+    t = np.asarray(times, float)
+    order = np.argsort(t, kind="stable")
+    bounds = np.concatenate([problem.starts, [problem.period]])
+    seg = np.clip(np.searchsorted(bounds, t[order], side="right") - 1, 0,
+                  len(problem.segments) - 1)
+    X = np.empty((t.size, problem.system.dim))
+    for k, sg in enumerate(problem.segments):
+        idx = np.nonzero(seg == k)[0]
+        if idx.size:
+            X[order[idx]] = _integrate_saving(problem.system, starts[k],
+                                              t[order[idx]] - bounds[k], sg.p, sim)
+    return X
 
 
 @dataclass(frozen=True)
