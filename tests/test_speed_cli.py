@@ -150,3 +150,18 @@ def test_sweep_resumes_from_its_tiles(tmp_path):
                         progress=lambda d, t: done.append(d))
     assert done[0] == 2 and done[-1] == 3
     assert [q.daf for q in again.points] == [q.daf for q in first.points]
+
+
+def test_api_speed_sweep_plot_and_dataset():
+    """`maglev_match.speed_sweep` takes the km/h range of the command line, returns the
+    points, the dataset and the figure."""
+    import maglev_match as mm
+
+    sw = mm.speed_sweep("turnout-soft", model="force", kmh=(0.0, 100.0, 50.0), n_modes=1,
+                        xi1=0.0, omega1=10.0)
+    assert [round(p.speed_kmh, 9) for p in sw.points] == [0.0, 50.0, 100.0]
+    ds = sw.to_xarray()
+    assert ds["daf"].attrs["units"] == "1" and ds["speed"].attrs["units"] == "m/s"
+    assert ds["daf"].values[1] == pytest.approx(sw.points[1].daf)
+    fig = sw.plot()
+    assert len(fig.axes) == 5

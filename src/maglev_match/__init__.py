@@ -40,6 +40,7 @@ _LAZY: dict[str, str] = {
     "simulate": "maglev_match.api",
     "matching_index": "maglev_match.api",
     "design_map": "maglev_match.api",
+    "speed_sweep": "maglev_match.api",
     "load_model": "maglev_match.models.user",
 }
 
@@ -59,6 +60,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         matching_index,
         root_locus,
         simulate,
+        speed_sweep,
         stability,
     )
     from maglev_match.dynamics.system import System  # noqa: F401

@@ -36,7 +36,6 @@ from maglev_match.cli.common import (
 from maglev_match.params import ParameterError
 
 SPEED_MODELS = ("unit", "vehicle", "force")
-MAX_SPEEDS = 2000  # points of one sweep
 KMH_MAX = 900.0  # km/h
 
 SpeedModelOpt = Annotated[str, typer.Option(
@@ -45,27 +44,6 @@ SpeedModelOpt = Annotated[str, typer.Option(
 SpansOpt = Annotated[int, typer.Option(
     "--spans", help="Spans a disturbed run may take to return to the periodic response "
     "(the guideway's length in spans).")]
-
-
-def speeds_kmh(start: float, stop: float, step: float) -> np.ndarray:
-    """The speeds (km/h) from ``start`` to ``stop`` by ``step`` (``stop`` included when the
-    steps reach it), checked: finite, 0 <= start <= stop <= 900 km/h, step > 0, at most
-    2000 speeds."""
-    for name, v in (("--from", start), ("--to", stop), ("--step", step)):
-        if not math.isfinite(v):
-            raise ParameterError(name, v, "must be a finite number (km/h)")
-    if start < 0:
-        raise ParameterError("--from", start, "must be >= 0 km/h")
-    if stop > KMH_MAX:
-        raise ParameterError("--to", stop, f"must be at most {KMH_MAX:g} km/h")
-    if stop < start:
-        raise ParameterError("--to", stop, f"must be >= --from ({start:g} km/h)")
-    if not step > 0:
-        raise ParameterError("--step", step, "must be > 0 km/h")
-    count = int(math.floor((stop - start) / step + 1e-9)) + 1
-    if count > MAX_SPEEDS:
-        raise ParameterError("--step", step, f"gives {count} speeds; at most {MAX_SPEEDS}")
-    return start + step * np.arange(count)
 
 
 def _check_model(model: str) -> str:
@@ -157,7 +135,13 @@ def speed_command(
     deviation, current, DAF, car-body acceleration and Sperling's Wz, the critical
     disturbance of the span being entered and chi(v) = h(v) / w0; resonance speeds and
     stability changes marked. Writes a netCDF sweep and a figure."""
-    from maglev_match.speed import KMH, SpeedOptions, check_speed_setup, speed_sweep
+    from maglev_match.speed import (
+        KMH,
+        SpeedOptions,
+        check_speed_setup,
+        speed_sweep,
+        speeds_kmh,
+    )
 
     _check_model(model)
     check_output_path(out)
