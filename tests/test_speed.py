@@ -286,3 +286,30 @@ def test_critical_disturbance_bracket_holds_in_single_runs():
     assert _fate(limited, limited.system, events, sol.x0, -up.largest_return, 40) == "return"
     assert _fate(limited, limited.system, events, sol.x0, -up.smallest_collision,
                  40) == "collision"
+
+
+def test_vehicle_at_standstill_is_model_b_up_to_the_suspension_preload():
+    """At v = 0 with the vehicle centred on a span, the full vehicle at speed has model B's
+    eigenvalues (plus the unloaded span's) to 1e-4 relative: the only difference is the
+    static redistribution of the weight through the secondary suspension (frames standing at
+    different deflections; a few newtons against 33 kN per point), which model B's zero
+    (its equilibrium on the deflected beam) leaves out."""
+    from maglev_match.dynamics.equilibria import stability
+    from maglev_match.models import vehicle as vehicle_model
+
+    p = SOFT
+    lay = mv.layout_of(p, "vehicle")
+    x_front = 0.5 * (p.L + lay.extent)
+    x = quasi_static_state(p, "vehicle", x_front)
+    pv = mv.moving_param_vector(p, "vehicle", v=0.0, x_front=x_front)
+    sys_m = mv.moving_system(p, "vehicle", pv)
+    n = sys_m.dim - 1
+    lam_m = np.linalg.eigvals(sys_m.f_and_jacobian(x, pv)[1][:n, :n])
+    lam_b = stability(build_system(p, "vehicle")).eigenvalues
+    dist = [np.min(np.abs(lam_m - lb)) / max(1.0, abs(lb)) for lb in lam_b]
+    assert max(dist) < 1e-4
+    # the preload: suspension forces of a few newtons, gaps within a micrometre of c0
+    b = vehicle_model.FRAME_SIGN * p.s0
+    d = x[0:6:2] - x[6] - b * x[7]
+    assert 0 < np.max(np.abs(p.k2 * d)) < 1e-3 * p.point_load_vehicle
+    assert np.max(np.abs(sys_m.observe("gap_deviation", x, pv))) < 1e-5
