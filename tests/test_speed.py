@@ -29,9 +29,9 @@ from maglev_match.speed import (
     passage_states,
     periodic_response,
     quasi_static_state,
-    simulate_over_spans,
     speed_point,
 )
+from maglev_match.speed_spans import simulate_over_spans
 
 SOFT = load_preset("turnout-soft")
 # the unit with one mode per span (model A's beam): the properties tested do not depend on

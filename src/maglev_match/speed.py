@@ -43,7 +43,8 @@ beam mode and refined by integrating again between the neighbours of the best sa
 Sweeps over speed run point by point, on Dask like maps, with checkpoint tiles
 (:mod:`maglev_match.checkpoint`); resonance speeds are listed (:func:`resonance_speeds`) and
 speeds where a multiplier leaves the unit circle are located by solving
-(:func:`locate_stability_change`).
+(:func:`locate_stability_change`). Runs over N spans are in :mod:`maglev_match.speed_spans`,
+maps over the speed and another parameter in :mod:`maglev_match.speed_maps`.
 """
 
 from __future__ import annotations
@@ -94,8 +95,6 @@ __all__ = [
     "passage_readouts",
     "passage_states",
     "observe_all",
-    "simulate_over_spans",
-    "SpanRun",
     "quasi_static_state",
     "periodic_response",
     "speed_point",
@@ -367,13 +366,13 @@ def _fast_frequency(params: Params) -> float:
     return params.n_modes**2 * float(params.omega1) / (2.0 * math.pi)
 
 
-def _sample_times(params: Params, T: float, opts: SpeedOptions) -> np.ndarray:
+def sample_times(params: Params, T: float, opts: SpeedOptions) -> np.ndarray:
     n = max(opts.min_samples, int(math.ceil(T * opts.samples_per_period
                                             * _fast_frequency(params))))
     return np.linspace(0.0, T, n + 1)
 
 
-def _integrate_saving(system, x_start: np.ndarray, t_rel: np.ndarray, p: np.ndarray,
+def integrate_saving(system, x_start: np.ndarray, t_rel: np.ndarray, p: np.ndarray,
                       sim: SimulationOptions) -> np.ndarray:
     """States at the relative times ``t_rel`` (increasing, >= 0) of the run from x_start,
     CHUNK saved times per integrator call (one compiled kernel)."""
@@ -418,13 +417,13 @@ def passage_states(problem: PassageProblem, starts: np.ndarray, times: np.ndarra
     for k, sg in enumerate(problem.segments):
         idx = np.nonzero(seg == k)[0]
         if idx.size:
-            X[order[idx]] = _integrate_saving(problem.system, starts[k],
+            X[order[idx]] = integrate_saving(problem.system, starts[k],
                                               t[order[idx]] - bounds[k], sg.p, sim)
     return X
 
 
 @dataclass(frozen=True)
-class _Samples:
+class PassageSamples:
     t: np.ndarray  # (N+1,) passage times
     X: np.ndarray  # (N+1, dim)
     seg: np.ndarray  # segment of each sample
@@ -432,10 +431,10 @@ class _Samples:
     starts: np.ndarray  # segment start states
 
 
-def _sample_passage(problem: PassageProblem, x0_run, params: Params, opts: SpeedOptions,
-                    sim: SimulationOptions) -> _Samples:
+def sample_passage(problem: PassageProblem, x0_run, params: Params, opts: SpeedOptions,
+                    sim: SimulationOptions) -> PassageSamples:
     T = problem.period
-    t = _sample_times(params, T, opts)
+    t = sample_times(params, T, opts)
     bounds = np.concatenate([problem.starts, [T]])
     seg = np.clip(np.searchsorted(bounds, t, side="right") - 1, 0, len(problem.segments) - 1)
     X = np.empty((t.size, problem.system.dim))
@@ -443,12 +442,12 @@ def _sample_passage(problem: PassageProblem, x0_run, params: Params, opts: Speed
         idx = np.nonzero(seg == k)[0]
         if idx.size == 0:
             continue
-        X[idx] = _integrate_saving(problem.system, x0_run.starts[k], t[idx] - bounds[k],
+        X[idx] = integrate_saving(problem.system, x0_run.starts[k], t[idx] - bounds[k],
                                    sg.p, sim)
-    return _Samples(t, X, seg, problem, x0_run.starts)
+    return PassageSamples(t, X, seg, problem, x0_run.starts)
 
 
-def _observe(samples: _Samples, name: str) -> np.ndarray:
+def observe_samples(samples: PassageSamples, name: str) -> np.ndarray:
     """Values of a named observable at the samples (k, m), each with its segment's
     parameters."""
     sys_ = samples.problem.system
@@ -464,7 +463,7 @@ def _observe(samples: _Samples, name: str) -> np.ndarray:
     return vals  # type: ignore[return-value]
 
 
-def _refine_extreme(samples: _Samples, name: str, comp: int, sign: float, values: np.ndarray,
+def _refine_extreme(samples: PassageSamples, name: str, comp: int, sign: float, values: np.ndarray,
                     sim: SimulationOptions, candidates: int = 3) -> tuple[float, float]:
     """The largest sign * g_comp over the passage: the best local maxima of the samples,
     each refined by integrating again between its neighbours with CHUNK saved times and a
@@ -490,7 +489,7 @@ def _refine_extreme(samples: _Samples, name: str, comp: int, sign: float, values
         else:
             x_start, t_start = samples.starts[k], bounds[k]
         ts = np.linspace(a, b, CHUNK)
-        Xz = _integrate_saving(sys_, x_start, ts - t_start, samples.problem.segments[k].p, sim)
+        Xz = integrate_saving(sys_, x_start, ts - t_start, samples.problem.segments[k].p, sim)
         gz = sign * observe_all(sys_, Xz, samples.problem.segments[k].p)[name][:, comp]
         j = int(np.argmax(gz))
         val, tt = float(gz[j]), float(ts[j])
@@ -524,21 +523,21 @@ class PassageReadouts:
 
 
 def passage_readouts(problem: PassageProblem, run, params: Params, kind: MovingModel,
-                     opts: SpeedOptions) -> tuple[PassageReadouts, _Samples]:
+                     opts: SpeedOptions) -> tuple[PassageReadouts, PassageSamples]:
     """The read-outs of the passage whose segment start states are ``run.starts``."""
     sim = SimulationOptions(rtol=opts.rtol, atol=opts.atol, max_steps=1_000_000)
-    samples = _sample_passage(problem, run, params, opts, sim)
+    samples = sample_passage(problem, run, params, opts, sim)
     n_pts = mv.layout_of(params, kind).n_loads if kind is not MovingModel.FORCE else 0
-    mid = _observe(samples, "midspan")
+    mid = observe_samples(samples, "midspan")
     comp = int(np.argmax(np.max(mid, axis=0)))
     midspan_max, _ = _refine_extreme(samples, "midspan", comp, 1.0, mid, sim)
     if kind is MovingModel.FORCE:
         empty = np.zeros(0)
         return PassageReadouts(empty, empty, empty, empty, float(midspan_max), float("nan"),
                                float("nan"), samples.t.size), samples
-    gap = _observe(samples, "gap_deviation")
-    cur = _observe(samples, "current")
-    acc = _observe(samples, "body_acceleration")
+    gap = observe_samples(samples, "gap_deviation")
+    cur = observe_samples(samples, "current")
+    acc = observe_samples(samples, "body_acceleration")
     gmax = np.array([_refine_extreme(samples, "gap_deviation", j, 1.0, gap, sim)[0]
                      for j in range(n_pts)])
     gmin = np.array([_refine_extreme(samples, "gap_deviation", j, -1.0, gap, sim)[0]
@@ -596,11 +595,6 @@ class SpeedCritical:
         if self.status == CriticalStatus.BRACKETED:
             return float(self.critical)  # type: ignore[arg-type]
         return None if self.largest_return is None else float(self.largest_return)
-
-
-def _not_computed(direction: int, gap_range: float, message: str) -> SpeedCritical:
-    return SpeedCritical(direction, CriticalStatus.NOT_COMPUTED, None, None, None, gap_range,
-                         0.0, 0, 0, 0, 0, None, message)
 
 
 def critical_disturbance_at_speed(params: Params, kind: MovingModel, v: float,
@@ -1111,7 +1105,7 @@ def compute_speed_tile(spec: SweepSpec, rows: tuple[int, int]) -> dict[str, np.n
             "point": np.array([json.dumps(p.to_json()) for p in pts])}
 
 
-def _run_tiles(spec, compute: Callable, checkpoint: Path | None, variables: tuple[str, ...],
+def run_tiles(spec, compute: Callable, checkpoint: Path | None, variables: tuple[str, ...],
                nx: int, *, resume: bool, scheduler: str | None, workers: int | None,
                progress: Callable[[int, int], None] | None) -> list[dict[str, np.ndarray]]:
     """Every tile of ``spec`` (which has ``tiles`` and ``key()``), made by
@@ -1179,8 +1173,8 @@ def run_speed_sweep(spec: SweepSpec, checkpoint: Path | None = None, *, resume: 
                     progress: Callable[[int, int], None] | None = None
                     ) -> list[SpeedPoint]:
     """Every speed of ``spec``, point by point, here or on Dask, with checkpoint tiles
-    (:func:`_run_tiles`)."""
-    tiles = _run_tiles(spec, compute_speed_tile, checkpoint, ("speed",), 1, resume=resume,
+    (:func:`run_tiles`)."""
+    tiles = run_tiles(spec, compute_speed_tile, checkpoint, ("speed",), 1, resume=resume,
                        scheduler=scheduler, workers=workers, progress=progress)
     return [SpeedPoint.from_json(json.loads(str(s))) for t in tiles for s in t["point"]]
 
@@ -1423,402 +1417,3 @@ def sweep_dataset(sweep: SpeedSweep):
         "points": json.dumps([p.to_json() for p in pts], default=float),
     })
     return annotate(ds, sweep.params)
-
-
-# ---------------------------------------------------------------------------------------
-# a run over a guideway of N spans
-# ---------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class SpanRun:
-    """A run from rigid ground (the abutment) over ``spans`` spans and off onto rigid
-    ground again, at constant speed (m/s): N + 1 passages, passage k starting when the
-    front of the vehicle reaches support k - 1.
-
-    t (s); gap_deviation, current (k, points); body_acceleration (k,); midspan (k, spans):
-    the mid-span deflection of every span (NaN while it is not in the model); span_starts :
-    start time of every passage (s). outcome : 'ok', 'collision' or 'failed';
-    collision_time (s), collision_point (1-based), collision_limit ('lower'/'upper').
-    periodic_gap, periodic_acceleration : the periodic response at the same times
-    (repeated passage after passage), or None. passage_starts : the segment start states
-    of every passage (for refined read-outs of a passage). limited : the physical limits
-    were on. per_span_midspan_max (m) : the largest deflection of each span;
-    per_passage_gap_max (m) : the largest |gap deviation| in each passage."""
-
-    __repr__ = compact_repr
-
-    params: Params
-    model: str
-    speed: float
-    spans: int
-    limited: bool
-    t: np.ndarray
-    gap_deviation: np.ndarray
-    current: np.ndarray
-    body_acceleration: np.ndarray
-    midspan: np.ndarray
-    span_starts: np.ndarray
-    outcome: str
-    collision_time: float | None
-    collision_point: int | None
-    collision_limit: str | None
-    periodic_gap: np.ndarray | None
-    periodic_acceleration: np.ndarray | None
-    passage_starts: tuple[np.ndarray, ...]
-    per_span_midspan_max: np.ndarray
-    per_passage_gap_max: np.ndarray
-    warnings: tuple[str, ...] = field(default=())
-
-    def summary(self) -> dict[str, Any]:
-        return {
-            "model": self.model, "speed": self.speed, "spans": self.spans,
-            "limits": self.limited, "outcome": self.outcome,
-            "collision_time": self.collision_time, "collision_point": self.collision_point,
-            "collision_limit": self.collision_limit,
-            "span_midspan_max": [float(v) for v in self.per_span_midspan_max],
-            "passage_gap_deviation_max": [float(v) for v in self.per_passage_gap_max],
-            "warnings": list(self.warnings),
-        }
-
-    def to_xarray(self):
-        """The histories as an :class:`xarray.Dataset` over ``time`` (s), with units."""
-        import xarray as xr
-
-        from maglev_match.datasets import annotate
-
-        data = {"body_acceleration": (("time",), self.body_acceleration),
-                "midspan": (("time", "span"), self.midspan)}
-        coords = {"time": ("time", self.t), "span": ("span", np.arange(1, self.spans + 1))}
-        if self.gap_deviation.shape[1]:
-            data["gap_deviation"] = (("time", "point"), self.gap_deviation)
-            data["current"] = (("time", "point"), self.current)
-            coords["point"] = ("point", np.arange(1, self.gap_deviation.shape[1] + 1))
-            if self.periodic_gap is not None:
-                data["periodic_gap_deviation"] = (("time", "point"), self.periodic_gap)
-        if self.periodic_acceleration is not None:
-            data["periodic_body_acceleration"] = (("time",), self.periodic_acceleration)
-        ds = xr.Dataset(data, coords=coords)
-        ds.attrs.update({"title": "maglev-match run over spans", "model": self.model,
-                         "speed": self.speed, "speed_units": "m/s", "spans": self.spans,
-                         "outcome": self.outcome, "limits": int(self.limited),
-                         "span_starts": json.dumps([float(v) for v in self.span_starts]),
-                         "warnings": json.dumps(list(self.warnings))})
-        if self.collision_time is not None:
-            ds.attrs.update({"collision_time": self.collision_time,
-                             "collision_point": self.collision_point,
-                             "collision_limit": self.collision_limit})
-        return annotate(ds, self.params, units={
-            "body_acceleration": "m/s^2", "midspan": "m", "span": "1",
-            "periodic_gap_deviation": "m", "periodic_body_acceleration": "m/s^2"},
-            long_names={
-                "body_acceleration": "car-body vertical acceleration (down positive)",
-                "midspan": "mid-span deflection of each span (down positive; NaN while the "
-                           "span is not under the vehicle's model)",
-                "span": "span number (1-based, in the direction of travel)",
-                "periodic_gap_deviation": "gap deviation of the periodic response",
-                "periodic_body_acceleration": "car-body acceleration of the periodic "
-                                              "response"})
-
-    def plot(self, path: str | Path | None = None):
-        from maglev_match.plots.speed import span_run_figure
-
-        fig = span_run_figure(self)
-        if path is None:
-            return fig
-        from maglev_match.plots import save_figure
-
-        return save_figure(fig, Path(path))
-
-
-def _integrate_events(system, x_start, t_rel, p, sim, events):
-    """As :func:`_integrate_saving`, with an event function: returns (states up to the
-    event, relative event time or None, event entry or None, state at the event)."""
-    out = []
-    x = np.array(x_start, float)
-    t_now = 0.0
-    k = 0
-    while k < t_rel.size:
-        chunk = t_rel[k:k + CHUNK]
-        s = chunk - t_now
-        if s[-1] <= 0.0:
-            out.append(np.tile(x, (chunk.size, 1)))
-            k += chunk.size
-            continue
-        save = np.maximum(np.concatenate([s, np.full(CHUNK - s.size, s[-1])]), 0.0)
-        res = simulate(system, x, float(s[-1]), p=p, x_ref=x, options=sim, n_save=CHUNK,
-                       t_save=save, event_fn=events)
-        if res.outcome == "failed":
-            raise FloatingPointError("a run over the spans failed: " + "; ".join(res.warnings))
-        X = np.array(res.x[: s.size], float)
-        if res.outcome == "collision":
-            ok = np.all(np.isfinite(X), axis=1) & (s <= float(res.event_time))
-            Xo = X[ok]
-            Xo[:, -1] = x[-1] + s[ok]
-            out.append(Xo)
-            ev = np.array(res.event_state, float)
-            ev[-1] = x[-1] + float(res.event_time)
-            return np.concatenate(out), t_now + float(res.event_time), res.event_index, ev
-        X[:, -1] = x[-1] + s
-        out.append(X)
-        x = X[-1].copy()
-        t_now = float(chunk[-1])
-        k += chunk.size
-    return np.concatenate(out), None, None, None
-
-
-def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
-                        limited: bool = True, options: SpeedOptions | None = None,
-                        overlay: bool = True, max_samples: int = 400_000) -> SpanRun:
-    """Run the vehicle from rigid ground over ``spans`` identical spans and off them at speed
-    v (m/s > 0), from its equilibrium on rigid ground with every span at rest; the physical
-    limits (current clamp, gap range: a collision ends the run) unless ``limited`` is False.
-    With ``overlay`` the periodic response is computed and repeated passage after passage
-    beside the run. At most ``max_samples`` saved times in all (each passage sampled as the
-    read-outs are, fewer if that would exceed it)."""
-    opts = options or SpeedOptions()
-    kind = check_speed_setup(params, model, [v], spans)
-    if not v > 0:
-        raise ParameterError("--speed", v, "must be > 0 for a run over spans")
-    L = float(params.L)
-    T = L / v
-    problems = {
-        "first": passage_problem(params, kind, v, limited=limited, approach_rigid=True),
-        "mid": passage_problem(params, kind, v, limited=limited),
-        "last": passage_problem(params, kind, v, limited=limited, exit_rigid=True),
-    }
-    sys_ = problems["mid"].system
-    events = (EventsWithArgs(mv.gap_events(kind, params.n_modes),
-                             (float(params.gap_min), float(params.gap_max)))
-              if limited and kind is not MovingModel.FORCE else None)
-    sim = SimulationOptions(rtol=opts.rtol, atol=opts.atol, max_steps=1_000_000)
-    grid = _sample_times(params, T, opts)
-    if (grid.size - 1) * (spans + 1) > max_samples:
-        grid = np.linspace(0.0, T, max(64, max_samples // (spans + 1)) + 1)
-    x = mv.rigid_equilibrium(params, kind)
-    n_pts = mv.layout_of(params, kind).n_loads if kind is not MovingModel.FORCE else 0
-    t_all, gaps, curs, accs, mids = [], [], [], [], []
-    starts_all: list[np.ndarray] = []
-    outcome, t_hit, p_hit, lim_hit = "ok", None, None, None
-    warnings: list[str] = []
-    for k in range(1, spans + 2):
-        prob = problems["first"] if k == 1 else (problems["last"] if k == spans + 1
-                                                 else problems["mid"])
-        bounds = np.concatenate([prob.starts, [T]])
-        seg_of = np.clip(np.searchsorted(bounds, grid[:-1], side="right") - 1, 0,
-                         len(prob.segments) - 1)
-        starts = []
-        xk = np.array(x, float)
-        xk[-1] = 0.0
-        mid = np.full((grid.size - 1, spans), np.nan)
-        for j, seg in enumerate(prob.segments):
-            starts.append(xk.copy())
-            idx = np.nonzero(seg_of == j)[0]
-            t_rel = np.concatenate([grid[idx] - bounds[j], [seg.duration]])
-            Xs, te, ie, xe = _integrate_events(prob.system, xk, t_rel, seg.p, sim, events)
-            kept = Xs[:-1] if te is None else Xs[Xs[:, -1] < bounds[j] + seg.duration - 1e-15]
-            if kept.shape[0] > idx.size:
-                kept = kept[:idx.size]
-            ids = idx[:kept.shape[0]]
-            if ids.size:
-                t_all.append((k - 1) * T + grid[ids])
-                vals = observe_all(sys_, kept, seg.p)
-                if n_pts:
-                    gaps.append(vals["gap_deviation"])
-                    curs.append(vals["current"])
-                    accs.append(vals["body_acceleration"].ravel())
-                ms = vals["midspan"]
-                if k >= 2:
-                    mid[ids, k - 2] = ms[:, 0]
-                if k <= spans:
-                    mid[ids, k - 1] = ms[:, 1]
-            if te is not None:
-                outcome = "collision"
-                t_hit = (k - 1) * T + bounds[j] + te
-                p_hit, lim_hit = int(ie) // 2 + 1, ("lower", "upper")[int(ie) % 2]
-                mids.append(mid[:ids.size] if ids.size else mid[:0])
-                break
-            xk = np.array(Xs[-1], float)
-            xk[-1] = bounds[j] + seg.duration
-        starts_all.append(np.array(starts))
-        if outcome == "collision":
-            break
-        mids.append(mid)
-        x = prob.apply_jump(xk)
-    t = np.concatenate(t_all) if t_all else np.zeros(0)
-    gap = np.concatenate(gaps) if gaps else np.zeros((t.size, 0))
-    cur = np.concatenate(curs) if curs else np.zeros((t.size, 0))
-    acc = np.concatenate(accs) if accs else np.full(t.size, np.nan)
-    mid_all = np.concatenate(mids)[: t.size] if mids else np.zeros((0, spans))
-    per_pass = np.array([np.nanmax(np.abs(gap[(t >= (k - 1) * T) & (t < k * T)]))
-                         if gap.size and np.any((t >= (k - 1) * T) & (t < k * T)) else np.nan
-                         for k in range(1, spans + 2)])
-    per_span = np.array([np.nanmax(mid_all[:, s]) if np.any(np.isfinite(mid_all[:, s]))
-                         else np.nan for s in range(spans)])
-    pg = pa = None
-    if overlay and kind is not MovingModel.FORCE:
-        pt = periodic_response(params, kind, v, opts)
-        if pt.converged:
-            samples = _sample_passage(pt.problem, pt.run, params, opts, sim) \
-                if grid.size == _sample_times(params, T, opts).size else None
-            if samples is None:  # the run's coarser grid: sample the periodic response on it
-                bounds = np.concatenate([pt.problem.starts, [T]])
-                seg = np.clip(np.searchsorted(bounds, grid, side="right") - 1, 0,
-                              len(pt.problem.segments) - 1)
-                X = np.empty((grid.size, pt.problem.system.dim))
-                for j, sg in enumerate(pt.problem.segments):
-                    idx = np.nonzero(seg == j)[0]
-                    if idx.size:
-                        X[idx] = _integrate_saving(pt.problem.system, pt.run.starts[j],
-                                                   grid[idx] - bounds[j], sg.p, sim)
-                samples = _Samples(grid, X, seg, pt.problem, pt.run.starts)
-            pgap = _observe(samples, "gap_deviation")
-            pacc = _observe(samples, "body_acceleration")
-            rel = np.mod(t, T)
-            kk = np.clip(np.rint(rel / (grid[1] - grid[0])).astype(int), 0, grid.size - 1)
-            pg, pa = pgap[kk], pacc[kk, 0]
-        else:
-            warnings.append(f"no periodic response to overlay: {pt.message}")
-    return SpanRun(params=params, model=kind.value, speed=float(v), spans=int(spans),
-                   limited=bool(limited), t=t, gap_deviation=gap, current=cur,
-                   body_acceleration=acc, midspan=mid_all,
-                   span_starts=np.arange(spans + 1) * T, outcome=outcome,
-                   collision_time=t_hit, collision_point=p_hit, collision_limit=lim_hit,
-                   periodic_gap=pg, periodic_acceleration=pa,
-                   passage_starts=tuple(starts_all), per_span_midspan_max=per_span,
-                   per_passage_gap_max=per_pass, warnings=tuple(warnings))
-
-
-# ---------------------------------------------------------------------------------------
-# maps over (v, another parameter)
-# ---------------------------------------------------------------------------------------
-MAP_SPEED_VARIABLES = ("converged", "stable", "largest_multiplier", "daf", "gap_dev_abs_max",
-                       "wz", "body_acc_peak", "h", "chi")
-
-
-@dataclass(frozen=True)
-class SpeedMapSpec:
-    """A map of read-outs at speed over two axes, one of them the speed ``v`` (m/s; km/h on
-    the command line): the base parameters, the model, the axes
-    (:class:`maglev_match.maps.Axis`) and the settings. Tiles are rows (fixed y)."""
-
-    base: dict[str, Any]
-    model: str
-    x: Any
-    y: Any
-    options: dict[str, Any]
-
-    def key(self) -> str:
-        d = {"kind": "speed-map", "base": {k: self.base[k] for k in sorted(self.base)},
-             "model": self.model, "x": self.x.__dict__, "y": self.y.__dict__,
-             "options": self.options}
-        return json.dumps(d, sort_keys=True, default=float)
-
-    @property
-    def tiles(self) -> list[tuple[int, int]]:
-        return [(i, i + 1) for i in range(self.y.count)]
-
-    def point(self, xv: float, yv: float) -> tuple[Params, float]:
-        """(parameters, speed in m/s) of a grid point."""
-        from maglev_match.params import make_params
-
-        values = dict(self.base)
-        v = None
-        for ax, val in ((self.x, xv), (self.y, yv)):
-            if ax.name == "v":
-                v = float(val)
-            else:
-                values[ax.name] = float(val)
-        return make_params(values), float(v)  # type: ignore[arg-type]
-
-
-def parse_speed_axes(params: Params, model: str, x: str, y: str,
-                     options: SpeedOptions) -> SpeedMapSpec:
-    """Both axes of a map with the speed on one of them: ``v=START:STOP:COUNT`` in km/h (0 <=
-    START < STOP), the other ``NAME=START:STOP:COUNT`` as for ``map``; every grid point is
-    validated (parameters and speed) before any work."""
-    from maglev_match.maps import Axis, parse_axis
-
-    axes = []
-    for text, option in ((x, "--x"), (y, "--y")):
-        name = text.split("=", 1)[0].strip()
-        if name != "v":
-            axes.append(parse_axis(text, option))
-            continue
-        parts = text.split("=", 1)[1].split(":")
-        try:
-            a, b, c = float(parts[0]), float(parts[1]), int(parts[2])
-        except (ValueError, IndexError):
-            raise ParameterError(option, text, "expected v=START:STOP:COUNT (km/h)") from None
-        if not (math.isfinite(a) and math.isfinite(b)) or not 0 <= a < b:
-            raise ParameterError(option, text, "the speed range must satisfy 0 <= START < STOP "
-                                 "(km/h)")
-        if c < 2:
-            raise ParameterError(option, text, "COUNT must be at least 2")
-        axes.append(Axis("v", a * KMH, b * KMH, c))
-    ax, ay = axes
-    if ax.name == ay.name:
-        raise ParameterError("--y", y, "the two axes must be different parameters")
-    spec = SpeedMapSpec(base=params.as_input_dict(), model=MovingModel(model).value, x=ax,
-                        y=ay, options=options.key())
-    if spec.x.count * spec.y.count > 100_000:
-        raise ParameterError("--x", x, "the grid has more than 100000 points")
-    for yv in ay.values:
-        for xv in ax.values:
-            p, v = spec.point(xv, yv)
-            check_speed_setup(p, model, [v], options.spans)
-    return spec
-
-
-def compute_speed_map_tile(spec: SpeedMapSpec, rows: tuple[int, int]
-                           ) -> dict[str, np.ndarray]:
-    """Rows rows[0]..rows[1]-1 of a speed map: (rows, nx) arrays of
-    :data:`MAP_SPEED_VARIABLES`."""
-    opts = SpeedOptions(**spec.options)
-    out = {k: np.full((rows[1] - rows[0], spec.x.count), np.nan) for k in MAP_SPEED_VARIABLES}
-    for r in range(*rows):
-        for c, xv in enumerate(spec.x.values):
-            p, v = spec.point(xv, spec.y.values[r])
-            pt = speed_point(p, spec.model, v, opts)
-            for k in MAP_SPEED_VARIABLES:
-                val = getattr(pt, k)
-                out[k][r - rows[0], c] = (np.nan if val is None else float(val))
-    return out
-
-
-def run_speed_map(spec: SpeedMapSpec, checkpoint: Path | None = None, *, resume: bool = False,
-                  scheduler: str | None = None, workers: int | None = 0,
-                  progress: Callable[[int, int], None] | None = None):
-    """The speed map as an :class:`xarray.Dataset` over (y, x), computed row by row here or
-    on Dask with checkpoint tiles (:func:`_run_tiles`)."""
-    import xarray as xr
-
-    from maglev_match.datasets import annotate
-    from maglev_match.params import PARAMETER_DOCS
-
-    tiles = _run_tiles(spec, compute_speed_map_tile, checkpoint, MAP_SPEED_VARIABLES,
-                       spec.x.count, resume=resume, scheduler=scheduler, workers=workers,
-                       progress=progress)
-    data = {k: np.concatenate([t[k] for t in tiles], axis=0) for k in MAP_SPEED_VARIABLES}
-    dims = (spec.y.name, spec.x.name)
-    units = {"converged": "1", "stable": "1", "largest_multiplier": "1", "daf": "1",
-             "gap_dev_abs_max": "m", "wz": "1", "body_acc_peak": "m/s^2", "h": "m",
-             "chi": "1", "v": "m/s"}
-    names = {"converged": SWEEP_NAMES["converged"], "stable": SWEEP_NAMES["stable"],
-             "largest_multiplier": SWEEP_NAMES["largest_multiplier"],
-             "daf": SWEEP_NAMES["daf"],
-             "gap_dev_abs_max": "largest |gap deviation| over the levitation points",
-             "wz": SWEEP_NAMES["wz"], "body_acc_peak": SWEEP_NAMES["body_acc_peak"],
-             "h": SWEEP_NAMES["h"], "chi": SWEEP_NAMES["chi"], "v": "vehicle speed"}
-
-    def coord(ax):
-        unit = "m/s" if ax.name == "v" else PARAMETER_DOCS.get(ax.name, ("",))[0]
-        return (ax.name, ax.values, {"units": unit})
-
-    ds = xr.Dataset({k: (dims, data[k]) for k in MAP_SPEED_VARIABLES},
-                    coords={spec.x.name: coord(spec.x), spec.y.name: coord(spec.y)})
-    ds["stable"] = xr.where(np.isfinite(ds["stable"]), ds["stable"], -1).astype(np.int8)
-    ds["converged"] = ds["converged"].fillna(0).astype(np.int8)
-    ds.attrs.update({"title": "maglev-match map at speed", "model": spec.model,
-                     "spec": spec.key()})
-    from maglev_match.params import make_params
-
-    return annotate(ds, make_params(dict(spec.base)), units=units, long_names=names)

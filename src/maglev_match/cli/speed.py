@@ -204,7 +204,8 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
                       out: Path | None, plot: Path | None, json_out: bool) -> None:
     """`simulate --speed V --spans N`: the run over N spans from rigid ground and off again,
     with the periodic response overlaid (called by the simulate command)."""
-    from maglev_match.speed import KMH, SpeedOptions, check_speed_setup, simulate_over_spans
+    from maglev_match.speed import KMH, SpeedOptions, check_speed_setup
+    from maglev_match.speed_spans import simulate_over_spans
 
     _check_model(model)
     n = 10 if spans is None else spans
@@ -270,7 +271,8 @@ def speed_map_command(x: str, y: str, preset: str, config, set_, out: Path | Non
                       json_out: bool, model: str | None) -> None:
     """`map` with the speed v (km/h) on one axis: every grid point a periodic response at
     speed with its read-outs (netCDF + figure)."""
-    from maglev_match.speed import SpeedOptions, parse_speed_axes, run_speed_map
+    from maglev_match.speed import SpeedOptions
+    from maglev_match.speed_maps import parse_speed_axes, run_speed_map
 
     kind = _check_model(model or "unit")
     check_output_path(out)
