@@ -58,17 +58,19 @@ def test_table_agrees_with_the_continuous_weighting_of_the_spectral_form():
 
 def test_lines_combine_by_tenth_power_sum_and_fft_recovers_them():
     """Two sinusoids: Wz = (Wz1^10 + Wz2^10)^(1/10); sampled over one common period, the
-    discrete Fourier transform recovers the lines exactly (and lines outside 0.5..30 Hz do
-    not count)."""
+    discrete Fourier transform recovers the lines exactly (a line above 30 Hz does not count;
+    one below 0.5 Hz counts with the table's 0.325 f^2 law continued)."""
     T = 4.0
     t = np.linspace(0.0, T, 8192, endpoint=False)
     acc = 0.4 * np.sin(2 * np.pi * 3.0 * t) + 0.7 * np.cos(2 * np.pi * 8.5 * t + 0.3) \
         + 5.0 * np.sin(2 * np.pi * 0.25 * t) + 2.0 * np.sin(2 * np.pi * 100.0 * t)
-    w1, w2 = sperling_line(0.4, 3.0), sperling_line(0.7, 8.5)
-    expected = (w1**10 + w2**10) ** 0.1
+    w1, w2, w0 = sperling_line(0.4, 3.0), sperling_line(0.7, 8.5), sperling_line(5.0, 0.25)
+    expected = (w1**10 + w2**10 + w0**10) ** 0.1
     wz, f, amp = sperling_of_periodic(acc, T)
     assert wz == pytest.approx(expected, rel=1e-9)
-    assert sperling_of_lines([0.4, 0.7], [3.0, 8.5]) == pytest.approx(expected, rel=1e-12)
+    assert sperling_of_lines([0.4, 0.7, 5.0], [3.0, 8.5, 0.25]) == pytest.approx(expected,
+                                                                            rel=1e-12)
     k = int(np.argmin(np.abs(f - 8.5)))
     assert amp[k] == pytest.approx(0.7, rel=1e-9)
-    assert sperling_line(5.0, 0.25) == 0.0 and sperling_line(2.0, 100.0) == 0.0
+    assert sperling_line(2.0, 100.0) == 0.0
+    assert w0 == pytest.approx(0.896 * (500.0**3 * 0.325 * 0.25**2 / 0.25) ** 0.1)

@@ -14,11 +14,17 @@ and Betzhold, as given by Garg & Dukkipati)::
     F(f) = 400 / f^2     for 5.9 <= f < 20 Hz
     F(f) = 1             for 20 <= f <= 30 Hz
 
+The table starts at 0.5 Hz. Lines below it are rated here with the same 0.325 f^2 law
+(their weight vanishes as f -> 0) instead of being dropped: at speed the span-passing
+frequency v / L sweeps through 0.5 Hz, and dropping a line there made the index jump where
+nothing physical changes (on an 18 m span at 30 and 35 km/h, 0.46 and 0.54 Hz, both next to
+the car body's 0.5 Hz mode). Lines above 30 Hz are left out.
+
 Sperling's original statement uses the displacement amplitude z (cm) instead,
 Wz = 2.7 (z^3 f^5 F(f))^(1/10); with a = (2 pi f)^2 z the two are the same formula, since
 0.896 (2 pi)^(6/10) = 2.70. A vibration made of several frequencies is rated by the
 10th-power sum of the ratings of its spectral lines, Wz = (sum_i Wz_i^10)^(1/10) (same
-sources). Lines outside 0.5..30 Hz, where the weighting is not defined, are left out.
+sources).
 
 Reading (Sperling's scale): 1 just noticeable; 2 clearly noticeable; 2.5 more pronounced but
 not unpleasant; 3 strong, irregular, but still tolerable; 3.25 very irregular; 3.5 extremely
@@ -45,7 +51,7 @@ __all__ = [
     "sperling_reading",
 ]
 
-F_MIN = 0.5  # Hz, lowest frequency of the weighting table
+F_MIN = 0.5  # Hz, lowest frequency of the weighting table (lines below: same f^2 law)
 F_MAX = 30.0  # Hz, highest frequency rated
 CM = 100.0  # cm per m
 
@@ -58,11 +64,11 @@ SCALE = ((1.0, "just noticeable"), (2.0, "clearly noticeable"),
 
 def sperling_weighting(f) -> np.ndarray:
     """The vertical frequency correction factor F(f) (module docstring); NaN outside
-    [0.5, 30] Hz."""
+    (0, 30] Hz."""
     f = np.asarray(f, float)
     out = np.where(f < 5.9, 0.325 * f**2, np.where(f < 20.0, 400.0 / np.maximum(f, 1e-300)**2,
                                                      1.0))
-    return np.where((f >= F_MIN) & (f <= F_MAX), out, np.nan)
+    return np.where((f > 0) & (f <= F_MAX), out, np.nan)
 
 
 def sperling_line(amplitude, f) -> np.ndarray:
