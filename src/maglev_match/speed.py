@@ -335,6 +335,12 @@ def _observe_chunk(fns: tuple[Callable, ...]):
     return cached_kernel(jax.vmap(one, in_axes=(0, None)), *fns, name="speed.observe")
 
 
+@cache
+def _observable_sizes(fns: tuple[Callable, ...], dim: int, n_p: int) -> tuple[int, ...]:
+    return tuple(int(np.prod(jax.eval_shape(f, jnp.zeros(dim), jnp.zeros(n_p)).shape))
+                 for f in fns)
+
+
 def observe_all(system, X: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
     """Every named observable of ``system`` at the states X (k, dim), as arrays (k, m): one
     compiled kernel for all of them, CHUNK states at a time (the last chunk padded), so the
@@ -343,8 +349,7 @@ def observe_all(system, X: np.ndarray, p: np.ndarray) -> dict[str, np.ndarray]:
     fns = tuple(system.observables[n] for n in names)
     X = np.asarray(X, float)
     k = X.shape[0]
-    sizes = [int(np.prod(jax.eval_shape(f, jnp.zeros(system.dim), jnp.asarray(p)).shape))
-             for f in fns]
+    sizes = _observable_sizes(fns, system.dim, np.asarray(p).size)
     ker = _observe_chunk(fns)
     vals = []
     for a in range(0, max(k, 1), CHUNK):

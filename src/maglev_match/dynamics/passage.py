@@ -29,9 +29,10 @@ C Phi U = S R_{K-1} ... R_0 and nothing is lost to rounding in the product), nev
 differences. While the passage map contracts strongly (the residual falls by the factor
 ``fast_ratio`` or more per passage), the chord iteration with the Jacobian approximated by 0
 (y <- p(y)) is used, which costs one state-only passage per step; otherwise Newton's method
-with the variational Jacobian, kept while it contracts (chord iterations). The transfer
-matrices are recomputed at the solution unless the last ones were computed within
-``multiplier_tol`` of it.
+with the variational Jacobian, kept while it contracts (chord iterations); the first
+Jacobian, which only steers Newton steps, is integrated with a tolerance 100 times looser.
+The transfer matrices for the multipliers are computed at the solution with the full
+tolerance (unless full-accuracy ones were computed within ``multiplier_tol`` of it).
 
 Stability: the multipliers of the passage map (Floquet multipliers of the periodic response;
 Kuznetsov 2004, sec. 1.5 and 9.3 for periodically forced systems), the eigenvalues of
@@ -51,6 +52,7 @@ the base trajectory too, with its own steps; its distance to the state-only run'
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cache
@@ -634,12 +636,21 @@ def solve_periodic_passage(problem: PassageProblem, x_guess: np.ndarray,
             continue
         newton = True
         if J is None or res > opts.chord_ratio * last_res:
+            # a Jacobian for Newton steps only needs a few digits: the first one is
+            # integrated 100 times looser (about 40 % fewer steps); the multipliers come
+            # from a full-accuracy solve at the solution
+            newton_opts = opts if J is not None else dataclasses.replace(
+                opts, tangent_rtol=min(100 * opts.tangent_rtol, 1e-4),
+                tangent_atol=min(100 * opts.tangent_atol, 1e-4))
             try:
-                fac = reduced_factors(problem, run.starts, opts,
-                                      x_ends=np.vstack([run.starts[1:], run.x_end[None, :]]))
+                newton_fac = reduced_factors(
+                    problem, run.starts, newton_opts,
+                    x_ends=np.vstack([run.starts[1:], run.x_end[None, :]]))
             except FloatingPointError as exc:
                 return fail(str(exc))
-            J = fac.jacobian
+            # only a full-accuracy solve may serve for the multipliers
+            fac = newton_fac if newton_opts is opts else None
+            J = newton_fac.jacobian
             J_at = y.copy()
             jac += 1
         last_res = res
