@@ -313,3 +313,25 @@ def test_vehicle_at_standstill_is_model_b_up_to_the_suspension_preload():
     d = x[0:6:2] - x[6] - b * x[7]
     assert 0 < np.max(np.abs(p.k2 * d)) < 1e-3 * p.point_load_vehicle
     assert np.max(np.abs(sys_m.observe("gap_deviation", x, pv))) < 1e-5
+
+
+def test_stability_change_is_located_by_solving():
+    """A beam stiffer than the standstill Hopf point (omega1 = 139 rad/s: the unit standing at
+    mid-span is unstable): the periodic response is unstable at 70 km/h and stable at
+    90 km/h, where the vehicle crosses the unstable middle of the span faster. The speed
+    between, where a complex pair of multipliers enters the unit circle (NS), is located to
+    |mu| = 1 by solving."""
+    from maglev_match.speed import locate_stability_change
+
+    p = UNIT1.replace(EI=4.0e10)
+    opts = SpeedOptions(critical=False)
+    lo, hi = 70 * KMH, 90 * KMH
+    mu_lo = periodic_response(p, "unit", lo, opts).multipliers.largest
+    mu_hi = periodic_response(p, "unit", hi, opts).multipliers.largest
+    assert mu_lo > 1.0 > mu_hi
+    ch = locate_stability_change(p, "unit", lo, hi, opts, xtol=1e-5)
+    assert ch.converged and ch.kind == "NS" and not ch.becomes_unstable
+    assert lo < ch.speed < hi
+    at = periodic_response(p, "unit", ch.speed, opts).multipliers
+    assert abs(at.largest - 1.0) < 1e-4
+    assert abs(complex(*ch.multiplier).imag) > 1e-3
