@@ -103,6 +103,7 @@ __all__ = [
     "resonance_speeds",
     "locate_stability_change",
     "standstill_point",
+    "adiabatic_rate",
     "w0_of",
 ]
 
@@ -790,6 +791,49 @@ def _nan_point(v: float, params: Params, kind: MovingModel, message: str,
                       nan, nan, 0, 0, 0, (message,))
 
 
+def adiabatic_rate(params: Params, model: str, v: float, positions: int = 40) -> float:
+    """The low-speed estimate of ln max|mu| / T (1/s): the mean over one passage of the
+    largest real part of the eigenvalues of the vehicle standing at each position (both
+    spans elastic), at ``positions`` equally spaced positions of the front (the adiabatic
+    limit of a slowly varying linear system; exact as v -> 0 when that eigenvalue stays
+    simple)."""
+    kind = MovingModel(model)
+    T = params.L / v
+    reals = []
+    for t in (np.arange(positions) + 0.5) * T / positions:
+        xf = params.L + v * t
+        x = quasi_static_state(params, kind, xf)
+        fb, rb = _flags(params, kind, xf)
+        p = mv.moving_param_vector(params, kind, v=0.0, x_front=xf, front_on_B=fb,
+                                   rear_on_B=rb)
+        J = mv.moving_system(params, kind, p).f_and_jacobian(x, p)[1]
+        reals.append(float(np.max(np.linalg.eigvals(J[:-1, :-1]).real)))
+    return float(np.mean(reals))
+
+
+def _failed_point(v: float, params: Params, kind: MovingModel, message: str,
+                  n_pts: int) -> SpeedPoint:
+    """A speed without a periodic response. When the vehicle standing along the span grows
+    so fast that the low-speed estimate of the largest multiplier, exp(T x the mean
+    growth rate), exceeds 10, the verdict is 'unstable' on that estimate (h = chi = 0) and
+    the warning says so; otherwise the verdict stays open."""
+    pt = _nan_point(v, params, kind, message, n_pts)
+    if v <= 0 or kind is MovingModel.FORCE:
+        return pt
+    try:
+        est = adiabatic_rate(params, kind, v) * params.L / v
+    except (FloatingPointError, np.linalg.LinAlgError):
+        return pt
+    if est > math.log(10.0):
+        note = (f"the vehicle standing along the span grows at {est * v / params.L:.3g} 1/s "
+                f"on average: the periodic response is strongly unstable (low-speed "
+                f"estimate of the largest multiplier exp({est:.3g})) and could not be "
+                "computed")
+        return dataclasses.replace(pt, stable=False, largest_multiplier=float(math.exp(
+            min(est, 700.0))), h=0.0, chi=0.0, warnings=(message, note))
+    return pt
+
+
 def periodic_response(params: Params, model: str, v: float,
                       options: SpeedOptions | None = None) -> PeriodicPassage:
     """The periodic response at speed v (m/s > 0): the fixed point of the span map from the
@@ -823,9 +867,9 @@ def speed_point(params: Params, model: str, v: float,
     try:
         sol = periodic_response(params, kind, v, opts)
     except FloatingPointError as exc:
-        return _nan_point(v, params, kind, f"no periodic response: {exc}", n_pts)
+        return _failed_point(v, params, kind, f"no periodic response: {exc}", n_pts)
     if not sol.converged or sol.multipliers is None:
-        return _nan_point(v, params, kind, f"no periodic response: {sol.message}", n_pts)
+        return _failed_point(v, params, kind, f"no periodic response: {sol.message}", n_pts)
     warnings: list[str] = []
     mult = sol.multipliers
     stable = mult.largest < 1.0
