@@ -41,7 +41,8 @@ class SpanRun:
     front of the vehicle reaches support k - 1.
 
     t (s); gap_deviation, current (k, points); body_acceleration (k,); midspan (k, spans):
-    the mid-span deflection of every span (NaN while it is not in the model); span_starts :
+    the mid-span deflection of every span while the vehicle is on it (NaN before the front
+    reaches it and after the rear has left it); span_starts :
     start time of every passage (s). outcome : 'ok', 'collision' or 'failed';
     collision_time (s), collision_point (1-based), collision_limit ('lower'/'upper').
     periodic_gap, periodic_acceleration : the periodic response at the same times
@@ -232,7 +233,10 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
                     curs.append(vals["current"])
                     accs.append(vals["body_acceleration"].ravel())
                 ms = vals["midspan"]
-                if k >= 2:
+                # the span behind is drawn while the vehicle is on it: once the rear has
+                # left it, it is no longer part of the model (its frozen state is not a
+                # motion)
+                if k >= 2 and seg.p[prob.system.param_index("active_A")] > 0.5:
                     mid[ids, k - 2] = ms[:, 0]
                 if k <= spans:
                     mid[ids, k - 1] = ms[:, 1]
