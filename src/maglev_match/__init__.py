@@ -45,6 +45,7 @@ _LAZY: dict[str, str] = {
     "design_search": "maglev_match.api",
     "design_map": "maglev_match.api",
     "study_report": "maglev_match.api",
+    "speed_sweep": "maglev_match.api",
     # figures: plot(result) draws any result; the figure functions themselves
     "plot": "maglev_match.plots",
     "figure_of": "maglev_match.plots",
@@ -77,6 +78,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         matching_index,
         root_locus,
         simulate,
+        speed_sweep,
         stability,
         study_report,
     )

@@ -50,6 +50,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from maglev_match.report import ReportResult
     from maglev_match.sensitivity import IndexSensitivity
     from maglev_match.simulation import MaglevSimulation
+    from maglev_match.speed import SpeedSweep
 
 __all__ = [
     "resolve_params",
@@ -65,6 +66,7 @@ __all__ = [
     "design_search",
     "design_map",
     "study_report",
+    "speed_sweep",
     "MODELS",
 ]
 
@@ -821,6 +823,61 @@ def design_map(params: Params | str | None = None,
         data = {k: np.concatenate([tiles[t][k] for t in spec.tiles], axis=0)
                 for k in tiles[spec.tiles[0]]}
     return annotate_map(map_dataset(spec, data), base)
+
+
+def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
+                speeds: Sequence[float] | None = None,
+                kmh: tuple[float, float, float] = (0.0, 150.0, 5.0), critical: bool = True,
+                spans: int = 40, workers: int | None = 0, scheduler: str | None = None,
+                checkpoint: str | Path | None = None, resume: bool = False,
+                progress: Callable[[int, int], None] | None = None,
+                **overrides: Any) -> SpeedSweep:
+    """The vehicle at speed over identical spans, swept over speed (`maglev-match speed`).
+
+    At every speed the periodic response (one span passage, found as the fixed point of
+    the span map), its multipliers and verdict, the gap deviation and current per
+    levitation point, the mid-span deflection and DAF, the car body's peak acceleration and
+    Sperling's Wz, the critical initial deflection of the span being entered and
+    chi(v) = h(v) / w0; then the resonance speeds in the range and the speeds where the
+    periodic response changes stability, located by solving.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+    model : str
+        `'unit'`, `'vehicle'` or `'force'` (a constant moving force).
+    speeds : sequence of float, optional
+        The speeds in m/s; without them, `kmh` = (from, to, step) in km/h as on the
+        command line (from 0 to 150 by 5 by default; v = 0 gives the standstill values).
+    critical : bool
+        Compute the critical disturbance at speed (slower).
+    spans : int
+        Spans a disturbed run may take to return to the periodic response.
+    workers, scheduler, checkpoint, resume, progress
+        As for [`design_map`][maglev_match.api.design_map]: 0 computes here, n > 0 on a
+        local Dask cluster, None one worker per core; `checkpoint` keeps a tile per speed
+        (then `resume` reuses them).
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    SpeedSweep
+        One [`SpeedPoint`][maglev_match.speed.SpeedPoint] per speed, the resonance speeds
+        and the stability changes; `.to_xarray()` and `.plot()` give the netCDF dataset and
+        the figure of the command line.
+    """
+    from maglev_match.speed import KMH, SpeedOptions, speeds_kmh
+    from maglev_match.speed import speed_sweep as _speed_sweep
+
+    p = resolve_params(params, **overrides)
+    if speeds is None:
+        speeds = list(speeds_kmh(*kmh) * KMH)
+    return _speed_sweep(p, model, list(speeds), SpeedOptions(critical=critical, spans=spans),
+                        checkpoint=None if checkpoint is None else Path(checkpoint),
+                        resume=resume, scheduler=scheduler, workers=workers,
+                        progress=progress)
 
 
 def _compute_tiles(spec, compute_tile, workers, scheduler, progress) -> dict:

@@ -954,8 +954,15 @@ def _sigint_ignored() -> Iterator[None]:
         signal.signal(signal.SIGINT, old)
 
 
-def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, total) -> None:
+def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, total,
+                 compute: Callable | None = None) -> None:
+    """Compute the tiles ``todo`` on Dask and save each into ``checkpoint`` as it finishes.
+    ``compute(spec, rows)`` makes a tile (default :func:`compute_tile`); other tiled jobs
+    (the speed sweeps of :mod:`maglev_match.speed`) pass their own, with a ``spec`` that
+    has ``key()``."""
     from dask.distributed import Client, LocalCluster, as_completed
+
+    compute = compute or compute_tile
 
     cluster = None
     if scheduler is None:
@@ -981,7 +988,7 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
                                  f"no Dask scheduler answered there ({exc})") from None
     futures: dict = {}
     try:
-        futures = {client.submit(compute_tile, spec, t, pure=False, retries=2): t for t in todo}
+        futures = {client.submit(compute, spec, t, pure=False, retries=2): t for t in todo}
         for fut in as_completed(futures):
             t = futures[fut]
             try:

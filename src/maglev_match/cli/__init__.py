@@ -57,38 +57,53 @@ DISK_FULL_HINT = ("; earlier files are unchanged and finished map tiles or Monte
 #: exactly the registered commands, each with the first sentence of its help.
 COMMANDS: dict[str, tuple[str, str]] = {
     "stability": ("stability", "Equilibrium, eigenvalues and the stability verdict with its "
-                  "margin."),
+                               "margin."),
     "root-locus": ("stability", "Eigenvalues along one parameter: writes CSV and a PNG/SVG "
-                   "figure."),
-    "presets": ("stability", "List the shipped parameter presets: beam values, a description, "
-                "and what each changes relative to the preset it derives from."),
+                                "figure."),
+    "presets": ("stability", "List the shipped parameter presets: beam values, a description,"
+                             " and what each changes relative to the preset it derives from."),
     "hopf": ("hopf", "Hopf points of the equilibrium along one parameter: value, frequency, "
-             "crossing speed d Re(lambda)/d param and the first Lyapunov coefficient l1 (> 0 "
-             "subcritical)."),
+                     "crossing speed d Re(lambda)/d param and the first Lyapunov coefficient "
+                     "l1 (> 0 subcritical)."),
     "hopf-curve": ("hopf", "The Hopf curve in two parameters by continuation, with l1 along "
-                   "it and the codimension-two points (GH with l2, BT, ZH, HH); writes CSV and "
-                   "a Fig. 4-style figure."),
+                           "it and the codimension-two points (GH with l2, BT, ZH, HH); "
+                           "writes CSV and a Fig. 4-style figure."),
     "cycles": ("cycles", "Cycles born at Hopf points, continued in --param until a physical "
-               "limit (Fig. 5)."),
+                         "limit (Fig. 5)."),
     "simulate": ("simulate", "Simulate model A or B from a named or explicit initial state; "
-                 "report collision (time, limit, levitation point), convergence or neither by "
-                 "the horizon."),
-    "index": ("index", "The matching index chi = h / w0 (model A or the full vehicle), with "
-              "the case that decided h, the simulated critical disturbance in both directions "
-              "and the reading; with --scatter, the spread of chi from parameter scatter."),
-    "map": ("index", "Stability, h, w0 and chi over a grid of two parameters (netCDF + "
-            "figure)."),
+                             "report collision (time, limit, levitation point), convergence "
+                             "or neither by the horizon. With --speed V --spans N: the "
+                             "vehicle at speed over N spans."),
+    "index": ("index", "The headline matching index chi = min(chi_paper, chi_simulation) "
+                       "(model A or the full vehicle): the paper's chi = h / w0 with the case"
+                       " that decided h, the simulated critical disturbance in both "
+                       "directions with what decided it, and the reading; with --scatter, the"
+                       " spread of chi from parameter scatter."),
+    "map": ("index", "The headline matching index chi = min(chi_paper, chi_simulation), its "
+                     "two parts, h, the simulated critical disturbances and stability over a "
+                     "grid of two parameters (netCDF + figure). An axis v=START:STOP:COUNT "
+                     "(km/h) maps the read-outs at speed instead (see `speed`)."),
     "report": ("report", "Self-contained HTML study report of one vehicle-beam pair (figures "
-               "embedded; the PNG/SVG files are written to <out stem>_figures/ beside it)."),
+                         "embedded; the PNG/SVG files are written to <out stem>_figures/ "
+                         "beside it)."),
     "reproduce": ("report", "Recompute the paper's figures (Figs. 4-8, 11-13) and its claims "
-                  "with the printed defaults; writes reproduce.html, claims.csv, claims.json "
-                  "and figures/ into --out."),
-    "sensitivity": ("design", "Exact d chi / d p, the elasticity (p / chi) d chi / d p and the "
-                    "margin's sensitivity for every parameter of model A or of the vehicle "
-                    "(--model vehicle), sorted by magnitude, with a tornado figure."),
-    "design": ("design", "The cheapest design (or the largest chi) meeting the requirements: "
-               "SLSQP with exact gradients from several grid starts, every candidate re-checked "
-               "by the full index."),
+                            "with the printed defaults; writes reproduce.html, claims.csv, "
+                            "claims.json and figures/ into --out."),
+    "sensitivity": ("design", "Exact d chi / d p of the headline index (the smaller of the "
+                              "paper's chi and chi_simulation; --no-simulation: the paper's "
+                              "chi), the elasticity (p / chi) d chi / d p and the margin's "
+                              "sensitivity for every parameter of model A or of the vehicle "
+                              "(--model vehicle), sorted by magnitude, with a tornado figure."),
+    "design": ("design", "The cheapest design (or the largest chi) meeting the requirements "
+                         "on the headline chi (both the paper's chi and chi_simulation; "
+                         "--no-simulation: the paper's chi alone): SLSQP with exact gradients"
+                         " from several grid starts, every candidate the full index."),
+    "speed": ("speed", "The vehicle at speed over identical simply supported spans: the "
+                       "periodic response at every speed from --from to --to (km/h), its "
+                       "stability (span-map multipliers), gap deviation, current, DAF, "
+                       "car-body acceleration and Sperling's Wz, the critical disturbance of "
+                       "the span being entered and chi(v) = h(v) / w0; resonance speeds and "
+                       "stability changes marked. Writes a netCDF sweep and a figure."),
 }
 
 
@@ -197,7 +212,7 @@ _flags_without_type()
 
 #: The modules that define commands (imported on demand, see :class:`LazyGroup`).
 COMMAND_MODULES = tuple(dict.fromkeys(
-    ("stability", "hopf", "cycles", "simulate", "index", "report", "design")
+    ("stability", "hopf", "cycles", "simulate", "index", "report", "design", "speed")
     + tuple(m for m, _ in COMMANDS.values())))
 _here = Path(__file__).parent
 

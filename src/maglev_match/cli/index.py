@@ -61,9 +61,10 @@ def index_command(
         "the --monte-carlo chunks (default: maglev-match-out/index/).")] = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """The matching index chi = h / w0 (model A or the full vehicle), with the case that
-    decided h, the simulated critical disturbance in both directions and the reading;
-    with --scatter, the spread of chi from parameter scatter."""
+    """The headline matching index chi = min(chi_paper, chi_simulation) (model A or the full
+    vehicle): the paper's chi = h / w0 with the case that decided h, the simulated critical
+    disturbance in both directions with what decided it, and the reading; with --scatter,
+    the spread of chi from parameter scatter."""
     if is_model_file(model):
         refuse_model_file(model, "index")
     from maglev_match.cli.design import (
@@ -234,7 +235,13 @@ def map_command(
 ) -> None:
     """The headline matching index chi = min(chi_paper, chi_simulation), its two parts,
     h, the simulated critical disturbances and stability over a grid of two parameters
-    (netCDF + figure)."""
+    (netCDF + figure). An axis v=START:STOP:COUNT (km/h) maps the read-outs at speed instead
+    (see `speed`)."""
+    from maglev_match.cli.speed import has_speed_axis, speed_map_command
+
+    if has_speed_axis(x, y):
+        return speed_map_command(x, y, preset, config, set_, out, resume, scheduler, workers,
+                                 json_out, model)
     refuse_model_file(model, "map")
     from maglev_match.io import atomic_write_netcdf
     from maglev_match.maps import (

@@ -100,11 +100,26 @@ def simulate_command(
         "--plot", help="Figure file (PNG; an SVG is written beside it), or a folder for "
         "simulation_MODEL.png, instead of beside the history.")] = None,
     json_out: JsonOpt = False,
+    speed: Annotated[float | None, typer.Option(
+        "--speed", help="Run at this speed (km/h) over --spans identical spans from rigid "
+        "ground and off again (--model unit|vehicle|force), the periodic response "
+        "overlaid; --t, --x5, --q1, --initial and --x0 do not apply.")] = None,
+    spans: Annotated[int | None, typer.Option(
+        "--spans", help="With --speed: the number of spans (default 10).")] = None,
 ) -> None:
     """Simulate model A or B from a named or explicit initial state; report collision
-    (time, limit, levitation point), convergence or neither by the horizon."""
+    (time, limit, levitation point), convergence or neither by the horizon. With --speed V
+    --spans N: the vehicle at speed over N spans."""
     from maglev_match.dynamics.simulate import SimulationOptions
     from maglev_match.simulation import initial_state, save_history, simulate_maglev
+
+    if speed is not None or spans is not None:
+        from maglev_match.cli.speed import simulate_at_speed
+
+        if speed is None:
+            raise UserError("--spans goes with --speed V (km/h)")
+        return simulate_at_speed(params_from_options(preset, config, set_), model, speed,
+                                 spans, limits, out, plot, json_out)
 
     if not is_model_file(model):
         check_model(model)

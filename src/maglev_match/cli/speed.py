@@ -1,0 +1,309 @@
+"""`maglev-match speed`: the vehicle at speed over identical spans, swept over speed; the
+run over N spans behind `simulate --speed V --spans N`; the map over (v, another parameter)
+behind `map --x v=...`. Speeds on the command line are in km/h; JSON and files are SI."""
+
+from __future__ import annotations
+
+import math
+import shutil
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+from rich import box
+from rich.table import Table
+
+from maglev_match.cli import app
+from maglev_match.cli.common import (
+    DEFAULT_PRESET_NAME,
+    ConfigOpt,
+    JsonOpt,
+    PresetOpt,
+    SetOpt,
+    check_output_path,
+    console,
+    emit_json,
+    output_target,
+    params_from_options,
+    preload,
+    print_warnings,
+    progress_report,
+    scheduler_option,
+    workers_option,
+)
+from maglev_match.params import ParameterError
+
+SPEED_MODELS = ("unit", "vehicle", "force")
+KMH_MAX = 900.0  # km/h
+
+SpeedModelOpt = Annotated[str, typer.Option(
+    "--model", help="'unit' (model A's unit, the vehicle's k units spread over its length), "
+    "'vehicle' (model B, six levitation points) or 'force' (a constant moving force).")]
+SpansOpt = Annotated[int, typer.Option(
+    "--spans", help="Spans a disturbed run may take to return to the periodic response "
+    "(the guideway's length in spans).")]
+
+
+def _check_model(model: str) -> str:
+    if model not in SPEED_MODELS:
+        raise ParameterError("--model", model, "must be 'unit', 'vehicle' or 'force'")
+    return model
+
+
+def _fmt(v: float, fmt: str) -> str:
+    return "-" if v is None or not np.isfinite(v) else format(v, fmt)
+
+
+def _table(sweep) -> Table:
+    t = Table(box=box.SIMPLE_HEAD, pad_edge=False)
+    cols = ["km/h", "stable", "max|mu|", "DAF", "max|gap dev| mm", "min current A",
+            "Wz", "acc m/s^2", "h mm", "chi(v)"]
+    for c in cols:
+        t.add_column(c, justify="right")
+    for p in sweep.points:
+        stable = "-" if p.stable is None else ("yes" if p.stable else "NO")
+        imin = min(p.current_min) if p.current_min else float("nan")
+        t.add_row(f"{p.speed_kmh:g}", stable, _fmt(p.largest_multiplier, ".4f"),
+                  _fmt(p.daf, ".4f"), _fmt(p.gap_dev_abs_max * 1e3, ".4f"),
+                  _fmt(imin, ".2f"), _fmt(p.wz, ".3f"), _fmt(p.body_acc_peak, ".4f"),
+                  _fmt(p.h * 1e3, ".3f"), _fmt(p.chi, ".3f"))
+    return t
+
+
+def _summary_lines(sweep) -> list[str]:
+    from maglev_match.ride import sperling_reading
+    from maglev_match.speed import KMH
+
+    out = []
+    daf, v_daf = sweep.largest("daf")
+    wz, v_wz = sweep.largest("wz")
+    gap, v_gap = sweep.largest("gap_dev_abs_max")
+    out.append(f"largest DAF {_fmt(daf, '.4f')} at {_fmt(v_daf / KMH, '.4g')} km/h; largest "
+               f"|gap deviation| {_fmt(gap * 1e3, '.4f')} mm at {_fmt(v_gap / KMH, '.4g')} km/h")
+    if np.isfinite(wz):
+        out.append(f"largest Wz {wz:.3f} at {v_wz / KMH:.4g} km/h ({sperling_reading(wz)})")
+    unstable = [p for p in sweep.points if p.stable is False]
+    if unstable:
+        out.append("the levitation LOSES STABILITY at " + ", ".join(
+            f"{p.speed_kmh:g}" for p in unstable) + " km/h")
+    elif sweep.model != "force":
+        out.append(f"the periodic response is stable at every speed from "
+                   f"{sweep.points[0].speed_kmh:g} to {sweep.points[-1].speed_kmh:g} km/h")
+    for c in sweep.stability_changes:
+        if c.converged:
+            what = "loses" if c.becomes_unstable else "regains"
+            out.append(f"  it {what} stability at {c.speed / KMH:.4f} km/h ({c.kind}, "
+                       f"multiplier {complex(*c.multiplier):.4g})")
+    chis = [p for p in sweep.points if np.isfinite(p.chi)]
+    if chis:
+        worst = min(chis, key=lambda p: p.chi)
+        out.append(f"smallest chi(v) {worst.chi:.3f} at {worst.speed_kmh:g} km/h (h = "
+                   f"{worst.h * 1e3:.3f} mm, w0 = {worst.w0 * 1e3:.4f} mm)")
+    return out
+
+
+@app.command("speed")
+def speed_command(
+    model: SpeedModelOpt = "unit",
+    from_: Annotated[float, typer.Option("--from", help="First speed (km/h).")] = 0.0,
+    to: Annotated[float, typer.Option("--to", help="Last speed (km/h).")] = 150.0,
+    step: Annotated[float, typer.Option("--step", help="Speed step (km/h).")] = 5.0,
+    spans: SpansOpt = 40,
+    preset: PresetOpt = DEFAULT_PRESET_NAME,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    critical: Annotated[bool, typer.Option(
+        "--critical/--no-critical", help="Compute the critical disturbance at speed "
+        "(h(v), chi(v)); off is faster.")] = True,
+    out: Annotated[Path | None, typer.Option(
+        "--out", help="Folder for speed_MODEL.nc and .png/.svg, or a file name whose stem "
+        "names them (default: maglev-match-out/speed/).")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Reuse the finished speeds of an "
+                                         "interrupted sweep (<out>.tiles/).")] = False,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", help="Local Dask workers (default: one per core; 0: in this process).",
+        callback=workers_option)] = None,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Existing Dask scheduler, tcp://host:port.",
+        callback=scheduler_option)] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """The vehicle at speed over identical simply supported spans: the periodic response at
+    every speed from --from to --to (km/h), its stability (span-map multipliers), gap
+    deviation, current, DAF, car-body acceleration and Sperling's Wz, the critical
+    disturbance of the span being entered and chi(v) = h(v) / w0; resonance speeds and
+    stability changes marked. Writes a netCDF sweep and a figure."""
+    from maglev_match.speed import (
+        KMH,
+        SpeedOptions,
+        check_speed_setup,
+        speed_sweep,
+        speeds_kmh,
+    )
+
+    _check_model(model)
+    check_output_path(out)
+    params = params_from_options(preset, config, set_)
+    kmh = speeds_kmh(from_, to, step)
+    opts = SpeedOptions(critical=critical, spans=spans)
+    check_speed_setup(params, model, list(kmh * KMH), spans)
+    folder, stem = output_target(out, "speed", f"speed_{model}")
+    nc = folder / f"{stem}.nc"
+    tiles = nc.with_name(nc.name + ".tiles")
+    if out is not None or not json_out:
+        preload("xarray", "matplotlib.pyplot", "h5netcdf")
+    with progress_report("speed") as prog:
+        prog.stage(f"{len(kmh)} speeds, model {model}, {'with' if critical else 'without'} "
+                   "the critical disturbance ...")
+        started = time.perf_counter()
+        sweep = speed_sweep(params, model, list(kmh * KMH), opts, checkpoint=tiles,
+                            resume=resume, scheduler=scheduler, workers=workers,
+                            progress=lambda d, t: prog.tiles(d, t, "speeds"))
+        elapsed = time.perf_counter() - started
+        prog.stage(f"sweep done in {elapsed:.1f} s; writing files ...")
+        files = _write_sweep(sweep, folder, stem)
+    shutil.rmtree(tiles, ignore_errors=True)  # the sweep is complete: its tiles are spent
+    summary = sweep.summary() | {"files": [str(f) for f in files]}
+    if json_out:
+        emit_json(summary)
+        print_warnings(sweep.warnings)
+        return
+    console.print(f"maglev-match speed — model {model}, preset {preset}, L = {params.L:g} m, "
+                  f"omega1 = {params.omega1:.4g} rad/s", highlight=False)
+    console.print(_table(sweep))
+    if sweep.resonances:
+        console.print("resonance speeds (an excitation frequency meets a natural frequency):",
+                      highlight=False)
+        for r in sweep.resonances:
+            console.print(f"  {r.label}", highlight=False, markup=False)
+    for line in _summary_lines(sweep):
+        console.print(line, highlight=False, markup=False)
+    print_warnings(sweep.warnings)
+    for f in files:
+        console.print(f"wrote {f}", highlight=False)
+
+
+def _write_sweep(sweep, folder: Path, stem: str) -> list[Path]:
+    from maglev_match.io import atomic_write
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.speed import speed_figure
+
+    folder.mkdir(parents=True, exist_ok=True)
+    nc = folder / f"{stem}.nc"
+    ds = sweep.to_xarray()
+    atomic_write(nc, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+    return [nc, *save_figure(speed_figure(sweep), folder / f"{stem}.png")]
+
+
+# ---------------------------------------------------------------------------------------
+# simulate --speed V --spans N
+# ---------------------------------------------------------------------------------------
+def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, limits: bool,
+                      out: Path | None, plot: Path | None, json_out: bool) -> None:
+    """`simulate --speed V --spans N`: the run over N spans from rigid ground and off again,
+    with the periodic response overlaid (called by the simulate command)."""
+    from maglev_match.speed import KMH, SpeedOptions, check_speed_setup
+    from maglev_match.speed_spans import simulate_over_spans
+
+    _check_model(model)
+    n = 10 if spans is None else spans
+    if not (math.isfinite(speed_kmh) and 0 < speed_kmh <= KMH_MAX):
+        raise ParameterError("--speed", speed_kmh, f"must lie in (0, {KMH_MAX:g}] km/h for a "
+                             "run over spans")
+    check_speed_setup(params, model, [speed_kmh * KMH], n)
+    if n > 1000:
+        raise ParameterError("--spans", n, "must be at most 1000 for a run over spans")
+    check_output_path(out, suffixes=(".nc",))
+    check_output_path(plot, "--plot")
+    with progress_report("simulate") as prog:
+        prog.stage(f"running model {model} over {n} spans at {speed_kmh:g} km/h ...")
+        run = simulate_over_spans(params, model, speed_kmh * KMH, n, limited=limits,
+                                  options=SpeedOptions(critical=False))
+        prog.stage(f"run done: {run.outcome}")
+        folder, stem = output_target(out, "simulate", f"simulation_{model}_speed")
+        folder.mkdir(parents=True, exist_ok=True)
+        from maglev_match.io import atomic_write
+
+        nc = folder / f"{stem}.nc"
+        ds = run.to_xarray()
+        atomic_write(nc, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+        written = [nc]
+        pfolder, pstem = output_target(plot if plot is not None else out, "simulate",
+                                       f"simulation_{model}_speed")
+        from maglev_match.plots import save_figure
+        from maglev_match.plots.speed import span_run_figure
+
+        written += save_figure(span_run_figure(run), pfolder / f"{pstem}.png")
+    summary: dict[str, Any] = run.summary() | {"files": [str(w) for w in written]}
+    if json_out:
+        emit_json(summary)
+        print_warnings(run.warnings)
+        return
+    console.print(f"model {model} over {n} spans of L = {params.L:g} m at {speed_kmh:g} km/h "
+                  f"({run.speed:.4g} m/s), limits {'on' if limits else 'off'}: {run.outcome}",
+                  highlight=False)
+    if run.outcome == "collision":
+        console.print(f"[bold red]collision[/] at t = {run.collision_time:.6f} s: "
+                      f"{run.collision_limit} gap limit at levitation point "
+                      f"{run.collision_point}")
+    spans_txt = ", ".join(f"{v * 1e3:.4f}" for v in run.per_span_midspan_max)
+    console.print(f"largest mid-span deflection per span (mm): {spans_txt}", highlight=False)
+    gaps_txt = ", ".join(_fmt(v * 1e3, ".4f") for v in run.per_passage_gap_max)
+    console.print(f"largest |gap deviation| per span passage (mm): {gaps_txt}",
+                  highlight=False)
+    print_warnings(run.warnings)
+    for w in written:
+        console.print(f"wrote {w}", highlight=False)
+
+
+# ---------------------------------------------------------------------------------------
+# map --x v=... (km/h) --y NAME=...
+# ---------------------------------------------------------------------------------------
+def has_speed_axis(*axes: str) -> bool:
+    """Whether a map axis is the speed ``v=START:STOP:COUNT`` (km/h)."""
+    return any(a.split("=", 1)[0].strip() == "v" for a in axes)
+
+
+def speed_map_command(x: str, y: str, preset: str, config, set_, out: Path | None,
+                      resume: bool, scheduler: str | None, workers: int | None,
+                      json_out: bool, model: str | None) -> None:
+    """`map` with the speed v (km/h) on one axis: every grid point a periodic response at
+    speed with its read-outs (netCDF + figure)."""
+    from maglev_match.speed import SpeedOptions
+    from maglev_match.speed_maps import parse_speed_axes, run_speed_map
+
+    kind = _check_model(model or "unit")
+    check_output_path(out)
+    params = params_from_options(preset, config, set_)
+    spec = parse_speed_axes(params, kind, x, y, SpeedOptions())
+    folder, stem = output_target(out, "map", f"map_{spec.x.name}_{spec.y.name}")
+    nc = folder / f"{stem}.nc"
+    tiles = nc.with_name(nc.name + ".tiles")
+    with progress_report("map") as prog:
+        prog.stage(f"map {spec.x.name} x {spec.y.name} at speed, model {kind}: "
+                   f"{len(spec.tiles)} rows ...")
+        ds = run_speed_map(spec, tiles, resume=resume, scheduler=scheduler, workers=workers,
+                           progress=prog.tiles)
+        from maglev_match.io import atomic_write
+        from maglev_match.plots import save_figure
+        from maglev_match.plots.speed import speed_map_figure
+
+        folder.mkdir(parents=True, exist_ok=True)
+        atomic_write(nc, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+        files = [nc, *save_figure(speed_map_figure(ds), folder / f"{stem}.png")]
+    shutil.rmtree(tiles, ignore_errors=True)
+    stable = ds["stable"].values
+    summary = {"netcdf": str(nc), "figures": [str(f) for f in files[1:]], "x": spec.x.name,
+               "y": spec.y.name, "model": kind, "shape": list(stable.shape),
+               "stable_fraction": float(np.mean(stable == 1)),
+               "chi_min": float(np.nanmin(ds["chi"].values))
+               if np.isfinite(ds["chi"].values).any() else None,
+               "speed_units_on_command_line": "km/h", "speed_units_in_file": "m/s"}
+    if json_out:
+        emit_json(summary)
+        return
+    console.print(f"wrote {', '.join(str(f) for f in files)}", highlight=False)
+    console.print(f"periodic response stable at {summary['stable_fraction']:.0%} of the "
+                  "points", highlight=False)

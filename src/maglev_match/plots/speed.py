@@ -1,0 +1,130 @@
+"""Figures at speed: the read-outs of a speed sweep against speed, and the time histories of
+a run over several spans with the periodic response overlaid."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from maglev_match.plots import new_figure
+
+__all__ = ["speed_figure", "span_run_figure"]
+
+KMH = 3.6  # km/h per m/s
+
+
+def _mark(ax, sweep, with_labels: bool) -> list:
+    """Resonance speeds (dotted grey) and located stability changes (dashed red)."""
+    handles = []
+    for k, r in enumerate(sweep.resonances):
+        h = ax.axvline(r.speed * KMH, color="0.55", ls=":", lw=0.9)
+        if k == 0:
+            handles.append((h, "resonance speed (excitation meets a natural frequency)"))
+    for k, c in enumerate(sweep.stability_changes):
+        if c.converged:
+            h = ax.axvline(c.speed * KMH, color="r", ls="--", lw=1.2)
+            if k == 0:
+                handles.append((h, f"stability change ({c.kind})"))
+    return handles if with_labels else []
+
+
+def speed_figure(sweep):
+    """Five panels against speed (km/h): DAF, largest |gap deviation| (mm), Sperling's Wz,
+    the largest |multiplier| of the span map (1 dashed: the stability limit) and
+    chi(v) = h(v) / w0; resonance speeds and located stability changes marked. Unstable
+    speeds are drawn as crosses. Returns the figure."""
+    v = sweep.speeds * KMH
+    stable = np.array([p.stable is not False for p in sweep.points])
+    fig, axes = new_figure(5, 1, figsize=(7.5, 11.0), sharex=True)
+    panels = [
+        ("daf", "DAF", 1.0),
+        ("gap_dev_abs_max", "largest |gap deviation| (mm)", 1e3),
+        ("wz", "Sperling Wz (vertical)", 1.0),
+        ("largest_multiplier", "largest |multiplier|", 1.0),
+        ("chi", "chi(v) = h(v) / w0", 1.0),
+    ]
+    for ax, (name, label, factor) in zip(axes, panels, strict=True):
+        y = sweep.column(name) * factor
+        ax.plot(v, y, "-", color="C0", lw=1.2)
+        ax.plot(v[stable], y[stable], "o", color="C0", ms=3.5)
+        if (~stable).any():
+            ax.plot(v[~stable], y[~stable], "x", color="r", ms=6, label="unstable")
+        ax.set_ylabel(label)
+        if name == "largest_multiplier":
+            ax.axhline(1.0, color="k", ls="--", lw=0.8)
+        handles = _mark(ax, sweep, ax is axes[0])
+        if handles:
+            ax.legend([h for h, _ in handles], [t for _, t in handles], fontsize=7,
+                      loc="best")
+    axes[-1].set_xlabel("speed (km/h)")
+    model = {"unit": "levitation unit", "vehicle": "full vehicle",
+             "force": "moving force"}.get(sweep.model, sweep.model)
+    axes[0].set_title(f"At speed over identical spans (L = {sweep.params.L:g} m): {model}")
+    fig.tight_layout()
+    return fig
+
+
+def span_run_figure(run):
+    """Time histories of a run over spans (:class:`maglev_match.speed.SpanRun`): gap
+    deviation per levitation point, the car body's acceleration and the mid-span deflection
+    of every span, with the periodic response repeated span after span (dashed) and the span
+    boundaries (the front of the vehicle reaching a support) marked. Returns the figure."""
+    fig, axes = new_figure(3, 1, figsize=(8.0, 8.5), sharex=True)
+    t = run.t
+    ax = axes[0]
+    for j in range(run.gap_deviation.shape[1]):
+        ax.plot(t, run.gap_deviation[:, j] * 1e3, lw=0.9, label=f"point {j + 1}")
+    if run.periodic_gap is not None:
+        for j in range(run.periodic_gap.shape[1]):
+            ax.plot(t, run.periodic_gap[:, j] * 1e3, "k--", lw=0.7,
+                    label="periodic response" if j == 0 else None)
+    ax.set_ylabel("gap deviation (mm)")
+    ax.legend(fontsize=7, ncol=4)
+    ax = axes[1]
+    ax.plot(t, run.body_acceleration, lw=0.9, label="run")
+    if run.periodic_acceleration is not None:
+        ax.plot(t, run.periodic_acceleration, "k--", lw=0.7, label="periodic response")
+    ax.set_ylabel("car-body acceleration (m/s^2)")
+    ax.legend(fontsize=7)
+    ax = axes[2]
+    for s in range(run.midspan.shape[1]):
+        ax.plot(t, run.midspan[:, s] * 1e3, lw=0.9, label=f"span {s + 1}")
+    ax.set_ylabel("mid-span deflection (mm, down)")
+    ax.set_xlabel("time (s)")
+    if run.midspan.shape[1] <= 8:
+        ax.legend(fontsize=7, ncol=4)
+    for a in axes:
+        for tb in run.span_starts:
+            a.axvline(tb, color="0.7", lw=0.6, ls=":")
+        if run.collision_time is not None:
+            a.axvline(run.collision_time, color="r", lw=1.2)
+    axes[0].set_title(f"{run.spans} spans at {run.speed * KMH:.4g} km/h "
+                      f"({run.outcome})")
+    fig.tight_layout()
+    return fig
+
+
+def speed_map_figure(ds):
+    """A map at speed (:func:`maglev_match.speed.run_speed_map`): chi(v) as colour at stable
+    points, unstable points crossed, the speed axis in km/h. Returns the figure."""
+    yname, xname = ds["chi"].dims
+    x, y = ds[xname].values.astype(float), ds[yname].values.astype(float)
+    xl, yl = xname, yname
+    if xname == "v":
+        x, xl = x * KMH, "speed v (km/h)"
+    if yname == "v":
+        y, yl = y * KMH, "speed v (km/h)"
+    chi = np.ma.masked_invalid(ds["chi"].values)
+    fig, ax = new_figure(figsize=(8.0, 5.5))
+    if chi.count():
+        mesh = ax.pcolormesh(x, y, chi, shading="nearest", cmap="viridis")
+        fig.colorbar(mesh, ax=ax, label="chi(v) = h(v) / w0")
+    unstable = ds["stable"].values == 0
+    if unstable.any():
+        X, Y = np.meshgrid(x, y)
+        ax.plot(X[unstable], Y[unstable], "rx", ms=7, label="periodic response unstable")
+        ax.legend(fontsize=8)
+    ax.set_xlabel(xl)
+    ax.set_ylabel(yl)
+    ax.set_title(f"At speed ({ds.attrs.get('model', '')}): chi(v) over {xname} and {yname}")
+    fig.tight_layout()
+    return fig
