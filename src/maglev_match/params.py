@@ -60,6 +60,8 @@ PARAMETER_DOCS: dict[str, tuple[str, str]] = {
     "kP": ("A/m", "gap feedback gain"),
     "kD": ("A s/m", "velocity feedback gain"),
     "ke": ("V/A", "current feedback gain"),
+    "tau": ("s", "delay of the outer control loop (gap and velocity feedback act on observer "
+            "outputs this old; 0: no delay)"),
     "xi1": ("-", "beam modal damping ratio (all modes)"),
     "omega1": ("rad/s", "beam first modal circular frequency"),
     "sigma": ("1/kg", "force gain coefficient of the vehicle on the beam"),
@@ -95,6 +97,7 @@ RANGES: dict[str, tuple[float, float]] = {
     "mbar": (1e-3, 1e7), "l": (1e-2, 1e4), "k": (1, 10_000), "gap_max": (0.0, 1.0),
     "m_s": (1e-3, 1e8), "j_s": (1e-3, 1e10), "m_b": (1e-3, 1e8), "j_b": (1e-3, 1e10),
     "k2": (1e-6, 1e10), "c2": (0.0, 1e9), "s": (1e-4, 1e4), "s0": (0.0, 1e4),
+    "tau": (0.0, 1.0),
 }
 # Inputs from which each derived value is computed (named in its error message).
 DERIVED_FROM: dict[str, tuple[str, ...]] = {
@@ -148,6 +151,7 @@ class Params:
     kP: float = 5000.0
     kD: float = 150.0
     ke: float = 25.0
+    tau: float = 0.0  # delay of the outer loop (s); 0 gives the delay-free models exactly
     # beam
     xi1: float = 0.005
     L: float = 18.0
@@ -318,7 +322,7 @@ def _validate_inputs(p: Params) -> None:
             raise ParameterError(n, v, "must be a whole number")
     _positive(p, "m", "M", "g", "ks", "mu0", "N", "A", "c0", "omega0", "xi0", "ke",
               "L", "EI", "mbar", "l", "k", "m_s", "j_s", "m_b", "j_b", "k2", "s")
-    _nonnegative(p, "cs", "c2", "kP", "kD", "s0", "gap_min")
+    _nonnegative(p, "cs", "c2", "kP", "kD", "s0", "gap_min", "tau")
     if not 0 <= p.xi1 < 1:
         raise ParameterError("xi1", p.xi1, "a damping ratio must lie in [0, 1)")
     if p.omega1 is not None and not 0 < p.omega1 <= 1e5:

@@ -36,6 +36,7 @@ from maglev_match.cli.common import (
     validate_value,
 )
 from maglev_match.cli.models import resolve_model
+from maglev_match.dynamics.delay import DiscretisedSystem, delay_hopf_points, is_delay_parameter
 from maglev_match.dynamics.hopf import (
     HopfPoint,
     locate_hopf_points,
@@ -87,7 +88,8 @@ def hopf_command(
         raise ParameterError("--steps", steps, "must be at least 2")
     if not start < stop:
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
-    rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
+    # --model unit|vehicle|FILE.py; along a delay: the discretised delay system (tau <= --to)
+    rm = resolve_model(model, set_, preset, config, delay_axis=(param, stop))
     params, system, model = rm.params, rm.system, rm.label
     engineering = params is not None and is_engineering(param)
     if not engineering:
@@ -102,6 +104,13 @@ def hopf_command(
         records = [{param: hp.value, **_point_record(hp, system, names)}
                    for hp in scan.points]
         names = (param, *names)
+    elif is_delay_parameter(system, param):  # crossings of the characteristic equation
+        if start < 0:
+            raise ParameterError("--from", start, f"{param} is a delay: the range must start "
+                                 "at or above 0")
+        scan = delay_hopf_points(system, param, start, stop, n_scan=steps)
+        names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
+        records = [_point_record(hp, system, names) for hp in scan.points]
     else:
         scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
         names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
@@ -109,14 +118,18 @@ def hopf_command(
     specials = [{"type": str(sp.type), param: sp.value, "located": sp.located,
                  "label": sp.label, "frequency": sp.frequency}
                 for sp in scan.special_points]
+    delay_note = _delay_note(system, param)
     if json_out:
         emit_json({"param": param, "model": model, "from": start, "to": stop,
                    "points": records, "special_points": specials,
-                   "warnings": list(scan.warnings)})
+                   "warnings": list(scan.warnings),
+                   **({"delay": delay_note} if delay_note else {})})
         return
     unit = "" if rm.is_user else unit_of(param)
     console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit}, "
                   f"model {model}: {len(records)} found")
+    if delay_note:
+        console.print(delay_note["text"], highlight=False)
     if records:
         table = Table(*names, "omega (rad/s)", "dRe/dp", "l1", "type", "others stable",
                       "converged")
@@ -132,6 +145,20 @@ def hopf_command(
         console.print(f"  {sp['label']}: {sp['type']} of the equilibrium at {param} = "
                       f"{sp[param]:.8g} ({sp['located']})")
     print_warnings(list(scan.warnings) + [w for hp in scan.points for w in hp.warnings])
+
+
+def _delay_note(system, param: str) -> dict | None:
+    """How a delay model was analysed (the delay axis, or a model with a delay)."""
+    if not isinstance(system, DiscretisedSystem):
+        return None
+    axis = param in system.delays
+    text = (f"  delay system: Chebyshev discretisation of the past with N = {system.nodes} "
+            f"nodes per delay (dimension {system.dim} = {system.n_state} states + "
+            f"{system.dim - system.n_state} history values)"
+            + ("; Hopf points in the delay are the crossings of the characteristic equation "
+               "(exact; delay 0 is the delay-free model)" if axis else ""))
+    return {"nodes": system.nodes, "dimension": system.dim, "states": system.n_state,
+            "delays": list(system.delays), "axis": axis, "text": text}
 
 
 def _parse_ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:

@@ -31,7 +31,8 @@ from maglev_match.dynamics.system import System
 from maglev_match.models.user import ModelFileError, UserModel, is_model_file, load_model
 from maglev_match.params import ParameterError, Params
 
-__all__ = ["ResolvedModel", "is_model_file", "refuse_model_file", "resolve_model"]
+__all__ = ["ResolvedModel", "delay_names", "is_model_file", "refuse_model_file",
+           "resolve_model"]
 
 
 @dataclass(frozen=True)
@@ -87,7 +88,8 @@ def load_user_model(path: str) -> UserModel:
 
 
 def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
-                  config: Path | None = None, *, limited: bool = False) -> ResolvedModel:
+                  config: Path | None = None, *, limited: bool = False,
+                  delay_axis: tuple[str, float] | None = None) -> ResolvedModel:
     """The system ``--model`` names, with ``--set`` (and, for the maglev models,
     ``--preset``/``--config``) applied.
 
@@ -97,6 +99,9 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
     sets : the ``--set NAME=VALUE`` items.
     preset, config : the maglev parameter set options (a user model refuses ``--config``).
     limited : the maglev model with its physical limits (built-in models only).
+    delay_axis : (parameter, largest value) of a parameter axis: when the parameter is a
+        delay of the model, the system is the discretised delay system sized for delays up
+        to that value, even where the delay is 0 (see :mod:`maglev_match.dynamics.delay`).
     """
     if is_model_file(model):
         if config is not None:
@@ -107,8 +112,10 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
         vals = user.values_with(values)
         desc = (f"Model {user.name} ({model}, {len(user.states)} states), "
                 + ", ".join(f"{k} = {v:.6g}" for k, v in vals.items()))
-        return ResolvedModel(system=user.system(values), description=desc, label=user.name,
-                             user=user)
+        tau_max = (delay_axis[1] if delay_axis is not None and delay_axis[0] in user.delays
+                   else None)
+        return ResolvedModel(system=user.system(values, tau_max=tau_max), description=desc,
+                             label=user.name, user=user)
     check_model(model)
     from maglev_match.cli.common import DEFAULT_PRESET_NAME
     from maglev_match.models import build_system
@@ -116,8 +123,20 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
     params = params_from_options(preset or DEFAULT_PRESET_NAME, config, sets)
     desc = (f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
             f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg")
-    return ResolvedModel(system=build_system(params, model, limited=limited), description=desc,
-                         label=model, params=params)
+    tau_max = (delay_axis[1] if delay_axis is not None and delay_axis[0] in MAGLEV_DELAYS
+               else None)
+    return ResolvedModel(system=build_system(params, model, limited=limited, tau_max=tau_max),
+                         description=desc, label=model, params=params)
+
+
+#: the delay parameters of the maglev models
+MAGLEV_DELAYS = ("tau",)
+
+
+def delay_names(rm: ResolvedModel) -> tuple[str, ...]:
+    """The delay parameters of a resolved model (the maglev models: tau; a user model: its
+    DELAYS)."""
+    return rm.user.delays if rm.user is not None else MAGLEV_DELAYS
 
 
 #: ``--model`` on the commands that analyse the maglev models themselves (index, map,
