@@ -175,6 +175,7 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     the one nearest the current value (or from all with ``--all``), continued without
     physical limits; extrema of every state and observable along the branch."""
     from maglev_match.dynamics.cycles import cycle_branch
+    from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
 
     user = load_user_model(model)
@@ -186,9 +187,17 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     design = system.param(param)
     a = (design / 4 if design > 0 else design - 1.0) if start is None else start
     b = (design * 4 if design > 0 else design + 1.0) if stop is None else stop
+    if param in user.delays:  # a delay axis from 0: the discretised delay system
+        a = 0.0 if start is None else start
+        if min(a, b) < 0:
+            raise ParameterError("--from", min(a, b), f"{param} is a delay: >= 0")
+        system = user.system(values, tau_max=max(a, b))
     if not (np.isfinite(a) and np.isfinite(b)) or a == b:
         raise UserError(f"--from/--to: empty search range [{a}, {b}]")
-    scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+    if is_delay_parameter(system, param):
+        scan = delay_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+    else:
+        scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
     hopfs = sorted((h for h in scan.points if h.converged), key=lambda h: abs(h.value - design))
     if not hopfs:
         raise UserError(f"no Hopf point of the equilibrium along {param} in "

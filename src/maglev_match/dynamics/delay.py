@@ -400,6 +400,12 @@ class DiscretisedSystem(System):
     def normal_form_dim(self) -> int:
         return self.dde.dim
 
+    #: Floquet multipliers by orthogonal iteration for the largest ones
+    #: (:func:`~maglev_match.dynamics.floquet.dominant_multipliers`): the discretised past
+    #: makes every interval's transfer matrix ill-conditioned, and all but a few multipliers
+    #: are far below round-off
+    floquet_method = "dominant"
+
     @property
     def delays(self) -> tuple[str, ...]:
         return self.dde.delays
