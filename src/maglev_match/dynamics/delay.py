@@ -39,9 +39,12 @@ det Delta = 0 with an error that falls exponentially in N (the eigenfunction
 exp(lambda theta) on the interval is resolved when N >> |lambda| tau / 2; Breda et al. 2005);
 each approximation is then corrected by Newton's method on the exact equations
 Delta(lambda) v = 0, c^H v = 1 (as DDE-BIFTOOL does; Engelborghs, Luzyanina & Roose 2002,
-ACM TOMS 28:1). A root is *trusted* when it is found, to ``TRUST_TOL`` relative, with N and
-with a larger N and its Newton correction converges to it; the trusted roots are the leading
-ones (by real part) up to the first one that fails.
+ACM TOMS 28:1). A root is *trusted* when Newton's method, started from its approximations
+with N and with a larger N (both within ``APPROX_TOL``), converges to the same root (to
+``TRUST_TOL``), and the larger N shows no further root to its right; the trusted roots are
+the leading ones (by real part) up to the first one that fails. (For tiny delays, tau
+|lambda| < 1e-5 or so, the discretised matrix has entries ~ N^2 / tau and its eigenvalues
+carry round-off far above the spectral error; the Newton correction removes it.)
 
 **Hopf points in a delay** (:func:`delay_crossings`, :func:`critical_delay`). The
 equilibrium does not move with a delay, so its Hopf points in tau_k are the delays at which
@@ -140,9 +143,12 @@ NODES_MAX = 64
 #: root with |lambda| <= rho is resolved to round-off (its Chebyshev coefficients on the
 #: interval fall like (|lambda| tau / 4)^j / j!; 1e-16 is reached for j ~ 1.2 |lambda| tau + 12)
 NODES_PER_RATE = 1.5
-#: a characteristic root is trusted when its approximations with N and a larger N and its
-#: Newton-corrected value agree to this, relative to max(1, |lambda|)
-TRUST_TOL = 1e-8
+#: a characteristic root is trusted when Newton's method on the exact characteristic
+#: equation, started from its approximations with N and with a larger N, converges from both
+#: to the same root, to this relative to max(1, |lambda|) ...
+TRUST_TOL = 1e-10
+#: ... from approximations no further than this (relative) from it
+APPROX_TOL = 1e-2
 
 
 class DelayNodesError(ValueError):
@@ -744,12 +750,16 @@ def characteristic_roots(dde: DelayDifferentialSystem, x: np.ndarray | None = No
         k = int(np.argmin(np.abs(w2 - lam)))
         check.append(w2[k])
         lr, _, r, ok = refine_characteristic_root(A0, As, taus, lam)
-        scale = max(1.0, abs(lam))
-        good = ok and abs(lr - lam) <= TRUST_TOL * scale and abs(w2[k] - lam) <= TRUST_TOL * scale
-        # a root of the finer discretisation right of this one that the coarse one lacks
-        missed = np.any((w2.real > lam.real + TRUST_TOL * scale)
+        lr2, _, _, ok2 = refine_characteristic_root(A0, As, taus, w2[k])
+        scale = max(1.0, abs(lr))
+        # both discretisations lead Newton to the same exact root, from nearby
+        good = (ok and ok2 and abs(lr - lr2) <= TRUST_TOL * scale
+                and abs(lr - lam) <= APPROX_TOL * scale
+                and abs(lr - w2[k]) <= APPROX_TOL * scale)
+        # and the finer discretisation has no root right of it that the coarse one lacks
+        missed = np.any((w2.real > lr.real + APPROX_TOL * scale)
                         & (np.min(np.abs(w2[:, None] - np.asarray(w1)[None, :]), axis=1)
-                           > TRUST_TOL * np.maximum(1.0, np.abs(w2))))
+                           > APPROX_TOL * np.maximum(1.0, np.abs(w2))))
         if good and not missed and not broken:
             trusted += 1
             roots.append(lr)
@@ -1365,7 +1375,7 @@ def simulate_delay(dde: DelayDifferentialSystem, x0: np.ndarray, t_end: float, *
                     for i in np.nonzero(vals[j] < 0)[0]:
                         a, b = ts[j - 1], ts[j]
                         times.append((brentq(lambda s, i=i, sol=sol: events_at(sol(s))[i], a, b,
-                                             xtol=1e-15, rtol=4e-16), int(i)))
+                                             xtol=1e-15, rtol=1e-15), int(i)))
                     ev_t, ev_i = min(times)
                     outcome = "collision"
                     t_old.append(ev_t)  # the run ends here
