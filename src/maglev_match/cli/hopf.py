@@ -35,7 +35,7 @@ from maglev_match.cli.common import (
     unit_of,
     validate_value,
 )
-from maglev_match.cli.models import resolve_model
+from maglev_match.cli.models import delay_names, resolve_model
 from maglev_match.dynamics.delay import DiscretisedSystem, delay_hopf_points, is_delay_parameter
 from maglev_match.dynamics.hopf import (
     HopfPoint,
@@ -51,6 +51,11 @@ from maglev_match.params import ParameterError
 # gain), so its default plane is the beam frequency against the velocity gain.
 DEFAULT_PLANE = {"unit": ("omega1", "sigma"), "vehicle": ("omega1", "kD")}
 DEFAULT_RANGES = {"omega1": (30.0, 400.0), "sigma": (1e-4, 8e-4)}
+# a delay axis without a design value: 0 .. 5 ms (the maglev models lose stability near
+# 1.2-1.5 ms); its first value is DELAY_FLOOR times the last (the discretisation is singular
+# at 0, where the model is the delay-free one)
+DEFAULT_DELAY_RANGE = 0.005
+DELAY_FLOOR = 1e-3
 
 
 def _point_record(hp: HopfPoint, system, names: tuple[str, ...]) -> dict:
@@ -147,14 +152,15 @@ def hopf_command(
     print_warnings(list(scan.warnings) + [w for hp in scan.points for w in hp.warnings])
 
 
-def _delay_note(system, param: str) -> dict | None:
+def _delay_note(system, param: str, crossings: bool = True) -> dict | None:
     """How a delay model was analysed (the delay axis, or a model with a delay)."""
     if not isinstance(system, DiscretisedSystem):
         return None
-    axis = param in system.delays
+    axis = param in system.delays and crossings
     text = (f"  delay system: Chebyshev discretisation of the past with N = {system.nodes} "
             f"nodes per delay (dimension {system.dim} = {system.n_state} states + "
-            f"{system.dim - system.n_state} history values)"
+            f"{system.dim - system.n_state} history values); l1 with <q,q> = 1 over the "
+            f"{system.n_state} states"
             + ("; Hopf points in the delay are the crossings of the characteristic equation "
                "(exact; delay 0 is the delay-free model)" if axis else ""))
     return {"nodes": system.nodes, "dimension": system.dim, "states": system.n_state,
@@ -204,6 +210,7 @@ def hopf_curve_command(
     """The Hopf curve in two parameters by continuation, with l1 along it and the
     codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
     check_output_path(out)
+    model_arg = model
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
     if params_opt is None and rm.is_user:
@@ -216,8 +223,10 @@ def hopf_curve_command(
         if len(parts) != 2 or parts[0] == parts[1]:
             raise UserError(f"--params '{params_opt}': expected two different names P1,P2")
         names = (parts[0], parts[1])
+    delays = delay_names(rm)
     for n in names:
-        check_param(system, model, n, "--params")
+        if n not in delays:  # a delay is a parameter of the discretised system (below)
+            check_param(system, model, n, "--params")
     given = _parse_ranges(ranges)
     for n in given:
         if n not in names:
@@ -228,12 +237,28 @@ def hopf_curve_command(
             bounds[n] = given[n]
         elif n in DEFAULT_RANGES and not rm.is_user:
             bounds[n] = DEFAULT_RANGES[n]
+        elif n in delays:  # a delay: from 0 (its design value may be 0)
+            v = system.param(n) if n in system.param_names else 0.0
+            bounds[n] = (0.0, 2.0 * v if v > 0 else DEFAULT_DELAY_RANGE)
         else:
             v = system.param(n)
             bounds[n] = (0.5 * v, 2.0 * v) if v > 0 else (v - 1.0, v + 1.0)
         for v in bounds[n]:
             if params is not None:
                 validate_value(params, n, v)
+    delay_notes = []
+    for n in names:
+        if n in delays:  # the discretised delay system, sized for the largest delay
+            lo, hi = bounds[n]
+            if lo < 0:
+                raise ParameterError("--range", f"{n}={lo:g}:{hi:g}", f"{n} is a delay: the "
+                                     "range must start at or above 0")
+            if lo < DELAY_FLOOR * hi:
+                bounds[n] = (DELAY_FLOOR * hi, hi)
+                delay_notes.append(f"{n} from {DELAY_FLOOR * hi:g} (the discretised delay "
+                                   f"system is singular at {n} = 0, the delay-free model)")
+            rm = resolve_model(model_arg, set_, preset, config, delay_axis=(n, hi))
+            system = rm.system
     a, b = bounds[names[1]]
     scan_values = [a + f * (b - a) for f in (0.5, 0.1, 0.9)]
 
@@ -310,7 +335,7 @@ def hopf_curve_command(
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]
     if json_out:
-        emit_json({"params": list(names), "model": model,
+        emit_json({"params": list(names), "model": model, "delay_notes": delay_notes,
                    "bounds": {n: list(bounds[n]) for n in names}, "points": points,
                    "special_points": special, "branches": branches, "csv": str(csv_path),
                    "special_csv": str(sp_path), "figures": [str(f) for f in figs],
@@ -318,6 +343,11 @@ def hopf_curve_command(
         return
     console.print(f"Hopf curve in ({names[0]}, {names[1]}), model {model}: "
                   f"{len(curves)} branch(es), {len(points)} points")
+    note = _delay_note(system, names[0], crossings=False)
+    if note:
+        console.print(note["text"], highlight=False)
+    for text in delay_notes:
+        console.print(f"  {text}", highlight=False)
     for k, c in enumerate(curves):
         l1 = c.l1()
         signs = "".join("+" if s > 0 else "-" for s in _runs(np.sign(l1)))
