@@ -21,6 +21,10 @@
   d exp(-zeta pi / sqrt(1 - zeta^2)) in closed form.
 * :func:`saturated_oscillator` - a planar oscillator with saturated negative damping,
   y' = -x - 2 zeta y + k sat(y): a stable limit cycle made of linear and saturated pieces.
+* :func:`linear_dde`, :func:`hutchinson`, :func:`mackey_glass` - delay equations: x' =
+  -a x(t - tau) (roots W_k(-a tau) / tau, Hopf at tau = pi / (2 a)), the delayed logistic
+  equation (Hopf at r tau = pi / 2, supercritical) and the Mackey-Glass equation (a period
+  doubling of its cycles).
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.dynamics.delay import DelayDifferentialSystem
 from maglev_match.dynamics.system import System
 
 
@@ -555,3 +560,59 @@ def saturated_oscillator_shooting(zeta: float, k: float) -> tuple[float, float]:
 
     xs = scipy.optimize.brentq(lambda x0: ret(x0)[0] - x0, 1.0, 20.0, xtol=1e-14)
     return ret(xs)[1], xs
+# ------------------------------------------------------------------------ delay equations
+def _state_signal(x, p):
+    return x
+
+
+def _x(x, p):
+    return x[0]
+
+
+def _linear_dde_rhs(x, xd, p):
+    return -p[0] * xd[0]
+
+
+def linear_dde(a: float = 2.0, tau: float = 0.5) -> DelayDifferentialSystem:
+    """x' = -a x(t - tau). Characteristic equation lambda = -a exp(-lambda tau), so
+    lambda tau exp(lambda tau) = -a tau and lambda = W_k(-a tau) / tau (Lambert W, branch k);
+    a pair crosses the imaginary axis at i a when a tau = pi / 2 (Hale & Verduyn Lunel 1993,
+    ch. 5)."""
+    return DelayDifferentialSystem(rhs=_linear_dde_rhs, signals=(_state_signal,),
+                                   delays=("tau",), p=np.array([a, tau]),
+                                   param_names=("a", "tau"), state_names=("x",),
+                                   observables={"x": _x}, name="linear-dde")
+
+
+def _hutchinson_rhs(x, yd, p):
+    return p[0] * x * (1.0 - yd[0] / p[1])
+
+
+def hutchinson(r: float = 1.0, K: float = 1.0, tau: float = 1.0) -> DelayDifferentialSystem:
+    """The delayed logistic equation x' = r x (1 - x(t - tau) / K) (Hutchinson 1948):
+    linearised at x = K it is u' = -r u(t - tau), so a Hopf bifurcation at r tau = pi / 2 with
+    frequency r (period 4 tau); supercritical (e.g. Hassard, Kazarinoff & Wan 1981)."""
+    return DelayDifferentialSystem(rhs=_hutchinson_rhs, signals=(_state_signal,),
+                                   delays=("tau",), p=np.array([r, K, tau]),
+                                   param_names=("r", "K", "tau"), state_names=("x",),
+                                   x_guess=np.array([K]), observables={"x": _x},
+                                   name="hutchinson")
+
+
+def _mackey_glass_rhs(x, yd, p):
+    beta, gamma, n = p[0], p[1], p[2]
+    y = yd[0]
+    return beta * y / (1.0 + y**n) - gamma * x
+
+
+def mackey_glass(beta: float = 2.0, gamma: float = 1.0, n: float = 9.65,
+                 tau: float = 0.5) -> DelayDifferentialSystem:
+    """The Mackey-Glass equation x' = beta x(t - tau) / (1 + x(t - tau)^n) - gamma x
+    (Mackey & Glass 1977) with the equilibrium x = 1 (beta = 2 gamma); with n = 9.65 its
+    cycles, born at a Hopf point near tau = 0.497, period-double as tau grows (the route to
+    the chaos of the classic tau = 2 example; Duruisseaux & Humphries 2022)."""
+    return DelayDifferentialSystem(rhs=_mackey_glass_rhs, signals=(_state_signal,),
+                                   delays=("tau",), p=np.array([beta, gamma, n, tau]),
+                                   param_names=("beta", "gamma", "n", "tau"),
+                                   state_names=("x",), x_guess=np.array([1.0]),
+                                   observables={"x": _x}, name="mackey-glass")

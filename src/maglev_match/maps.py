@@ -229,19 +229,18 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.dynamics.paths import PATH_PARAM, path_system
     from maglev_match.limits_check import cycle_limit_margins
-    from maglev_match.models.unit import param_vector, unit_system
 
     yv = spec.y.values[row]
     xs = spec.x.values
     nx = xs.size
     pts = [spec.point(xv, yv) for xv in xs]
-    system = unit_system(pts[0])
+    # the path: extension below, the grid, extension above; grid point j sits at t = j + off
+    ext_lo, ext_hi = _extension(spec, xs, yv)
+    system, param_vector = _row_system(pts + [q for _, q in ext_lo + ext_hi])
     P = np.array([param_vector(p) for p in pts])
     w0 = np.array([p.w0 for p in pts])
     h_max = np.array([p.gap_max - p.c0 for p in pts])
 
-    # the path: extension below, the grid, extension above; grid point j sits at t = j + off
-    ext_lo, ext_hi = _extension(spec, xs, yv)
     x_nodes = np.array([x for x, _ in ext_lo[::-1]] + list(xs) + [x for x, _ in ext_hi])
     nodes = np.array([param_vector(q) for _, q in ext_lo[::-1]] + list(P)
                      + [param_vector(q) for _, q in ext_hi])
@@ -352,7 +351,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         dist = np.full(nx, np.inf)
     h = np.where(resolved, h, np.nan)
     chi = h / w0
-    return {
+    out = {
         "chi": chi, "h": h, "w0": w0, "stable": stable, "max_real_part": max_re,
         "hopf_distance": dist, "case": case.astype(np.int8),
         "omega1_point": P[:, system.param_index("omega1")],
@@ -360,9 +359,51 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         "current_reverses": reverses, "resolved": resolved, "reason": reason,
         "hopf_x": hopf_x,
     }
+    _zero_delay_points(out, pts, system)
+    return out
+
+
+def _row_system(points: list[Params]):
+    """The system of a row and the parameter vector of a point on it: model A's ODE when
+    no point of the row (extension included) has a delay; else its discretised delay system
+    with nodes for the row's largest delay, the delay entering the vector as its last entry,
+    and a zero delay replaced by :data:`DELAY_FLOOR` times the largest (the discretisation
+    is singular at tau = 0; :func:`_zero_delay_points` recomputes those points)."""
+    from maglev_match.models.unit import param_vector, unit_system
+
+    tau_max = max(p.tau for p in points)
+    if tau_max == 0:
+        return unit_system(points[0]), param_vector
+    floor = DELAY_FLOOR * tau_max
+
+    def vector(p: Params) -> np.ndarray:
+        return np.append(param_vector(p), max(p.tau, floor))
+
+    return unit_system(points[0], tau_max=tau_max), vector
+
+
+def _zero_delay_points(out: dict[str, np.ndarray], pts: list[Params], system) -> None:
+    """The points of a delayed row whose delay is 0 (e.g. the first column of a tau axis),
+    recomputed with the delay-free model by the point-wise index (in place); the row's path
+    passed them at the floor delay."""
+    if not hasattr(system, "dde"):
+        return
+    from maglev_match.matching import matching_index
+
+    for j, p in enumerate(pts):
+        if p.tau != 0:
+            continue
+        res = matching_index(p, simulate=False)
+        out["chi"][j], out["h"][j] = res.chi, res.h
+        out["stable"][j], out["max_real_part"][j] = res.stable, res.max_real_part
+        out["case"][j] = CASE_CODES.get(str(res.case), out["case"][j])
+        out["current_reverses"][j] = res.current_reverses
+        out["resolved"][j] = bool(res.converged)
+        out["reason"][j] = 0 if res.converged else REASON_FAILED
 
 
 PATH_PAD = 16  # the path's nodes are padded to a multiple of this (shared kernels)
+DELAY_FLOOR = 1e-3  # a zero delay on a delayed row's path, as a fraction of the largest
 SCAN_PER_NODE = 3  # samples of the Hopf scan per path interval (as the earlier scan)
 SCAN_BATCH = 64  # the stacked Jacobian call is padded to a multiple of this many samples
 REFINE_WINDOW = 4  # nodes of the short path on which a Hopf guess is refined

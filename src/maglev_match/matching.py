@@ -162,6 +162,7 @@ class MatchingIndex:
     cycle: CyclePoint | None = field(default=None, repr=False, compare=False)
     critical_up: Any = field(default=None, repr=False, compare=False)
     critical_down: Any = field(default=None, repr=False, compare=False)
+    critical_delay: dict[str, Any] | None = None  # see critical_delay_info
 
     def as_json(self) -> dict[str, Any]:
         """The machine-readable form (SI units); the cycle's profile is left out."""
@@ -269,7 +270,7 @@ def matching_index(
             omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
             newton="chord" if model == "vehicle" else "full",
         )
-    res = replace(res, model=model)
+    res = replace(res, model=model, critical_delay=critical_delay_info(params, model))
     if not simulate:
         return replace(res, headline=headline_text(res))
     if not res.stable:
@@ -554,3 +555,38 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
                   mechanism_up=mech[0], mechanism_down=mech[1], simulation_derivative=deriv,
                   critical_up=crits[0], critical_down=crits[1])
     return replace(out, headline=headline_text(out))
+
+
+# ---------------------------------------------------------------------------------------
+# the critical delay of the controller (issue 23)
+# ---------------------------------------------------------------------------------------
+def critical_delay_info(params: Params, model: str = "unit") -> dict[str, Any]:
+    """The critical delay of the outer control loop at ``params``: the smallest tau (s) at
+    which the equilibrium loses stability, with the frequency (rad/s) of the crossing pair,
+    l1 (1/s, |q| = 1 on the state; > 0 subcritical) and whether ``params.tau`` lies below
+    it. From the characteristic equation of the delay system
+    (:func:`maglev_match.dynamics.delay.critical_delay`), over the valid range of tau.
+
+    Keys: value (s, None when stable for every delay in the range, 0 when unstable without
+    delay), frequency, l1, kind, crossing_speed, tau (the set delay), stable_at_tau,
+    tau_max, warnings."""
+    from maglev_match.dynamics.delay import critical_delay
+    from maglev_match.dynamics.equilibria import find_equilibrium
+    from maglev_match.models.unit import unit_dde
+    from maglev_match.models.vehicle import vehicle_dde
+    from maglev_match.params import RANGES
+
+    dde = unit_dde(params) if model == "unit" else vehicle_dde(params)
+    eq = find_equilibrium(dde.ode_system(), dde.ode_params(dde.p))
+    tau_max = RANGES["tau"][1]
+    cd = critical_delay(dde, "tau", eq.x, dde.p, tau_max=tau_max)
+    warnings = list(cd.warnings)
+    if not eq.converged:
+        warnings.append(f"equilibrium not converged: {eq.message}")
+    tau = float(params.tau)
+    stable_at_tau = None if cd.value is None and not cd.stable_without_delay else (
+        cd.value is None or tau < cd.value)
+    return {"value": cd.value, "frequency": cd.frequency, "l1": cd.l1, "kind": cd.kind,
+            "crossing_speed": cd.crossing_speed, "tau": tau, "stable_at_tau": stable_at_tau,
+            "stable_without_delay": cd.stable_without_delay, "tau_max": tau_max,
+            "warnings": warnings}

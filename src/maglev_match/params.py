@@ -63,6 +63,8 @@ PARAMETER_DOCS: dict[str, tuple[str, str]] = {
     "kP": ("A/m", "gap feedback gain"),
     "kD": ("A s/m", "velocity feedback gain"),
     "ke": ("V/A", "current feedback gain"),
+    "tau": ("s", "delay of the outer control loop (gap and velocity feedback act on observer "
+            "outputs this old; 0: no delay)"),
     "xi1": ("-", "beam modal damping ratio (all modes)"),
     "omega1": ("rad/s", "beam first modal circular frequency"),
     "sigma": ("1/kg", "force gain coefficient of the vehicle on the beam"),
@@ -98,11 +100,12 @@ RANGES: dict[str, tuple[float, float]] = {
     "mbar": (1e-3, 1e7), "l": (1e-2, 1e4), "k": (1, 10_000), "gap_max": (0.0, 1.0),
     "m_s": (1e-3, 1e8), "j_s": (1e-3, 1e10), "m_b": (1e-3, 1e8), "j_b": (1e-3, 1e10),
     "k2": (1e-6, 1e10), "c2": (0.0, 1e9), "s": (1e-4, 1e4), "s0": (0.0, 1e4),
+    "tau": (0.0, 1.0),
 }
 # Sign rules of the inputs (checked first, with their own message).
 POSITIVE = ("m", "M", "g", "ks", "mu0", "N", "A", "c0", "omega0", "xi0", "ke",
             "L", "EI", "mbar", "l", "k", "m_s", "j_s", "m_b", "j_b", "k2", "s")
-NONNEGATIVE = ("cs", "c2", "kP", "kD", "s0", "gap_min")
+NONNEGATIVE = ("cs", "c2", "kP", "kD", "s0", "gap_min", "tau")
 # Ranges of the values that may also be set directly (omega1, sigma) or have a rule of their
 # own (xi1): the same rules as _validate_inputs states in words.
 _SPECIAL_RANGES: dict[str, tuple[float, float]] = {
@@ -199,6 +202,7 @@ class Params:
     kP: float = 5000.0
     kD: float = 150.0
     ke: float = 25.0
+    tau: float = 0.0  # delay of the outer loop (s); 0 gives the delay-free models exactly
     # beam
     xi1: float = 0.005
     L: float = 18.0

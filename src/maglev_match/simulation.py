@@ -258,6 +258,14 @@ def _system(params: Params, model: str, limited: bool) -> System:
     return build_system(params, model, limited=limited)
 
 
+def _lifted(system: System, x: np.ndarray) -> np.ndarray:
+    """State(s) of the model (rows) as states of ``system``: with a delay (tau > 0) the
+    system is the discretised delay system, whose extra states hold the past; a model state
+    given alone means a constant past (the state held for t <= 0)."""
+    lift = getattr(system, "lift", None)
+    return np.asarray(x, float) if lift is None else lift(x)
+
+
 def simulate_maglev(
     params: Params,
     model: str = "unit",
@@ -281,9 +289,9 @@ def simulate_maglev(
     system = _system(params, model, limited)
     x_start = equilibrium_state(params, model) if x0 is None else np.asarray(x0, float)
     res = simulate(
-        system, x_start, t_end,
+        system, _lifted(system, x_start), t_end,
         event_fn=_events_for(params, model) if limited else None,
-        x_ref=equilibrium_state(params, model),
+        x_ref=_lifted(system, equilibrium_state(params, model)),
         options=options, n_save=n_save,
     )
     point = limit = None
@@ -625,6 +633,8 @@ def critical_disturbance_of_system(
     """
     if not tol > 0:
         raise ParameterError("tol", tol, "must be > 0")
+    if x_ref is not None:
+        x_ref = _lifted(system, x_ref)
     opts = options or SimulationOptions()
     opts = dataclasses.replace(opts, stop_on_converged=True)
 
@@ -642,8 +652,8 @@ def critical_disturbance_of_system(
         for ext in range(max_extend + 1):
             if pending.size == 0:
                 break
-            b = simulate_batch(system, x0_of(pending), t, event_fn=events, x_ref=x_ref,
-                               options=opts)
+            b = simulate_batch(system, _lifted(system, x0_of(pending)), t, event_fn=events,
+                               x_ref=x_ref, options=opts)
             runs += pending.size
             horizon = max(horizon, t)
             undecided = []

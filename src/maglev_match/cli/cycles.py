@@ -39,7 +39,7 @@ from maglev_match.cli.common import (
     steps_option,
 )
 from maglev_match.cli.common import params_from_options as _params
-from maglev_match.cli.models import is_model_file, user_cycles
+from maglev_match.cli.models import MAGLEV_DELAYS, is_model_file, user_cycles
 from maglev_match.io import atomic_open, atomic_write_text
 from maglev_match.params import ParameterError, Params, warn_overridden
 
@@ -164,6 +164,7 @@ def cycles_command(
 ) -> None:
     """Cycles born at Hopf points, continued in --param until a physical limit (Fig. 5)."""
     from maglev_match.dynamics.cycles import cycle_branch
+    from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.engineering import engineering_system, is_engineering
     from maglev_match.limits_check import cycle_limit_margins
@@ -190,11 +191,20 @@ def cycles_command(
         preload("maglev_match.plots.cycles", "maglev_match.datasets", "xarray", "h5netcdf")
     system = build_system(params, model)
     try:
-        design = getattr(params, param) if is_engineering(param) else system.param(param)
+        design = getattr(params, param) if is_engineering(param) else (
+            params.tau if param in MAGLEV_DELAYS else system.param(param))
     except KeyError as exc:
         raise UserError(str(exc).strip("'\"")) from None
     a = design / 4 if start is None else start
     b = design * 4 if stop is None else stop
+    if param in MAGLEV_DELAYS:  # a delay axis: the discretised delay system up to its end
+        a = 0.0 if start is None else start
+        if not b > 0:
+            raise UserError(f"--param {param}: give the largest delay with --to (the design "
+                            f"value is {design:g} s)")
+        if min(a, b) < 0:
+            raise ParameterError("--from", min(a, b), f"{param} is a delay: >= 0 s")
+        system = build_system(params, model, tau_max=max(a, b))
     if is_engineering(param):  # beam/vehicle data: omega1, sigma (geometry) follow it
         if start is None or stop is None:
             raise UserError(f"--param {param}: give the range with --from and --to")
@@ -206,7 +216,10 @@ def cycles_command(
         raise ParameterError("--scan", n_scan, "must be at least 3")
     with progress_report("cycles") as prog:
         prog.stage(f"searching Hopf points along {param} in [{a:.6g}, {b:.6g}] ...")
-        scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+        if is_delay_parameter(system, param):  # crossings of the characteristic equation
+            scan = delay_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+        else:
+            scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
         hopfs = [h for h in scan.points if h.converged]
         if not hopfs:
             raise UserError(f"no Hopf point of the equilibrium along {param} in "
@@ -257,7 +270,7 @@ def cycles_command(
         ]
     files: list[Path] = []
     if out is not None or not json_out:
-        files = _write_outputs(out, param, model, scan, branches, params, at)
+        files = _write_outputs(out, param, model, scan, branches, params, at, system)
         result["files"] = [str(f) for f in files]
     if json_out:
         emit_json(result)
@@ -265,7 +278,7 @@ def cycles_command(
     _print_summary(result, branches, chosen, param, files)
 
 
-def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
+def _write_outputs(out, param, model, scan, branches, params, at, system=None) -> list[Path]:
     from maglev_match.plots import save_figure
     from maglev_match.plots.cycles import branch_label, cycle_diagram
 
@@ -287,7 +300,7 @@ def _write_outputs(out, param, model, scan, branches, params, at) -> list[Path]:
     from maglev_match.models import build_system
     from maglev_match.restart import RestartKind, stamp
 
-    system = build_system(params, model)
+    system = build_system(params, model) if system is None else system
     for k, br in enumerate(branches):
         if not br.points:
             continue

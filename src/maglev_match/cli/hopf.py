@@ -48,6 +48,11 @@ if TYPE_CHECKING:  # the numerics (and JAX) are imported when a command runs
 # gain), so its default plane is the beam frequency against the velocity gain.
 DEFAULT_PLANE = {"unit": ("omega1", "sigma"), "vehicle": ("omega1", "kD")}
 DEFAULT_RANGES = {"omega1": (30.0, 400.0), "sigma": (1e-4, 8e-4)}
+# a delay axis without a design value: 0 .. 5 ms (the maglev models lose stability near
+# 1.2-1.5 ms); its first value is DELAY_FLOOR times the last (the discretisation is singular
+# at 0, where the model is the delay-free one)
+DEFAULT_DELAY_RANGE = 0.005
+DELAY_FLOOR = 1e-3
 
 
 def _point_record(hp: HopfPoint, system, names: tuple[str, ...]) -> dict:
@@ -92,7 +97,9 @@ def hopf_command(
         raise ParameterError("--steps", steps, "must be at least 2")
     if not start < stop:
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
-    rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
+    # --model unit|vehicle|FILE.py; along a delay: the discretised delay system (tau <= --to)
+    rm = resolve_model(model, set_, preset, config, delay_axis=(param, stop))
+    from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.engineering import engineering_hopf_points, is_engineering
 
@@ -112,6 +119,13 @@ def hopf_command(
             records = [{param: hp.value, **_point_record(hp, system, names)}
                        for hp in scan.points]
             names = (param, *names)
+        elif is_delay_parameter(system, param):  # crossings of the characteristic equation
+            if start < 0:
+                raise ParameterError("--from", start, f"{param} is a delay: the range must "
+                                     "start at or above 0")
+            scan = delay_hopf_points(system, param, start, stop, n_scan=steps)
+            names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
+            records = [_point_record(hp, system, names) for hp in scan.points]
         else:
             scan = locate_hopf_points(system, param, start, stop, n_scan=steps)
             names = tuple(dict.fromkeys((param,) + DEFAULT_PLANE.get(model, ())))
@@ -121,16 +135,20 @@ def hopf_command(
     specials = [{"type": str(sp.type), param: sp.value, "located": sp.located,
                  "label": sp.label, "frequency": sp.frequency}
                 for sp in scan.special_points]
+    delay_note = _delay_note(system, param)
     unit = "" if rm.is_user else unit_of(param)
     files = ([] if json_out and out is None else  # --json alone: the JSON is the result
              _write_hopf_points(out, model, param, unit, names, records, scan))
     if json_out:
         emit_json({"param": param, "model": model, "from": start, "to": stop,
                    "points": records, "special_points": specials,
-                   "files": [str(f) for f in files], "warnings": list(scan.warnings)})
+                   "files": [str(f) for f in files], "warnings": list(scan.warnings),
+                   **({"delay": delay_note} if delay_note else {})})
         return
     console.print(f"Hopf points along {param} in [{start:g}, {stop:g}] {unit}, "
                   f"model {model}: {len(records)} found")
+    if delay_note:
+        console.print(delay_note["text"], highlight=False)
     if records:
         table = Table("label", *names, "omega (rad/s)", "dRe/dp", "l1", "type",
                       "others stable", "converged")
@@ -168,6 +186,23 @@ def _write_hopf_points(out, model: str, param: str, unit: str, names: tuple[str,
 
     fig = hopf_scan_figure(scan, param, unit)
     return [csv_path, *save_figure(fig, folder / stem)]
+
+
+def _delay_note(system, param: str, crossings: bool = True) -> dict | None:
+    """How a delay model was analysed (the delay axis, or a model with a delay)."""
+    from maglev_match.dynamics.delay import DiscretisedSystem
+
+    if not isinstance(system, DiscretisedSystem):
+        return None
+    axis = param in system.delays and crossings
+    text = (f"  delay system: Chebyshev discretisation of the past with N = {system.nodes} "
+            f"nodes per delay (dimension {system.dim} = {system.n_state} states + "
+            f"{system.dim - system.n_state} history values); l1 with <q,q> = 1 over the "
+            f"{system.n_state} states"
+            + ("; Hopf points in the delay are the crossings of the characteristic equation "
+               "(exact; delay 0 is the delay-free model)" if axis else ""))
+    return {"nodes": system.nodes, "dimension": system.dim, "states": system.n_state,
+            "delays": list(system.delays), "axis": axis, "text": text}
 
 
 def _parse_ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
@@ -219,11 +254,12 @@ def hopf_curve_command(
 ) -> None:
     """The Hopf curve in two parameters by continuation, with l1 along it and the
     codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
-    from maglev_match.cli.models import resolve_model
+    from maglev_match.cli.models import delay_names, resolve_model
     from maglev_match.dynamics.hopf import stability_grid
     from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans
 
     check_output_path(out)
+    model_arg = model
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
     restarted = None
@@ -255,8 +291,10 @@ def hopf_curve_command(
         if len(parts) != 2 or parts[0] == parts[1]:
             raise UserError(f"--params '{params_opt}': expected two different names P1,P2")
         names = (parts[0], parts[1])
+    delays = delay_names(rm)
     for n in names:
-        check_param(system, model, n, "--params")
+        if n not in delays:  # a delay is a parameter of the discretised system (below)
+            check_param(system, model, n, "--params")
     given = _parse_ranges(ranges)
     for n in given:
         if n not in names:
@@ -267,12 +305,28 @@ def hopf_curve_command(
             bounds[n] = given[n]
         elif n in DEFAULT_RANGES and not rm.is_user:
             bounds[n] = DEFAULT_RANGES[n]
+        elif n in delays:  # a delay: from 0 (its design value may be 0)
+            v = system.param(n) if n in system.param_names else 0.0
+            bounds[n] = (0.0, 2.0 * v if v > 0 else DEFAULT_DELAY_RANGE)
         else:
             v = system.param(n)
             bounds[n] = (0.5 * v, 2.0 * v) if v > 0 else (v - 1.0, v + 1.0)
         for v in bounds[n]:
             if params is not None:
                 validate_value(params, n, v)
+    delay_notes = []
+    for n in names:
+        if n in delays:  # the discretised delay system, sized for the largest delay
+            lo, hi = bounds[n]
+            if lo < 0:
+                raise ParameterError("--range", f"{n}={lo:g}:{hi:g}", f"{n} is a delay: the "
+                                     "range must start at or above 0")
+            if lo < DELAY_FLOOR * hi:
+                bounds[n] = (DELAY_FLOOR * hi, hi)
+                delay_notes.append(f"{n} from {DELAY_FLOOR * hi:g} (the discretised delay "
+                                   f"system is singular at {n} = 0, the delay-free model)")
+            rm = resolve_model(model_arg, set_, preset, config, delay_axis=(n, hi))
+            system = rm.system
     a, b = bounds[names[1]]
     scan_values = [a + f * (b - a) for f in (0.5, 0.1, 0.9)]
     if restarted is not None:  # the saved bounds, widened by --range
@@ -365,7 +419,7 @@ def hopf_curve_command(
     branches = [{"converged": c.converged, "message": c.message, "n_points": len(c.points),
                  "closed": c.closed, "warnings": list(c.warnings)} for c in curves]
     if json_out:
-        emit_json({"params": list(names), "model": model,
+        emit_json({"params": list(names), "model": model, "delay_notes": delay_notes,
                    "restart": None if restarted is None else {
                        "file": restarted[1].path, "label": restarted[1].label,
                        "values": list(restarted[1].values), "hopf_search": False},
@@ -379,6 +433,11 @@ def hopf_curve_command(
                       highlight=False, markup=False)
     console.print(f"Hopf curve in ({names[0]}, {names[1]}), model {model}: "
                   f"{len(curves)} branch(es), {len(points)} points")
+    note = _delay_note(system, names[0], crossings=False)
+    if note:
+        console.print(note["text"], highlight=False)
+    for text in delay_notes:
+        console.print(f"  {text}", highlight=False)
     for k, c in enumerate(curves):
         l1 = c.l1()
         signs = "".join("+" if s > 0 else "-" for s in _runs(np.sign(l1)))

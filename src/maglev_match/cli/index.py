@@ -145,6 +145,25 @@ def _direction_line(d: dict, size: float | None, mm: float) -> str:
     return f"{val}{extra}"
 
 
+def _print_critical_delay(res) -> None:
+    """The critical delay of the outer control loop (one line, issue 23)."""
+    cd = getattr(res, "critical_delay", None)
+    if not cd:
+        return
+    ms = 1e3
+    at = (f"; at tau = {cd['tau'] * ms:.4g} ms the equilibrium is "
+          + ("stable" if cd["stable_at_tau"] else "unstable") if cd["tau"] > 0 else "")
+    if cd["value"] is None:
+        text = (f"none up to {cd['tau_max']:g} s (stable for every delay of the controller)"
+                if cd["stable_without_delay"] else "none (the equilibrium is unstable)")
+    elif cd["value"] == 0:
+        text = "0 (the equilibrium is unstable without delay)"
+    else:
+        text = (f"tau = {cd['value'] * ms:.4g} ms (omega = {cd['frequency']:.5g} rad/s, "
+                f"{cd['kind']}, l1 = {cd['l1']:.3g}){at}")
+    console.print(f"  critical delay of the controller: {text}", highlight=False)
+
+
 def print_index(res, preset: str, config, set_) -> None:
     """The text form of a :class:`~maglev_match.matching.MatchingIndex` (every warning
     of the JSON form is printed here too): the headline chi first, then the paper's
@@ -165,6 +184,7 @@ def print_index(res, preset: str, config, set_) -> None:
         kind = ("subcritical" if (res.l1 or 0) > 0 else "supercritical") if res.l1 else ""
         console.print(f"  nearest Hopf point: {res.hopf_param} = {res.hopf_value:.6g}{dist}"
                       + (f", {kind}, l1 = {res.l1:.3g}" if kind else ""))
+    _print_critical_delay(res)
     console.print("  [bold]by the paper's definition[/]:")
     console.print(f"    h  = {res.h * mm:.4g} mm: {CASE_TEXT.get(res.case, res.case)}")
     w0_text = ("static beam deflection" if res.model == "unit"

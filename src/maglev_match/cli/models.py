@@ -41,7 +41,8 @@ def is_model_file(model: str) -> bool:
     that module: a usage error must not wait for JAX)."""
     return str(model).endswith(".py")
 
-__all__ = ["ResolvedModel", "is_model_file", "refuse_model_file", "resolve_model"]
+__all__ = ["ResolvedModel", "delay_names", "is_model_file", "refuse_model_file",
+           "resolve_model"]
 
 
 @dataclass(frozen=True)
@@ -98,7 +99,8 @@ def load_user_model(path: str) -> UserModel:
         raise UserError(str(exc)) from None
 
 
-def user_system(user: UserModel, values: dict[str, float], option: str = "--set") -> System:
+def user_system(user: UserModel, values: dict[str, float], option: str = "--set", *,
+                tau_max: float | None = None) -> System:
     """The user model's system at ``values``, refused (exit code 2, before any work) when its
     right-hand side or Jacobian is not finite at X0 there: an overflow such as
     ``--set rho=1e308`` is a numerical failure to name, not a verdict to print."""
@@ -108,7 +110,7 @@ def user_system(user: UserModel, values: dict[str, float], option: str = "--set"
         raise UserError(f"{option} {given}: numerical failure: {problem}; choose values that "
                         "keep it finite" if given else f"model file {user.path}: numerical "
                         f"failure at the defaults: {problem}")
-    return user.system(values)
+    return user.system(values, tau_max=tau_max)
 
 
 #: Options of the maglev models that a user model file refuses (parameter name -> option).
@@ -116,7 +118,8 @@ MAGLEV_PARAMETER_SETS = {"preset": "--preset"}
 
 
 def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
-                  config: Path | None = None, *, limited: bool = False) -> ResolvedModel:
+                  config: Path | None = None, *, limited: bool = False,
+                  delay_axis: tuple[str, float] | None = None) -> ResolvedModel:
     """The system ``--model`` names, with ``--set`` (and, for the maglev models,
     ``--preset``/``--config``) applied.
 
@@ -126,6 +129,9 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
     sets : the ``--set NAME=VALUE`` items.
     preset, config : the maglev parameter set options (a user model refuses ``--config``).
     limited : the maglev model with its physical limits (built-in models only).
+    delay_axis : (parameter, largest value) of a parameter axis: when the parameter is a
+        delay of the model, the system is the discretised delay system sized for delays up
+        to that value, even where the delay is 0 (see :mod:`maglev_match.dynamics.delay`).
     """
     if is_model_file(model):
         if config is not None:
@@ -138,7 +144,10 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
         vals = user.values_with(values)
         desc = (f"Model {user.name} ({model}, {len(user.states)} states), "
                 + ", ".join(f"{k} = {v:.6g}" for k, v in vals.items()))
-        return ResolvedModel(system=user_system(user, values), description=desc,
+        tau_max = (delay_axis[1] if delay_axis is not None and delay_axis[0] in user.delays
+                   else None)
+        return ResolvedModel(system=user_system(user, values, tau_max=tau_max),
+                             description=desc,
                              label=user.name, user=user)
     check_model(model)
     from maglev_match.cli.common import DEFAULT_PRESET_NAME
@@ -148,8 +157,20 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
 
     desc = (f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
             f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg")
-    return ResolvedModel(system=build_system(params, model, limited=limited), description=desc,
-                         label=model, params=params)
+    tau_max = (delay_axis[1] if delay_axis is not None and delay_axis[0] in MAGLEV_DELAYS
+               else None)
+    return ResolvedModel(system=build_system(params, model, limited=limited, tau_max=tau_max),
+                         description=desc, label=model, params=params)
+
+
+#: the delay parameters of the maglev models
+MAGLEV_DELAYS = ("tau",)
+
+
+def delay_names(rm: ResolvedModel) -> tuple[str, ...]:
+    """The delay parameters of a resolved model (the maglev models: tau; a user model: its
+    DELAYS)."""
+    return rm.user.delays if rm.user is not None else MAGLEV_DELAYS
 
 
 #: ``--model`` on the commands that analyse the maglev models themselves (index, map,
@@ -210,6 +231,7 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     ``--out`` the branches are also saved as netCDF (restartable); ``--restart FILE
     --label L`` continues a saved one (:func:`maglev_match.cli.restart.user_cycles_restart`)."""
     from maglev_match.dynamics.cycles import cycle_branch
+    from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
 
     refuse_given({"ignore_current": "--ignore-current", "config": "--config",
@@ -231,9 +253,17 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     design = system.param(param)
     a = (design / 4 if design > 0 else design - 1.0) if start is None else start
     b = (design * 4 if design > 0 else design + 1.0) if stop is None else stop
+    if param in user.delays:  # a delay axis from 0: the discretised delay system
+        a = 0.0 if start is None else start
+        if min(a, b) < 0:
+            raise ParameterError("--from", min(a, b), f"{param} is a delay: >= 0")
+        system = user.system(values, tau_max=max(a, b))
     if not (np.isfinite(a) and np.isfinite(b)) or a == b:
         raise UserError(f"--from/--to: empty search range [{a}, {b}]")
-    scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+    if is_delay_parameter(system, param):
+        scan = delay_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
+    else:
+        scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
     hopfs = sorted((h for h in scan.points if h.converged), key=lambda h: abs(h.value - design))
     if not hopfs:
         raise UserError(f"no Hopf point of the equilibrium along {param} in "

@@ -339,7 +339,8 @@ def floquet_multipliers(system: System, orbit: PeriodicOrbit) -> np.ndarray:
         jnp.asarray(orbit.states[idx]), jnp.asarray(h), orbit.period, jnp.asarray(orbit.p),
         jnp.asarray(e),
     )
-    return floquet_multipliers_from_blocks(np.asarray(J), orbit.period, h, m)
+    return floquet_multipliers_from_blocks(np.asarray(J), orbit.period, h, m,
+                                           method=getattr(system, "floquet_method", "auto"))
 
 
 @cache
@@ -918,7 +919,8 @@ class CycleProblem:
         blocks, mesh, P, _ = pt.correction.data
         J, Tb, h = blocks if blocks is not None else _blocks_at(self.prob, pt.u, mesh)
         triv, mult = _split_trivial(floquet_multipliers_from_blocks(
-            J, Tb, h, self.prob.m, method=self.floquet_method, transfer=P))
+            J, Tb, h, self.prob.m, transfer=P,
+            method=getattr(self.prob.system, "floquet_method", self.floquet_method)))
         tol = self.opt.neutral_tol
         nun = int(np.sum(np.abs(mult) > 1.0 + tol))
         reliable = bool(abs(triv - 1.0) <= self.trivial_tol)
@@ -1765,7 +1767,8 @@ def correct_cycle(
         return CorrectionResult(None, False, its, f"no convergence (residual {res:.2e})")
     U, T, lam = prob.unpack(Y)
     J, Tb, h = blocks if blocks is not None else _blocks_at(prob, Y, prob.mesh)
-    triv, mult = _split_trivial(floquet_multipliers_from_blocks(J, Tb, h, orbit.ncol))
+    triv, mult = _split_trivial(floquet_multipliers_from_blocks(
+        J, Tb, h, orbit.ncol, method=getattr(system, "floquet_method", "auto")))
     tol_n = CycleOptions.neutral_tol
     nun = int(np.sum(np.abs(mult) > 1.0 + tol_n))
     reliable = bool(abs(triv - 1.0) <= CycleOptions.trivial_tol)

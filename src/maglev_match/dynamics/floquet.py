@@ -76,6 +76,7 @@ __all__ = [
     "floquet_analysis",
     "floquet_multipliers_from_blocks",
     "floquet_multipliers_product",
+    "dominant_multipliers",
     "grouped_transfer_matrices",
     "transfer_matrices",
     "periodic_eigenvalues",
@@ -94,6 +95,7 @@ class FloquetMethod(StrEnum):
     """How the multipliers were computed."""
 
     PERIODIC_QZ = "periodic_qz"  # periodic Schur form of the condensed pairs
+    DOMINANT = "dominant"  # orthogonal iteration for the largest ones, the rest below 1e-12
     CYCLIC_QR = "cyclic_qr"  # LAPACK QR on the block cyclic matrix, accepted by its bound
     PRODUCT = "product"  # eigenvalues of the explicit monodromy product (old method)
 
@@ -663,7 +665,16 @@ def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND, method: str
         raise ValueError("Floquet multipliers: the Jacobian along the orbit (or the period) "
                          "is not finite")
     if method not in ("auto", *tuple(FloquetMethod)) or method == FloquetMethod.PRODUCT:
-        raise ValueError(f"method = {method!r}: must be auto, periodic_qz or cyclic_qr")
+        raise ValueError(f"method = {method!r}: must be auto, periodic_qz, cyclic_qr or "
+                         "dominant")
+    if method == FloquetMethod.DOMINANT:
+        P = transfer_matrices(J, T, h, m) if transfer is None else np.asarray(transfer, float)
+        mu, _, ok = dominant_multipliers(P, min(P.shape[1], 16))
+        with np.errstate(divide="ignore"):
+            la = np.log(np.abs(mu))
+        pe = PeriodicEigenvalues(log_abs=la, phase=np.angle(mu), sweeps=0, converged=ok)
+        return (mu.real if np.all(mu.imag == 0) else mu), la, pe, int(P.shape[0]), \
+            FloquetMethod.DOMINANT
     if transfer is not None and group_cond > 1.0:
         d = _balance_scale(J)  # the same balancing, applied to the given P_j: D^-1 P_j D
         P = np.asarray(transfer, float) * (d[None, None, :] / d[None, :, None])
@@ -689,6 +700,62 @@ def _multipliers(J, T, h, m, group_cond: float = DEFAULT_GROUP_COND, method: str
     order = np.argsort(-la, kind="stable")
     la, ph = la[order], ph[order]
     return _to_values(la, ph), la, pe, int(F.shape[0]), FloquetMethod.PERIODIC_QZ
+
+
+#: With method "dominant", the multipliers left out are below this in modulus.
+DOMINANT_FLOOR = 1e-12
+
+
+def dominant_multipliers(P: np.ndarray, p: int, *, floor: float = DOMINANT_FLOOR,
+                         max_sweeps: int = 12, tol: float = 1e-13, seed: int = 0
+                         ) -> tuple[np.ndarray, int, bool]:
+    """The multipliers of largest modulus of the formal product M = P_{K-1} ... P_0, by
+    orthogonal iteration on the periodic sequence (subspace iteration carried through the
+    factors with a QR factorisation after each, so the product is never formed; Golub &
+    Van Loan 2013, sec. 7.3.2 for one matrix, Kressner 2006, sec. 3.1 for products).
+
+    For a stiff system, such as the discretised past of a delay equation (modes decaying
+    like exp(-N^2 t / tau)), each P_j is ill-conditioned beyond any grouping and the periodic
+    QZ on NTST factors of full size is slow; but all multipliers except a few are far below
+    round-off. Starting with a subspace of dimension ``p``, the iteration runs until the
+    subspace is invariant to ``tol`` (a sweep costs K QR factorisations of n x p matrices),
+    then the multipliers are the eigenvalues of the p x p restriction Q_0^T M Q_0. When the
+    smallest of them is not below ``floor``, ``p`` is doubled (up to n): the multipliers
+    left out are then all smaller than ``floor`` and are returned as 0.
+
+    Returns (n multipliers by modulus, largest first; the dimension used; converged).
+    """
+    P = np.asarray(P, float)
+    K, n, _ = P.shape
+    rng = np.random.default_rng(seed)
+    p = max(1, min(int(p), n))
+    while True:
+        Q0 = np.linalg.qr(rng.standard_normal((n, p)))[0]
+        converged = False
+        for _ in range(max_sweeps):
+            Q = Q0
+            Rs = []
+            for j in range(K):
+                Q, R = np.linalg.qr(P[j] @ Q)
+                Rs.append(R)
+            moved = float(np.linalg.norm(Q - Q0 @ (Q0.T @ Q)))
+            Qstart = Q0
+            Q0 = Q
+            if moved <= tol * max(1.0, math.sqrt(p)):
+                converged = True
+                break
+        # M Qstart = Q R_{K-1} ... R_0, so M restricted to span(Qstart) is Qstart^T Q R_tot
+        Rtot = np.eye(p)
+        with np.errstate(under="ignore"):
+            for R in Rs:
+                Rtot = R @ Rtot
+        mu = np.linalg.eigvals(Qstart.T @ Q @ Rtot)
+        mu = mu[np.argsort(-np.abs(mu), kind="stable")]
+        if p >= n or (converged and abs(mu[-1]) < floor):
+            out = np.zeros(n, complex)
+            out[:p] = mu
+            return out, p, converged
+        p = min(n, 2 * p)
 
 
 def floquet_multipliers_from_blocks(J: np.ndarray, T: float, h: np.ndarray, m: int,

@@ -349,7 +349,7 @@ def _hopf_validation(system, param, val, xs, pv, om, omega_guess, bounds) -> str
 
 def _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings) -> HopfPoint:
     J = system.jacobian(xs, pv)
-    q, padj = hopf_eigenvectors(J, om)
+    q, padj = hopf_eigenvectors(J, om, getattr(system, "normal_form_dim", None))
     # crossing speed: d lambda / d alpha = <p, (dJ/dalpha along the equilibrium branch) q>
     fa = system.param_derivative(xs, pv, param)
     try:

@@ -268,7 +268,7 @@ class _HopfCurveSolver:
         others = others[np.lexsort((-np.abs(others.imag), -others.real))]
         if om > 0:
             q = z[n : 2 * n] + 1j * z[2 * n : 3 * n]
-            q = q / np.linalg.norm(q)
+            q = q / np.linalg.norm(q[:getattr(self.system, "normal_form_dim", None)])
             padj = _null_vector(J.T + 1j * om * np.eye(n))
             padj = padj / np.conj(np.vdot(padj, q))
             l1 = _l1_from_forms(self.system.rhs, x, pv, J, om, q, padj)

@@ -29,6 +29,7 @@ from maglev_match.aot import cached_kernel
 from maglev_match.dynamics.system import System
 
 __all__ = [
+    "eigenvector_norm",
     "hopf_eigenvectors",
     "first_lyapunov_coefficient",
     "second_lyapunov_coefficient",
@@ -107,19 +108,29 @@ def _null_vector(M: np.ndarray) -> np.ndarray:
     return np.conj(vh[-1])
 
 
-def hopf_eigenvectors(J: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray]:
+def eigenvector_norm(q: np.ndarray, norm_dim: int | None = None) -> float:
+    """The norm in <q, q> = 1: over all entries, or over the first ``norm_dim`` (a system
+    whose leading states are the physical ones, e.g. a discretised delay system whose other
+    states sample the past: its coefficients then do not depend on the discretisation)."""
+    q = np.asarray(q)
+    return float(np.linalg.norm(q if norm_dim is None else q[:norm_dim]))
+
+
+def hopf_eigenvectors(J: np.ndarray, omega: float, norm_dim: int | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
     """Right and adjoint eigenvectors at a Hopf point.
 
     Returns (q, p) with J q = i omega q, J^T p = -i omega p, <q, q> = 1, <p, q> = 1
-    (<a, b> = sum conj(a) b). The phase of q is fixed so that its largest component is real
-    and positive.
+    (<a, b> = sum conj(a) b; <q, q> over the first ``norm_dim`` entries when given, see
+    :func:`eigenvector_norm`). The phase of q is fixed so that its largest component is
+    real and positive.
     """
     n = J.shape[0]
     eye = np.eye(n)
     q = _null_vector(J - 1j * omega * eye)
     k = int(np.argmax(np.abs(q)))
     q = q * np.exp(-1j * np.angle(q[k]))
-    q = q / np.linalg.norm(q)
+    q = q / eigenvector_norm(q, norm_dim)
     p = _null_vector(J.T + 1j * omega * eye)
     s = np.vdot(p, q)
     p = p / np.conj(s)
@@ -138,7 +149,9 @@ def first_lyapunov_coefficient(
 
     l1 = 1/(2 omega) Re[<p, C(q,q,qbar)> - 2 <p, B(q, J^-1 B(q,qbar))>
                         + <p, B(qbar, (2 i omega I - J)^-1 B(q,q))>]
-    with <q, q> = 1 and <p, q> = 1; B and C exact by autodiff.
+    with <q, q> = 1 and <p, q> = 1; B and C exact by autodiff. <q, q> is taken over the
+    system's first ``normal_form_dim`` states when it has that attribute (a discretised
+    delay system: the current state).
 
     Parameters
     ----------
@@ -155,10 +168,11 @@ def first_lyapunov_coefficient(
     pv = system.p if p is None else np.asarray(p, float)
     x = np.asarray(x, float)
     J = np.asarray(system.derivatives.jacobian(x, pv))
+    norm_dim = getattr(system, "normal_form_dim", None)
     if q is None or p_adj is None:
-        q, p_adj = hopf_eigenvectors(J, omega)
+        q, p_adj = hopf_eigenvectors(J, omega, norm_dim)
     else:
-        q = np.asarray(q, complex) / np.linalg.norm(q)
+        q = np.asarray(q, complex) / eigenvector_norm(q, norm_dim)
         p_adj = np.asarray(p_adj, complex)
         p_adj = p_adj / np.conj(np.vdot(p_adj, q))
     return _l1_from_forms(system.rhs, x, pv, J, float(omega), q, p_adj)
@@ -184,7 +198,7 @@ def second_lyapunov_coefficient(
     x = np.asarray(x, float)
     J = system.jacobian(x, pv)
     if q is None or p_adj is None:
-        q, p_adj = hopf_eigenvectors(J, omega)
+        q, p_adj = hopf_eigenvectors(J, omega, getattr(system, "normal_form_dim", None))
     F = _real_forms(system.rhs)
     xj, pj = np.asarray(x), np.asarray(pv)
 

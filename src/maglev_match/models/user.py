@@ -9,6 +9,13 @@ The file defines, at module level::
     SCALES = [...]                                    # optional: typical size of each state
     OBSERVABLES = {"name": lambda x, p: ...}          # optional: read-outs g(x, p)
 
+A delay model also defines ``DELAYS``, a tuple of PARAMS names, each a delay (seconds, or
+the model's time unit; default values >= 0), and writes ``rhs(x, xd, p)`` with ``xd[k]`` the
+state at t - p[DELAYS[k]] (``xd`` has shape (len(DELAYS), len(STATES))). A file without
+DELAYS keeps ``rhs(x, p)``. The delay model's system is the discretisation of
+:mod:`maglev_match.dynamics.delay` (the delay-free ODE rhs(x, [x, ..., x], p) when every
+delay is 0), so every analysis accepts it; its past holds the whole state (m = n).
+
 ``rhs`` must be written with ``jax.numpy`` so that it can be traced and differentiated
 exactly (no ``numpy``/``math`` on the state, no ``float()``, no Python ``if`` on a value
 that depends on x or p: use ``jnp.where``). :func:`load_model` checks all of this once, by
@@ -174,7 +181,8 @@ class UserModel:
     x0 : equilibrium guess (zeros if the file gives none).
     scales : typical magnitude of each state (ones if the file gives none).
     observables : name -> g(x, p) with p a mapping (as in the file).
-    rhs : the file's ``rhs(x, p)`` (p a mapping).
+    rhs : the file's ``rhs(x, p)``, or ``rhs(x, xd, p)`` for a delay model (p a mapping).
+    delays : the names in DELAYS (empty for an ODE model).
     """
 
     name: str
@@ -187,6 +195,7 @@ class UserModel:
     rhs: Callable[..., Any]
     _vector_rhs: Callable[..., Any] = field(repr=False, default=None)  # type: ignore[assignment]
     _vector_obs: Mapping[str, Callable[..., Any]] = field(repr=False, default_factory=dict)
+    delays: tuple[str, ...] = ()
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -215,8 +224,8 @@ class UserModel:
         p = jnp.asarray([vals[n] for n in self.param_names], dtype=jnp.float64)
         x = jnp.asarray(self.x0)
         with np.errstate(all="ignore"):
-            f = np.asarray(_finite_kernel(self._vector_rhs)(x, p))
-            J = np.asarray(jax.jacfwd(_finite_kernel(self._vector_rhs))(x, p))
+            f = np.asarray(_finite_kernel(self._ode_rhs)(x, p))
+            J = np.asarray(jax.jacfwd(_finite_kernel(self._ode_rhs))(x, p))
         changed = ", ".join(f"{k} = {v:g}" for k, v in (values or {}).items())
         at = f" with {changed}" if changed else ""
         if not np.all(np.isfinite(f)):
@@ -227,10 +236,25 @@ class UserModel:
                     "overflow or a value outside the model's domain")
         return None
 
-    def system(self, values: Mapping[str, float] | None = None) -> System:
+    @property
+    def _ode_rhs(self) -> Callable[..., Any]:
+        """The right-hand side as ``f(x, p)``; for a delay model with a constant past
+        (every delayed state equal to x: the equilibria and the delay-free model)."""
+        if not self.delays:
+            return self._vector_rhs
+        return _constant_past(self._vector_rhs, len(self.delays))
+
+    def system(self, values: Mapping[str, float] | None = None, *,
+               tau_max: float | None = None) -> System:
         """The :class:`System` at the defaults with ``values`` applied. Every System of one
-        UserModel shares the same right-hand side function, so it is compiled once."""
+        UserModel shares the same right-hand side function, so it is compiled once.
+
+        A delay model gives its discretised system (:func:`delay_model_system`) when a
+        delay is positive or ``tau_max`` asks for a delay axis; with every delay 0 and no
+        axis, the delay-free ODE."""
         vals = self.values_with(values)
+        if self.delays:
+            return delay_model_system(self, vals, tau_max=tau_max)
         return System(
             rhs=self._vector_rhs,
             p=np.array([vals[n] for n in self.param_names], float),
@@ -469,8 +493,15 @@ def load_model(path: str | Path, timeout: float | None = None) -> UserModel:
         raise ModelFileError(path, "OBSERVABLES must be a dict name -> function g(x, p)")
     names = tuple(clean)
     p0 = np.array([clean[k] for k in names], float)
-    vrhs = _vectorised(mod.rhs, names, path, "rhs")
-    f0, J0 = _check_traceable(path, "rhs", vrhs, x0, p0, timeout)
+    delays = check_delays(path, mod, clean)
+    if delays:
+        vrhs = _vectorised_delayed(mod.rhs, names, path)
+        f0, J0 = _check_delayed_rhs(path, vrhs, x0, p0, len(delays), timeout)
+        ode_rhs = _constant_past(vrhs, len(delays))
+    else:
+        vrhs = _vectorised(mod.rhs, names, path, "rhs")
+        f0, J0 = _check_traceable(path, "rhs", vrhs, x0, p0, timeout)
+        ode_rhs = vrhs
     if f0.shape != (n,):
         raise ModelFileError(path, f"rhs returns shape {f0.shape}, expected ({n},) "
                              "(one derivative per state in STATES)")
@@ -480,7 +511,7 @@ def load_model(path: str | Path, timeout: float | None = None) -> UserModel:
         raise ModelFileError(path, f"the Jacobian of rhs is not finite at X0 = {x0.tolist()} "
                              "(e.g. sqrt or a power at the edge of its domain); move X0 "
                              "inside the domain")
-    _check_neighbourhood(path, vrhs, x0, p0, scales, tuple(states))
+    _check_neighbourhood(path, ode_rhs, x0, p0, scales, tuple(states))
     vobs = {}
     for k, g in obs_in.items():
         vg = _vectorised(g, names, path, f"OBSERVABLES['{k}']")
@@ -491,4 +522,143 @@ def load_model(path: str | Path, timeout: float | None = None) -> UserModel:
         vobs[k] = vg
     return UserModel(name=path.stem, path=path, states=tuple(states), params=clean, x0=x0,
                      scales=scales, observables=dict(obs_in), rhs=mod.rhs, _vector_rhs=vrhs,
-                     _vector_obs=vobs)
+                     _vector_obs=vobs, delays=delays)
+
+
+# ---------------------------------------------------------------------------------------
+# delay models: the DELAYS contract and their systems
+# ---------------------------------------------------------------------------------------
+def _positional_count(fn: Callable) -> int | None:
+    """Number of positional parameters of ``fn`` (None when it cannot be told, e.g. *args)."""
+    import inspect
+
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):
+        return None
+    kinds = [prm.kind for prm in sig.parameters.values()]
+    if inspect.Parameter.VAR_POSITIONAL in kinds:
+        return None
+    return sum(k in (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+               for k in kinds)
+
+
+def check_delays(path: Path, mod: Any, params: Mapping[str, float]) -> tuple[str, ...]:
+    """The DELAYS of a model file, checked: a tuple (or list) of distinct PARAMS names whose
+    default values are >= 0, with an ``rhs(x, xd, p)`` of three arguments; a file without
+    DELAYS must have ``rhs(x, p)``. Returns () for an ODE model."""
+    delays = getattr(mod, "DELAYS", None)
+    count = _positional_count(mod.rhs)
+    if delays is None:
+        if count == 3:
+            raise ModelFileError(path, "rhs takes three arguments (x, xd, p), a delay model's "
+                                 "form, but the file defines no DELAYS; add DELAYS = "
+                                 "(\"tau\",) naming the delay parameters, or write rhs(x, p)")
+        return ()
+    if isinstance(delays, str) or not isinstance(delays, list | tuple) or not delays:
+        raise ModelFileError(path, f"DELAYS = {delays!r} must be a non-empty tuple of PARAMS "
+                             "names, e.g. DELAYS = (\"tau\",)"[:300])
+    for d in delays:
+        if not isinstance(d, str) or d not in params:
+            raise ModelFileError(path, f"DELAYS entry {d!r} is not a name in PARAMS "
+                                 f"({', '.join(params) or 'none'})")
+        if not params[d] >= 0:
+            raise ModelFileError(path, f"PARAMS['{d}'] = {params[d]!r} is a delay (in DELAYS) "
+                                 "and must be >= 0")
+    if len(set(delays)) != len(delays):
+        raise ModelFileError(path, f"DELAYS has repeated names: {list(delays)}")
+    if count is not None and count != 3:
+        raise ModelFileError(path, f"a delay model (DELAYS = {tuple(delays)}) defines "
+                             f"rhs(x, xd, p) with xd[k] the state at t - DELAYS[k]; its rhs "
+                             f"takes {count} argument(s)")
+    return tuple(delays)
+
+
+def _vectorised_delayed(fn: Callable[..., Any], names: tuple[str, ...],
+                        path: Path | None = None, what: str = "rhs") -> Callable[..., Any]:
+    """``fn(x, xd, mapping)`` as ``g(x, yd, p_vector)`` with ``yd`` the tuple of delayed
+    states (one per delay) that :class:`~maglev_match.dynamics.delay.DelayDifferentialSystem`
+    passes; ``xd`` is given to the file as a (K, n) array. Guarded and refused when complex
+    as :func:`_vectorised`."""
+
+    def g(x, yd, p):
+        xd = jnp.stack([jnp.reshape(y, (-1,)) for y in yd])
+        if path is None:
+            out = fn(x, xd, {n: p[i] for i, n in enumerate(names)})
+        else:
+            with _guarded(path, what):
+                out = fn(x, xd, {n: p[i] for i, n in enumerate(names)})
+        if jnp.iscomplexobj(out):
+            raise ModelFileError(path or "?", f"{what} returns complex numbers "
+                                 f"({jnp.result_type(out)}); the vector field must be real")
+        return jnp.asarray(out, dtype=jnp.float64)
+
+    g.__name__ = getattr(fn, "__name__", "user_function")
+    return g
+
+
+def _constant_past(vrhs: Callable, n_delays: int) -> Callable[..., Any]:
+    """A delayed right-hand side ``g(x, yd, p)`` with every delayed state equal to x, as
+    ``f(x, p)`` (the delay-free model; its equilibria are those of the delay system)."""
+
+    def f(x, p):
+        return vrhs(x, tuple(x for _ in range(n_delays)), p)
+
+    f.__name__ = getattr(vrhs, "__name__", "user_function")
+    return f
+
+
+def _check_delayed_rhs(path: Path, vrhs: Callable, x0: np.ndarray, p0: np.ndarray,
+                       n_delays: int, timeout: float | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Evaluate the delayed ``rhs(x, xd, p)`` at x = X0, xd = (X0, ..., X0) under jit and
+    its derivatives in x and xd; return the value (its shape is checked by the caller) and
+    the Jacobian of the delay-free model (constant past) at X0."""
+    yd = tuple(jnp.asarray(x0) for _ in range(n_delays))
+
+    def both(x, p):
+        return vrhs(x, yd, p)
+
+    def delayed(y, p):
+        return vrhs(jnp.asarray(x0), tuple(y for _ in range(n_delays)), p)
+
+    val, _ = _check_traceable(path, "rhs(x, xd, p)", both, x0, p0, timeout)
+    _check_traceable(path, "rhs(x, xd, p) (in xd)", delayed, x0, p0, timeout)
+    _, jac = _check_traceable(path, "rhs(x, xd, p) (constant past)",
+                              _constant_past(vrhs, n_delays), x0, p0, timeout)
+    return val, jac
+
+
+def _identity_signal(x, p):
+    return x
+
+
+def delay_model_system(user: UserModel, values: Mapping[str, float], *,
+                       tau_max: float | None = None) -> System:
+    """The system of a delay model at ``values`` (all parameters): the discretisation of
+    its delay system (:func:`~maglev_match.dynamics.delay.discretise`) when a delay is
+    positive or ``tau_max`` is given, else the delay-free ODE. A negative delay or one too
+    long for the discretisation is a ParameterError naming it."""
+    from maglev_match.dynamics.delay import (
+        DelayDifferentialSystem,
+        DelayNodesError,
+        discretise,
+    )
+    from maglev_match.params import ParameterError
+
+    names = user.param_names
+    p = np.array([values[n] for n in names], float)
+    for d in user.delays:
+        if not values[d] >= 0:
+            raise ParameterError(d, values[d], "a delay must be >= 0")
+    dde = DelayDifferentialSystem(
+        rhs=user._vector_rhs, signals=tuple(_identity_signal for _ in user.delays),
+        delays=user.delays, p=p, param_names=names, state_names=user.states,
+        x_guess=user.x0, state_scale=user.scales, observables=dict(user._vector_obs),
+        name=user.name, signal_names=tuple(user.states for _ in user.delays))
+    if tau_max is None and not any(values[d] > 0 for d in user.delays):
+        return dde.ode_system()
+    try:
+        return discretise(dde, tau_max=tau_max)
+    except DelayNodesError as exc:
+        raise ParameterError(exc.field, exc.value, exc.rule) from None

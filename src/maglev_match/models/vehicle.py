@@ -13,6 +13,11 @@ State layout (16 + 2 n_modes + 18 entries):
 
 Levitation point j = 2k-1, 2k sits at a_j = -s, +s on frame k, frame k at b_k = -s0, 0, +s0
 from the body centre; the vehicle centre is at mid-span.
+
+With a delay tau > 0 of the outer control loop (parameter ``tau``, s), every point's current
+equation reads its outer-loop command u_j = kP y1_j + kD (v_j + u_j') late, as in model A
+(:mod:`maglev_match.models.unit`): i_j' = (i_j / c_j) c_j' + ke c_j / K (u_j(t - tau) - i_j
++ i0). :func:`vehicle_dde` is this delay system (six delayed signals).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from functools import cache
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.dynamics.delay import DelayDifferentialSystem
 from maglev_match.dynamics.system import System
 from maglev_match.models.limits import clamp_current, hold_current_rate
 from maglev_match.params import PARAMETER_DOCS, Params, param_ranges
@@ -96,7 +102,7 @@ def point_kinematics(x, p, n_modes: int):
     return u, ud, c, cd
 
 
-def _rhs(x, p, n_modes: int, limited: bool):
+def _rhs(x, p, n_modes: int, limited: bool, command=None):
     q, a, b, xj, phi, omega, K, i0, q_static = _geometry(p, n_modes)
     L = layout(n_modes)
     body, body_dot = x[L["body"]], x[L["body_dot"]]
@@ -124,8 +130,10 @@ def _rhs(x, p, n_modes: int, limited: bool):
              + 2.0 / (q["mbar"] * q["L"]) * (phi @ f))
 
     gap_err = c - q["c0"] - y1
+    # the outer loops' current commands u_j = kP y1_j + kD y2_j (read late when delayed)
+    u = q["kP"] * y1 + q["kD"] * (v + ud) if command is None else command
     di = r * cd + q["ke"] * c / K * (
-        q["kP"] * y1 + q["kD"] * (v + ud) - i + i0
+        u - i + i0
     )
     if limited:
         di = hold_current_rate(i, di)
@@ -143,6 +151,31 @@ def vehicle_rhs(n_modes: int = 3, limited: bool = False):
 
     rhs.__name__ = f"vehicle_rhs_{n_modes}{'_limited' if limited else ''}"
     return rhs
+
+
+@cache
+def vehicle_delay_rhs(n_modes: int = 3, limited: bool = False):
+    """Model B with the outer loops delayed: ``rhs(x, ud, p)`` with ``ud[0]`` the six
+    commands u_j(t - tau) (cached per n_modes and limits)."""
+
+    def rhs(x, ud, p):
+        return _rhs(x, p, n_modes, limited, command=ud[0])
+
+    rhs.__name__ = f"vehicle_delay_rhs_{n_modes}{'_limited' if limited else ''}"
+    return rhs
+
+
+@cache
+def outer_loop_commands(n_modes: int = 3):
+    """u_j = kP y1_j + kD (v_j + u_j') (A) at the six points: the delayed quantities."""
+    L = layout(n_modes)
+
+    def commands(x, p):
+        ud = point_kinematics(x, p, n_modes)[1]
+        return p[_IDX["kP"]] * x[L["y1"]] + p[_IDX["kD"]] * (x[L["v"]] + ud)
+
+    commands.__name__ = f"vehicle_commands_{n_modes}"
+    return commands
 
 
 def param_vector(params: Params) -> np.ndarray:
@@ -189,9 +222,10 @@ def _observables(n_modes: int) -> dict:
             "beam_deflection": beam_deflection}
 
 
-def vehicle_system(params: Params, limited: bool = False) -> System:
-    """Model B as a :class:`System` for the given parameter set."""
-    n = params.n_modes
+DELAY_PARAM_NAMES = PARAM_NAMES + ("tau",)
+
+
+def _state_scale(n: int) -> np.ndarray:
     L = layout(n)
     scale = np.ones(34 + 2 * n)
     scale[L["body"]] = 1e-3
@@ -201,6 +235,33 @@ def vehicle_system(params: Params, limited: bool = False) -> System:
     scale[L["i"]] = 1.0
     scale[L["y1"]] = 1e-3
     scale[L["v"]] = 1e-2
+    return scale
+
+
+def vehicle_dde(params: Params, limited: bool = False) -> DelayDifferentialSystem:
+    """Model B with the delayed outer loops as a delay system (parameters
+    :data:`DELAY_PARAM_NAMES`); its delay-free system is the ODE of :func:`vehicle_system`."""
+    n = params.n_modes
+    return DelayDifferentialSystem(
+        rhs=vehicle_delay_rhs(n, limited), signals=(outer_loop_commands(n),), delays=("tau",),
+        p=np.append(param_vector(params), float(params.tau)), param_names=DELAY_PARAM_NAMES,
+        state_names=state_names(n), x_guess=equilibrium_guess(params),
+        state_scale=_state_scale(n), observables=_observables(n),
+        name=f"vehicle ({n} modes)", signal_names=(tuple(f"u{j}" for j in range(1, 7)),),
+        ode_rhs=vehicle_rhs(n, limited), ode_param_names=PARAM_NAMES)
+
+
+def vehicle_system(params: Params, limited: bool = False, *, tau_max: float | None = None,
+                   nodes: int | None = None) -> System:
+    """Model B as a :class:`System` for the given parameter set: the ODE when
+    ``params.tau = 0`` and no ``tau_max``, else the discretised delay system (as
+    :func:`maglev_match.models.unit.unit_system`)."""
+    if params.tau > 0 or tau_max is not None or nodes is not None:
+        from maglev_match.models.unit import discretised
+
+        return discretised(vehicle_dde(params, limited), tau_max=tau_max, nodes=nodes)
+    n = params.n_modes
+    scale = _state_scale(n)
     return System(
         rhs=vehicle_rhs(n, limited),
         p=param_vector(params),

@@ -1,0 +1,184 @@
+"""The maglev models with a delayed outer control loop (parameter tau): the delay-free
+limit, convergence of the discretisation, the critical delay, simulation and the index."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from maglev_match.dynamics.delay import (
+    DiscretisedSystem,
+    characteristic_roots,
+    critical_delay,
+    delay_first_lyapunov_coefficient,
+    simulate_delay,
+)
+from maglev_match.dynamics.equilibria import stability
+from maglev_match.dynamics.hopf import locate_hopf_points, refine_hopf_point
+from maglev_match.dynamics.normal_forms import first_lyapunov_coefficient
+from maglev_match.dynamics.system import System
+from maglev_match.models import build_system
+from maglev_match.models.unit import (
+    STATE_SCALE,
+    param_vector,
+    unit_dde,
+    unit_rhs,
+    unit_rhs_limited,
+    unit_system,
+)
+from maglev_match.params import ParameterError, load_preset
+from maglev_match.simulation import gap_limit_events, simulate_maglev
+
+
+@pytest.fixture(scope="module")
+def soft():
+    return load_preset("turnout-soft")
+
+
+@pytest.fixture(scope="module")
+def ode_hopf(soft):
+    """Model A's Hopf point along omega1 without delay (128.44 rad/s, subcritical)."""
+    return locate_hopf_points(unit_system(soft), "omega1", 100.0, 150.0).points[0]
+
+
+# ---------------------------------------------------------------------------------------
+# tau -> 0
+# ---------------------------------------------------------------------------------------
+def test_zero_delay_is_todays_ode_exactly(soft, ode_hopf):
+    s = build_system(soft, "unit")
+    assert type(s) is System and s.rhs is unit_rhs and "tau" not in s.param_names
+    assert np.array_equal(s.p, param_vector(soft))
+    assert build_system(soft, "unit", limited=True).rhs is unit_rhs_limited
+    # the delay system's delay-free system is the same ODE (same function, same numbers)
+    dde = unit_dde(soft)
+    ode = dde.ode_system()
+    assert ode.rhs is unit_rhs and np.array_equal(ode.p, s.p)
+    # the characteristic-equation code at tau = 0 reproduces the ODE's eigenvalues and l1
+    w = stability(s).eigenvalues
+    cr = characteristic_roots(dde, count=9)
+    assert np.max(np.abs(np.sort_complex(cr.roots) - np.sort_complex(w))) < 1e-10
+    pk = np.append(ode_hopf.p, 0.0)
+    l1 = delay_first_lyapunov_coefficient(dde, ode_hopf.x, pk, ode_hopf.frequency)
+    assert abs(l1 - ode_hopf.l1) <= 1e-10 * abs(ode_hopf.l1)
+
+
+def test_discretised_model_a_tends_to_the_ode_as_tau_goes_to_zero(soft, ode_hopf):
+    """The Hopf point along omega1 of the discretised delay system moves linearly in tau
+    (-1.37e4 rad/s per s): the slopes at tau = 1e-6 and 1e-7 agree, and the linear
+    extrapolation to tau = 0 is the ODE's Hopf point."""
+    shifts = {}
+    for tau in (1e-6, 1e-7):
+        S = unit_system(soft.replace(tau=tau))
+        hp = refine_hopf_point(S, "omega1", ode_hopf.value, S.lift(ode_hopf.x),
+                               ode_hopf.frequency)
+        assert hp.converged and isinstance(S, DiscretisedSystem)
+        shifts[tau] = hp.value - ode_hopf.value
+    s1, s2 = shifts[1e-6] / 1e-6, shifts[1e-7] / 1e-7
+    assert abs(s1 - s2) <= 1e-3 * abs(s2) and s2 < 0
+    limit = ode_hopf.value + (1e-6 * shifts[1e-7] - 1e-7 * shifts[1e-6]) / (1e-6 - 1e-7)
+    assert abs(limit - ode_hopf.value) <= 2e-9 * ode_hopf.value
+
+
+def test_characteristic_roots_tend_to_the_ode_eigenvalues_at_second_order(soft):
+    """lambda(tau) = lambda0 + tau lambda'(0) + O(tau^2) with the closed form
+    lambda'(0) = -lambda0 <u, A1 v> / <u, v> (u, v left/right eigenvectors of A0 + A1;
+    from d/dtau of det(lambda I - A0 - A1 exp(-lambda tau)) = 0 at tau = 0): the six
+    rightmost roots at tau = 1e-8 equal it to 1e-10, and the remainder falls like tau^2."""
+    import scipy.linalg
+
+    from maglev_match.dynamics.delay import delay_jacobians
+
+    A0, (A1,) = delay_jacobians(unit_dde(soft), np.zeros(9))
+    w, vl, vr = scipy.linalg.eig(A0 + A1, left=True, right=True)
+    rest = {}
+    for tau in (1e-6, 1e-7, 1e-8):
+        cr = characteristic_roots(unit_dde(soft.replace(tau=tau)), count=6)
+        assert cr.trusted == 6
+        errs = []
+        for lam in cr.roots:
+            k = int(np.argmin(np.abs(w - lam)))
+            u, v = vl[:, k], vr[:, k]
+            slope = -w[k] * (np.conj(u) @ A1 @ v) / (np.conj(u) @ v)
+            errs.append(abs(lam - w[k] - tau * slope))
+        rest[tau] = np.array(errs)
+    assert np.all(rest[1e-8] < 1e-10)
+    ratio = rest[1e-6][2:] / rest[1e-7][2:]  # (the first pair is at round-off already)
+    assert np.all((ratio > 80) & (ratio < 120))
+
+
+def test_rightmost_roots_converge_in_the_number_of_nodes(soft):
+    """At tau = 1 ms the discretised system's six rightmost eigenvalues agree to 1e-10 for
+    N = 16 and 32 and with the Newton-corrected characteristic roots (N = 32 and 48)."""
+    p = soft.replace(tau=1e-3)
+    dde = unit_dde(p)
+    ref = characteristic_roots(dde, count=6, nodes=32)
+    assert ref.trusted == 6
+    for N in (16, 32):
+        w = stability(unit_system(p, nodes=N)).eigenvalues[:6]
+        assert np.max(np.abs(w - ref.roots) / np.maximum(1.0, np.abs(ref.roots))) < 1e-10
+
+
+# ---------------------------------------------------------------------------------------
+# the critical delay
+# ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("preset", ["turnout-soft", "turnout-stiff"])
+def test_critical_delay_is_where_the_discretised_system_loses_stability(preset):
+    params = load_preset(preset)
+    dde = unit_dde(params)
+    cd = critical_delay(dde, tau_max=0.02)
+    assert cd.stable_without_delay and 1e-3 < cd.value < 2e-3 and cd.crossing_speed > 0
+    below = stability(unit_system(params.replace(tau=cd.value * (1 - 1e-6))))
+    above = stability(unit_system(params.replace(tau=cd.value * (1 + 1e-6))))
+    assert below.stable and not above.stable
+    pair = above.eigenvalues[0]
+    assert abs(abs(pair.imag) - cd.frequency) < 1e-3
+    # l1: the characteristic-matrix formula and the discretised system's normal form
+    S = unit_system(params.replace(tau=cd.value))
+    l1 = first_lyapunov_coefficient(S, S.lift(np.zeros(9)), None, cd.frequency)
+    assert l1 == pytest.approx(cd.l1, rel=1e-6) and cd.kind == "supercritical"
+
+
+def test_a_delay_needing_too_many_nodes_is_a_parameter_error(soft):
+    with pytest.raises(ParameterError, match=r"'tau' = 0\.5: needs .* at most"):
+        unit_system(soft.replace(tau=0.5))
+    with pytest.raises(ParameterError, match="tau"):
+        soft.replace(tau=-1e-3)
+
+
+# ---------------------------------------------------------------------------------------
+# simulation: method of steps against the discretised ODE
+# ---------------------------------------------------------------------------------------
+def test_simulation_with_delay_matches_the_method_of_steps(soft):
+    """The discretised ODE (default nodes) against the method of steps on model A with the
+    limits on, tau = 1 ms, a constant past: the gap agrees to 1e-11 m and collision times to
+    1e-10 s; the states to 2e-4 of their scale (the coil current, near t = tau, where the
+    constant past's kink is transported through the history)."""
+    p = soft.replace(tau=1e-3)
+    ev = gap_limit_events("unit", 0, p.gap_min, p.gap_max)
+    dde = unit_dde(p, limited=True)
+    for x5, end in ((-1e-3, "running"), (-6e-3, "collision")):
+        x0 = np.zeros(9)
+        x0[4] = x5
+        disc = simulate_maglev(p, "unit", x0, 0.3, n_save=301)
+        ref = simulate_delay(dde, x0, 0.3, event_fn=ev, n_save=301)
+        assert disc.outcome == ref.outcome == end
+        ok = np.all(np.isfinite(disc.result.x), axis=1) & np.all(np.isfinite(ref.x), axis=1)
+        xd, xr = disc.result.x[ok, :9], ref.x[ok]
+        assert np.max(np.abs((xd[:, 0] - xd[:, 4]) - (xr[:, 0] - xr[:, 4]))) < 1e-11
+        assert np.max(np.abs(xd - xr) / STATE_SCALE) < 2e-4
+        if end == "collision":
+            assert abs(disc.collision_time - ref.event_time) < 1e-10
+
+
+# ---------------------------------------------------------------------------------------
+# the index with a delay
+# ---------------------------------------------------------------------------------------
+def test_index_beyond_the_critical_delay_is_zero_and_says_why(soft):
+    from maglev_match.matching import matching_index
+
+    res = matching_index(soft.replace(tau=2e-3), simulate=False)
+    assert res.chi == 0.0 and not res.stable and res.case == "unstable_equilibrium"
+    cd = res.critical_delay
+    ref = critical_delay(unit_dde(soft), tau_max=1.0)
+    assert cd["value"] == pytest.approx(ref.value, rel=1e-12) and cd["stable_at_tau"] is False
+    assert cd["kind"] == "supercritical" and cd["frequency"] == pytest.approx(ref.frequency)
