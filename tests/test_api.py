@@ -22,7 +22,8 @@ PUBLIC = ("load_preset", "load_params", "Params", "System", "stability", "hopf_p
           "ParameterError", "root_locus", "build_system", "index_sensitivity",
           "design_search", "study_report", "plot", "figure_of", "root_locus_figure",
           "hopf_curve_figure", "cycle_diagram", "simulation_figure", "map_figure",
-          "tornado_figure", "design_path_figure", "hopf_scan_figure")
+          "tornado_figure", "design_path_figure", "hopf_scan_figure", "restart_branch",
+          "speed_sweep")
 
 
 def test_import_is_light_and_every_public_name_resolves():

@@ -126,9 +126,9 @@ def test_restart_without_parameter_options_continues_the_saved_branch(capsys, fi
     again = next(f for f in files if f.suffix == ".nc")
     assert load_cycle_restart(again, "P0").path == str(again)  # restartable in turn
     # the Python API's restart: the saved model and values from the file, the same points
-    from maglev_match.restart import restart
+    import maglev_match as mm
 
-    api = restart(nc, "P1", max_steps=2)
+    api = mm.restart_branch(nc, "P1", max_steps=2)
     assert api.branch.values.tolist() == pytest.approx([r["sigma"] for r in doc["branch"]],
                                                        rel=1e-12)
     assert [str(s.type) for s in api.branch.special_points] == \

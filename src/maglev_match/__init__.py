@@ -45,6 +45,7 @@ _LAZY: dict[str, str] = {
     "design_search": "maglev_match.api",
     "design_map": "maglev_match.api",
     "study_report": "maglev_match.api",
+    "restart_branch": "maglev_match.api",
     "speed_sweep": "maglev_match.api",
     # figures: plot(result) draws any result; the figure functions themselves
     "plot": "maglev_match.plots",
@@ -76,6 +77,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         hopf_points,
         index_sensitivity,
         matching_index,
+        restart_branch,
         root_locus,
         simulate,
         speed_sweep,

@@ -66,6 +66,7 @@ __all__ = [
     "design_search",
     "design_map",
     "study_report",
+    "restart_branch",
     "speed_sweep",
     "MODELS",
 ]
@@ -656,6 +657,49 @@ def design_search(params: Params | str | None = None, *,
     evaluator = MaglevEvaluator(base, problem.names, model=_check_model(model),
                                 simulate=simulate)
     return optimise_design(problem, evaluator, grid=grid, starts=starts, progress=progress)
+
+
+def restart_branch(source: str | Path | Any, label: str, system: System | None = None, *,
+            param: str | None = None, stop: float | None = None,
+            bounds: Mapping[str, tuple[float, float]] | None = None,
+            **options: Any) -> Any:
+    """Continue a saved branch from one of its points (`cycles --restart FILE --label L`,
+    `hopf-curve --restart FILE --label L`). The file says what it holds; no Hopf point is
+    searched again.
+
+    Parameters
+    ----------
+    source : str, Path or xarray.Dataset
+        A branch file written by `cycles --out` or `hopf-curve --out` (or by
+        `maglev_match.restart.save_equilibrium_branch`).
+    label : str
+        The point to continue from: `P<k>` for the k-th saved point, or a special point's
+        label (`LPC1`, `PD1`, `GH1`, ...).
+    system : System, optional
+        The model; by default the saved model at its saved parameter values (model A or B,
+        or the user model file the branch names). Its names and values must match the
+        saved ones (all but the continued parameter), else a clear error names them.
+    param : str, optional
+        A cycle branch: continue in another parameter (default the saved one).
+    stop : float, optional
+        An equilibrium branch: where the continued parameter should end (required there).
+    bounds : mapping, optional
+        A Hopf curve: `{name: (low, high)}` for its two parameters (default the saved ones).
+    **options
+        Passed to the continuation (e.g. `max_steps`, `ntst`).
+
+    (Named `restart_branch` because `maglev_match.restart` is the module that reads the
+    files.)
+
+    Returns
+    -------
+    RestartedCycleBranch, or (HopfCurve, HopfCurveRestart), or (EquilibriumBranch,
+    EquilibriumRestart); see `maglev_match.restart`. A damaged or mismatched file raises
+    `maglev_match.restart.RestartFileError` naming the file and the problem.
+    """
+    from maglev_match.restart import restart as _restart
+
+    return _restart(source, label, system, param=param, stop=stop, bounds=bounds, **options)
 
 
 def study_report(params: Params | str | None = None, out: str | Path = "report.html", *,
