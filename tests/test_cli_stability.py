@@ -51,6 +51,8 @@ def test_root_locus_writes_csv_and_png(capsys, tmp_path):
     assert csv.exists() and (tmp_path / "root_locus_unit_omega1.png").stat().st_size > 1000
     rows = csv.read_text().splitlines()
     assert len(rows) == 1 + 31 * 9
+    assert rows[0] == ("omega1 (rad/s),index,re (1/s),im (rad/s),max_real_part (1/s),"
+                       "equilibrium_converged")  # SI values, units in the headers
     # a stability change is reported where the max real part changes sign
     mr = np.array(doc["max_real_part"])
     assert (len(doc["stability_changes"]) > 0) == bool(np.any(np.diff(np.sign(mr)) != 0))

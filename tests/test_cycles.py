@@ -239,7 +239,9 @@ def test_cli_cycles_json_shape(capsys, tmp_path):
         assert min(last["gap_dev_min"] + 0.008, 0.010 - last["gap_dev_max"],
                    last["current_min"] / 26.68) == pytest.approx(0.0, abs=1e-6)
     assert (tmp_path / "cycles_unit_sigma.png").exists()
-    assert (tmp_path / "cycles_unit_sigma.csv").read_text().startswith("branch,hopf,sigma")
+    # SI values, each header with its unit
+    assert (tmp_path / "cycles_unit_sigma.csv").read_text().startswith(
+        "branch,hopf,sigma (1/kg),period (s),gap_dev_max (m),gap_dev_min (m),current_min (A)")
     # the full branch as netCDF, and a restart from its third point
     import xarray as xr
 

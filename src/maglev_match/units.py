@@ -53,6 +53,8 @@ QUANTITIES: dict[str, Unit] = {
     "gap_min": _MM,
     "gap_deviation_max": _MM,
     "gap_deviation_min": _MM,
+    "gap_dev_max": _MM,
+    "gap_dev_min": _MM,
     "gap_rate": _MM_S,
     "beam_deflection": _MM,
     "x5": _MM,

@@ -111,14 +111,21 @@ def _hopf_json(h: HopfPoint, param: str) -> dict[str, Any]:
             "others_stable": h.others_stable, "converged": h.converged}
 
 
-def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+def _write_csv(path: Path, rows: list[dict[str, Any]], param: str | None = None) -> None:
+    """Rows as CSV, SI values, each header ``name (unit)`` (the continued parameter's unit
+    from the parameter table, the others from :mod:`maglev_match.units`)."""
+    from maglev_match.cli.common import unit_of
+    from maglev_match.units import header
+
     if not rows:
         atomic_write_text(path, "")
         return
+    keys = list(rows[0])
+    unit = unit_of(param) if param else ""
     with atomic_open(path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
+        w = csv.writer(fh)
+        w.writerow([f"{k} ({unit})" if k == param and unit else header(k) for k in keys])
+        w.writerows([[r.get(k, "") for k in keys] for r in rows])
 
 
 @app.command("cycles")
@@ -290,8 +297,8 @@ def _write_outputs(out, param, model, scan, branches, params, at, system=None) -
             rows.append({"branch": branch_label(k), "hopf": br.hopf.value, **r})
         for r in _special_rows(br, param):
             specials.append({"branch": branch_label(k), **r})
-    _write_csv(folder / f"{stem}.csv", rows)
-    _write_csv(folder / f"{stem}_special_points.csv", specials)
+    _write_csv(folder / f"{stem}.csv", rows, param)
+    _write_csv(folder / f"{stem}_special_points.csv", specials, param)
     files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
     # the full branches (profiles, multipliers, special points, restart data) as netCDF
     from maglev_match.cli.common import unit_of

@@ -376,14 +376,15 @@ def hopf_curve_command(
             special.append(rec)
     with atomic_open(csv_path, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["branch", names[0], names[1], "frequency", "l1", "others_stable"])
+        nh = [f"{n} ({unit_of(n)})" if not rm.is_user and unit_of(n) else n for n in names]
+        w.writerow(["branch", *nh, header("frequency"), "l1", "others_stable"])
         for r in points:
             w.writerow([r["branch"], f"{r[names[0]]:.12g}", f"{r[names[1]]:.12g}",
                         f"{r['frequency']:.12g}", f"{r['l1']:.8g}", r["others_stable"]])
     sp_path = folder / f"{stem}_special.csv"
     with atomic_open(sp_path, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["type", names[0], names[1], "frequency", "l2", "branch"])
+        w.writerow(["type", *nh, header("frequency"), "l2", "branch"])
         for r in special:
             w.writerow([r["type"], f"{r[names[0]]:.12g}", f"{r[names[1]]:.12g}",
                         f"{r['frequency']:.10g}", "" if r.get("l2") is None else

@@ -223,9 +223,9 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
         folder, stem = output_target(out, "cycles", f"cycles_{model}_{param}_restart")
         rows = [{"branch": "b1", "restart_of": f"{label} of {restart}", **r}
                 for r in _branch_rows(br, param)]
-        _write_csv(folder / f"{stem}.csv", rows)
+        _write_csv(folder / f"{stem}.csv", rows, param)
         _write_csv(folder / f"{stem}_special_points.csv",
-                   [{"branch": "b1", **r} for r in _special_rows(br, param)])
+                   [{"branch": "b1", **r} for r in _special_rows(br, param)], param)
         files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
         if br.points:
             from maglev_match.cli.common import unit_of

@@ -197,7 +197,9 @@ def root_locus_command(
     csv_path = folder / f"{stem}.csv"
     with atomic_open(csv_path, "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow([param, "index", "re", "im", "max_real_part", "equilibrium_converged"])
+        pu = unit_of(param)
+        w.writerow([f"{param} ({pu})" if pu else param, "index", header("re"), header("im"),
+                    header("max_real_part"), "equilibrium_converged"])
         for v, eig, mr, ok in zip(values, res.eigenvalues, res.max_real_part, res.converged,
                                   strict=True):
             for k, z in enumerate(eig):
