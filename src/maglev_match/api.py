@@ -665,7 +665,8 @@ def restart_branch(source: str | Path | Any, label: str, system: System | None =
             **options: Any) -> Any:
     """Continue a saved branch from one of its points (`cycles --restart FILE --label L`,
     `hopf-curve --restart FILE --label L`). The file says what it holds; no Hopf point is
-    searched again.
+    searched again. (Named `restart_branch` because `maglev_match.restart` is the module
+    that reads the files.)
 
     Parameters
     ----------
@@ -687,9 +688,6 @@ def restart_branch(source: str | Path | Any, label: str, system: System | None =
         A Hopf curve: `{name: (low, high)}` for its two parameters (default the saved ones).
     **options
         Passed to the continuation (e.g. `max_steps`, `ntst`).
-
-    (Named `restart_branch` because `maglev_match.restart` is the module that reads the
-    files.)
 
     Returns
     -------

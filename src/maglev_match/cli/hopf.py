@@ -255,8 +255,7 @@ def hopf_curve_command(
     """The Hopf curve in two parameters by continuation, with l1 along it and the
     codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
     from maglev_match.cli.models import delay_names, resolve_model
-    from maglev_match.dynamics.hopf_curve import stability_grid
-    from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans
+    from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans, stability_grid
 
     check_output_path(out)
     model_arg = model

@@ -186,14 +186,14 @@ def speed_command(
 
 
 def _write_sweep(sweep, folder: Path, stem: str) -> list[Path]:
-    from maglev_match.io import atomic_write
+    from maglev_match.io import atomic_write_netcdf
     from maglev_match.plots import save_figure
     from maglev_match.plots.speed import speed_figure
 
     folder.mkdir(parents=True, exist_ok=True)
     nc = folder / f"{stem}.nc"
     ds = sweep.to_xarray()
-    atomic_write(nc, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+    atomic_write_netcdf(nc, ds)
     return [nc, *save_figure(speed_figure(sweep), folder / f"{stem}.png")]
 
 
@@ -224,11 +224,11 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
         prog.stage(f"run done: {run.outcome}")
         folder, stem = output_target(out, "simulate", f"simulation_{model}_speed")
         folder.mkdir(parents=True, exist_ok=True)
-        from maglev_match.io import atomic_write
+        from maglev_match.io import atomic_write_netcdf
 
         nc = folder / f"{stem}.nc"
         ds = run.to_xarray()
-        atomic_write(nc, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+        atomic_write_netcdf(nc, ds)
         written = [nc]
         pfolder, pstem = output_target(plot if plot is not None else out, "simulate",
                                        f"simulation_{model}_speed")
@@ -286,12 +286,12 @@ def speed_map_command(x: str, y: str, preset: str, config, set_, out: Path | Non
                    f"{len(spec.tiles)} rows ...")
         ds = run_speed_map(spec, tiles, resume=resume, scheduler=scheduler, workers=workers,
                            progress=prog.tiles)
-        from maglev_match.io import atomic_write
+        from maglev_match.io import atomic_write_netcdf
         from maglev_match.plots import save_figure
         from maglev_match.plots.speed import speed_map_figure
 
         folder.mkdir(parents=True, exist_ok=True)
-        atomic_write(nc, lambda tmp: ds.to_netcdf(tmp, engine="h5netcdf"))
+        atomic_write_netcdf(nc, ds)
         files = [nc, *save_figure(speed_map_figure(ds), folder / f"{stem}.png")]
     shutil.rmtree(tiles, ignore_errors=True)
     stable = ds["stable"].values
