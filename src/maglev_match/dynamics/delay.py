@@ -511,7 +511,9 @@ def discretise(dde: DelayDifferentialSystem, nodes: int | None = None, *,
 
     Raises :class:`DelayNodesError` when a delay is negative, or when the delays need more
     than :data:`NODES_MAX` intervals. The discretised system's ``param_ranges`` bound each
-    delay to (0, the longest delay N intervals resolve].
+    delay to (0, the longest delay N intervals resolve] (by the rule of :func:`nodes_for`;
+    when both ``nodes`` and ``tau_max`` are given, the caller has chosen the resolution for
+    delays up to ``tau_max``, and that is the bound).
     """
     taus = dde.delay_values()
     for name, t in zip(dde.delays, taus, strict=True):
@@ -519,6 +521,7 @@ def discretise(dde: DelayDifferentialSystem, nodes: int | None = None, *,
             raise DelayNodesError(name, float(t), "a delay must be a finite number >= 0 s")
     longest = max([float(np.max(taus))] + ([float(tau_max)] if tau_max is not None else []))
     rate = dde.rate_bound()
+    chosen = nodes is not None  # the caller's resolution: its tau_max is the delays' bound
     if nodes is None:
         nodes = nodes_for(longest, rate)
         if nodes > NODES_MAX:
@@ -545,6 +548,8 @@ def discretise(dde: DelayDifferentialSystem, nodes: int | None = None, *,
     X0 = np.asarray(_lift_kernel(dde.signals, n, nodes)(jnp.asarray(dde.x_guess),
                                                         jnp.asarray(dde.p)))
     hi = max_delay_for(rate, nodes)
+    if chosen and tau_max is not None:
+        hi = max(hi, float(tau_max))
     ranges = dict(dde.param_ranges)
     for d in dde.delays:
         lo_d, hi_d = ranges.get(d, (0.0, math.inf))
