@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -23,10 +23,22 @@ from maglev_match.cli.common import (
     console,
     console_err,
     emit_json,
+    given,
     output_target,
     params_from_options,
     print_warnings,
+    progress_report,
     refuse_given,
+)
+from maglev_match.cli.cycle_tables import _cycle_rows, _special_rows_user
+from maglev_match.cli.restart import (
+    HOPF_SEARCH_OPTIONS,
+    _fail_if_nothing_continued,
+    _mesh,
+    _need_label,
+    _refuse_continued_value,
+    _restart_json,
+    restart_errors,
 )
 from maglev_match.params import ParameterError, Params
 
@@ -201,26 +213,6 @@ def _at_values(user: UserModel, at: list[str] | None) -> dict[str, float]:
     return parse_sets(user, at, option="--at")
 
 
-def _cycle_rows(br, param: str) -> list[dict[str, Any]]:
-    """The rows of a user-model cycle branch (CSV and JSON)."""
-    out_rows = []
-    for c in br.points:
-        r = {param: c.value, "period": c.period, "stable": c.stable,
-             "unstable_multipliers": c.n_unstable,
-             "trivial_multiplier_error": abs(c.trivial_multiplier - 1.0),
-             "max_abs_multiplier": float(np.max(np.abs(c.multipliers)))
-             if len(c.multipliers) else 0.0, "kind": c.kind}
-        for k, (hi, lo) in c.extrema.items():
-            r[f"{k}_max"], r[f"{k}_min"] = hi, lo
-        out_rows.append(r)
-    return out_rows
-
-
-def _special_rows_user(br, param: str) -> list[dict[str, Any]]:
-    return [{"type": s.type, param: s.value, "period": s.period, "located": s.located,
-             "detail": s.detail, "label": s.label} for s in br.special_points]
-
-
 def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param: str,
                 start: float | None, stop: float | None, all_hopf: bool, n_scan: int,
                 ntst: int, ncol: int, max_steps: int, json_out: bool, out: Path | None,
@@ -229,7 +221,7 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     the one nearest the current value (or from all with ``--all``), continued without
     physical limits; extrema of every state and observable along the branch. With
     ``--out`` the branches are also saved as netCDF (restartable); ``--restart FILE
-    --label L`` continues a saved one (:func:`maglev_match.cli.restart.user_cycles_restart`)."""
+    --label L`` continues a saved one (:func:`user_cycles_restart`)."""
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
@@ -240,8 +232,6 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
                  "current limit and takes its values from --set/--at")
     user = load_user_model(model)
     if restart is not None or label is not None:
-        from maglev_match.cli.restart import user_cycles_restart
-
         return user_cycles_restart(user=user, model=model, restart=restart, label=label,
                                    param=param, sets=sets, at=at, ntst=ntst, ncol=ncol,
                                    max_steps=max_steps, json_out=json_out, out=out)
@@ -382,3 +372,93 @@ def user_simulate(model: str, sets: list[str] | None, t: float, state: np.ndarra
     for w in written:
         console.print(f"wrote {w}", highlight=False)
     print_warnings(res.warnings)
+
+
+@restart_errors
+def user_cycles_restart(*, user, model: str, restart: Path | None, label: str | None,
+                        param: str, sets: list[str] | None, at: list[str] | None, ntst: int,
+                        ncol: int, max_steps: int, json_out: bool, out: Path | None) -> None:
+    """`cycles --restart` on a user model file (its own cycles file)."""
+    from maglev_match.restart import (
+        RestartKind,
+        check_parameters,
+        load_cycle_restart,
+        saved_values,
+        stamp,
+    )
+
+    _need_label(restart, label)
+    refuse_given(HOPF_SEARCH_OPTIONS, "a restart searches no Hopf point: it continues the "
+                 "saved branch from --label; leave this option out")
+    values = {**parse_sets(user, sets), **parse_sets(user, at, option="--at")}
+    system = user.system()
+    rs = load_cycle_restart(restart, label, system)
+    _refuse_continued_value(rs, sets, at)
+    if not given("param"):
+        param = rs.param
+    if param not in system.param_names:
+        raise UserError(f"--param {param}: model file {model} has no such parameter; valid "
+                        f"names: {', '.join(system.param_names)}")
+    if values:
+        system = user_system(user, values, "--set/--at")
+    else:
+        system = user_system(user, saved_values(rs), "the saved parameters")
+    check_parameters(rs, system, param)
+    ntst, ncol = _mesh(rs, ntst, ncol)
+    from maglev_match.dynamics.cycles import cycle_branch
+
+    with progress_report("cycles") as prog:
+        prog.stage(f"{rs.describe()}; no Hopf search ...")
+        br = cycle_branch(system, rs.start, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
+                          restart=rs.state, restart_param=rs.param,
+                          observables=tuple(system.observables))
+    header = rs.describe() + (f", continued in {param}" if param != rs.param else "")
+    result = {"model": user.name, "model_file": str(model), "param": param,
+              "restart": _restart_json(rs, param),
+              "branches": [{"hopf": rs.start.value, "branch": _cycle_rows(br, param),
+                            "special_points": _special_rows_user(br, param),
+                            "stopped_reason": br.stopped_reason,
+                            "warnings": list(br.warnings)}],
+              "hopf_points": [], "warnings": []}
+    if out is not None:
+        import csv
+
+        from maglev_match.io import atomic_open, atomic_write_netcdf
+
+        folder, stem = output_target(out, "cycles", f"cycles_{user.name}_{param}_restart")
+        rows = _cycle_rows(br, param)
+        path = folder / f"{stem}.csv"
+        with atomic_open(path, "w", newline="") as fh:
+            if rows:
+                w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+                w.writeheader()
+                w.writerows(rows)
+        result["files"] = [str(path)]
+        if br.points:
+            ds = stamp(br.to_xarray(system), RestartKind.CYCLE_BRANCH, system, user.name,
+                       "cycles --restart")
+            ds.attrs["restart_of"] = f"{label} of {restart}"
+            ds.attrs["model_file"] = str(Path(model).resolve())
+            atomic_write_netcdf(folder / f"{stem}.nc", ds)
+            result["files"].append(str(folder / f"{stem}.nc"))
+    if json_out:
+        emit_json(result)
+        return _fail_if_nothing_continued(br, rs)
+    console.print(f"cycles: {header}; no Hopf search", highlight=False, markup=False)
+    console.print(f"branch stopped: {br.stopped_reason} after {br.steps} steps",
+                  highlight=False)
+    pts = br.points
+    for k in sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1])
+                    if pts else []):
+        c = pts[k]
+        console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
+                      f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
+                      f"multipliers, |trivial - 1| = {abs(c.trivial_multiplier - 1):.1e})",
+                      highlight=False)
+    for s in br.special_points:
+        console.print(f"  {s.label or s.type}: {s.type} at {param} = {s.value:.8g} "
+                      f"({s.located})", highlight=False)
+    for f in result.get("files", []):
+        console.print(f"wrote {f}", highlight=False)
+    print_warnings(br.warnings)
+    _fail_if_nothing_continued(br, rs)

@@ -22,18 +22,16 @@ import typer
 from maglev_match.cli.common import (
     UserError,
     check_model,
-    console,
     emit_json,
     given,
     output_target,
     params_from_options,
     print_error,
-    print_warnings,
     progress_report,
     refuse_given,
 )
 
-__all__ = ["cycles_restart", "user_cycles_restart", "hopf_curve_restart", "restart_errors"]
+__all__ = ["cycles_restart", "hopf_curve_restart", "restart_errors"]
 
 #: Options of `cycles` that only steer the Hopf search a restart does not do.
 HOPF_SEARCH_OPTIONS = {"start": "--from", "stop": "--to", "all_hopf": "--all", "n_scan": "--scan"}
@@ -142,7 +140,7 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
                    at: list[str] | None, ntst: int, ncol: int, max_steps: int,
                    ignore_current: bool, json_out: bool, out: Path | None) -> None:
     """`cycles --restart` on model A or B."""
-    from maglev_match.cli.cycles import (
+    from maglev_match.cli.cycle_tables import (
         _branch_rows,
         _special_rows,
         _write_csv,
@@ -243,7 +241,7 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
     if json_out:
         emit_json(result)
         return _fail_if_nothing_continued(br, rs)
-    from maglev_match.cli.cycles import _print_summary
+    from maglev_match.cli.cycle_tables import _print_summary
 
     _print_summary(result, [br], [rs.start], param, files,
                    first_line=f"cycles: {header}; no Hopf search; branch stopped: "
@@ -274,97 +272,6 @@ def _restart_figure(br, rs, system, param, params, target: Path, header: str, at
                     source=Path(rs.path).name, scale=1e3,
                     new_branch_text=f"b1: continued from {rs.label} of {Path(rs.path).name}")
     return save_figure(fig, target.with_suffix(".png"))
-
-
-@restart_errors
-def user_cycles_restart(*, user, model: str, restart: Path | None, label: str | None,
-                        param: str, sets: list[str] | None, at: list[str] | None, ntst: int,
-                        ncol: int, max_steps: int, json_out: bool, out: Path | None) -> None:
-    """`cycles --restart` on a user model file (its own cycles file)."""
-    from maglev_match.cli.models import _cycle_rows, _special_rows_user, parse_sets, user_system
-    from maglev_match.restart import (
-        RestartKind,
-        check_parameters,
-        load_cycle_restart,
-        saved_values,
-        stamp,
-    )
-
-    _need_label(restart, label)
-    refuse_given(HOPF_SEARCH_OPTIONS, "a restart searches no Hopf point: it continues the "
-                 "saved branch from --label; leave this option out")
-    values = {**parse_sets(user, sets), **parse_sets(user, at, option="--at")}
-    system = user.system()
-    rs = load_cycle_restart(restart, label, system)
-    _refuse_continued_value(rs, sets, at)
-    if not given("param"):
-        param = rs.param
-    if param not in system.param_names:
-        raise UserError(f"--param {param}: model file {model} has no such parameter; valid "
-                        f"names: {', '.join(system.param_names)}")
-    if values:
-        system = user_system(user, values, "--set/--at")
-    else:
-        system = user_system(user, saved_values(rs), "the saved parameters")
-    check_parameters(rs, system, param)
-    ntst, ncol = _mesh(rs, ntst, ncol)
-    from maglev_match.dynamics.cycles import cycle_branch
-
-    with progress_report("cycles") as prog:
-        prog.stage(f"{rs.describe()}; no Hopf search ...")
-        br = cycle_branch(system, rs.start, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
-                          restart=rs.state, restart_param=rs.param,
-                          observables=tuple(system.observables))
-    header = rs.describe() + (f", continued in {param}" if param != rs.param else "")
-    result = {"model": user.name, "model_file": str(model), "param": param,
-              "restart": _restart_json(rs, param),
-              "branches": [{"hopf": rs.start.value, "branch": _cycle_rows(br, param),
-                            "special_points": _special_rows_user(br, param),
-                            "stopped_reason": br.stopped_reason,
-                            "warnings": list(br.warnings)}],
-              "hopf_points": [], "warnings": []}
-    if out is not None:
-        import csv
-
-        from maglev_match.io import atomic_open, atomic_write_netcdf
-
-        folder, stem = output_target(out, "cycles", f"cycles_{user.name}_{param}_restart")
-        rows = _cycle_rows(br, param)
-        path = folder / f"{stem}.csv"
-        with atomic_open(path, "w", newline="") as fh:
-            if rows:
-                w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-                w.writeheader()
-                w.writerows(rows)
-        result["files"] = [str(path)]
-        if br.points:
-            ds = stamp(br.to_xarray(system), RestartKind.CYCLE_BRANCH, system, user.name,
-                       "cycles --restart")
-            ds.attrs["restart_of"] = f"{label} of {restart}"
-            ds.attrs["model_file"] = str(Path(model).resolve())
-            atomic_write_netcdf(folder / f"{stem}.nc", ds)
-            result["files"].append(str(folder / f"{stem}.nc"))
-    if json_out:
-        emit_json(result)
-        return _fail_if_nothing_continued(br, rs)
-    console.print(f"cycles: {header}; no Hopf search", highlight=False, markup=False)
-    console.print(f"branch stopped: {br.stopped_reason} after {br.steps} steps",
-                  highlight=False)
-    pts = br.points
-    for k in sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1])
-                    if pts else []):
-        c = pts[k]
-        console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
-                      f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
-                      f"multipliers, |trivial - 1| = {abs(c.trivial_multiplier - 1):.1e})",
-                      highlight=False)
-    for s in br.special_points:
-        console.print(f"  {s.label or s.type}: {s.type} at {param} = {s.value:.8g} "
-                      f"({s.located})", highlight=False)
-    for f in result.get("files", []):
-        console.print(f"wrote {f}", highlight=False)
-    print_warnings(br.warnings)
-    _fail_if_nothing_continued(br, rs)
 
 
 @restart_errors

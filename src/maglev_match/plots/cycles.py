@@ -14,7 +14,7 @@ import numpy as np
 from matplotlib.lines import Line2D
 
 from maglev_match.dynamics.cycles import CycleBranch
-from maglev_match.plots import new_figure
+from maglev_match.plots.base import new_figure
 
 __all__ = ["cycle_diagram", "branch_label"]
 

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from maglev_match.plots import new_figure
+from maglev_match.plots.base import new_figure
 
 
 def tornado_figure(sens, top: int = 15, title: str = ""):

@@ -12,7 +12,7 @@ from matplotlib.colors import ListedColormap
 from scipy import ndimage
 
 from maglev_match.dynamics.hopf_curve import HopfCurve
-from maglev_match.plots import new_figure
+from maglev_match.plots.base import new_figure
 
 _LINESTYLE = {"subcritical": "-", "supercritical": "--"}
 _COLOR = {"subcritical": "C3", "supercritical": "C0"}

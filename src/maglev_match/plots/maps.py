@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.patches import Patch
 
-from maglev_match.plots import new_figure
+from maglev_match.plots.base import new_figure
 
 __all__ = ["map_figure", "BOUNDARY_LABEL", "ROW_HOPF_LABEL"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from maglev_match.plots import new_figure
+from maglev_match.plots.base import new_figure
 
 __all__ = ["root_locus_figure", "axis_crossings", "zoom_window", "NEAR_TRACKS"]
 

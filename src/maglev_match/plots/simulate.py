@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from maglev_match.plots import new_figure, save_figure
+from maglev_match.plots.base import new_figure, save_figure
 from maglev_match.simulation import MaglevSimulation, equilibrium_state, history_dataset
 from maglev_match.units import label as unit_label
 from maglev_match.units import shown as shown_in

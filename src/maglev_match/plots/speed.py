@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from maglev_match.plots import new_figure
+from maglev_match.plots.base import new_figure
 
 __all__ = ["speed_figure", "span_run_figure"]
 
