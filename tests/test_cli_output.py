@@ -81,6 +81,9 @@ def test_output_target_folder_file_and_default(tmp_path, monkeypatch):
     assert (folder, stem) == (Path("res"), "cycles_unit_omega1") and folder.is_dir()
     folder, stem = output_target(Path("a/b/run.csv"), "simulate", "simulation_unit")
     assert (folder, stem) == (Path("a/b"), "run") and folder.is_dir()
+    # a number after the last dot is part of a folder's name, not a file type
+    folder, stem = output_target(Path("runs/tau_0.001"), "index", "index_unit")
+    assert (folder, stem) == (Path("runs/tau_0.001"), "index_unit") and folder.is_dir()
 
 
 def test_gitignore_covers_the_default_output_folder():

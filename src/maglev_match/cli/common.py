@@ -215,16 +215,25 @@ def default_output(command: str) -> Path:
     return Path(OUTPUT_ROOT) / command
 
 
+def is_file_name(path: Path | str) -> bool:
+    """True when ``path`` names a file: its last part has a suffix that begins with a letter
+    (``run.csv``, ``map.nc``, ``report.html``). A name without one, or whose "suffix" is a
+    number (``tau_0.001``, ``v1.5``), is a folder."""
+    suffix = Path(path).suffix
+    return len(suffix) > 1 and suffix[1].isalpha()
+
+
 def output_target(out: Path | None, command: str, stem: str) -> tuple[Path, str]:
     """Where a command writes, the same way in every command: ``(folder, stem)``.
 
     ``--out`` absent: the folder ``maglev-match-out/<command>/`` and the command's own
-    ``stem``. A name without a suffix is a folder (created) holding ``stem.*``. A name with a
-    suffix is a file: its folder (created) and its stem name the outputs, so
-    ``--out results/rl.csv`` writes ``results/rl.csv`` beside ``results/rl.png``.
+    ``stem``. A name without a file suffix (:func:`is_file_name`) is a folder (created)
+    holding ``stem.*``. A name with one is a file: its folder (created) and its stem name
+    the outputs, so ``--out results/rl.csv`` writes ``results/rl.csv`` beside
+    ``results/rl.png``.
     """
     path = output_path(out, str(default_output(command)))
-    if path.suffix == "":
+    if not is_file_name(path):
         return path, stem
     return path.parent, path.stem
 
@@ -247,7 +256,7 @@ def write_result_json(out: Path | None, command: str, stem: str, data: Any,
 def output_path(out: Path | None, default: str) -> Path:
     """The output path (creating its folder): ``out`` if given, else ``default``."""
     path = Path(out) if out is not None else Path(default)
-    if path.suffix == "":
+    if not is_file_name(path):
         path.mkdir(parents=True, exist_ok=True)
     else:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -380,7 +389,7 @@ def check_output_path(path: Path | str | None, option: str = "--out", *,
     if text.strip() == "" or "\x00" in text:
         raise ParameterError(option, text, "must be a file or folder name")
     if kind == "auto":
-        kind = "folder" if p.suffix == "" else "file"
+        kind = "file" if is_file_name(p) else "folder"
     if suffixes is not None and kind == "file" and p.suffix.lower() not in suffixes:
         raise ParameterError(option, text, f"must end in {' or '.join(suffixes)}")
     absolute = Path(os.path.abspath(p))

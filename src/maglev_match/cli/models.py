@@ -24,6 +24,7 @@ from maglev_match.cli.common import (
     console_err,
     emit_json,
     given,
+    is_file_name,
     output_target,
     params_from_options,
     print_warnings,
@@ -344,7 +345,7 @@ def user_simulate(model: str, sets: list[str] | None, t: float, state: np.ndarra
                    n_save=n_save)
     written = []
     if out is not None:
-        if out.suffix not in ("", ".csv"):
+        if is_file_name(out) and out.suffix != ".csv":
             raise UserError(f"--out {out}: for a user model the history file must end in .csv "
                             "(or give a folder)")
         folder, stem = output_target(out, "simulate", f"simulation_{user.name}")

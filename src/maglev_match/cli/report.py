@@ -21,6 +21,7 @@ from maglev_match.cli.common import (
     console_err,
     emit_json,
     horizon_option,
+    is_file_name,
     output_target,
     params_from_options,
     progress_report,
@@ -65,14 +66,15 @@ def report_command(
     refuse_model_file(model, "report")
     from maglev_match.report import ReportSettings, study_report
 
-    if out is not None and out.suffix and out.suffix.lower() not in (".html", ".htm"):
+    if out is not None and is_file_name(out) and out.suffix.lower() not in (".html", ".htm"):
         raise UserError(f"--out {out}: the report is an HTML file; give a name ending in .html "
                         "or a folder")
     if not t_end > 0:
         raise UserError(f"--t-end {t_end:g}: must be > 0")
     check_output_path(out)
     folder, stem = output_target(out, "report", "report")
-    out = folder / (f"{stem}{out.suffix}" if out is not None and out.suffix else f"{stem}.html")
+    named = out is not None and is_file_name(out)
+    out = folder / (f"{stem}{out.suffix}" if named else f"{stem}.html")
     params = params_from_options(preset, config, set_)
     base = ReportSettings.quick_settings() if quick else ReportSettings()
     settings = ReportSettings(**{**base.as_dict(), "include_vehicle": model_b, "t_end": t_end})
@@ -120,11 +122,11 @@ def reproduce_command(
     for k in only or []:
         if k not in keys:
             raise UserError(f"--only {k}: no such section; choose from {', '.join(keys)}")
-    if out is not None and out.suffix and out.suffix.lower() not in (".html", ".htm"):
+    if out is not None and is_file_name(out) and out.suffix.lower() not in (".html", ".htm"):
         raise UserError(f"--out {out}: give a folder or an HTML file name (reproduce writes "
                         "several files)")
     check_output_path(out)
-    html_name = out.name if out is not None and out.suffix else None
+    html_name = out.name if out is not None and is_file_name(out) else None
     out, _ = output_target(out, "reproduce", "reproduce")
     settings = ReportSettings.quick_settings() if quick else ReportSettings()
     n_sections = len(only) if only else len(keys)

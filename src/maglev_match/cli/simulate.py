@@ -26,6 +26,7 @@ from maglev_match.cli.common import (
     displacement_option,
     emit_json,
     horizon_option,
+    is_file_name,
     n_save_option,
     output_target,
     params_from_options,
@@ -131,7 +132,7 @@ def simulate_command(
         raise UserError(f"--n-save {n_save}: need at least 2 saved points")
     if not (rtol > 0 and atol > 0):
         raise UserError("--rtol and --atol must be > 0")
-    if out is not None and out.suffix not in ("", ".csv", ".nc"):
+    if out is not None and is_file_name(out) and out.suffix not in (".csv", ".nc"):
         raise UserError(f"--out {out}: the history file must end in .csv or .nc (or give "
                         "a folder)")
     state = _read_state(x0) if x0 is not None else None
