@@ -153,9 +153,11 @@ def main() -> None:
     print(f"{os.cpu_count()} cores, load {load()}")
     if "factor" in args.jobs:
         parts_breakdown()
-    if args.against is None:
-        return
     jobs = [j for j in args.jobs.split(",") if not (args.skip_cli and j == "cli")]
+    if args.against is None:  # this tree only: each job once in this process, no baseline
+        for job in (j for j in jobs if j != "factor"):
+            print(f"{job} (this tree, no baseline): {json.dumps(JOBS[job]())}; load {load()}")
+        return
     for job in jobs:
         res = interleaved(Path(__file__), job, args.against, args.rounds)
         key = "factor_ms" if job == "factor" else "cpu"
