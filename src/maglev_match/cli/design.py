@@ -337,7 +337,8 @@ def sensitivity_command(
         console.print(f"  note: {sens.limit_boundary_note}")
     _print_spread(spread)
     _print_sampled(mc)
-    console.print(f"  figure: {', '.join(str(f) for f in figs)}")
+    for f in figs:
+        console.print(f"wrote {f}", highlight=False)
     print_warnings(sens.warnings + idx.warnings)
 
 
@@ -478,7 +479,8 @@ def design_command(
         console.print(f"[bold red]numerical failure at the design:[/] {idx.message}")
     _print_spread(spread)
     _print_sampled(mc, chi_req)
-    console.print(f"  figure: {', '.join(str(f) for f in figs)}")
+    for f in figs:
+        console.print(f"wrote {f}", highlight=False)
     print_warnings(res.warnings + idx.warnings)
     if not ok:
         raise typer.Exit(NO_FEASIBLE_DESIGN)
