@@ -138,28 +138,21 @@ def test_cli_design_without_a_feasible_design_exits_3(capsys, tmp_path):
     assert data["status"] != "feasible" and data["index"]["chi"] < 1000
 
 
-@pytest.mark.slow
-def test_cheapest_soft_beam_meets_the_headline_index_and_1pct_less_does_not():
-    """The README example, `design --vary EI=5e9:4e10 --minimize EI --require chi>=5`: the
-    beam returned meets chi >= 5 on the headline index, i.e. with both parts (the paper's
-    chi and chi_simulation), each re-checked by the full index; 1 % less EI does not. (The
-    paper-only answer, EI = 8.13e9 N m^2, reads chi_simulation = 2.1 there.)"""
+def test_paper_only_design_is_a_beam_the_simulation_rejects():
+    """The paper's chi alone (`design ... --no-simulation`) answers a beam about three times
+    softer than the headline's (the README example; the headline answer itself is checked
+    by tests/test_readme.py on the README's own run): there the full index reads
+    chi_simulation well below the required 5, so the headline index rejects it."""
     base = load_preset("turnout-soft")
     prob = DesignProblem((Variable("EI", 5e9, 4e10),), Goal.MINIMIZE, "EI",
                          (Requirement(Quantity.CHI, 5.0),))
-    res = optimise_design(prob, MaglevEvaluator(base, ["EI"]))
-    assert res.status == DesignStatus.FEASIBLE, res.message
-    ei = res.values["EI"]
-    again = matching_index(base.replace(EI=ei))
-    assert again.chi >= 5.0 and again.chi_paper >= 5.0 and again.chi_simulation >= 5.0
-    assert again.chi == pytest.approx(res.index.chi, rel=1e-9)
-    less = matching_index(base.replace(EI=0.99 * ei))
-    assert less.chi < 5.0
-    # the paper's chi alone is far above the bound there: chi_simulation decides
-    assert "chi >= 5" in res.active[0] and again.reading_basis == "simulation"
     paper_only = optimise_design(prob, MaglevEvaluator(base, ["EI"], simulate=False), grid=5,
                                  starts=1)
-    assert paper_only.values["EI"] < 0.5 * ei
+    assert paper_only.status == DesignStatus.FEASIBLE, paper_only.message
+    ei = paper_only.values["EI"]
+    assert paper_only.index.chi_paper == pytest.approx(5.0, rel=1e-3)
+    full = matching_index(base.replace(EI=ei))
+    assert full.chi_simulation < 3.0 and full.chi == full.chi_simulation < 5.0
 
 
 def test_cli_chi_simulation_requirement_without_simulation_is_refused(capsys):

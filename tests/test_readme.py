@@ -155,3 +155,30 @@ def _same(a, b, rtol: float = 1e-5) -> bool:
     if isinstance(a, float) or isinstance(b, float):
         return a is not None and b is not None and abs(a - b) <= rtol * max(abs(a), abs(b))
     return a == b
+
+
+def test_readme_design_answer_meets_the_headline_and_one_percent_less_does_not(runs):
+    """The README's design example as the README ran it: the beam it answers (the EI the
+    README quotes) meets chi >= 5 on the headline index with both parts, re-checked by the
+    full index, and 1 % less EI does not; the requirement binds chi_simulation."""
+    from maglev_match.matching import matching_index
+    from maglev_match.params import load_preset
+
+    _, results = runs
+    line = next(k for k in results if k.startswith("design "))
+    code, out, _ = results[line]
+    assert code == 0
+    ei = float(re.search(r"EI = ([0-9.e+-]+) \(range", out).group(1))
+    quoted = float(re.search(r"It answers EI = ([0-9.e+-]+) N m\^2", README).group(1))
+    assert ei == pytest.approx(quoted, rel=5e-4)  # the README says what the command answers
+    base = load_preset("turnout-soft")
+    again = matching_index(base.replace(EI=ei))
+    tol = 1e-5  # (the printed EI has 6 digits; chi is at the bound there)
+    assert again.chi == min(again.chi_paper, again.chi_simulation)
+    assert again.chi_paper >= 5.0 and again.chi_simulation >= 5.0 * (1 - tol)
+    assert again.reading_basis == "simulation"
+    shown = float(re.search(r"full index there: chi = ([0-9.]+)", out).group(1))
+    assert shown == pytest.approx(again.chi, rel=1e-4)
+    less = matching_index(base.replace(EI=0.99 * ei))
+    assert less.chi < 5.0
+
