@@ -2,6 +2,7 @@
 the reading (monotone, never more than the simulation supports, the contradiction warned),
 and the trend of h and h_simulation approaching a subcritical Hopf point on model A."""
 
+import functools
 import math
 
 import jax.numpy as jnp
@@ -168,13 +169,20 @@ def _cd(status, lo, hi, gap_range=0.01, direction=-1):
                                nonmonotone=False)
 
 
+@functools.cache
+def _synthetic_index():
+    """The paper's index of one synthetic system (computed once: the property tests below
+    vary only the readings combined with it)."""
+    s = synthetic(-0.04, 1.0)
+    return index_of_system(s, s.p, w0=W0, h_max=H_MAX, search=SEARCH)
+
+
 @settings(max_examples=150, deadline=None)
 @given(st.floats(min_value=1e-4, max_value=0.5), st.floats(min_value=1e-4, max_value=0.0099))
 def test_reading_uses_the_smaller_index(h_cycle, d_crit):
     """Whatever the two readings, the words follow min(chi, chi_simulation); a
     disagreement beyond the stated factor is a warning."""
-    s = synthetic(-0.04, 1.0)
-    res = index_of_system(s, s.p, w0=W0, h_max=H_MAX, search=SEARCH)
+    res = _synthetic_index()
     res = res.__class__(**{**{k: getattr(res, k) for k in res.__dataclass_fields__},
                            "chi": h_cycle / W0, "chi_paper": h_cycle / W0, "h": h_cycle})
     out = with_simulation(res, _cd("bracketed", d_crit - 5e-6, d_crit + 5e-6))
@@ -189,8 +197,7 @@ def test_reading_uses_the_smaller_index(h_cycle, d_crit):
 
 
 def test_open_simulation_is_a_warning_not_silence():
-    s = synthetic(-0.04, 1.0)
-    res = index_of_system(s, s.p, w0=W0, h_max=H_MAX, search=SEARCH)
+    res = _synthetic_index()
     out = with_simulation(res, _cd("open", 0.002, 0.004))
     assert out.h_simulation == 0.002  # only what was seen to return is claimed
     assert any("inconclusive" in w for w in out.warnings)
