@@ -88,6 +88,30 @@ def test_exported_and_loaded_kernels_are_bitwise_plain_jit(aot_cache, case):
     assert aot.STATS.loaded == 1 and aot.STATS.exported == 1
 
 
+def test_compiled_code_is_released_near_the_mapping_limit(aot_cache, monkeypatch):
+    """Past its share of vm.max_map_count a process drops the compiled kernels it holds
+    (every Kernel's loaded signatures and JAX's caches); the kernels then reload from disk
+    with bitwise the same results."""
+    cases = _kernels_and_args()
+    kernels = [_fresh(fn, *static, name=name) for _, fn, static, name, _ in cases]
+    before = [k(*args) for k, (*_, args) in zip(kernels, cases, strict=True)]
+    assert all(k._calls for k in kernels) and aot.STATS.released == 0
+    monkeypatch.setattr(aot, "MAP_SHARE", 0.0)  # any process is "near the limit"
+    monkeypatch.setattr(aot, "MAP_CHECK_EVERY", 1)
+    if aot._map_limit() == 0:
+        pytest.skip("no vm.max_map_count here (not Linux)")
+    form2 = normal_forms._real_forms(unit.unit_rhs)[2].fn
+    kf = _fresh(form2, unit.unit_rhs, 2, name="normal_forms.form")
+    kf(np.zeros(N), P_A, np.ones((3, N)), np.ones((3, N)))  # a new signature: the check
+    assert aot.STATS.released == 1
+    assert not any(k._calls for k in kernels)
+    monkeypatch.setattr(aot, "MAP_SHARE", 1.0)
+    loaded = aot.STATS.loaded
+    for k, (*_, args), ref in zip(kernels, cases, before, strict=True):
+        _assert_bitwise(k(*args), ref)
+    assert aot.STATS.loaded == loaded + len(kernels)  # read from disk, not traced again
+
+
 def test_new_parameter_value_reuses_the_exported_kernel(aot_cache):
     _, fn, static, name, (z, p, c) = _kernels_and_args()[0]
     k = _fresh(fn, *static, name=name)

@@ -44,10 +44,12 @@ Reference: JAX documentation, "Exporting and serializing staged-out computations
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import os
 import tempfile
 import types
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
@@ -60,7 +62,7 @@ import numpy as np
 from maglev_match import jax_setup
 
 __all__ = ["AotStats", "Kernel", "STATS", "aot_dir", "cached_kernel", "enabled", "identity",
-           "prune"]
+           "prune", "release_compiled_code"]
 
 _PACKAGE_ROOT = Path(__file__).resolve().parent
 _MAX_ARRAY = 4096  # arrays up to this many elements can be static ingredients
@@ -74,14 +76,68 @@ class AotStats:
     exported: int = 0  # kernels exported and written
     plain: int = 0  # kernels that run as plain jax.jit (no identity, AOT off, failures)
     rejected: int = 0  # unreadable or mismatching files that were replaced
+    released: int = 0  # times the compiled code in memory was released (mapping limit)
     names: list[str] = field(default_factory=list)  # names of the exported kernels
 
     def reset(self) -> None:
-        self.loaded = self.exported = self.plain = self.rejected = 0
+        self.loaded = self.exported = self.plain = self.rejected = self.released = 0
         self.names.clear()
 
 
 STATS = AotStats()
+
+
+# ---------------------------------------------------------------------------------------
+# the memory-mapping limit
+# ---------------------------------------------------------------------------------------
+# Every XLA executable keeps ~3 memory mappings of its machine code, and Linux caps a
+# process at vm.max_map_count mappings (65530 by default). A long process that compiles
+# thousands of distinct kernels (a study over many structural parameters, a test session)
+# would reach the cap, and the next compilation dies with a segmentation fault inside LLVM.
+# So every MAP_CHECK_EVERY new kernel signatures the process counts its mappings, and past
+# MAP_SHARE of the cap it releases the compiled code it holds; later calls reload kernels
+# from the persistent caches (or compile them again).
+MAP_SHARE = 0.6
+MAP_CHECK_EVERY = 32
+_LIVE: weakref.WeakSet = weakref.WeakSet()  # every Kernel of this process
+_prepared = 0
+
+
+def _map_limit() -> int:
+    try:
+        return int(Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):  # not Linux
+        return 0
+
+
+def _map_count() -> int:
+    try:
+        with open("/proc/self/maps", "rb") as fh:
+            return sum(1 for _ in fh)
+    except OSError:
+        return 0
+
+
+def release_compiled_code() -> None:
+    """Drop the compiled kernels this process holds in memory: JAX's caches and every
+    :class:`Kernel`'s loaded signatures. Results do not change; the next call of a kernel
+    loads or compiles it again."""
+    for k in list(_LIVE):
+        k._calls.clear()
+    jax.clear_caches()
+    gc.collect()
+    STATS.released += 1
+
+
+def _guard_mappings() -> None:
+    """Release the compiled code when the process nears the mapping limit (see above)."""
+    global _prepared
+    _prepared += 1
+    if _prepared % MAP_CHECK_EVERY:
+        return
+    limit = _map_limit()
+    if limit and _map_count() > MAP_SHARE * limit:
+        release_compiled_code()
 
 
 def enabled() -> bool:
@@ -243,6 +299,7 @@ class Kernel:
         self._calls: dict[tuple, Callable] = {}
         self.__wrapped__ = fn
         self.__doc__ = getattr(fn, "__doc__", None)
+        _LIVE.add(self)
 
     def __repr__(self) -> str:
         mode = "plain jit" if self.key is None else f"{len(self._calls)} signature(s)"
@@ -288,6 +345,7 @@ class Kernel:
         plain jit when exporting is not possible (then this process only)."""
         from jax import export
 
+        _guard_mappings()
         path = self._path(sig)
         if path is None:
             STATS.plain += 1
