@@ -3,6 +3,8 @@ limit, convergence of the discretisation, the critical delay, simulation and the
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -182,3 +184,38 @@ def test_index_beyond_the_critical_delay_is_zero_and_says_why(soft):
     ref = critical_delay(unit_dde(soft), tau_max=1.0)
     assert cd["value"] == pytest.approx(ref.value, rel=1e-12) and cd["stable_at_tau"] is False
     assert cd["kind"] == "supercritical" and cd["frequency"] == pytest.approx(ref.frequency)
+
+
+def test_a_delayed_map_row_simulates_the_delay_system(monkeypatch):
+    """A map row with a delay gets its critical disturbances from the point-wise search on
+    the delay system (the map's batched search integrates model A's ODE, which has no
+    delay): every stable point of the row goes there, with its delay, in both directions,
+    and the search's outcome becomes the size by the index's rule (bracketed: the critical
+    size; every size returned: the gap range; still open: no number, a reason code)."""
+    import maglev_match.maps as maps
+    import maglev_match.simulation as simulation
+
+    calls = []
+    outcomes = {0.5e-3: ("bracketed", 2.5e-3), 1e-3: ("all_return", None),
+                1.5e-3: ("open", None)}
+
+    def fake(p, *, direction, **kw):
+        calls.append((p.tau, direction))
+        status, crit = outcomes[round(p.tau, 6)]
+        return SimpleNamespace(status=status, critical=crit, gap_range=8e-3)
+
+    def no_batch(*a, **k):
+        raise AssertionError("a delayed row must not use the ODE's batched search")
+
+    maps.simulation_settings()  # (read from the real search's signature, before the fake)
+    monkeypatch.setattr(simulation, "critical_disturbance", fake)
+    monkeypatch.setattr(maps, "critical_sizes_batch", no_batch)
+    base = load_preset("turnout-soft")
+    spec = maps.MapSpec(base=base.as_input_dict(), x=maps.Axis("tau", 0.5e-3, 2e-3, 4),
+                        y=maps.Axis("kD", base.kD, base.kD, 1))
+    stable = np.array([True, True, True, False])  # the last point: no search at all
+    row, _ = maps._simulate_row(spec, 0, {"stable": stable, "max_real_part": -np.ones(4)}, [])
+    assert sorted(calls) == sorted((t, d) for t in (0.5e-3, 1e-3, 1.5e-3) for d in (-1, 1))
+    np.testing.assert_array_equal(row["h_down"][:2], [2.5e-3, 8e-3])
+    assert np.isnan(row["h_down"][2]) and np.isnan(row["h_down"][3])
+    assert row["reason"].tolist() == [0, 0, maps.REASON_SIM_UNDECIDED, 0]

@@ -791,6 +791,9 @@ def _simulate_row(spec: MapSpec, r: int, pr: dict, below: list[dict[int, np.ndar
     xs = spec.x.values
     nx = xs.size
     pts = [spec.point(xv, spec.y.values[r]) for xv in xs]
+    if any(p.tau > 0 for p in pts):  # the batched search runs model A's ODE: not a delay
+        return (_simulate_row_pointwise(pts, np.asarray(pr["stable"], bool)),
+                {d: np.full(nx, np.nan) for d in DIRECTIONS})
     P = np.array([param_vector(p) for p in pts])
     limits = np.array([[p.gap_min, p.gap_max] for p in pts])
     c0 = P[:, PARAM_NAMES.index("c0")]
@@ -847,6 +850,33 @@ def _simulate_row(spec: MapSpec, r: int, pr: dict, below: list[dict[int, np.ndar
         reason = np.where(unresolved[d] & stable & (reason == 0), code, reason)
     return ({"h_up": size[-1], "h_down": size[1], "reason": reason.astype(np.int8)},
             known)
+
+
+def _simulate_row_pointwise(pts: list, stable: np.ndarray) -> dict[str, np.ndarray]:
+    """A row with a delay: each stable point's critical disturbances by the point-wise
+    search on the delay system (:func:`maglev_match.simulation.critical_disturbance`, the
+    index's own search and rule), since the batched search of
+    :func:`critical_sizes_batch` integrates model A's ODE."""
+    from maglev_match.simulation import critical_disturbance
+
+    settings = simulation_settings()
+    nx = len(pts)
+    size = {d: np.full(nx, np.nan) for d in DIRECTIONS}
+    reason = np.zeros(nx, np.int8)
+    for j, p in enumerate(pts):
+        if not stable[j]:
+            continue
+        for d in DIRECTIONS:
+            cd = critical_disturbance(p, direction=d, tol=settings.tol)
+            if cd.status == "bracketed":
+                size[d][j] = float(cd.critical)
+            elif cd.status == "all_return":
+                size[d][j] = float(cd.gap_range)
+            elif cd.status == "all_collide":
+                size[d][j] = 0.0
+            elif reason[j] == 0:  # open: runs left undecided; no number
+                reason[j] = REASON_SIM_UNDECIDED
+    return {"h_up": size[-1], "h_down": size[1], "reason": reason}
 
 
 def compute_tile(spec: MapSpec, rows: tuple[int, int]) -> dict[str, np.ndarray]:
