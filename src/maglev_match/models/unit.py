@@ -46,6 +46,7 @@ def levitation_current(p):
 
 def _rhs(x, p, limited: bool, command=None):
     q = _unpack(p)
+    m, M = q["m"], q["M"]
     K = q["mu0"] * q["N"] ** 2 * q["A"]
     c0 = q["c0"]
     i0 = levitation_current(p)
@@ -56,23 +57,14 @@ def _rhs(x, p, limited: bool, command=None):
     r = (clamp_current(i) if limited else i) / c
     # F2 - (m+M) g written without cancellation: K r0^2 / 2 = (m+M) g exactly.
     dF = 0.5 * K * (r - r0) * (r + r0)
+    susp = q["cs"] * (x2 - x4) + q["ks"] * (x1 - x3)
+    w1, xi1, sig = q["omega1"], q["xi1"], q["sigma"]
+    gap_err = x1 - x5 - x8
     # the outer loop's current command u = kP y1 + kD y2 (read late when delayed)
     u = q["kP"] * x8 + q["kD"] * (x9 + x2) if command is None else command
     di = r * (x2 - x6) + q["ke"] * c / K * (u - x7)
     if limited:
         di = hold_current_rate(i, di)
-    return _field(q, x, dF, di)
-
-
-def _field(q, x, dF, d7):
-    """The vector field of model A given the magnet's force change dF = F2 - (m+M) g and the
-    rate d7 of its seventh coordinate (the current's, or the regular chart's r's): the
-    masses, the beam mode and the observer are the same in every chart."""
-    m, M = q["m"], q["M"]
-    x1, x2, x3, x4, x5, x6, _, x8, x9 = x
-    susp = q["cs"] * (x2 - x4) + q["ks"] * (x1 - x3)
-    w1, xi1, sig = q["omega1"], q["xi1"], q["sigma"]
-    gap_err = x1 - x5 - x8
     return jnp.stack([
         x2,
         -dF / m - susp / m,
@@ -80,7 +72,7 @@ def _field(q, x, dF, d7):
         susp / M,
         x6,
         -(w1**2) * x5 - 2.0 * xi1 * w1 * x6 + sig * dF,
-        d7,
+        di,
         x9 + x2 + 2.0 * q["xi0"] * q["omega0"] * gap_err,
         q["omega0"] ** 2 * gap_err,
     ])
@@ -94,6 +86,7 @@ def _rhs_regular(y, p):
     smooth at gap c = 0, where the original one is 0/0 (i and c vanish together on every
     trajectory that reaches c = 0)."""
     q = _unpack(p)
+    m, M = q["m"], q["M"]
     K = q["mu0"] * q["N"] ** 2 * q["A"]
     c0 = q["c0"]
     i0 = levitation_current(p)
@@ -102,8 +95,21 @@ def _rhs_regular(y, p):
     c = x1 - x5 + c0
     r = y7 + r0
     dF = 0.5 * K * (r - r0) * (r + r0)
+    susp = q["cs"] * (x2 - x4) + q["ks"] * (x1 - x3)
+    w1, xi1, sig = q["omega1"], q["xi1"], q["sigma"]
+    gap_err = x1 - x5 - x8
     dr = q["ke"] / K * (q["kP"] * x8 + q["kD"] * (x9 + x2) - (r * c - i0))
-    return _field(q, y, dF, dr)
+    return jnp.stack([
+        x2,
+        -dF / m - susp / m,
+        x4,
+        susp / M,
+        x6,
+        -(w1**2) * x5 - 2.0 * xi1 * w1 * x6 + sig * dF,
+        dr,
+        x9 + x2 + 2.0 * q["xi0"] * q["omega0"] * gap_err,
+        q["omega0"] ** 2 * gap_err,
+    ])
 
 
 def _to_regular(x, p):
