@@ -128,10 +128,9 @@ class LazyGroup(TyperGroup):
             return self.commands[cmd_name]
         if self._listing and cmd_name in COMMANDS:  # the root help: name and one line
             return _Listed(cmd_name, help=COMMANDS[cmd_name][1])
-        if cmd_name in COMMANDS:
-            _import_command_module(COMMANDS[cmd_name][0])
-        else:
-            load_all_commands()
+        if cmd_name not in COMMANDS:  # the table is the whole set (tested): no such command
+            return None
+        _import_command_module(COMMANDS[cmd_name][0])
         self._adopt_registered()
         return self.commands.get(cmd_name)
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import csv
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.table import Table
 from rich.text import Text
@@ -66,6 +65,8 @@ def table_eigenvalues(eigenvalues) -> list[tuple[int, complex]]:
     |Im| <= IMAG_RTOL max(|lambda|, 1) is rounding noise and set to 0 (a real eigenvalue,
     kept with its multiplicity). The real matrix's spectrum is closed under conjugation
     (Golub & Van Loan, Matrix Computations, 7.4), so dropping Im < 0 loses nothing."""
+    import numpy as np
+
     rows = []
     for k, z in enumerate(np.asarray(eigenvalues, complex)):
         if abs(z.imag) <= IMAG_RTOL * max(abs(z), 1.0):
@@ -93,6 +94,7 @@ def stability_command(
     check_output_path(out)
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system = rm.params, rm.system
+    import numpy as np
     res = stability(system)
     files = [] if json_out and out is None else [_write_eigenvalues(out, rm.label, res)]
     if json_out:
@@ -135,6 +137,8 @@ def stability_command(
 
 def _write_eigenvalues(out, model: str, res):
     """Every eigenvalue of the equilibrium as CSV (units in the headers)."""
+    import numpy as np
+
     from maglev_match.io import atomic_open
 
     folder, stem = output_target(out, "stability", f"stability_{model}")
@@ -165,6 +169,8 @@ def root_locus_command(
     json_out: JsonOpt = False,
 ) -> None:
     """Eigenvalues along one parameter: writes CSV and a PNG/SVG figure."""
+    import numpy as np
+
     from maglev_match.cli.models import resolve_model
     from maglev_match.engineering import is_engineering
     from maglev_match.io import atomic_open
