@@ -25,6 +25,7 @@ from maglev_match.cli.common import (
     bounded,
     check_model,
     check_output_path,
+    console,
     emit_json,
     finite,
     ncol_option,
@@ -209,14 +210,20 @@ def cycles_command(
              "warnings": list(br.warnings)}
             for k, (h, br) in enumerate(zip(chosen[1:], branches[1:], strict=True))
         ]
-    files: list[Path] = []
-    if out is not None or not json_out:
-        files = _write_outputs(out, param, model, scan, branches, params, at, system)
-        result["files"] = [str(f) for f in files]
     if json_out:
+        if out is not None:
+            files = _write_outputs(out, param, model, scan, branches, params, at, system)
+            result["files"] = [str(f) for f in files]
         emit_json(result)
         return
-    _print_summary(result, branches, chosen, param, files)
+    # The answer first, the files after: writing the netCDF and the figure costs about a
+    # second (xarray, HDF5 and two renderings), which the reader need not wait for.
+    _print_summary(result, branches, chosen, param, [])
+    with progress_report("cycles") as prog:
+        prog.stage("writing the branch files and the figure ...")
+        files = _write_outputs(out, param, model, scan, branches, params, at, system)
+    for f in files:
+        console.print(f"wrote {f}")
 
 
 def _write_outputs(out, param, model, scan, branches, params, at, system=None) -> list[Path]:
