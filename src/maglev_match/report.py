@@ -404,17 +404,15 @@ def section_root_locus(params: Params, ctx: ReportContext) -> tuple[str, list[Pa
     res = root_locus(build_system(params, "unit"), "omega1", values)
     fig = root_locus_figure(values, res.eigenvalues, "omega1", "(rad/s)")
     fig.axes[1].axvline(float(params.omega1), color="C3", ls="--", lw=1)
-    frag, files = save_and_embed(
+    figure, files = save_and_embed(
         fig, ctx, "root_locus_omega1",
         f"Model A: eigenvalues along omega1 at sigma = {params.sigma:.4g} 1/kg; the dashed "
         f"line marks the design point omega1 = {params.omega1:.5g} rad/s.")
     mr = res.max_real_part
     changes = [float(values[k] - mr[k] * (values[k + 1] - values[k]) / (mr[k + 1] - mr[k]))
                for k in range(len(values) - 1) if np.sign(mr[k]) != np.sign(mr[k + 1])]
-    text = ("<p>max Re(lambda) changes sign near omega1 = "
-            + (", ".join(f"{c:.4g}" for c in changes) if changes else "nowhere in the range")
-            + " rad/s (linear interpolation on the grid).</p>")
-    return frag + text, files, {"stability_changes": changes}
+    return (render("root_locus.html.j2", figure=figure, changes=changes), files,
+            {"stability_changes": changes})
 
 
 # ---------------------------------------------------------------------------------------
@@ -526,7 +524,13 @@ def cycle_diagram_figure(d: CycleDiagram, design: float | None = None, title: st
     return fig
 
 
-def cycle_diagram_table(d: CycleDiagram) -> str:
+CYCLE_TABLE_HEADER = ("Hopf {p}", "omega (rad/s)", "l1", "kind", "d Re/d param",
+                      "limit contact at {p}", "other cycle bifurcations", "branch stopped")
+
+
+def cycle_diagram_rows(d: CycleDiagram) -> list[tuple[Any, ...]]:
+    """One row per Hopf point of a diagram: the point, its branch's first contact with a
+    limit, its other cycle bifurcations and how the branch ended."""
     rows = []
     for hp, br in d.branches:
         contact = next((sp for sp in br.special_points if sp.type == "contact"), None)
@@ -535,9 +539,13 @@ def cycle_diagram_table(d: CycleDiagram) -> str:
         rows.append((hp.value, hp.frequency, hp.l1, hp.kind, hp.crossing_speed,
                      contact.value if contact else None,
                      "; ".join(others) or "-", br.stopped_reason))
-    return table_html([f"Hopf {d.param}", "omega (rad/s)", "l1", "kind", "d Re/d param",
-                       f"limit contact at {d.param}", "other cycle bifurcations",
-                       "branch stopped"], rows, "hopf")
+    return rows
+
+
+def cycle_diagram_table(d: CycleDiagram) -> str:
+    """The rows of :func:`cycle_diagram_rows` as an HTML table."""
+    return table_html([h.format(p=d.param) for h in CYCLE_TABLE_HEADER],
+                      cycle_diagram_rows(d), "hopf")
 
 
 def section_bifurcation_diagrams(params: Params, ctx: ReportContext
@@ -545,22 +553,23 @@ def section_bifurcation_diagrams(params: Params, ctx: ReportContext
     """Cycle bifurcation diagrams through the design point: along omega1 at the design
     sigma and along sigma at the design omega1 (cf. the paper's Fig. 5)."""
     s = ctx.settings
-    parts, files, data = [], [], {}
+    diagrams, files, data = [], [], {}
     w_lo, w_hi = s.hopf_omega1_range
     s_lo, s_hi = s.hopf_sigma_range
     for param, lo, hi in (("omega1", w_lo, w_hi), ("sigma", max(s_lo, 1e-6), s_hi)):
         d = cycle_diagram(params, param, lo, hi, s)
         ctx.cache[f"diagram_{param}"] = d
         design = float(getattr(params, param))
-        frag, fl = save_and_embed(
+        figure, fl = save_and_embed(
             cycle_diagram_figure(d, design), ctx, f"cycles_{param}",
             f"Model A: equilibrium and limit cycles along {param}; solid stable, dashed "
             "unstable, * Hopf point, o first contact of the cycle with a gap limit (dotted).")
-        parts += [frag, cycle_diagram_table(d)]
+        diagrams.append({"figure": figure, "param": param,
+                         "rows": _formatted(cycle_diagram_rows(d))})
         files += fl
         data[param] = {"hopf": [(hp.value, hp.l1, hp.kind) for hp, _ in d.branches],
                        "limit_contacts": d.limit_contacts()}
-    return "".join(parts), files, data
+    return render("cycles.html.j2", diagrams=diagrams), files, data
 
 
 # ---------------------------------------------------------------------------------------
@@ -698,10 +707,11 @@ def section_time_history(params: Params, ctx: ReportContext) -> tuple[str, list[
     t_end = ctx.settings.t_end
     sim, ds = run_time_history(params, "unit", t_end, x5=-params.w0)
     runs = [(f"model A, x5(0) = -w0 = {-params.w0 * 1e3:.3g} mm", ds)]
-    frag, files = save_and_embed(
+    figure, files = save_and_embed(
         time_history_figure(runs, params, "Model A after the typical disturbance"), ctx,
         "time_history_unit", "Model A with the physical limits on, from x5(0) = -w0; the "
         "dotted lines are the gap limits.")
+    figures = [figure]
     rows = [("model A", f"x5(0) = {-params.w0 * 1e3:.4g} mm", outcome_text(sim))]
     data = {"unit": sim.summary()}
     if ctx.settings.include_vehicle:
@@ -712,11 +722,12 @@ def section_time_history(params: Params, ctx: ReportContext) -> tuple[str, list[
             ctx, "time_history_vehicle",
             "Model B: the vehicle pressed onto the free beam (all q_n = 0), gaps at the "
             "first point of each levitation frame.")
-        frag += fb
+        figures.append(fb)
         files += filesb
         rows.append(("model B", "pressed onto the free beam", outcome_text(simb)))
         data["vehicle"] = simb.summary()
-    return frag + table_html(["model", "initial state", "outcome"], rows), files, data
+    return (render("time_history.html.j2", figures=figures, rows=_formatted(rows)), files,
+            data)
 
 
 # ---------------------------------------------------------------------------------------
@@ -947,12 +958,16 @@ def hopf_curve_figure(curves: Sequence[Any], marks: Sequence[tuple[str, float, f
     return fig
 
 
+def hopf_curve_rows(curves: Sequence[Any]) -> list[tuple[Any, ...]]:
+    """One row per codimension-two point of the Hopf curves: branch, type, where, the
+    frequency, l2 and a note."""
+    return [(k + 1, sp.type, sp.values[0], sp.values[1], sp.frequency, sp.l2, sp.note)
+            for k, c in enumerate(curves) for sp in c.special_points]
+
+
 def hopf_curve_table(curves: Sequence[Any]) -> str:
-    rows = []
-    for k, c in enumerate(curves):
-        for sp in c.special_points:
-            rows.append((k + 1, sp.type, sp.values[0], sp.values[1], sp.frequency, sp.l2,
-                         sp.note))
+    """The rows of :func:`hopf_curve_rows` as an HTML table (or a sentence when none)."""
+    rows = hopf_curve_rows(curves)
     if not rows:
         return "<p>No codimension-two points on the computed branches.</p>"
     return table_html(["branch", "type", "omega1 (rad/s)", "sigma (1/kg)", "omega (rad/s)",
@@ -967,21 +982,18 @@ def section_hopf_curve(params: Params, ctx: ReportContext) -> tuple[str, list[Pa
         ctx.cache["hopf_curves"] = curves
     marks = [(f"design point ({params.omega1:.4g}, {params.sigma:.3g})", float(params.omega1),
               float(params.sigma))]
-    frag, files = save_and_embed(
+    figure, files = save_and_embed(
         hopf_curve_figure(curves, marks, ctx.settings,
                           region=stability_region(params, ctx.settings)), ctx, "hopf_curve",
         "Hopf curve of model A in the (omega1, sigma) plane, continued from the Hopf points "
         "through the design point; squares are codimension-two points; shaded: unstable "
         "equilibrium on an eigenvalue grid (an independent check of the curve).")
-    info = []
-    for c in curves:
-        info.append(f"branch of {len(c.points)} points, {c.steps} steps: {c.message}"
-                    + (" (closed)" if c.closed else ""))
-    text = "<ul>" + "".join(f"<li>{esc(t)}</li>" for t in info) + "</ul>"
     data = [{"values": c.values().tolist(), "l1": c.l1().tolist(),
              "special_points": [(sp.type, sp.values) for sp in c.special_points]}
             for c in curves]
-    return frag + text + hopf_curve_table(curves), files, data
+    frag = render("hopf_curve.html.j2", figure=figure, curves=curves,
+                  codim2_rows=_formatted(hopf_curve_rows(curves)))
+    return frag, files, data
 
 
 # ---------------------------------------------------------------------------------------
@@ -1035,10 +1047,6 @@ def study_report(
             progress(title)
         results.append(run_section(key, title, fn, params, ctx))
     name = label or "parameter set"
-    intro = (f"<p>Study of the vehicle-beam pair <b>{esc(name)}</b>: omega1 = "
-             f"{params.omega1:.5g} rad/s, sigma = {params.sigma:.4g} 1/kg, w0 = "
-             f"{params.w0 * 1e3:.4g} mm. Model A is one levitation unit on the first beam mode "
-             "(9 states); model B is the full vehicle on a multi-mode beam. All quantities "
-             "in SI units unless a unit is given.</p>")
+    intro = render("study_intro.html.j2", name=name, params=params)
     return write_report(out, f"maglev-match study report: {name}", intro, results,
                         {"label": name, **settings.as_dict()}, params, t0)
