@@ -630,6 +630,7 @@ def design_search(params: Params | str | None = None, *,
         optimise_design,
         parse_requirement,
         parse_vary,
+        refuse_switched_off,
     )
 
     if (minimize is None) == (maximize is None):
@@ -642,12 +643,7 @@ def design_search(params: Params | str | None = None, *,
     texts = ([f"{k}>={float(v)!r}" for k, v in require.items()]
              if isinstance(require, Mapping) else list(require))
     reqs = tuple(parse_requirement(r) for r in texts)
-    if not simulate:
-        for r, text in zip(reqs, texts, strict=True):
-            if r.quantity == "chi_simulation":
-                raise ParameterError(f"require {text}", "simulate=False",
-                                     "chi_simulation is switched off by simulate=False: drop "
-                                     "one of the two")
+    refuse_switched_off(reqs, texts, simulate, "require", "simulate=False")
     goal = Goal.MINIMIZE if minimize is not None else Goal.MAXIMIZE
     problem = DesignProblem(variables, goal, minimize or maximize or "", reqs)
     base = resolve_params(params, **overrides)

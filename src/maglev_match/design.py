@@ -472,6 +472,18 @@ def parse_requirement(text: str) -> Requirement:
     return Requirement(q, bound)
 
 
+def refuse_switched_off(reqs: Sequence[Requirement], texts: Sequence[str], simulate: bool,
+                        option: str, switch: str) -> None:
+    """A requirement on chi_simulation while the simulation is switched off (``switch``:
+    the option or argument that did it) is a usage error naming both."""
+    if simulate:
+        return
+    for r, text in zip(reqs, texts, strict=True):
+        if r.quantity == Quantity.CHI_SIMULATION:
+            raise ParameterError(f"{option} {text}", switch, "chi_simulation is switched off "
+                                 f"by {switch}: drop one of the two")
+
+
 # ---------------------------------------------------------------------------------------
 # the optimiser
 # ---------------------------------------------------------------------------------------

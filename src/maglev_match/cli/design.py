@@ -383,6 +383,7 @@ def design_command(
         optimise_design,
         parse_requirement,
         parse_vary,
+        refuse_switched_off,
     )
     from maglev_match.plots import save_figure
     from maglev_match.plots.design import design_path_figure
@@ -397,12 +398,8 @@ def design_command(
         raise ParameterError("--grid", grid, "must be at least 2")
     variables = tuple(parse_vary(v) for v in vary)
     reqs = tuple(parse_requirement(r) for r in require or [])
-    if no_simulation:
-        for r, text in zip(reqs, require or [], strict=True):
-            if r.quantity == "chi_simulation":
-                raise ParameterError(f"--require {text}", "--no-simulation",
-                                     "chi_simulation is switched off by --no-simulation: drop "
-                                     "one of the two")
+    refuse_switched_off(reqs, require or [], not no_simulation, "--require",
+                        "--no-simulation")
     goal = Goal.MINIMIZE if minimize is not None else Goal.MAXIMIZE
     problem = DesignProblem(variables, goal, minimize or maximize or "", reqs)
     base = params_from_options(preset, config, set_)
