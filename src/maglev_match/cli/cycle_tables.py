@@ -19,7 +19,7 @@ from maglev_match.params import ParameterError, Params, warn_overridden
 if TYPE_CHECKING:  # the numerics (and JAX) are imported when a command runs
     from maglev_match.dynamics.cycles import CycleBranch
 
-__all__ = ["apply_at", "branch_rows", "special_rows", "write_csv", "print_summary",
+__all__ = ["apply_at", "branch_rows", "special_rows", "write_csv", "print_summary", "shown_rows",
            "user_cycle_rows", "user_special_rows"]
 
 
@@ -107,7 +107,7 @@ def _print_summary(result, branches, chosen, param, files, first_line: str | Non
         table = Table(param, "T (s)", "gap dev max (mm)", "gap dev min (mm)", "i min (A)",
                       "stability", "n unst", box=box.SIMPLE)
         pts = br.points
-        idx = sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1]))
+        idx = shown_rows(len(pts))
         for k in idx:
             c = pts[k]
             table.add_row(f"{c.value:.7g}", f"{c.period:.5f}",
@@ -158,6 +158,12 @@ def _cycle_rows(br, param: str) -> list[dict[str, Any]]:
 def _special_rows_user(br, param: str) -> list[dict[str, Any]]:
     return [{"type": s.type, param: s.value, "period": s.period, "located": s.located,
              "detail": s.detail, "label": s.label} for s in br.special_points]
+
+
+def shown_rows(n: int) -> list[int]:
+    """The rows of a branch of ``n`` points that the text tables show: about a dozen,
+    evenly spaced, and the last."""
+    return sorted(set(range(0, n, max(1, n // 12))) | {n - 1}) if n else []
 
 
 # the names the command modules have used

@@ -31,7 +31,7 @@ from maglev_match.cli.common import (
     progress_report,
     refuse_given,
 )
-from maglev_match.cli.cycle_tables import _cycle_rows, _special_rows_user
+from maglev_match.cli.cycle_tables import _cycle_rows, _special_rows_user, shown_rows
 from maglev_match.cli.restart import (
     HOPF_SEARCH_OPTIONS,
     _fail_if_nothing_continued,
@@ -214,6 +214,16 @@ def _at_values(user: UserModel, at: list[str] | None) -> dict[str, float]:
     return parse_sets(user, at, option="--at")
 
 
+def _print_user_points(br, param: str) -> None:
+    """The rows :func:`shown_rows` picks of a user model's cycle branch, one line each."""
+    for k in shown_rows(len(br.points)):
+        c = br.points[k]
+        console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
+                      f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
+                      f"multipliers, |trivial - 1| = {abs(c.trivial_multiplier - 1):.1e})",
+                      highlight=False)
+
+
 def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param: str,
                 start: float | None, stop: float | None, all_hopf: bool, n_scan: int,
                 ntst: int, ncol: int, max_steps: int, json_out: bool, out: Path | None,
@@ -309,15 +319,7 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
         console.print(f"Hopf point {param} = {h.value:.8g}, frequency {h.frequency:.6g} rad/s, "
                       f"l1 = {h.l1:.4g} ({h.kind}); branch stopped: {br.stopped_reason} after "
                       f"{br.steps} steps", highlight=False)
-        pts = br.points
-        shown = sorted(set(range(0, len(pts), max(1, len(pts) // 12))) | {len(pts) - 1}) \
-            if pts else []
-        for k in shown:
-            c = pts[k]
-            console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
-                          f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
-                          f"multipliers, |trivial - 1| = {abs(c.trivial_multiplier - 1):.1e})",
-                          highlight=False)
+        _print_user_points(br, param)
         for s in br.special_points:
             console.print(f"  {s.type} at {param} = {s.value:.8g} ({s.located})"
                           f"{': ' + s.detail if s.detail else ''}", highlight=False)
@@ -448,14 +450,7 @@ def user_cycles_restart(*, user, model: str, restart: Path | None, label: str | 
     console.print(f"cycles: {header}; no Hopf search", highlight=False, markup=False)
     console.print(f"branch stopped: {br.stopped_reason} after {br.steps} steps",
                   highlight=False)
-    pts = br.points
-    for k in sorted(set(list(range(0, len(pts), max(1, len(pts) // 12))) + [len(pts) - 1])
-                    if pts else []):
-        c = pts[k]
-        console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
-                      f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
-                      f"multipliers, |trivial - 1| = {abs(c.trivial_multiplier - 1):.1e})",
-                      highlight=False)
+    _print_user_points(br, param)
     for s in br.special_points:
         console.print(f"  {s.label or s.type}: {s.type} at {param} = {s.value:.8g} "
                       f"({s.located})", highlight=False)
