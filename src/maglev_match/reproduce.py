@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
+from maglev_match.io import atomic_open, atomic_write_text
 from maglev_match.params import Params, load_preset
 from maglev_match.report import (
     ReportContext,
@@ -49,12 +50,12 @@ from maglev_match.report import (
     cycle_diagram,
     cycle_diagram_figure,
     cycle_diagram_table,
-    esc,
+    fmt,
     hopf_curve_figure,
     hopf_curve_table,
     hopf_curves,
-    note_html,
     outcome_text,
+    render,
     run_section,
     run_time_history,
     save_and_embed,
@@ -768,24 +769,10 @@ def _variants(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
     written = []
     for v in full:
         path = ctx.out_dir / f"paper-variant-{v.param}.toml"
-        path.write_text(variant_preset_text(v))
+        atomic_write_text(path, variant_preset_text(v))
         written.append(path)
-    text = (
-        "<p>With the printed defaults the Hopf point A1 (along omega1 at sigma = 4e-4) lies "
-        "well above 105 rad/s, so alpha2 is stable, unlike the paper. One parameter at a time "
-        f"(all others as printed), we solved max Re(lambda) = 0 at (omega1, sigma) = "
-        f"({VARIANT_TARGET}, 4e-4) for the parameter (Brent's method after a scan of "
-        "[0.1x, 10x] the printed value; [0, 0.9] for xi1). The table gives that value, the "
-        "interval of values that put A1 inside (100, 105) rad/s, A1 recomputed with it by the "
-        "Hopf search, and which of the paper's stability statements then hold.</p>")
     sim_rows: list[tuple[Any, ...]] = []
     if full:
-        text += ("<p>Single changes that reconcile every stability statement listed: "
-                 + ", ".join(f"<b>{esc(v.param)} = {v.value:.4g}</b> (printed {v.default:g})"
-                             for v in full)
-                 + ". They are offered as the presets <code>paper-variant-&lt;parameter&gt;"
-                 "</code> (shipped with the package and written to this folder); they are "
-                 "variants, not the paper's printed values.</p>")
         t_end = 3.0 if st.settings.quick else 5.0
         for v in full:
             shipped = _shipped_variant_value(v.param)
@@ -799,14 +786,9 @@ def _variants(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
                     sim_rows.append((f"{v.param} = {v.value:.5g}" + (
                         "" if shipped is None else f" (shipped preset: {shipped:.6g})"),
                         name, f"{x5 * 1e3:g} mm", outcome_text(sim)))
-    else:
-        text += "<p>No single parameter change reconciles all of the stability statements.</p>"
-    sim_table = ("<p>The reconciling variants' runs of model A (limits on) from the paper's "
-                 "initial values:</p>" + table_html(["variant", "point", "x5(0)", "outcome"],
-                                                    sim_rows)) if sim_rows else ""
-    note = note_html("A moved A1 also changes h, chi and the collision times; the claims "
-                     "table above is computed with the printed defaults only.")
-    return text + table + sim_table + note, written, [asdict(v) for v in results]
+    frag = render("reproduce_variants.html.j2", target=VARIANT_TARGET, full=full, table=table,
+                  sim_rows=[tuple(fmt(c) for c in r) for r in sim_rows])
+    return frag, written, [asdict(v) for v in results]
 
 
 def _shipped_variant_value(param: str) -> float | None:
@@ -819,23 +801,14 @@ def _shipped_variant_value(param: str) -> float | None:
     return float(getattr(load_preset(name), param))
 
 
-def _discussion(study: Study) -> str:
-    """One factual paragraph on the cause of the stability differences (when Fig. 5a's
-    diagram has been computed)."""
+def _hopf_a1(study: Study) -> float | None:
+    """The Hopf point A1 along omega1 at sigma = 4e-4 (when Fig. 5a's diagram has been
+    computed): the fact the claims section's discussion of the stability differences
+    rests on."""
     d = study.cache.values.get("diagram:omega1")
     if d is None or not d.branches:
-        return ""
-    a1 = d.branches[0][0].value
-    return (
-        "<p>The differing stability statements (alpha2 unstable, the stiff turnout beam "
-        "unstable in models A and B, chi = 0 there, the divergence of Fig. 11, the collision "
-        f"of Fig. 7) trace back to one fact: with the printed defaults the Hopf point A1 "
-        f"along omega1 at sigma = 4e-4 lies at {a1:.4g} rad/s, whereas these statements need "
-        "it between 100 rad/s (alpha1 stable) and about 105 rad/s (alpha2 and the stiff beam "
-        "at 104.5 rad/s unstable, at their slightly larger sigma). The last section "
-        "computes which single parameter change would move it there. The size of h (and "
-        "so chi) and the collision at alpha1 from -2.2 mm differ as well; they depend on "
-        "the cycle's amplitude, not only on where A1 lies.</p>")
+        return None
+    return float(d.branches[0][0].value)
 
 
 # ---------------------------------------------------------------------------------------
@@ -887,27 +860,19 @@ def reproduce(
     counts = {k: sum(1 for c in claims if c.verdict == k)
               for k in ("agree", "close", "differ", "not computed")}
     summary = ", ".join(f"{n} {k}" for k, n in counts.items() if n)
-    claims_html = (f"<p>{len(claims)} claims: {esc(summary)}. Verdict rule: numbers agree "
-                   "within 1 %, are close within 5 %, otherwise differ; qualitative statements "
-                   "agree or differ. Computed with the printed equations and defaults, "
-                   "nothing tuned.</p>" + _discussion(study) + claims_table_html(claims))
+    claims_html = render("reproduce_claims.html.j2", n_claims=len(claims), summary=summary,
+                         a1=_hopf_a1(study), table=claims_table_html(claims))
     claims_section = SectionResult("claims", "Claims table", claims_html, (),
                                    [asdict(c) for c in claims], True, "",
                                    time.perf_counter() - tc)
-    with (out / "claims.csv").open("w", newline="") as fh:
+    with atomic_open(out / "claims.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["key", "source", "claim", "paper", "ours", "verdict", "difference", "note"])
         for c in claims:
             w.writerow([c.key, c.source, c.claim, c.paper, c.ours, c.verdict, c.difference,
                         c.note])
-    (out / "claims.json").write_text(json.dumps([asdict(c) for c in claims], indent=2))
-    intro = (
-        "<p>Every figure and claim of the paper that its text describes, recomputed with the "
-        "printed equations and the printed default parameters: presets "
-        "<code>alpha1</code>, <code>alpha2</code>, <code>alpha3</code>, "
-        "<code>turnout-soft</code> and <code>turnout-stiff</code>. The paper's numbers are "
-        "claims to check, not targets; where they do not follow from the printed equations "
-        "and parameters, the table says so.</p>")
+    atomic_write_text(out / "claims.json", json.dumps([asdict(c) for c in claims], indent=2))
+    intro = render("reproduce_intro.html.j2")
     report = write_report(out / "reproduce.html", "maglev-match: reproduction of the paper",
                           intro, [claims_section, *results],
                           {"command": "reproduce", **settings.as_dict(),
