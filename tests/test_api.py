@@ -258,3 +258,8 @@ def test_design_search_takes_keyword_ranges_and_requirements():
         mm.design_search("turnout-soft", vary={"EI": (5e9, 4e10)})
     with pytest.raises(mm.ParameterError):
         mm.design_search("turnout-soft", vary={"EI": (-1.0, 4e10)}, minimize="EI")
+    # a range whose static deflection falls below W0_MIN (chi meaningless) is refused before
+    # any index is computed, as on the command line, and the message names `vary`
+    with pytest.raises(mm.ParameterError, match="has no physical meaning") as err:
+        mm.design_search("turnout-soft", vary={"sigma": (1e-8, 1e-3)}, maximize="chi")
+    assert "'vary sigma'" in str(err.value)

@@ -627,6 +627,7 @@ def design_search(params: Params | str | None = None, *,
         DesignProblem,
         Goal,
         MaglevEvaluator,
+        check_vary_ranges,
         optimise_design,
         parse_requirement,
         parse_vary,
@@ -650,6 +651,7 @@ def design_search(params: Params | str | None = None, *,
     for var in variables:  # both ends must be valid parameter values
         base.replace(**{var.name: var.lo})
         base.replace(**{var.name: var.hi})
+    check_vary_ranges(base, variables, "vary")  # valid sets with a meaningful chi throughout
     evaluator = MaglevEvaluator(base, problem.names, model=_check_model(model),
                                 simulate=simulate)
     return optimise_design(problem, evaluator, grid=grid, starts=starts, progress=progress)

@@ -424,12 +424,14 @@ def _samples(var: Variable, n: int = 17) -> np.ndarray:
     return np.linspace(var.lo, var.hi, n)
 
 
-def check_vary_ranges(base: Params, variables: Sequence[Variable]) -> None:
+def check_vary_ranges(base: Params, variables: Sequence[Variable], field: str = "--vary"
+                      ) -> None:
     """Refuse, before any index is computed, ranges that contain invalid parameter sets or
     designs whose static deflection w0 falls below :data:`W0_MIN` (where chi = h / w0 is
     meaningless). Sampled: every corner of the box, and 17 points along each range with the
     other variables at the base values (w0 is monotone in sigma, omega1, EI, m, M; the
-    samples catch the rest, e.g. L through sin^2 in sigma)."""
+    samples catch the rest, e.g. L through sin^2 in sigma). ``field`` names the ranges in
+    the message (``--vary`` on the command line, ``vary`` in the API)."""
     names = [v.name for v in variables]
     points = [dict(zip(names, c, strict=True))
               for c in itertools.product(*[(v.lo, v.hi) for v in variables])]
@@ -440,14 +442,14 @@ def check_vary_ranges(base: Params, variables: Sequence[Variable]) -> None:
         try:
             p = base.replace(**pt)
         except ParameterError as exc:
-            raise ParameterError(f"--vary {' '.join(names)}", where,
+            raise ParameterError(f"{field} {' '.join(names)}", where,
                                  f"this point of the ranges is not a valid parameter set "
                                  f"({exc}); narrow the ranges") from None
         w0 = p.w0
         if not w0 >= W0_MIN:
             chi_max = (p.gap_max - p.c0) / w0 if w0 > 0 else math.inf
             raise ParameterError(
-                f"--vary {' '.join(names)}", where,
+                f"{field} {' '.join(names)}", where,
                 f"the static deflection w0 = {w0:.3g} m there is below {W0_MIN:g} m, where "
                 f"chi = h / w0 (up to {chi_max:.3g}) has no physical meaning; narrow the "
                 "ranges")
