@@ -23,6 +23,7 @@ from maglev_match.models import moving as mv
 from maglev_match.speed import (
     KMH,
     SpeedOptions,
+    SpeedPoint,
     observe_all,
     passage_problem,
     passage_readouts,
@@ -30,6 +31,7 @@ from maglev_match.speed import (
     periodic_response,
     quasi_static_state,
     speed_point,
+    standstill_point,
 )
 from maglev_match.speed_spans import simulate_over_spans
 
@@ -276,6 +278,41 @@ def test_critical_disturbance_bracket_holds_in_single_runs():
     assert _fate(limited, limited.system, events, sol.x0, -up.largest_return, 40) == "return"
     assert _fate(limited, limited.system, events, sol.x0, -up.smallest_collision,
                  40) == "collision"
+
+
+def _critical(direction, status, size, gap_range):
+    from maglev_match.speed import SpeedCritical
+
+    bracketed = status == "bracketed"
+    return SpeedCritical(direction, status, size if bracketed else None,
+                         size if status != "all_collide" else None,
+                         size * 1.01 if bracketed else None, gap_range, 1e-5, 8, 0, 40, 2,
+                         None)
+
+
+@pytest.mark.parametrize("down, up, ceiling", [
+    (("all_return", 8e-3), ("all_return", 10e-3), True),  # h = the down gap range
+    (("bracketed", 5e-3), ("all_return", 10e-3), False),  # h measured (down)
+    (("all_return", 8e-3), ("bracketed", 9e-3), True),  # h set by the saturated direction
+    (("all_return", 8e-3), ("bracketed", 3e-3), False),  # h measured (up)
+    (("all_collide", 0.0), ("all_return", 10e-3), False),  # h = 0, not a ceiling
+])
+def test_h_at_ceiling_marks_a_saturated_search(down, up, ceiling):
+    """h(v) = min over the directions of the supported size; it is the search's ceiling
+    (chi(v) a lower bound) exactly when the direction that sets it returned at every size up
+    to its gap range. The flag survives the JSON round trip of the checkpoint tiles."""
+    import dataclasses
+
+    pt = standstill_point(UNIT1, "unit")
+    d = _critical(+1, down[0], down[1], 8e-3)
+    u = _critical(-1, up[0], up[1], 10e-3)
+    h = min(d.supported(), u.supported())
+    pt = dataclasses.replace(pt, speed=10.0, down=d, up=u, h=h, chi=h / pt.w0)
+    assert pt.h_at_ceiling is ceiling
+    js = pt.to_json()
+    assert js["h_at_ceiling"] is ceiling
+    again = SpeedPoint.from_json(js)
+    assert again.h_at_ceiling is ceiling and again.h == pt.h
 
 
 def test_vehicle_at_standstill_is_model_b_up_to_the_suspension_preload():

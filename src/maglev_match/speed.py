@@ -766,13 +766,26 @@ class SpeedPoint:
         vals = [abs(v) for v in (*self.gap_dev_max, *self.gap_dev_min)]
         return max(vals) if vals else float("nan")
 
+    @property
+    def h_at_ceiling(self) -> bool:
+        """h(v) is the search's ceiling, not a measured margin: in the direction that sets
+        it every initial deflection up to the gap range returned, so chi(v) is a lower
+        bound (no deflection within the gap range was seen to cause contact)."""
+        if not np.isfinite(self.h):
+            return False
+        setting = [c for c in (self.down, self.up)
+                   if c is not None and c.supported() is not None and c.supported() == self.h]
+        return bool(setting) and all(c.status == CriticalStatus.ALL_RETURN for c in setting)
+
     def to_json(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
+        d["h_at_ceiling"] = self.h_at_ceiling
         return d
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> SpeedPoint:
         d = dict(d)
+        d.pop("h_at_ceiling", None)  # a property, recomputed
         for k in ("down", "up"):
             if d.get(k) is not None:
                 d[k] = SpeedCritical(**d[k])
@@ -1349,6 +1362,15 @@ def speed_sweep(params: Params, model: str = "unit", speeds: Sequence[float] = (
                     warnings.append(f"a stability change between {a.speed / KMH:.4g} and "
                                     f"{b.speed / KMH:.4g} km/h could not be located: "
                                     f"{ch.message}")
+    ceiling = [p for p in pts if p.h_at_ceiling]
+    if ceiling:
+        warnings.append(
+            f"at {len(ceiling)} of {len(pts)} speeds (" + ", ".join(
+                f"{p.speed / KMH:.4g}" for p in ceiling[:6]) + (", ..." if len(ceiling) > 6
+                                                                 else "")
+            + " km/h) every initial deflection up to the gap range returned: h(v) there is "
+            "the search's ceiling (the gap range), so chi(v) is a lower bound, not a "
+            "measured margin")
     res = resonance_speeds(params, kind, min(vals), max(vals)) if max(vals) > 0 else ()
     return SpeedSweep(params=params, model=kind.value, points=tuple(pts), resonances=res,
                       stability_changes=tuple(changes), options=opts,
@@ -1364,7 +1386,8 @@ SWEEP_UNITS = {
     "critical_multiplier_imag": "1", "max_real_part": "1/s", "gap_dev_max": "m",
     "gap_dev_min": "m", "current_max": "A", "current_min": "A", "current_reverses": "1",
     "midspan_max": "m", "static_deflection": "m", "daf": "1", "body_acc_peak": "m/s^2",
-    "wz": "1", "h": "m", "h_down": "m", "h_up": "m", "w0": "m", "chi": "1",
+    "wz": "1", "h": "m", "h_down": "m", "h_up": "m", "h_at_ceiling": "1", "w0": "m",
+    "chi": "1",
     "integration_error": "1", "point": "1",
 }
 SWEEP_NAMES = {
@@ -1390,6 +1413,8 @@ SWEEP_NAMES = {
     "h": "critical initial deflection of the span being entered (smaller direction)",
     "h_down": "critical initial deflection, beam down (gaps close)",
     "h_up": "critical initial deflection, beam up (gaps open)",
+    "h_at_ceiling": "h is the search's ceiling (1: every deflection up to the gap range "
+                    "returned; chi is then a lower bound) or a measured margin (0)",
     "w0": "static deflection of the standstill index (same model)",
     "chi": "matching index at speed chi(v) = h(v) / w0",
     "integration_error": "variational solve against state run, scaled",
@@ -1439,6 +1464,7 @@ def sweep_dataset(sweep: SpeedSweep):
         "h": (("speed",), sweep.column("h")),
         "h_down": (("speed",), np.array([crit(p, "down") for p in pts])),
         "h_up": (("speed",), np.array([crit(p, "up") for p in pts])),
+        "h_at_ceiling": (("speed",), np.array([p.h_at_ceiling for p in pts], np.int8)),
         "w0": (("speed",), sweep.column("w0")),
         "chi": (("speed",), sweep.column("chi")),
         "integration_error": (("speed",), sweep.column("integration_error")),

@@ -68,7 +68,8 @@ def _table(sweep) -> Table:
         t.add_row(f"{p.speed_kmh:g}", stable, _fmt(p.largest_multiplier, ".4f"),
                   _fmt(p.daf, ".4f"), _fmt(p.gap_dev_abs_max * 1e3, ".4f"),
                   _fmt(imin, ".2f"), _fmt(p.wz, ".3f"), _fmt(p.body_acc_peak, ".4f"),
-                  _fmt(p.h * 1e3, ".3f"), _fmt(p.chi, ".3f"))
+                  _fmt(p.h * 1e3, ".3f"),
+                  (">=" if p.h_at_ceiling else "") + _fmt(p.chi, ".3f"))
     return t
 
 
@@ -100,7 +101,9 @@ def _summary_lines(sweep) -> list[str]:
     if chis:
         worst = min(chis, key=lambda p: p.chi)
         out.append(f"smallest chi(v) {worst.chi:.3f} at {worst.speed_kmh:g} km/h (h = "
-                   f"{worst.h * 1e3:.3f} mm, w0 = {worst.w0 * 1e3:.4f} mm)")
+                   f"{worst.h * 1e3:.3f} mm, w0 = {worst.w0 * 1e3:.4f} mm)"
+                   + (": a lower bound, h(v) is the gap range (no deflection within it "
+                      "caused contact)" if worst.h_at_ceiling else ""))
     return out
 
 
