@@ -190,6 +190,27 @@ def test_row_with_hopf_point_just_outside_the_grid_matches_pointwise_index():
     assert row["hopf_distance"][-1] == pytest.approx(abs(hopf_w - 140.0), rel=1e-6)
 
 
+def test_row_without_a_hopf_point_on_its_path_takes_the_pointwise_index():
+    """A row along kD = 148..152 on the soft turnout beam is stable along its whole path
+    (extension included) and meets no Hopf point, yet an unstable cycle born at a Hopf point
+    along omega1 bounds the basin at each of its points. The row must not claim "no cycle
+    within limits" (h = 10 mm, as it once did): its points agree with the point-wise
+    index."""
+    from maglev_match.maps import CASE_CODES, compute_row
+    from maglev_match.matching import matching_index
+
+    spec = MapSpec(base=load_preset("turnout-soft").as_input_dict(),
+                   x=Axis("kD", 148.0, 152.0, 3), y=Axis("sigma", 4.718e-4, 4.8e-4, 2),
+                   ntst=30)
+    row = compute_row(spec, 0)
+    assert row["stable"].all() and row["resolved"].all()
+    for j, xv in enumerate(spec.x.values):
+        point = matching_index(spec.point(xv, spec.y.values[0]), simulate=False)
+        assert point.case == "unstable_cycle" and point.h < 9e-3
+        assert row["case"][j] == CASE_CODES["unstable_cycle"]
+        assert row["h"][j] == pytest.approx(point.h, rel=1e-9)
+
+
 def test_unmatched_sign_change_is_unresolved_with_its_reason(monkeypatch):
     """If no Hopf point can be matched to a sign change of max Re (here: the Hopf search
     made to find nothing), the stable points next to it are unresolved with reason code

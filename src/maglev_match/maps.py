@@ -42,7 +42,7 @@ import math
 import os
 import signal
 import warnings as warnings_mod
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -295,6 +295,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         mark(stretch_from(side, step), REASON_NO_HOPF)
     hopf_points.sort(key=lambda hp: hp.value)
 
+    covered = np.zeros(nx, dtype=bool)  # grid points of a stretch next to a Hopf point
     for hp in hopf_points:
         # the nodes of the stable stretch next to this Hopf point
         j_lo, j_hi = math.floor(hp.value), math.ceil(hp.value)
@@ -308,6 +309,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         in_grid = stretch[(stretch >= off) & (stretch < off + nx)]
         if in_grid.size == 0:
             continue  # the stretch lies wholly outside the grid
+        covered[in_grid - off] = True
         end = int(in_grid.max() if step > 0 else in_grid.min())
         br = cycle_branch(path, hp, PATH_PARAM, stop_at=float(end), ntst=spec.ntst,
                           ncol=spec.ncol, max_steps=spec.max_steps, limits=limits,
@@ -359,7 +361,14 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         "current_reverses": reverses, "resolved": resolved, "reason": reason,
         "hopf_x": hopf_x,
     }
-    _zero_delay_points(out, pts, system)
+    # A stable stretch with no Hopf point at either end on the path: the row has no cycle to
+    # continue to its points, so "no cycle within limits" would be a claim without evidence
+    # (a cycle born at a Hopf point off the row can still reach them). Those points, and a
+    # delayed row's zero-delay points, take the point-wise paper index, as `index` computes
+    # it (its own Hopf search along omega1 and sigma).
+    orphans = np.flatnonzero(stable & ~covered & resolved)
+    zero_delay = [j for j, p in enumerate(pts) if p.tau == 0] if hasattr(system, "dde") else []
+    _pointwise_points(out, pts, sorted(set(orphans.tolist()) | set(zero_delay)))
     return out
 
 
@@ -368,7 +377,7 @@ def _row_system(points: list[Params]):
     no point of the row (extension included) has a delay; else its discretised delay system
     with nodes for the row's largest delay, the delay entering the vector as its last entry,
     and a zero delay replaced by :data:`DELAY_FLOOR` times the largest (the discretisation
-    is singular at tau = 0; :func:`_zero_delay_points` recomputes those points)."""
+    is singular at tau = 0; :func:`_pointwise_points` recomputes those points)."""
     from maglev_match.models.unit import param_vector, unit_system
 
     tau_max = max(p.tau for p in points)
@@ -382,17 +391,16 @@ def _row_system(points: list[Params]):
     return unit_system(points[0], tau_max=tau_max), vector
 
 
-def _zero_delay_points(out: dict[str, np.ndarray], pts: list[Params], system) -> None:
-    """The points of a delayed row whose delay is 0 (e.g. the first column of a tau axis),
-    recomputed with the delay-free model by the point-wise index (in place); the row's path
-    passed them at the floor delay."""
-    if not hasattr(system, "dde"):
-        return
+def _pointwise_points(out: dict[str, np.ndarray], pts: list[Params],
+                      which: Sequence[int]) -> None:
+    """Points ``which`` of a row recomputed by the point-wise paper index (in place): the
+    points of a stable stretch the row's path reaches from no Hopf point, and the points of
+    a delayed row whose delay is 0 (e.g. the first column of a tau axis; the row's path
+    passed them at the floor delay, and the point-wise index uses the delay-free model)."""
     from maglev_match.matching import matching_index
 
-    for j, p in enumerate(pts):
-        if p.tau != 0:
-            continue
+    for j in which:
+        p = pts[j]
         res = matching_index(p, simulate=False)
         out["chi"][j], out["h"][j] = res.chi, res.h
         out["stable"][j], out["max_real_part"][j] = res.stable, res.max_real_part
