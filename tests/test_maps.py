@@ -408,3 +408,24 @@ def test_map_command_removes_its_tiles_after_success_unless_kept(tmp_path, capsy
     kept = tmp_path / "b" / "map_omega1_sigma.nc.tiles"
     assert kept.is_dir() and list(kept.glob("tile_*.npz"))
     assert f"checkpoint tiles kept in {kept}" in out
+
+
+def test_delay_axis_extension_stays_within_the_discretisation_bound():
+    """A row along tau is extended beyond the grid only as far as the discretisation
+    resolves a delay (else a valid axis near the bound, tau = 0..0.05 s, failed in every row
+    when its extension reached 0.075 s); the grid's own bound is refused up front."""
+    from maglev_match.dynamics.delay import max_delay_for
+    from maglev_match.maps import _extension
+    from maglev_match.models.unit import unit_dde
+    from maglev_match.params import ParameterError
+
+    base = load_preset("turnout-soft").as_input_dict()
+    for stop in (0.004, 0.05):
+        spec = MapSpec(base=base, x=Axis("tau", 0.0, stop, 3), y=Axis("kD", 100.0, 150.0, 2))
+        bound = max_delay_for(unit_dde(spec.point(stop, 100.0)).rate_bound())
+        lo, hi = _extension(spec, spec.x.values, 100.0)
+        assert lo == []  # a negative delay is not a parameter set
+        assert all(x <= bound for x, _ in hi)
+        assert len(hi) == min(2, int((bound - stop) // (stop / 2)))
+    with pytest.raises(ParameterError, match="the delay must be at most"):
+        MapSpec(base=base, x=Axis("tau", 0.0, 1.0, 2), y=Axis("kD", 100.0, 150.0, 2)).validate()

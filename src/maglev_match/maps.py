@@ -198,6 +198,14 @@ class MapSpec:
         for yv in self.y.values:
             for xv in self.x.values:
                 self.point(xv, yv)
+        if "tau" in (self.x.name, self.y.name):  # the delay must be resolvable (its rule)
+            from maglev_match.models.unit import unit_system
+
+            for xv in (self.x.start, self.x.stop):
+                for yv in (self.y.start, self.y.stop):
+                    p = self.point(xv, yv)
+                    if p.tau > 0:
+                        unit_system(p)  # raises ParameterError naming tau and its bound
 
     @property
     def tiles(self) -> list[tuple[int, int]]:
@@ -536,13 +544,22 @@ def _scan_hopf_points(path, w: np.ndarray, t_end: float, system, nodes: np.ndarr
 def _extension(spec: MapSpec, xs: np.ndarray, yv: float
                ) -> tuple[list[tuple[float, Params]], list[tuple[float, Params]]]:
     """Parameter sets beyond both ends of a row, at the grid spacing, out to one span (or
-    to the last valid parameter set before that): lists of (x, Params), nearest first."""
+    to the last valid parameter set before that, and on a delay axis to the longest delay
+    the discretisation resolves): lists of (x, Params), nearest first."""
     dx = (xs[-1] - xs[0]) / (xs.size - 1)
+    tau_bound = math.inf  # along a delay axis: the longest delay the discretisation resolves
+    if spec.x.name == "tau":
+        from maglev_match.dynamics.delay import max_delay_for
+        from maglev_match.models.unit import unit_dde
+
+        tau_bound = max_delay_for(unit_dde(spec.point(xs[-1], yv)).rate_bound())
     out: list[list[tuple[float, Params]]] = []
     for end, sign in ((xs[0], -1.0), (xs[-1], 1.0)):
         side: list[tuple[float, Params]] = []
         for k in range(1, xs.size):
             xv = end + sign * k * dx
+            if spec.x.name == "tau" and xv > tau_bound:
+                break
             try:
                 side.append((xv, spec.point(xv, yv)))
             except ParameterError:

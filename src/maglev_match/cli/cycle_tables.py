@@ -8,7 +8,6 @@ import csv
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from rich import box
 from rich.table import Table
 
@@ -43,6 +42,8 @@ def apply_at(params: Params, at: list[str] | None) -> Params:
 
 
 def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
+    import numpy as np
+
     rows = []
     for c in br.points:
         gmax, gmin = c.extrema["gap_deviation"]
@@ -61,6 +62,8 @@ def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
 
 
 def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
+    import numpy as np
+
     from maglev_match.dynamics.continuation import SpecialPointKind
 
     rows = []
@@ -142,6 +145,8 @@ def _print_summary(result, branches, chosen, param, files, first_line: str | Non
 
 def _cycle_rows(br, param: str) -> list[dict[str, Any]]:
     """The rows of a user-model cycle branch (CSV and JSON)."""
+    import numpy as np
+
     out_rows = []
     for c in br.points:
         r = {param: c.value, "period": c.period, "stable": c.stable,

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
 import typer
 
 from maglev_match.cli.common import (
@@ -44,6 +43,8 @@ from maglev_match.cli.restart import (
 from maglev_match.params import ParameterError, Params
 
 if TYPE_CHECKING:  # the user-model loader and System import JAX: loaded when used
+    import numpy as np
+
     from maglev_match.dynamics.system import System
     from maglev_match.models.user import UserModel
 
@@ -233,6 +234,8 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     physical limits; extrema of every state and observable along the branch. With
     ``--out`` the branches are also saved as netCDF (restartable); ``--restart FILE
     --label L`` continues a saved one (:func:`user_cycles_restart`)."""
+    import numpy as np
+
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
@@ -334,6 +337,8 @@ def user_simulate(model: str, sets: list[str] | None, t: float, state: np.ndarra
                   ) -> None:
     """``simulate`` on a user model: from ``--x0`` (default X0, the file's equilibrium
     guess), without physical limits; reports the outcome and the final state."""
+    import numpy as np
+
     from maglev_match.dynamics.simulate import SimulationOptions, simulate
 
     user = load_user_model(model)

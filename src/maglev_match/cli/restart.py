@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
 import typer
 
 from maglev_match.cli.common import (
@@ -37,6 +36,9 @@ __all__ = ["cycles_restart", "hopf_curve_restart", "restart_errors"]
 HOPF_SEARCH_OPTIONS = {"start": "--from", "stop": "--to", "all_hopf": "--all", "n_scan": "--scan"}
 #: Options that choose parameter values.
 PARAMETER_OPTIONS = ("preset", "config", "set_", "at")
+
+if TYPE_CHECKING:  # NumPy is imported when a restart runs (fast usage errors)
+    import numpy as np
 
 
 def restart_errors(fn):
@@ -89,6 +91,8 @@ def _mesh(rs, ntst: int, ncol: int) -> tuple[int, int]:
 
 def _saved_part(rs, system, observable: str) -> tuple[np.ndarray, ...]:
     """Values, max, min and stability of ``observable`` over the saved branch points."""
+    import numpy as np
+
     from maglev_match.dynamics.cycles import orbit_extrema
 
     vals, hi, lo, st = [], [], [], []
@@ -123,6 +127,8 @@ def _fail_if_nothing_continued(br, rs) -> None:
 
 def _kind(l1: float | None) -> str:
     """Criticality of the saved Hopf point (as `hopf` and `cycles` print it)."""
+    import numpy as np
+
     if l1 is None or not np.isfinite(l1):
         return "unknown"
     return "subcritical" if l1 > 0 else "supercritical" if l1 < 0 else "degenerate"
@@ -140,6 +146,8 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
                    at: list[str] | None, ntst: int, ncol: int, max_steps: int,
                    ignore_current: bool, json_out: bool, out: Path | None) -> None:
     """`cycles --restart` on model A or B."""
+    import numpy as np
+
     from maglev_match.cli.cycle_tables import (
         _branch_rows,
         _special_rows,
@@ -250,6 +258,8 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
 
 
 def _restart_figure(br, rs, system, param, params, target: Path, header: str, at) -> list:
+    import numpy as np
+
     from maglev_match.plots import save_figure
     from maglev_match.plots.cycles import cycle_diagram
     from maglev_match.plots.restart import draw_saved_part
@@ -286,6 +296,8 @@ def hopf_curve_restart(*, rm, restart: Path | None, label: str | None,
     --range widens or narrows the saved bounds; without --preset/--config/--set the saved
     parameter values are used (``system``, and ``params`` for the maglev models)."""
     import dataclasses
+
+    import numpy as np
 
     from maglev_match.restart import (
         load_hopf_curve_restart,
