@@ -67,6 +67,34 @@ def test_answers_without_computing_do_not_import_jax(argv, code):
         assert r["out"].strip() == f"maglev-match {__version__}"
 
 
+# every command that takes --set, with the other options it needs to get that far
+SET_COMMANDS = {
+    "stability": (), "root-locus": (), "hopf": (), "hopf-curve": (), "cycles": (),
+    "simulate": (), "index": (), "report": (),
+    "sensitivity": (), "speed": (),
+    "map": ("--x", "omega1=40:190:3", "--y", "sigma=2e-4:6e-4:3"),
+    "design": ("--vary", "EI=5e9:4e10", "--maximize", "chi"),
+}
+
+
+@pytest.mark.parametrize("command", sorted(SET_COMMANDS))
+def test_a_bad_set_is_refused_before_jax_in_every_command(command):
+    """A misspelt parameter is the commonest usage error: every command refuses it in one
+    line before its numerics (JAX) or its figures (matplotlib) load."""
+    r = _probe(command, "--set", "nosuch=1", *SET_COMMANDS[command])
+    assert r["code"] == 2, r
+    assert "nosuch" in r["err"] and len(r["err"].strip().splitlines()) == 1, r["err"]
+    assert not {"jax", "matplotlib", "pydantic"} & set(r["heavy"]), r["heavy"]
+
+
+def test_set_commands_cover_every_command_with_a_set_option():
+    from maglev_match.cli import all_commands
+
+    with_set = {name for name, cmd in all_commands().items()
+                if any("--set" in p.opts for p in cmd.params)}
+    assert with_set == set(SET_COMMANDS)
+
+
 def test_root_help_lists_every_command_with_its_first_sentence():
     r = _probe("--help")
     from maglev_match.cli import COMMANDS

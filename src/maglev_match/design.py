@@ -38,15 +38,18 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import scipy.optimize
 
-from maglev_match.matching import MatchingIndex, matching_index
 from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError, Params
 from maglev_match.reprs import compact_repr
-from maglev_match.sensitivity import DerivativeStatus, index_sensitivity, system_sensitivity
+
+if TYPE_CHECKING:  # the index and its sensitivities (and JAX) load when a design runs, so
+    # that the parsers below answer a bad --vary or --require at once
+    from maglev_match.matching import MatchingIndex
+    from maglev_match.sensitivity import DerivativeStatus
 
 __all__ = [
     "Goal",
@@ -209,6 +212,9 @@ class MaglevEvaluator:
                                                                 strict=True)})
 
     def evaluate(self, values: np.ndarray, gradient: bool) -> Evaluation:
+        from maglev_match.matching import matching_index
+        from maglev_match.sensitivity import index_sensitivity
+
         t = time.perf_counter()
         p = self.params(values)
         idx = matching_index(p, model=self.model, simulate=self.simulate)
@@ -228,6 +234,8 @@ class MaglevEvaluator:
                           dchi_simulation=dsim)
 
     def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex:
+        from maglev_match.matching import matching_index
+
         return matching_index(self.params(values), model=self.model,
                               simulate=simulate and self.simulate)
 
@@ -279,6 +287,7 @@ class SystemEvaluator:
 
     def evaluate(self, values: np.ndarray, gradient: bool) -> Evaluation:
         from maglev_match.matching import index_of_system
+        from maglev_match.sensitivity import DerivativeStatus, system_sensitivity
 
         t = time.perf_counter()
         system, w0, h_max, search, limits = self.make(np.asarray(values, float))

@@ -105,13 +105,6 @@ def cycles_command(
         "branch point or a special point's label (LPC1, PD1, ...).")] = None,
 ) -> None:
     """Cycles born at Hopf points, continued in --param until a physical limit (Fig. 5)."""
-    from maglev_match.dynamics.cycles import cycle_branch
-    from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
-    from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.engineering import engineering_system, is_engineering
-    from maglev_match.limits_check import cycle_limit_margins
-    from maglev_match.models import build_system
-
     check_output_path(out)
     if not 2 <= ncol <= 7:
         raise ParameterError("--ncol", ncol, "must be between 2 and 7")
@@ -129,6 +122,14 @@ def cycles_command(
                               json_out=json_out, out=out)
     check_model(model)
     params = apply_at(_params(preset, config, set_), at)
+    # the numerics (and JAX) once the options are known to be good
+    from maglev_match.dynamics.cycles import cycle_branch
+    from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
+    from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.engineering import engineering_system, is_engineering
+    from maglev_match.limits_check import cycle_limit_margins
+    from maglev_match.models import build_system
+
     if out is not None or not json_out:  # files at the end: load their writers meanwhile
         preload("maglev_match.plots.cycles", "maglev_match.datasets", "xarray", "h5netcdf")
     system = build_system(params, model)

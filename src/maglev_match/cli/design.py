@@ -253,15 +253,16 @@ def sensitivity_command(
     chi_simulation; --no-simulation: the paper's chi), the elasticity (p / chi) d chi / d p
     and the margin's sensitivity for every parameter of model A or of the vehicle
     (--model vehicle), sorted by magnitude, with a tornado figure."""
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.design import tornado_figure
-    from maglev_match.sensitivity import DerivativeStatus, index_sensitivity
-
     model = check_model(model)
     params = params_from_options(preset, config, set_)
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "sensitivity", "tornado", monte_carlo)
+    # the numerics (and JAX) and the figures once the options are known to be good
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.design import tornado_figure
+    from maglev_match.sensitivity import DerivativeStatus, index_sensitivity
+
     with progress_report("sensitivity") as prog:
         prog.stage("computing the index and its sensitivities ...")
         sens = index_sensitivity(params, boundaries=boundaries, model=model,
@@ -385,8 +386,6 @@ def design_command(
         parse_vary,
         refuse_switched_off,
     )
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.design import design_path_figure
 
     model = check_model(model)
     if (minimize is None) == (maximize is None):
@@ -410,6 +409,9 @@ def design_command(
     check_index_params(base)
     sc = scatter_options(base, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "design", "design-path", monte_carlo)
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.design import design_path_figure
+
     evaluator = MaglevEvaluator(base, problem.names, model=model, simulate=not no_simulation)
     with progress_report("design") as prog:
         prog.stage("searching ...")

@@ -255,12 +255,12 @@ def hopf_curve_command(
     """The Hopf curve in two parameters by continuation, with l1 along it and the
     codimension-two points (GH with l2, BT, ZH, HH); writes CSV and a Fig. 4-style figure."""
     from maglev_match.cli.models import delay_names, resolve_model
-    from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans, stability_grid
 
     check_output_path(out)
     model_arg = model
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
+    from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans, stability_grid
     restarted = None
     if restart is not None or label is not None:  # continue a saved curve (cli/restart.py)
         from maglev_match.cli.common import refuse_given

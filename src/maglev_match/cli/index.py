@@ -273,8 +273,6 @@ def map_command(
         run_map,
     )
     from maglev_match.params import ParameterError
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.maps import map_figure
 
     check_output_path(out)
     base = params_from_options(preset, config, set_)
@@ -285,6 +283,9 @@ def map_command(
     spec = MapSpec(base=base.as_input_dict(), x=ax, y=ay, rows_per_tile=rows_per_tile,
                    ntst=ntst, simulate=not no_simulation)
     spec.validate()  # every grid point, before any work starts
+    from maglev_match.plots import save_figure
+    from maglev_match.plots.maps import map_figure
+
     out = folder / f"{stem}.nc"
     checkpoint = out.with_name(out.name + ".tiles")
     log = out.with_suffix(".log")

@@ -111,9 +111,6 @@ def simulate_command(
     """Simulate model A or B from a named or explicit initial state; report collision
     (time, limit, levitation point), convergence or neither by the horizon. With --speed V
     --spans N: the vehicle at speed over N spans."""
-    from maglev_match.dynamics.simulate import SimulationOptions
-    from maglev_match.simulation import initial_state, save_history, simulate_maglev
-
     if speed is not None or spans is not None:
         from maglev_match.cli.speed import simulate_at_speed
 
@@ -145,6 +142,10 @@ def simulate_command(
                      "limits and writes its history with --out FILE.csv")
         return user_simulate(model, set_, t, state, n_save, rtol, atol, json_out, out)
     params = params_from_options(preset, config, set_)
+    # the numerics (and JAX) once the options are known to be good
+    from maglev_match.dynamics.simulate import SimulationOptions
+    from maglev_match.simulation import initial_state, save_history, simulate_maglev
+
     x_init = initial_state(params, model, initial=initial, x5=x5, q1=q1, state=state)
     with progress_report("simulate") as prog:
         prog.stage(f"simulating model {'A' if model == 'unit' else 'B'} for {t:g} s ...")

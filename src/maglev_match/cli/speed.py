@@ -138,7 +138,10 @@ def speed_command(
     deviation, current, DAF, car-body acceleration and Sperling's Wz, the critical
     disturbance of the span being entered and chi(v) = h(v) / w0; resonance speeds and
     stability changes marked. Writes a netCDF sweep and a figure."""
-    from maglev_match.speed import (
+    _check_model(model)
+    check_output_path(out)
+    params = params_from_options(preset, config, set_)
+    from maglev_match.speed import (  # the numerics (and JAX) once the parameters are good
         KMH,
         SpeedOptions,
         check_speed_setup,
@@ -146,9 +149,6 @@ def speed_command(
         speeds_kmh,
     )
 
-    _check_model(model)
-    check_output_path(out)
-    params = params_from_options(preset, config, set_)
     kmh = speeds_kmh(from_, to, step)
     opts = SpeedOptions(critical=critical, spans=spans)
     check_speed_setup(params, model, list(kmh * KMH), spans)

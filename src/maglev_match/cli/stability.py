@@ -172,7 +172,6 @@ def root_locus_command(
     import numpy as np
 
     from maglev_match.cli.models import resolve_model
-    from maglev_match.engineering import is_engineering
     from maglev_match.io import atomic_open
 
     check_output_path(out)
@@ -182,6 +181,8 @@ def root_locus_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
+    from maglev_match.engineering import is_engineering
+
     engineering = params is not None and is_engineering(param)
     if not engineering:
         check_param(system, model, param, "--param")
