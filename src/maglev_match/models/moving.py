@@ -74,7 +74,7 @@ from maglev_match import jax_setup  # noqa: F401  (float64 on)
 from maglev_match.dynamics.system import System
 from maglev_match.models import unit as unit_model
 from maglev_match.models import vehicle as vehicle_model
-from maglev_match.models.limits import clamp_current, gap_margins, hold_current_rate
+from maglev_match.models.limits import clamp_current, gap_margins
 from maglev_match.params import Params
 
 __all__ = [
@@ -367,21 +367,8 @@ def _vehicle_rhs(x, p, n_modes: int, limited: bool):
     wd, dq, ddq = _slots_dynamics(q, qd, (q_["xi1"], q_["L"], q_["mbar"], q_["omega1"]), G,
                                   Gdot, K * r**2, n_modes, pk[2:4])
     cd = ud - wd
-    z0, th0, z0d, th0d = body[6], body[7], body_dot[6], body_dot[7]
-    d = z - z0 - b * th0
-    dd = zd - z0d - b * th0d
-    susp = q_["k2"] * d + q_["c2"] * dd
-    fp = f.reshape(3, 2)
-    z_acc = (-(fp[:, 0] + fp[:, 1]) - susp) / q_["m_s"]
-    th_acc = q_["s"] * (fp[:, 0] - fp[:, 1]) / q_["j_s"]
-    body_acc = jnp.stack([z_acc[0], th_acc[0], z_acc[1], th_acc[1], z_acc[2], th_acc[2],
-                          jnp.sum(susp) / q_["m_b"], jnp.sum(b * susp) / q_["j_b"]])
-    gap_err = c - q_["c0"] - y1
-    di = r * cd + q_["ke"] * c / K * (q_["kP"] * y1 + q_["kD"] * (vv + ud) - i + i0)
-    if limited:
-        di = hold_current_rate(i, di)
-    dy1 = vv + ud + 2.0 * q_["xi0"] * q_["omega0"] * gap_err
-    dv = q_["omega0"] ** 2 * gap_err
+    body_acc = vehicle_model.body_accelerations(q_, b, body, body_dot, f)
+    di, dy1, dv = vehicle_model.loop_rates(q_, K, i0, r, c, cd, ud, i, y1, vv, limited)
     return jnp.concatenate([body_dot, body_acc, di, dy1, dv, dq[0], ddq[0], dq[1], ddq[1],
                             jnp.ones(1)])
 

@@ -102,16 +102,12 @@ def point_kinematics(x, p, n_modes: int):
     return u, ud, c, cd
 
 
-def _rhs(x, p, n_modes: int, limited: bool, command=None):
-    q, a, b, xj, phi, omega, K, i0, q_static = _geometry(p, n_modes)
-    L = layout(n_modes)
-    body, body_dot = x[L["body"]], x[L["body_dot"]]
-    u, ud, c, cd = point_kinematics(x, p, n_modes)
-    i, y1, v = x[L["i"]], x[L["y1"]], x[L["v"]]
-    r0 = i0 / q["c0"]
-    r = (clamp_current(i) if limited else i) / c
-    f = K * (r - r0) * (r + r0)  # net upward force per point, without cancellation (N)
-
+def body_accelerations(q, b, body, body_dot, f):
+    """The accelerations of the three levitation frames (heave, pitch) and the car body
+    (heave, pitch), in state order, from the frames' and body's positions and velocities,
+    the frames' offsets ``b`` and the net upward forces ``f`` of the six points (pairs per
+    frame): the secondary suspension and the magnets. Shared by model B at standstill and
+    at speed."""
     z, zd = body[0:6:2], body_dot[0:6:2]
     z0, th0, z0d, th0d = body[6], body[7], body_dot[6], body_dot[7]
     d = z - z0 - b * th0
@@ -122,15 +118,16 @@ def _rhs(x, p, n_modes: int, limited: bool, command=None):
     th_acc = q["s"] * (f_pair[:, 0] - f_pair[:, 1]) / q["j_s"]
     z0_acc = jnp.sum(susp) / q["m_b"]
     th0_acc = jnp.sum(b * susp) / q["j_b"]
-    body_acc = jnp.stack([z_acc[0], th_acc[0], z_acc[1], th_acc[1], z_acc[2], th_acc[2],
-                          z0_acc, th0_acc])
+    return jnp.stack([z_acc[0], th_acc[0], z_acc[1], th_acc[1], z_acc[2], th_acc[2],
+                      z0_acc, th0_acc])
 
-    qn, qd = x[L["q"]], x[L["q_dot"]]
-    q_acc = (-2.0 * q["xi1"] * omega * qd - omega**2 * (qn - q_static)
-             + 2.0 / (q["mbar"] * q["L"]) * (phi @ f))
 
+def loop_rates(q, K, i0, r, c, cd, ud, i, y1, v, limited: bool, command=None):
+    """The rates of the six points' currents, observer states y1 and v: the magnets'
+    circuits under the outer loops' commands u_j = kP y1_j + kD (v_j + u_j') (``command``:
+    read late when delayed), the current's rate held at the clamp when ``limited``. Shared
+    by model B at standstill and at speed."""
     gap_err = c - q["c0"] - y1
-    # the outer loops' current commands u_j = kP y1_j + kD y2_j (read late when delayed)
     u = q["kP"] * y1 + q["kD"] * (v + ud) if command is None else command
     di = r * cd + q["ke"] * c / K * (
         u - i + i0
@@ -139,6 +136,26 @@ def _rhs(x, p, n_modes: int, limited: bool, command=None):
         di = hold_current_rate(i, di)
     dy1 = v + ud + 2.0 * q["xi0"] * q["omega0"] * gap_err
     dv = q["omega0"] ** 2 * gap_err
+    return di, dy1, dv
+
+
+def _rhs(x, p, n_modes: int, limited: bool, command=None):
+    q, a, b, xj, phi, omega, K, i0, q_static = _geometry(p, n_modes)
+    L = layout(n_modes)
+    body, body_dot = x[L["body"]], x[L["body_dot"]]
+    u, ud, c, cd = point_kinematics(x, p, n_modes)
+    i, y1, v = x[L["i"]], x[L["y1"]], x[L["v"]]
+    r0 = i0 / q["c0"]
+    r = (clamp_current(i) if limited else i) / c
+    f = K * (r - r0) * (r + r0)  # net upward force per point, without cancellation (N)
+
+    body_acc = body_accelerations(q, b, body, body_dot, f)
+
+    qn, qd = x[L["q"]], x[L["q_dot"]]
+    q_acc = (-2.0 * q["xi1"] * omega * qd - omega**2 * (qn - q_static)
+             + 2.0 / (q["mbar"] * q["L"]) * (phi @ f))
+
+    di, dy1, dv = loop_rates(q, K, i0, r, c, cd, ud, i, y1, v, limited, command)
     return jnp.concatenate([body_dot, body_acc, qd, q_acc, di, dy1, dv])
 
 
