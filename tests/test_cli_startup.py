@@ -50,6 +50,8 @@ def _probe(*argv: str) -> dict:
     (["map", "--x", "omega1=1:2"], 2),
     (["nosuchcommand"], 2),
     (["report", "--out", "r.txt"], 2),
+    (["speed", "--from", "-1"], 2),
+    (["design", "--vary", "g=1:20", "--maximize", "chi"], 2),
 ], ids=lambda v: " ".join(v) if isinstance(v, list) else str(v))
 def test_answers_without_computing_do_not_import_jax(argv, code):
     r = _probe(*argv)

@@ -41,7 +41,6 @@ from enum import StrEnum
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
-import scipy.optimize
 
 from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError, Params
 from maglev_match.reprs import compact_repr
@@ -650,6 +649,8 @@ def optimise_design(
 
         def cb(u):
             path.append(np.array(u))
+
+        import scipy.optimize  # loaded with the search, not with the parsers above
 
         res = scipy.optimize.minimize(fun, u0, jac=jac, method="SLSQP", bounds=[(0, 1)] * d,
                                       constraints=cons, callback=cb,

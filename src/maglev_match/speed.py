@@ -80,6 +80,7 @@ from maglev_match.models.moving import MovingModel
 from maglev_match.params import ParameterError, Params
 from maglev_match.reprs import compact_repr
 from maglev_match.ride import sperling_of_periodic
+from maglev_match.speed_grid import KMH, SPEED_MAX, speeds_kmh
 
 __all__ = [
     "KMH",
@@ -107,9 +108,7 @@ __all__ = [
     "w0_of",
 ]
 
-KMH = 1.0 / 3.6  # m/s per km/h
 CHUNK = SAVE_SLOTS  # saved times per integrator call: one compiled kernel for every run
-SPEED_MAX = 250.0  # m/s (900 km/h): beyond any maglev line; keeps passages resolvable
 
 
 class CriticalStatus(StrEnum):
@@ -222,29 +221,6 @@ def check_speed_setup(params: Params, model: str, speeds: Sequence[float] = (),
                                  f"({SPEED_MAX / KMH:g} km/h)")
     return kind
 
-
-MAX_SPEEDS = 2000  # points of one sweep
-
-
-def speeds_kmh(start: float, stop: float, step: float) -> np.ndarray:
-    """The speeds (km/h) from ``start`` to ``stop`` by ``step`` (``stop`` included when the
-    steps reach it), checked: finite, 0 <= start <= stop <= 900 km/h, step > 0, at most
-    2000 speeds."""
-    for name, v in (("--from", start), ("--to", stop), ("--step", step)):
-        if not math.isfinite(v):
-            raise ParameterError(name, v, "must be a finite number (km/h)")
-    if start < 0:
-        raise ParameterError("--from", start, "must be >= 0 km/h")
-    if stop > SPEED_MAX / KMH:
-        raise ParameterError("--to", stop, f"must be at most {SPEED_MAX / KMH:g} km/h")
-    if stop < start:
-        raise ParameterError("--to", stop, f"must be >= --from ({start:g} km/h)")
-    if not step > 0:
-        raise ParameterError("--step", step, "must be > 0 km/h")
-    count = int(math.floor((stop - start) / step + 1e-9)) + 1
-    if count > MAX_SPEEDS:
-        raise ParameterError("--step", step, f"gives {count} speeds; at most {MAX_SPEEDS}")
-    return start + step * np.arange(count)
 
 
 def w0_of(params: Params, kind: MovingModel) -> float:

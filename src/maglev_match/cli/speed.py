@@ -34,6 +34,7 @@ from maglev_match.cli.common import (
     workers_option,
 )
 from maglev_match.params import ParameterError
+from maglev_match.speed_grid import speeds_kmh
 
 SPEED_MODELS = ("unit", "vehicle", "force")
 KMH_MAX = 900.0  # km/h
@@ -141,15 +142,14 @@ def speed_command(
     _check_model(model)
     check_output_path(out)
     params = params_from_options(preset, config, set_)
-    from maglev_match.speed import (  # the numerics (and JAX) once the parameters are good
+    kmh = speeds_kmh(from_, to, step)
+    from maglev_match.speed import (  # the numerics (and JAX) once the options are good
         KMH,
         SpeedOptions,
         check_speed_setup,
         speed_sweep,
-        speeds_kmh,
     )
 
-    kmh = speeds_kmh(from_, to, step)
     opts = SpeedOptions(critical=critical, spans=spans)
     check_speed_setup(params, model, list(kmh * KMH), spans)
     folder, stem = output_target(out, "speed", f"speed_{model}")
