@@ -369,15 +369,38 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
         "current_reverses": reverses, "resolved": resolved, "reason": reason,
         "hopf_x": hopf_x,
     }
+    # A delayed row's zero-delay points take the point-wise index (the row passed them at the
+    # floor delay).
+    zero_delay = [j for j, p in enumerate(pts) if p.tau == 0] if hasattr(system, "dde") else []
+    _pointwise_points(out, pts, zero_delay)
     # A stable stretch with no Hopf point at either end on the path: the row has no cycle to
     # continue to its points, so "no cycle within limits" would be a claim without evidence
-    # (a cycle born at a Hopf point off the row can still reach them). Those points, and a
-    # delayed row's zero-delay points, take the point-wise paper index, as `index` computes
-    # it (its own Hopf search along omega1 and sigma).
-    orphans = np.flatnonzero(stable & ~covered & resolved)
-    zero_delay = [j for j, p in enumerate(pts) if p.tau == 0] if hasattr(system, "dde") else []
-    _pointwise_points(out, pts, sorted(set(orphans.tolist()) | set(zero_delay)))
+    # (a cycle born at a Hopf point off the row can still reach them). Both ends of such a
+    # stretch are computed by the point-wise paper index, as `index` computes it (its own
+    # Hopf search along omega1 and sigma); when both confirm no cycle within the limits, the
+    # interior keeps that reading (a cycle's amplitude grows away from its Hopf point), else
+    # every point of the stretch takes the point-wise index.
+    orphan = stable & ~covered & resolved
+    orphan[zero_delay] = False
+    for run in _runs_of(orphan):
+        ends = sorted({run[0], run[-1]})
+        _pointwise_points(out, pts, ends)
+        confirmed = all(out["stable"][j] and out["resolved"][j] and out["case"][j]
+                        == CASE_CODES["no_cycle_within_limits"] for j in ends)
+        if not confirmed:
+            _pointwise_points(out, pts, [j for j in run if j not in ends])
     return out
+
+
+def _runs_of(mask: np.ndarray) -> list[list[int]]:
+    """The runs of consecutive True entries of ``mask``, as lists of indices."""
+    runs: list[list[int]] = []
+    for j in np.flatnonzero(mask):
+        if runs and runs[-1][-1] == j - 1:
+            runs[-1].append(int(j))
+        else:
+            runs.append([int(j)])
+    return runs
 
 
 def _row_system(points: list[Params]):
