@@ -382,25 +382,14 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     # every point of the stretch takes the point-wise index.
     orphan = stable & ~covered & resolved
     orphan[zero_delay] = False
-    for run in _runs_of(orphan):
-        ends = sorted({run[0], run[-1]})
+    for s, e in _stretches(orphan):
+        ends = sorted({int(s), int(e)})
         _pointwise_points(out, pts, ends)
         confirmed = all(out["stable"][j] and out["resolved"][j] and out["case"][j]
                         == CASE_CODES["no_cycle_within_limits"] for j in ends)
         if not confirmed:
-            _pointwise_points(out, pts, [j for j in run if j not in ends])
+            _pointwise_points(out, pts, range(s + 1, e))
     return out
-
-
-def _runs_of(mask: np.ndarray) -> list[list[int]]:
-    """The runs of consecutive True entries of ``mask``, as lists of indices."""
-    runs: list[list[int]] = []
-    for j in np.flatnonzero(mask):
-        if runs and runs[-1][-1] == j - 1:
-            runs[-1].append(int(j))
-        else:
-            runs.append([int(j)])
-    return runs
 
 
 def _row_system(points: list[Params]):
@@ -581,7 +570,7 @@ def _extension(spec: MapSpec, xs: np.ndarray, yv: float
         side: list[tuple[float, Params]] = []
         for k in range(1, xs.size):
             xv = end + sign * k * dx
-            if spec.x.name == "tau" and xv > tau_bound:
+            if xv > tau_bound:
                 break
             try:
                 side.append((xv, spec.point(xv, yv)))
@@ -905,6 +894,7 @@ def _simulate_row_pointwise(pts: list, stable: np.ndarray) -> dict[str, np.ndarr
     search on the delay system (:func:`maglev_match.simulation.critical_disturbance`, the
     index's own search and rule), since the batched search of
     :func:`critical_sizes_batch` integrates model A's ODE."""
+    from maglev_match.matching import _supported_size
     from maglev_match.simulation import critical_disturbance
 
     settings = simulation_settings()
@@ -916,12 +906,8 @@ def _simulate_row_pointwise(pts: list, stable: np.ndarray) -> dict[str, np.ndarr
             continue
         for d in DIRECTIONS:
             cd = critical_disturbance(p, direction=d, tol=settings.tol)
-            if cd.status == "bracketed":
-                size[d][j] = float(cd.critical)
-            elif cd.status == "all_return":
-                size[d][j] = float(cd.gap_range)
-            elif cd.status == "all_collide":
-                size[d][j] = 0.0
+            if cd.status in ("bracketed", "all_return", "all_collide"):
+                size[d][j] = _supported_size(cd)  # the index's rule
             elif reason[j] == 0:  # open: runs left undecided; no number
                 reason[j] = REASON_SIM_UNDECIDED
     return {"h_up": size[-1], "h_down": size[1], "reason": reason}
