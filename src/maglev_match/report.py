@@ -524,13 +524,9 @@ def cycle_diagram_figure(d: CycleDiagram, design: float | None = None, title: st
     return fig
 
 
-CYCLE_TABLE_HEADER = ("Hopf {p}", "omega (rad/s)", "l1", "kind", "d Re/d param",
-                      "limit contact at {p}", "other cycle bifurcations", "branch stopped")
-
-
-def cycle_diagram_rows(d: CycleDiagram) -> list[tuple[Any, ...]]:
+def cycle_diagram_table(d: CycleDiagram) -> str:
     """One row per Hopf point of a diagram: the point, its branch's first contact with a
-    limit, its other cycle bifurcations and how the branch ended."""
+    limit, its other cycle bifurcations and how the branch ended (an HTML table)."""
     rows = []
     for hp, br in d.branches:
         contact = next((sp for sp in br.special_points if sp.type == "contact"), None)
@@ -539,13 +535,9 @@ def cycle_diagram_rows(d: CycleDiagram) -> list[tuple[Any, ...]]:
         rows.append((hp.value, hp.frequency, hp.l1, hp.kind, hp.crossing_speed,
                      contact.value if contact else None,
                      "; ".join(others) or "-", br.stopped_reason))
-    return rows
-
-
-def cycle_diagram_table(d: CycleDiagram) -> str:
-    """The rows of :func:`cycle_diagram_rows` as an HTML table."""
-    return table_html([h.format(p=d.param) for h in CYCLE_TABLE_HEADER],
-                      cycle_diagram_rows(d), "hopf")
+    return table_html([f"Hopf {d.param}", "omega (rad/s)", "l1", "kind", "d Re/d param",
+                       f"limit contact at {d.param}", "other cycle bifurcations",
+                       "branch stopped"], rows, "hopf")
 
 
 def section_bifurcation_diagrams(params: Params, ctx: ReportContext
@@ -564,8 +556,7 @@ def section_bifurcation_diagrams(params: Params, ctx: ReportContext
             cycle_diagram_figure(d, design), ctx, f"cycles_{param}",
             f"Model A: equilibrium and limit cycles along {param}; solid stable, dashed "
             "unstable, * Hopf point, o first contact of the cycle with a gap limit (dotted).")
-        diagrams.append({"figure": figure, "param": param,
-                         "rows": _formatted(cycle_diagram_rows(d))})
+        diagrams.append({"figure": figure, "table": cycle_diagram_table(d)})
         files += fl
         data[param] = {"hopf": [(hp.value, hp.l1, hp.kind) for hp, _ in d.branches],
                        "limit_contacts": d.limit_contacts()}
@@ -958,16 +949,11 @@ def hopf_curve_figure(curves: Sequence[Any], marks: Sequence[tuple[str, float, f
     return fig
 
 
-def hopf_curve_rows(curves: Sequence[Any]) -> list[tuple[Any, ...]]:
-    """One row per codimension-two point of the Hopf curves: branch, type, where, the
-    frequency, l2 and a note."""
-    return [(k + 1, sp.type, sp.values[0], sp.values[1], sp.frequency, sp.l2, sp.note)
-            for k, c in enumerate(curves) for sp in c.special_points]
-
-
 def hopf_curve_table(curves: Sequence[Any]) -> str:
-    """The rows of :func:`hopf_curve_rows` as an HTML table (or a sentence when none)."""
-    rows = hopf_curve_rows(curves)
+    """One row per codimension-two point of the Hopf curves: branch, type, where, the
+    frequency, l2 and a note (an HTML table, or a sentence when there is none)."""
+    rows = [(k + 1, sp.type, sp.values[0], sp.values[1], sp.frequency, sp.l2, sp.note)
+            for k, c in enumerate(curves) for sp in c.special_points]
     if not rows:
         return "<p>No codimension-two points on the computed branches.</p>"
     return table_html(["branch", "type", "omega1 (rad/s)", "sigma (1/kg)", "omega (rad/s)",
@@ -992,7 +978,7 @@ def section_hopf_curve(params: Params, ctx: ReportContext) -> tuple[str, list[Pa
              "special_points": [(sp.type, sp.values) for sp in c.special_points]}
             for c in curves]
     frag = render("hopf_curve.html.j2", figure=figure, curves=curves,
-                  codim2_rows=_formatted(hopf_curve_rows(curves)))
+                  table=hopf_curve_table(curves))
     return frag, files, data
 
 

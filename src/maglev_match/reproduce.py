@@ -50,7 +50,6 @@ from maglev_match.report import (
     cycle_diagram,
     cycle_diagram_figure,
     cycle_diagram_table,
-    fmt,
     hopf_curve_figure,
     hopf_curve_table,
     hopf_curves,
@@ -787,7 +786,8 @@ def _variants(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
                         "" if shipped is None else f" (shipped preset: {shipped:.6g})"),
                         name, f"{x5 * 1e3:g} mm", outcome_text(sim)))
     frag = render("reproduce_variants.html.j2", target=VARIANT_TARGET, full=full, table=table,
-                  sim_rows=[tuple(fmt(c) for c in r) for r in sim_rows])
+                  sim_table=table_html(["variant", "point", "x5(0)", "outcome"], sim_rows)
+                  if sim_rows else "")
     return frag, written, [asdict(v) for v in results]
 
 
