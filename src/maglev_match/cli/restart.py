@@ -12,6 +12,7 @@ is :mod:`maglev_match.restart`.
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -127,9 +128,7 @@ def _fail_if_nothing_continued(br, rs) -> None:
 
 def _kind(l1: float | None) -> str:
     """Criticality of the saved Hopf point (as `hopf` and `cycles` print it)."""
-    import numpy as np
-
-    if l1 is None or not np.isfinite(l1):
+    if l1 is None or not math.isfinite(l1):
         return "unknown"
     return "subcritical" if l1 > 0 else "supercritical" if l1 < 0 else "degenerate"
 

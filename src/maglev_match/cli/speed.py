@@ -34,10 +34,10 @@ from maglev_match.cli.common import (
     workers_option,
 )
 from maglev_match.params import ParameterError
-from maglev_match.speed_grid import speeds_kmh
+from maglev_match.speed_grid import KMH, SPEED_MAX, speeds_kmh
 
 SPEED_MODELS = ("unit", "vehicle", "force")
-KMH_MAX = 900.0  # km/h
+KMH_MAX = SPEED_MAX / KMH  # km/h (900): the sweep's bound, for one run at speed too
 
 SpeedModelOpt = Annotated[str, typer.Option(
     "--model", help="'unit' (model A's unit, the vehicle's k units spread over its length), "
@@ -76,7 +76,6 @@ def _table(sweep) -> Table:
 
 def _summary_lines(sweep) -> list[str]:
     from maglev_match.ride import sperling_reading
-    from maglev_match.speed import KMH
 
     out = []
     daf, v_daf = sweep.largest("daf")
@@ -144,7 +143,6 @@ def speed_command(
     params = params_from_options(preset, config, set_)
     kmh = speeds_kmh(from_, to, step)
     from maglev_match.speed import (  # the numerics (and JAX) once the options are good
-        KMH,
         SpeedOptions,
         check_speed_setup,
         speed_sweep,
@@ -207,7 +205,7 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
                       out: Path | None, plot: Path | None, json_out: bool) -> None:
     """`simulate --speed V --spans N`: the run over N spans from rigid ground and off again,
     with the periodic response overlaid (called by the simulate command)."""
-    from maglev_match.speed import KMH, SpeedOptions, check_speed_setup
+    from maglev_match.speed import SpeedOptions, check_speed_setup
     from maglev_match.speed_spans import simulate_over_spans
 
     _check_model(model)

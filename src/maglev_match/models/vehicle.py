@@ -129,9 +129,7 @@ def loop_rates(q, K, i0, r, c, cd, ud, i, y1, v, limited: bool, command=None):
     by model B at standstill and at speed."""
     gap_err = c - q["c0"] - y1
     u = q["kP"] * y1 + q["kD"] * (v + ud) if command is None else command
-    di = r * cd + q["ke"] * c / K * (
-        u - i + i0
-    )
+    di = r * cd + q["ke"] * c / K * (u - i + i0)
     if limited:
         di = hold_current_rate(i, di)
     dy1 = v + ud + 2.0 * q["xi0"] * q["omega0"] * gap_err
