@@ -13,9 +13,6 @@ import io
 import math
 import os
 import re
-import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -315,43 +312,6 @@ def test_unexpected_exception_is_one_line_exit_1(monkeypatch):
     assert "Traceback" not in err
     with pytest.raises(ZeroDivisionError):
         run(["stability", "--debug"])
-
-
-def _wait_for(path: Path, proc, limit=240.0):
-    deadline = time.time() + limit
-    while not path.exists():
-        assert proc.poll() is None, proc.communicate()[1][-2000:]
-        assert time.time() < deadline, "map did not start"
-        time.sleep(0.1)
-
-
-@pytest.mark.parametrize("workers", ["0", "1"])
-def test_ctrl_c_stops_map_with_130_and_resume_hint(tmp_path, workers):
-    """SIGINT to the process group (as a terminal's Ctrl-C): exit 130 soon, a line saying
-    how to resume, and no KeyboardInterrupt traceback from the process or its workers."""
-    out = tmp_path / "m.nc"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "maglev_match.cli", "map", "--x", "omega1=100:140:6",
-         "--y", "sigma=3e-4:5e-4:200", "--rows-per-tile", "1", "--workers", workers,
-         "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-        start_new_session=True)
-    try:
-        _wait_for(tmp_path / "m.nc.tiles" / "spec.json", proc)
-        time.sleep(3.0)
-        t = time.time()
-        os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=90)
-        elapsed = time.time() - t
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    assert proc.returncode == 130, err[-2000:]
-    assert "--resume" in err and "Traceback" not in err and "KeyboardInterrupt" not in err
-    assert elapsed < 60
-    assert not out.exists()
 
 
 def test_disk_full_is_one_line_exit_1(monkeypatch):

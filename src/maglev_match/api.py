@@ -932,17 +932,13 @@ def _compute_tiles(spec, compute_tile, workers, scheduler, progress) -> dict:
             if progress:
                 progress(len(out), total)
         return out
-    import os
+    from dask.distributed import Client, as_completed
 
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    from maglev_match.maps import SINGLE_THREADED_ENV
+    from maglev_match.maps import local_cluster
 
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                               processes=True, dashboard_address=None,
-                               env=SINGLE_THREADED_ENV)
+        cluster = local_cluster(workers)
         client = Client(cluster)
     else:
         client = Client(scheduler)

@@ -40,7 +40,6 @@ import json
 import logging
 import math
 import os
-import signal
 import warnings as warnings_mod
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -50,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from maglev_match import checkpoint as checkpoint_mod
+from maglev_match.interrupts import on_interrupt
 from maglev_match.options import CollocationMesh
 from maglev_match.params import FIELD_NAMES, ParameterError, Params, make_params
 
@@ -1018,84 +1018,181 @@ def run_map(
         done = len(spec.tiles) - len(missing)
         todo = missing if max_tiles is None else missing[:max_tiles]
         total = len(spec.tiles)
+        count = TileCount(done, total, checkpoint)
         if progress:
             progress(done, total)
         if todo:
-            if workers == 0 and scheduler is None:
-                try:
+            with count.stoppable():
+                if workers == 0 and scheduler is None:
                     for t in todo:
                         _save_tile(checkpoint, t, compute_tile(spec, t), spec)
-                        done += 1
+                        count.done += 1
                         if progress:
-                            progress(done, total)
-                except KeyboardInterrupt:
-                    raise checkpoint_mod.MapStopped(
-                        _stopped_text("interrupted", done, total, checkpoint), 130) from None
-            else:
-                with dask_log_capture(log, echo=echo_dask):
-                    _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done,
-                                 total)
+                            progress(count.done, total)
+                else:
+                    with dask_log_capture(log, echo=echo_dask):
+                        _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress,
+                                     count)
         return assemble(spec, checkpoint)
 
 
-def _stopped_text(what: str, done: int, total: int, checkpoint: Path) -> str:
-    return (f"{what}: {done} of {total} tiles are saved in {checkpoint}; run the same command "
-            "with --resume to continue")
+def _stopped_text(what: str, done: int, total: int, checkpoint: Path,
+                  noun: str = "tiles") -> str:
+    return (f"{what}: {done} of {total} {noun} are saved in {checkpoint}; run the same "
+            "command with --resume to continue")
+
+
+@dataclass
+class TileCount:
+    """The finished pieces of a tiled job that keeps them in ``folder``: what an interrupt
+    or a lost scheduler says (the count at that moment and how to resume)."""
+
+    done: int
+    total: int
+    folder: Path
+    noun: str = "tiles"
+
+    def text(self, what: str = "interrupted") -> str:
+        return _stopped_text(what, self.done, self.total, self.folder, self.noun)
+
+    @contextlib.contextmanager
+    def stoppable(self) -> Iterator[None]:
+        """The job's ``with`` block: its stop note is this count (for the command line's
+        interrupt guard), and a Ctrl-C anywhere inside (an import, the start of a cluster,
+        a piece) becomes :class:`~maglev_match.checkpoint.MapStopped` with exit code 130
+        and the resume hint."""
+        with on_interrupt(self.text):
+            try:
+                yield
+            except KeyboardInterrupt:
+                raise checkpoint_mod.MapStopped(self.text(), 130) from None
+
+
+def _python_ignoring_sigint() -> str | None:
+    """The path of a tiny launcher that starts this Python with SIGINT ignored (a POSIX shell
+    script: ``trap '' INT`` then ``exec python "$@"``), kept in a per-user temporary folder;
+    None where there is no POSIX shell or the file cannot be written."""
+    import hashlib
+    import shlex
+    import sys
+    import tempfile
+
+    if os.name != "posix" or not os.path.exists("/bin/sh"):
+        return None
+    text = f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(sys.executable)} \"$@\"\n"
+    tag = hashlib.sha256(text.encode()).hexdigest()[:16]
+    folder = Path(tempfile.gettempdir()) / f"maglev-match-{os.getuid()}"
+    exe = folder / f"python-{tag}"
+    try:
+        if exe.is_file() and exe.read_text() == text and os.access(exe, os.X_OK):
+            return str(exe)
+        folder.mkdir(mode=0o700, exist_ok=True)
+        if folder.stat().st_uid != os.getuid():
+            return None  # someone else's folder: do not run what it holds
+        tmp = folder / f".{exe.name}.{os.getpid()}.tmp"
+        tmp.write_text(text)
+        tmp.chmod(0o755)
+        os.replace(tmp, exe)
+        return str(exe)
+    except OSError:
+        return None
 
 
 @contextlib.contextmanager
-def _sigint_ignored() -> Iterator[None]:
-    """Ignore SIGINT while worker processes are started, so that they inherit the ignored
-    disposition: Ctrl-C in a terminal reaches the whole process group, and only this
-    (the client) process should react; the workers are shut down by the client."""
-    try:
-        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:  # not the main thread: signals cannot be changed here
+def workers_ignore_sigint() -> Iterator[None]:
+    """Start the worker processes created in the ``with`` block with SIGINT ignored.
+
+    Ctrl-C in a terminal reaches the whole process group; only this (the client) process
+    should react, and the workers are shut down by it. The workers are spawned (a fresh
+    Python) by Dask's nannies, from a thread of their own, at a moment the client does not
+    choose; so instead of ignoring SIGINT in this process while they start (a Ctrl-C in
+    that window was lost, and a map went on computing), the spawned Python itself starts
+    through a launcher that ignores SIGINT (:func:`multiprocessing.set_executable`). Where
+    there is no launcher (no POSIX shell) SIGINT is ignored here during the start, as before.
+    """
+    import multiprocessing
+    import multiprocessing.spawn
+    import signal
+
+    exe = _python_ignoring_sigint()
+    if exe is not None:
+        old = multiprocessing.spawn.get_executable()
+        multiprocessing.set_executable(exe)
+        try:
+            yield
+        finally:
+            multiprocessing.set_executable(old)
+        return
+    try:  # pragma: no cover - not POSIX
+        old_handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # pragma: no cover - not the main thread
         yield
         return
-    try:
+    try:  # pragma: no cover
         yield
-    finally:
-        signal.signal(signal.SIGINT, old)
+    finally:  # pragma: no cover
+        signal.signal(signal.SIGINT, old_handler)
 
 
-def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, total,
+def local_cluster(workers: int | None) -> Any:
+    """A local Dask cluster for the package's tiled jobs: ``workers`` single-threaded worker
+    processes (None or 0: one per core), no dashboard, one-thread BLAS and XLA in the
+    workers (:data:`SINGLE_THREADED_ENV`), glibc's own malloc thresholds, and workers that
+    ignore Ctrl-C (:func:`workers_ignore_sigint`): the client stops them."""
+    import dask
+    from dask.distributed import LocalCluster
+
+    # Dask's nannies set MALLOC_TRIM_THRESHOLD_=65536 so that workers hand memory back
+    # to the OS; for this workload that turns every large temporary array into an
+    # mmap/munmap pair (measured: ~1200 per second, a third of the worker's CPU time in
+    # the kernel). The tiles are small, so keep glibc's default behaviour.
+    with dask.config.set({
+        "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": MALLOC_TRIM_THRESHOLD,
+        "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": MALLOC_MMAP_THRESHOLD,
+    }), workers_ignore_sigint():
+        return LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                            processes=True, dashboard_address=None, env=SINGLE_THREADED_ENV)
+
+
+def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, count: TileCount,
                  compute: Callable | None = None) -> None:
-    """Compute the tiles ``todo`` on Dask and save each into ``checkpoint`` as it finishes.
+    """Compute the tiles ``todo`` on Dask and save each into ``checkpoint`` as it finishes,
+    counting them in ``count`` (call inside its :meth:`TileCount.stoppable` block).
     ``compute(spec, rows)`` makes a tile (default :func:`compute_tile`); other tiled jobs
     (the speed sweeps of :mod:`maglev_match.speed`) pass their own, with a ``spec`` that
     has ``key()``."""
-    from dask.distributed import Client, LocalCluster, as_completed
-
     compute = compute or compute_tile
+    run_pieces_on_dask({t: (compute, (spec, t)) for t in todo},
+                       lambda t, data: _save_tile(checkpoint, t, data, spec),
+                       scheduler, workers, progress, count)
 
-    cluster = None
-    if scheduler is None:
-        n = workers or os.cpu_count() or 1
-        import dask
 
-        # Dask's nannies set MALLOC_TRIM_THRESHOLD_=65536 so that workers hand memory back
-        # to the OS; for this workload that turns every large temporary array into an
-        # mmap/munmap pair (measured: ~1200 per second, a third of the worker's CPU time in
-        # the kernel). The tiles are small, so keep glibc's default behaviour.
-        with dask.config.set({
-            "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": MALLOC_TRIM_THRESHOLD,
-            "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": MALLOC_MMAP_THRESHOLD,
-        }), _sigint_ignored():
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, env=SINGLE_THREADED_ENV)
-        client = Client(cluster)
-    else:
-        try:
-            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
-        except (OSError, TimeoutError, ValueError, TypeError) as exc:
-            raise ParameterError("--scheduler", scheduler,
-                                 f"no Dask scheduler answered there ({exc})") from None
+def run_pieces_on_dask(tasks: dict, save: Callable[[Any, Any], None], scheduler: str | None,
+                       workers: int | None, progress: Callable[[int, int], None] | None,
+                       count: TileCount) -> None:
+    """Run ``tasks`` ({key: (function, args)}) on Dask (a local cluster of ``workers``
+    processes, :func:`local_cluster`, or an existing ``scheduler``) and ``save(key,
+    result)`` each as it finishes, counting them in ``count`` (call inside its
+    :meth:`TileCount.stoppable` block: an interrupt is re-raised here once the workers are
+    quietened; a lost scheduler raises :class:`~maglev_match.checkpoint.MapStopped`)."""
+    from dask.distributed import Client, as_completed
+
+    cluster = client = None
     futures: dict = {}
     try:
-        futures = {client.submit(compute, spec, t, pure=False, retries=2): t for t in todo}
+        if scheduler is None:
+            cluster = local_cluster(workers)
+            client = Client(cluster)
+        else:
+            try:
+                client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
+            except (OSError, TimeoutError, ValueError, TypeError) as exc:
+                raise ParameterError("--scheduler", scheduler,
+                                     f"no Dask scheduler answered there ({exc})") from None
+        futures = {client.submit(fn, *args, pure=False, retries=2): key
+                   for key, (fn, args) in tasks.items()}
         for fut in as_completed(futures):
-            t = futures[fut]
+            key = futures[fut]
             try:
                 data = fut.result()
             except KeyboardInterrupt:
@@ -1103,33 +1200,31 @@ def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, done, tot
             except Exception as exc:
                 if _is_lost_connection(exc):
                     _quiet_logging()  # the client's reconnect attempts end in tracebacks
-                    raise checkpoint_mod.MapStopped(_stopped_text(
-                        f"lost the Dask scheduler ({type(exc).__name__})", done, total,
-                        checkpoint)) from None
+                    raise checkpoint_mod.MapStopped(count.text(
+                        f"lost the Dask scheduler ({type(exc).__name__})")) from None
                 raise
-            _save_tile(checkpoint, t, data, spec)
-            done += 1
+            save(key, data)
+            count.done += 1
             if progress:
-                progress(done, total)
+                progress(count.done, count.total)
     except KeyboardInterrupt:
         # stop quietly: the shutdown of interrupted workers is expected, not news
         _quiet_logging()
-        if cluster is not None:  # the local workers too (they log to our stderr)
+        if cluster is not None and client is not None:  # the local workers (our stderr)
             with contextlib.suppress(Exception):
                 client.run(_quiet_logging)
-        if cluster is None:  # an existing scheduler: drop our tasks there
+        if cluster is None and client is not None:  # an existing scheduler: drop our tasks
             with contextlib.suppress(Exception):
                 client.cancel(list(futures))
-        raise checkpoint_mod.MapStopped(
-            _stopped_text("interrupted", done, total, checkpoint), 130) from None
+        raise
     except (OSError, TimeoutError) as exc:
         _quiet_logging()
-        raise checkpoint_mod.MapStopped(_stopped_text(
-            f"lost the Dask scheduler ({type(exc).__name__}: {exc})", done, total,
-            checkpoint)) from None
+        raise checkpoint_mod.MapStopped(count.text(
+            f"lost the Dask scheduler ({type(exc).__name__}: {exc})")) from None
     finally:
-        with contextlib.suppress(Exception):
-            client.close(timeout=10)
+        if client is not None:
+            with contextlib.suppress(Exception):
+                client.close(timeout=10)
         if cluster is not None:
             with contextlib.suppress(Exception):
                 cluster.close(timeout=10)

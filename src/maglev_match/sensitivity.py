@@ -1239,8 +1239,8 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
     recomputed. ``workers == 0`` computes in this process; ``model`` 'unit' or 'vehicle'.
     """
     import contextlib
-    import os
 
+    from maglev_match.maps import TileCount, dask_log_capture, run_pieces_on_dask
     from maglev_match.options import MonteCarloOptions
     from maglev_match.params import ParameterError
 
@@ -1257,51 +1257,24 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
         except ValueError as exc:
             raise ParameterError("--resume", str(ck.folder), str(exc)) from None
         todo = ck.todo(pieces)
-        done = len(pieces) - len(todo)
+        count = TileCount(len(pieces) - len(todo), len(pieces), ck.folder,
+                          noun="Monte Carlo chunks")
         if progress:
-            progress(done, len(pieces))
-        if todo and workers == 0 and scheduler is None:
-            for a, b in todo:
-                ck.save((a, b), {"chi": mc_chunk(base_values, names, X[a:b], model)})
-                done += 1
-                if progress:
-                    progress(done, len(pieces))
-        elif todo:
-            import dask
-            from dask.distributed import Client, LocalCluster, as_completed
-
-            from maglev_match.maps import (
-                MALLOC_MMAP_THRESHOLD,
-                MALLOC_TRIM_THRESHOLD,
-                SINGLE_THREADED_ENV,
-            )
-
-            cluster = None
-            if scheduler is None:
-                with dask.config.set({
-                    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_":
-                        MALLOC_TRIM_THRESHOLD,
-                    "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_":
-                        MALLOC_MMAP_THRESHOLD,
-                }):
-                    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
-                                           threads_per_worker=1, processes=True,
-                                           dashboard_address=None, env=SINGLE_THREADED_ENV)
-                client = Client(cluster)
-            else:
-                client = Client(scheduler)
-            try:
-                futs = {client.submit(mc_chunk, base_values, names, X[a:b], model,
-                                      pure=False, retries=2): (a, b) for a, b in todo}
-                for fut in as_completed(futs):
-                    ck.save(futs[fut], {"chi": fut.result()})
-                    done += 1
+            progress(count.done, len(pieces))
+        with count.stoppable():
+            if todo and workers == 0 and scheduler is None:
+                for a, b in todo:
+                    ck.save((a, b), {"chi": mc_chunk(base_values, names, X[a:b], model)})
+                    count.done += 1
                     if progress:
-                        progress(done, len(pieces))
-            finally:
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+                        progress(count.done, len(pieces))
+            elif todo:
+                with dask_log_capture(ck.folder / "dask.log"):
+                    run_pieces_on_dask(
+                        {(a, b): (mc_chunk, (base_values, names, X[a:b], model))
+                         for a, b in todo},
+                        lambda piece, chi: ck.save(piece, {"chi": chi}), scheduler, workers,
+                        progress, count)
         bad = [t for t in pieces if not ck.check(t).ok]
         if bad:
             raise RuntimeError(f"{len(bad)} of {len(pieces)} Monte Carlo chunks are missing "

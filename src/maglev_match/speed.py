@@ -1182,23 +1182,20 @@ def run_tiles(spec, compute: Callable, checkpoint: Path | None, variables: tuple
             except ValueError as exc:
                 raise ParameterError("--resume", str(folder), str(exc)) from None
             todo, _ = ck.usable_tiles(folder, spec.tiles, key, variables, nx)
-            done = total - len(todo)
+            count = maps.TileCount(total - len(todo), total, folder)
             if progress:
-                progress(done, total)
+                progress(count.done, total)
             if todo:
-                if workers == 0 and scheduler is None:
-                    try:
+                with count.stoppable():
+                    if workers == 0 and scheduler is None:
                         for t in todo:
                             ck.save_tile(folder, t, compute(spec, t), key)
-                            done += 1
+                            count.done += 1
                             if progress:
-                                progress(done, total)
-                    except KeyboardInterrupt:
-                        raise ck.MapStopped(maps._stopped_text("interrupted", done, total,
-                                                               folder), 130) from None
-                else:
-                    maps._run_on_dask(spec, todo, folder, scheduler, workers, progress, done,
-                                      total, compute=compute)
+                                progress(count.done, total)
+                    else:
+                        maps._run_on_dask(spec, todo, folder, scheduler, workers, progress,
+                                          count, compute=compute)
             out = []
             for t in spec.tiles:
                 if not ck.check_tile(folder, t, key, variables, nx).ok:

@@ -321,6 +321,12 @@ def main(argv: list[str] | None = None) -> int:
     Run as a program (``argv`` None) and interrupted, the process ends at once with code 130
     after flushing its output: tearing down an interpreter whose XLA computation was
     interrupted midway can crash (SIGSEGV seen), which would hide the exit code."""
+    global _GUARDED
+    if argv is None:  # a program: Ctrl-C ends it within seconds in every phase
+        from maglev_match.cli import interrupts
+
+        interrupts.install(lambda text: print_error(text, prefix="stopped"))
+        _GUARDED = True
     code = _main(argv)
     if code == 130 and argv is None:
         with contextlib.suppress(Exception):
@@ -328,6 +334,21 @@ def main(argv: list[str] | None = None) -> int:
             sys.stderr.flush()
         os._exit(130)
     return code
+
+
+#: Whether :func:`main` runs as the program (the interrupt guard is installed).
+_GUARDED = False
+
+
+def _stopped(text: str) -> None:
+    """The one 'stopped: ...' line of an interrupted command. As a program the interrupt
+    guard prints it and ends the process (exit 130), so that its watchdog, racing to end
+    a process that does not stop, never prints a second line."""
+    if _GUARDED:
+        from maglev_match.cli import interrupts
+
+        interrupts.finish(text)
+    print_error(text, prefix="stopped")
 
 
 def _main(argv: list[str] | None) -> int:
@@ -352,12 +373,17 @@ def _main(argv: list[str] | None) -> int:
         print_error(f"{exc}{DISK_FULL_HINT}")
         return 1
     except MapStopped as exc:
-        print_error(str(exc), prefix="stopped" if exc.exit_code == 130 else "error")
+        if exc.exit_code == 130:
+            _stopped(str(exc))
+        else:
+            print_error(str(exc))
         return exc.exit_code
     except typer.Exit as exc:
         return int(exc.exit_code or 0)
     except (typer.Abort, KeyboardInterrupt):
-        print_error("interrupted", prefix="stopped")
+        from maglev_match.interrupts import stop_note
+
+        _stopped(stop_note())
         return 130
     except CLICK_EXCEPTIONS as exc:
         text, code = _usage_message(exc)
@@ -374,7 +400,10 @@ def _main(argv: list[str] | None) -> int:
             print_error(str(exc))
             return 2
         if cp is not None and isinstance(exc, cp.MapStopped):
-            print_error(str(exc), prefix="stopped" if exc.exit_code == 130 else "error")
+            if exc.exit_code == 130:
+                _stopped(str(exc))
+            else:
+                print_error(str(exc))
             return exc.exit_code
         if debug:
             raise
@@ -416,7 +445,7 @@ def _main(argv: list[str] | None) -> int:
             print_warnings([note])
     if isinstance(rv, int) and not isinstance(rv, bool):
         if rv == 130:
-            print_error("interrupted", prefix="stopped")
+            _stopped("interrupted")
         return rv
     return 0
 
