@@ -35,12 +35,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/_interleave.py
 
+from maglev_match.core.params import load_preset  # noqa: E402
 from maglev_match.dynamics.cycles import cycle_branch  # noqa: E402
 from maglev_match.dynamics.hopf import locate_hopf_points  # noqa: E402
 from maglev_match.dynamics.shooting import shoot_periodic_orbit, trajectory_extrema  # noqa: E402
-from maglev_match.limits_check import cycle_limit_margins  # noqa: E402
-from maglev_match.models import build_system  # noqa: E402
-from maglev_match.params import load_preset  # noqa: E402
+from maglev_match.maglev import build_system  # noqa: E402
+from maglev_match.maglev.limits_check import cycle_limit_margins  # noqa: E402
 
 
 def branch_job() -> None:
@@ -206,9 +206,9 @@ def main() -> None:
     # chi at one point, warm (continuation), against the same route with the multipliers at
     # every point and the whole-system LU (the earlier path), and against the simulated
     # critical disturbance at the same point
+    from maglev_match.analyses.matching import matching_index
+    from maglev_match.analyses.simulation import critical_disturbance
     from maglev_match.dynamics import basin
-    from maglev_match.matching import matching_index
-    from maglev_match.simulation import critical_disturbance
     p_alpha = load_preset("alpha1")
     current_cb = basin.cycle_branch
 

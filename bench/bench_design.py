@@ -24,7 +24,7 @@ import platform
 import statistics
 import time
 
-from maglev_match.design import (
+from maglev_match.analyses.design import (
     DesignProblem,
     Goal,
     MaglevEvaluator,
@@ -33,9 +33,9 @@ from maglev_match.design import (
     Variable,
     optimise_design,
 )
-from maglev_match.matching import matching_index
-from maglev_match.params import load_preset
-from maglev_match.sensitivity import index_sensitivity
+from maglev_match.analyses.matching import matching_index
+from maglev_match.analyses.sensitivity import index_sensitivity
+from maglev_match.core.params import load_preset
 
 
 def timed(fn, repeat: int) -> tuple[float, float, object]:

@@ -38,7 +38,7 @@ def _cpu(fn) -> float:
 
 
 def bench_netcdf(repeat: int, folder: Path) -> None:
-    from maglev_match.io import atomic_write, atomic_write_netcdf
+    from maglev_match.core.io import atomic_write, atomic_write_netcdf
 
     for n in (20, 100, 300):
         ds = _map_dataset(n)
@@ -65,7 +65,7 @@ def rhs(x, p):
 
 
 def bench_model_load(repeat: int, folder: Path) -> None:
-    import maglev_match.models.user as U
+    import maglev_match.maglev.user as U
 
     full, check = [], []
     for k in range(repeat):

@@ -21,14 +21,14 @@ import time
 
 import numpy as np
 
+from maglev_match.core.params import load_preset
 from maglev_match.dynamics.hopf import (
     first_lyapunov_coefficient,
     hopf_eigenvectors,
     locate_hopf_points,
 )
 from maglev_match.dynamics.hopf_curve import hopf_curve, stability_grid
-from maglev_match.models import build_system
-from maglev_match.params import load_preset
+from maglev_match.maglev import build_system
 
 CPU: dict[str, float] = {}
 

@@ -30,10 +30,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from maglev_match.maps import Axis, MapSpec, compute_row, run_map
-from maglev_match.matching import matching_index
-from maglev_match.params import load_preset
-from maglev_match.simulation import critical_disturbance
+from maglev_match.analyses.maps import Axis, MapSpec, compute_row, run_map
+from maglev_match.analyses.matching import matching_index
+from maglev_match.analyses.simulation import critical_disturbance
+from maglev_match.core.params import load_preset
 
 
 def timed(fn, repeat: int) -> tuple[float, object]:
@@ -104,7 +104,7 @@ def headline_against_paper(base, n: int, workers_list, rows_per_tile: int) -> No
     the simulations."""
     import dataclasses
 
-    import maglev_match.maps as maps
+    import maglev_match.analyses.maps as maps
 
     paper = MapSpec(base=base.as_input_dict(), x=Axis("omega1", 40, 190, n),
                     y=Axis("sigma", 2e-4, 6e-4, n), rows_per_tile=rows_per_tile,
@@ -185,7 +185,7 @@ def sensitivity_timing(repeat: int) -> None:
     interleaved, at the two turnout beams; CPU seconds of this process (medians)."""
     import os
 
-    from maglev_match.sensitivity import index_sensitivity
+    from maglev_match.analyses.sensitivity import index_sensitivity
 
     print(f"load average at the start: {os.getloadavg()[0]:.2f}")
     for name in ("turnout-soft", "turnout-stiff"):

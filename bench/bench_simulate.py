@@ -30,14 +30,14 @@ import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 from maglev_match import load_preset  # noqa: E402
-from maglev_match.dynamics.simulate import (  # noqa: E402
+from maglev_match.analyses.simulation import gap_limit_events, initial_state  # noqa: E402
+from maglev_match.dynamics.integrate.simulate import (  # noqa: E402
     SimulationOptions,
     simulate,
     simulate_batch,
 )
-from maglev_match.models import build_system  # noqa: E402
-from maglev_match.models import vehicle as vm  # noqa: E402
-from maglev_match.simulation import gap_limit_events, initial_state  # noqa: E402
+from maglev_match.maglev import build_system  # noqa: E402
+from maglev_match.maglev import vehicle as vm  # noqa: E402
 
 RTOL, ATOL = 1e-8, 1e-8  # ATOL in units of each state's typical size (both sides)
 
@@ -160,7 +160,7 @@ def timed(fn, repeats, key=None):
 def main(quick: bool) -> None:
     rep = 3 if quick else 7
     opts = SimulationOptions(rtol=RTOL, atol=ATOL)
-    from maglev_match import jax_setup
+    from maglev_match.core import jax_setup
 
     print(f"# bench_simulate  rtol={RTOL} atol={ATOL}*state_scale  quick={quick}  "
           f"pinned to cpu {jax_setup.PINNED_CPU}  load {os.getloadavg()[0]:.2f}")
@@ -264,7 +264,7 @@ def main(quick: bool) -> None:
           f" ms ({r2.outcome}; a compilation would take seconds)")
 
     # ---------------- simulated critical disturbance (the index's h_simulation)
-    from maglev_match.simulation import critical_disturbance, vehicle_critical_disturbance
+    from maglev_match.analyses.simulation import critical_disturbance, vehicle_critical_disturbance
 
     def crit(fn, P, direction, batch, reps):
         fn(P, direction=direction, batch=batch)  # compile

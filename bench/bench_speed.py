@@ -1,4 +1,4 @@
-"""Benchmark: the vehicle at speed over identical spans (maglev_match.speed).
+"""Benchmark: the vehicle at speed over identical spans (maglev_match.analyses.speed.sweep).
 
 1. One periodic solve (Newton on the span map, multipliers at the solution) against the
    baseline of simulating span after span until the state at the hand-over settles to the
@@ -26,8 +26,7 @@ import time
 import numpy as np
 
 from maglev_match import load_preset
-from maglev_match.dynamics.passage import run_passage
-from maglev_match.speed import (
+from maglev_match.analyses.speed.sweep import (
     KMH,
     SpeedOptions,
     passage_problem,
@@ -36,6 +35,7 @@ from maglev_match.speed import (
     speed_point,
     speed_sweep,
 )
+from maglev_match.dynamics.integrate.passage import run_passage
 
 TOL = 1e-9  # scaled residual of both methods
 
@@ -48,7 +48,7 @@ def cpu_children() -> float:
 def settle_by_simulation(params, model, v, max_passages=20_000):
     """The baseline: x <- P(x) from the same quasi-static start until max |P(x) - x| / scale
     < TOL. Returns (passages, residual)."""
-    from maglev_match.models import moving as mv
+    from maglev_match.maglev import moving as mv
 
     problem = passage_problem(params, model, v)
     x = quasi_static_state(params, model, params.L)

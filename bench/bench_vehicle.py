@@ -29,11 +29,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/_interleave.py
 def _vehicle_problem():
     import numpy as np
 
+    from maglev_match.core.params import load_preset
     from maglev_match.dynamics import collocation as C
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.models import build_system
-    from maglev_match.params import load_preset
+    from maglev_match.maglev import build_system
 
     system = build_system(load_preset("turnout-soft"), "vehicle")
     scan = locate_hopf_points(system, "omega1", 60.0, 160.0, n_scan=30)
@@ -78,8 +78,8 @@ def factor_job() -> dict:
 
 
 def index_job() -> dict:
-    from maglev_match.matching import matching_index
-    from maglev_match.params import load_preset
+    from maglev_match.analyses.matching import matching_index
+    from maglev_match.core.params import load_preset
 
     p = load_preset("turnout-soft")
     matching_index(p, model="vehicle", simulate=False)  # warm

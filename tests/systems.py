@@ -447,7 +447,7 @@ def _osc_field(x, p, i_force):
 def clamped_oscillator_limited_rhs(x, p):
     """The limited vector field (force from max(i, 0), di/dt held at 0 while i <= 0 and
     falling), as the simulator integrates it."""
-    from maglev_match.models.limits import clamp_current, hold_current_rate
+    from maglev_match.maglev.limits import clamp_current, hold_current_rate
 
     di = hold_current_rate(x[2], _osc_rate(x, p))
     return jnp.concatenate([_osc_field(x, p, clamp_current(x[2])), di[None]])

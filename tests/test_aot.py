@@ -1,4 +1,4 @@
-"""Ahead-of-time kernels (maglev_match.aot): bitwise the same results as plain jax.jit,
+"""Ahead-of-time kernels (maglev_match.core.aot): bitwise the same results as plain jax.jit,
 loaded from disk without tracing, keyed so a new parameter value reuses the file, and
 robust to corrupt files; plus the light import of the command line."""
 
@@ -14,10 +14,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from maglev_match import aot, jax_setup
+from maglev_match.core import aot, jax_setup
+from maglev_match.core.params import load_preset
 from maglev_match.dynamics import collocation, hopf, normal_forms
-from maglev_match.models import unit, vehicle
-from maglev_match.params import load_preset
+from maglev_match.maglev import unit, vehicle
 
 P_A = unit.param_vector(load_preset("turnout-soft"))
 N = len(unit.STATE_NAMES)
@@ -212,9 +212,9 @@ def test_a_new_process_loads_kernels_without_tracing(tmp_path):
     script = textwrap.dedent("""
         import logging, sys
         import numpy as np
-        from maglev_match import aot
-        from maglev_match.models.unit import unit_system
-        from maglev_match.params import load_preset
+        from maglev_match.core import aot
+        from maglev_match.maglev.unit import unit_system
+        from maglev_match.core.params import load_preset
         from maglev_match.dynamics.hopf import locate_hopf_points
         import jax
         jax.config.update("jax_log_compiles", True)

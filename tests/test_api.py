@@ -15,7 +15,7 @@ import maglev_match as mm
 from maglev_match.api import resolve_params
 from maglev_match.cli import main as cli_main
 from maglev_match.dynamics.equilibria import stability as lib_stability
-from maglev_match.models import build_system
+from maglev_match.maglev import build_system
 
 PUBLIC = ("load_preset", "load_params", "Params", "System", "stability", "hopf_points",
           "hopf_curve", "cycle_branch", "simulate", "matching_index", "design_map",
@@ -45,7 +45,7 @@ def test_import_is_light_and_every_public_name_resolves():
 
 
 def test_load_model_exported():
-    from maglev_match.models.user import load_model
+    from maglev_match.maglev.user import load_model
 
     assert mm.load_model is load_model
     assert "load_model" in mm.__all__
@@ -94,7 +94,7 @@ def test_hopf_points_lie_where_the_margin_vanishes():
 
 
 def test_root_locus_dataset_has_the_margin_of_stability():
-    from maglev_match.datasets import root_locus_dataset
+    from maglev_match.core.datasets import root_locus_dataset
 
     p = mm.load_preset("alpha1")
     res = mm.root_locus(p, "omega1", [90.0, 100.0])
@@ -127,7 +127,7 @@ def test_cycle_branch_starts_at_the_hopf_frequency():
 
 
 def test_simulate_collides_for_a_large_disturbance_and_matches_the_library():
-    from maglev_match.simulation import initial_state, simulate_maglev
+    from maglev_match.analyses.simulation import initial_state, simulate_maglev
 
     p = mm.load_preset("turnout-soft")
     big = mm.simulate(p, x5=-7e-3, t_end=2.0, n_save=201)
@@ -141,7 +141,7 @@ def test_simulate_collides_for_a_large_disturbance_and_matches_the_library():
 
 
 def test_matching_index_is_h_over_w0_and_equals_library():
-    from maglev_match.matching import matching_index as lib_index
+    from maglev_match.analyses.matching import matching_index as lib_index
 
     p = mm.load_preset("alpha1")
     res = mm.matching_index(p, simulate=False)
@@ -224,12 +224,12 @@ def test_full_vehicle_index_sensitivities_and_figures_through_the_api(tmp_path,
     sensitivities equal the library's; results with a figure draw it with .plot()."""
     import matplotlib.figure
 
-    from maglev_match.matching import matching_index as lib_index
-    from maglev_match.sensitivity import index_sensitivity as lib_sens
+    from maglev_match.analyses.matching import matching_index as lib_index
+    from maglev_match.analyses.sensitivity import index_sensitivity as lib_sens
 
     p = mm.load_preset("turnout-soft")
     calls = []
-    import maglev_match.matching as matching
+    import maglev_match.analyses.matching as matching
 
     def record(params, **kw):  # the vehicle index itself is tested in test_matching_vehicle
         calls.append((params, kw))

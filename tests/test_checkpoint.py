@@ -11,7 +11,9 @@ import warnings
 import numpy as np
 import pytest
 
-from maglev_match.checkpoint import (
+from maglev_match.analyses.maps import MAP_VARIABLES, Axis, MapSpec, run_map
+from maglev_match.cli import main
+from maglev_match.core.checkpoint import (
     CheckpointLocked,
     CheckpointWarning,
     TileStatus,
@@ -23,9 +25,7 @@ from maglev_match.checkpoint import (
     tile_path,
     usable_tiles,
 )
-from maglev_match.cli import main
-from maglev_match.maps import MAP_VARIABLES, Axis, MapSpec, run_map
-from maglev_match.params import load_params
+from maglev_match.core.params import load_params
 
 BASE = load_params("turnout-soft", sets=["omega1=124", "sigma=4e-4"])
 
@@ -138,7 +138,7 @@ def test_second_map_on_same_out_refused_while_first_runs(tmp_path, capsys):
     ready = tmp_path / "ready"
     code = textwrap.dedent(f"""
         import pathlib, time
-        from maglev_match.checkpoint import lock_folder
+        from maglev_match.core.checkpoint import lock_folder
         with lock_folder(pathlib.Path({str(folder)!r})):
             pathlib.Path({str(ready)!r}).write_text("1")
             time.sleep(120)
@@ -202,7 +202,7 @@ def test_run_map_refuses_unresolving_mesh_before_work(tmp_path, changes, option)
     checkpoint folder is even created."""
     from dataclasses import replace
 
-    from maglev_match.params import ParameterError
+    from maglev_match.core.params import ParameterError
 
     spec = replace(_spec(), **changes)
     with pytest.raises(ParameterError) as err:
@@ -212,7 +212,7 @@ def test_run_map_refuses_unresolving_mesh_before_work(tmp_path, changes, option)
 
 
 def test_run_map_refuses_negative_workers(tmp_path):
-    from maglev_match.params import ParameterError
+    from maglev_match.core.params import ParameterError
 
     with pytest.raises(ParameterError, match="--workers"):
         run_map(_spec(), tmp_path / "ck", workers=-1)
@@ -278,7 +278,7 @@ def test_lost_scheduler_stops_with_resume_hint(tmp_path):
 def _fake_chunks(monkeypatch, calls):
     """A stand-in for the index of each sample, a pure function of its values, so that the
     checkpoint (not the index) is what these tests exercise; counts the samples computed."""
-    import maglev_match.sensitivity as S
+    import maglev_match.analyses.sensitivity as S
 
     def chunk(base_values, names, rows, model="unit"):
         calls.append(len(rows))
@@ -344,8 +344,8 @@ def test_monte_carlo_truncated_chunk_is_named_and_recomputed(tmp_path, monkeypat
 
 
 def test_monte_carlo_counts_are_checked_by_the_library(tmp_path):
-    import maglev_match.sensitivity as S
-    from maglev_match.params import ParameterError
+    import maglev_match.analyses.sensitivity as S
+    from maglev_match.core.params import ParameterError
 
     for kw, field in (({"n": 10**20}, "--monte-carlo"), ({"n": 1}, "--monte-carlo"),
                       ({"seed": -1}, "--seed"), ({"workers": -1}, "--workers"),

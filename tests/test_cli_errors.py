@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 import maglev_match.cli.stability as stability_cli
 from maglev_match.cli import CLICK_EXCEPTIONS, app, main
 from maglev_match.cli.common import NTST_MIN
-from maglev_match.params import RANGES
+from maglev_match.core.params import RANGES
 
 FAST = settings(max_examples=40, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,

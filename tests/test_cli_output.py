@@ -12,7 +12,7 @@ import pytest
 from maglev_match.cli import app, main
 from maglev_match.cli.common import OUTPUT_ROOT, output_target, progress_report
 from maglev_match.cli.stability import IMAG_RTOL, table_eigenvalues
-from maglev_match.params import load_preset
+from maglev_match.core.params import load_preset
 
 PROGRESS_LINE = re.compile(r"^maglev-match (\S+) \[ *\d+\.\d s\] (.+)$")
 
@@ -159,7 +159,7 @@ def test_hopf_param_L_agrees_with_the_direct_omega1_search(capsys):
     assert direct[0]["frequency"] == pytest.approx(pts[0]["frequency"], rel=1e-6)
     # the crossing speed is per metre of span: a central difference of max Re(lambda) in L
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.models import build_system
+    from maglev_match.maglev import build_system
 
     assert pts[0]["others_stable"]
     h = 1e-4
@@ -266,7 +266,7 @@ def test_engineering_param_outside_the_model_is_refused(capsys):
 
 def test_at_warns_when_an_explicit_omega1_overrides_the_span():
     from maglev_match.cli.cycles import apply_at
-    from maglev_match.params import ParameterWarning
+    from maglev_match.core.params import ParameterWarning
 
     with pytest.warns(ParameterWarning) as caught:
         p = apply_at(load_preset("alpha1"), ["L=20"])

@@ -20,21 +20,21 @@ from systems import (
     oscillator_limit_events,
 )
 
-from maglev_match.critical import (
+from maglev_match.analyses.critical import (
     Mechanism,
     critical_from_bisection,
     solve_critical,
     solve_critical_batch,
 )
-from maglev_match.dynamics.escape import extrema_walk, grazing_derivative, solve_grazing
-from maglev_match.dynamics.simulate import SimulationOptions, simulate_batch
-from maglev_match.params import ParameterError, load_preset
-from maglev_match.simulation import (
+from maglev_match.analyses.simulation import (
     _events_for,
     _system,
     critical_disturbance,
     critical_disturbance_of_system,
 )
+from maglev_match.core.params import ParameterError, load_preset
+from maglev_match.dynamics.escape import extrema_walk, grazing_derivative, solve_grazing
+from maglev_match.dynamics.integrate.simulate import SimulationOptions, simulate_batch
 
 W = np.array([1.0, 0.0, 0.0])  # the oscillator's limited observable: x
 
@@ -174,7 +174,7 @@ def test_model_a_dchi_simulation_matches_central_differences(name):
     """d chi_simulation / dp through the beam formulas (L, EI) and the controller (kD), by
     the implicit function theorem on the solved grazing condition, against central
     differences of tight-tolerance critical sizes: to 1e-4."""
-    from maglev_match.sensitivity import index_sensitivity
+    from maglev_match.analyses.sensitivity import index_sensitivity
 
     P = load_preset("turnout-soft")
     sens = index_sensitivity(P, boundaries=False)

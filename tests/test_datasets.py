@@ -13,7 +13,7 @@ import xarray as xr
 
 import maglev_match as mm
 from maglev_match.cli import main as cli_main
-from maglev_match.datasets import annotate, simulation_dataset, state_units
+from maglev_match.core.datasets import annotate, simulation_dataset, state_units
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "maglev_match"
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from maglev_match.cli import main
+from maglev_match.core.params import load_preset
 from maglev_match.dynamics.delay import critical_delay
-from maglev_match.models.unit import unit_dde
-from maglev_match.params import load_preset
+from maglev_match.maglev.unit import unit_dde
 
 # x' = -a x(t - tau): Hopf at tau = pi / (2 a) with frequency a
 LINEAR_DDE = '''\

@@ -8,6 +8,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from maglev_match.analyses.simulation import gap_limit_events, simulate_maglev
+from maglev_match.core.params import ParameterError, load_preset
 from maglev_match.dynamics.delay import (
     DiscretisedSystem,
     characteristic_roots,
@@ -19,8 +21,8 @@ from maglev_match.dynamics.equilibria import stability
 from maglev_match.dynamics.hopf import locate_hopf_points, refine_hopf_point
 from maglev_match.dynamics.normal_forms import first_lyapunov_coefficient
 from maglev_match.dynamics.system import System
-from maglev_match.models import build_system
-from maglev_match.models.unit import (
+from maglev_match.maglev import build_system
+from maglev_match.maglev.unit import (
     STATE_SCALE,
     param_vector,
     unit_dde,
@@ -28,8 +30,6 @@ from maglev_match.models.unit import (
     unit_rhs_limited,
     unit_system,
 )
-from maglev_match.params import ParameterError, load_preset
-from maglev_match.simulation import gap_limit_events, simulate_maglev
 
 
 @pytest.fixture(scope="module")
@@ -176,7 +176,7 @@ def test_simulation_with_delay_matches_the_method_of_steps(soft):
 # the index with a delay
 # ---------------------------------------------------------------------------------------
 def test_index_beyond_the_critical_delay_is_zero_and_says_why(soft):
-    from maglev_match.matching import matching_index
+    from maglev_match.analyses.matching import matching_index
 
     res = matching_index(soft.replace(tau=2e-3), simulate=False)
     assert res.chi == 0.0 and not res.stable and res.case == "unstable_equilibrium"
@@ -192,8 +192,8 @@ def test_a_delayed_map_row_simulates_the_delay_system(monkeypatch):
     delay): every stable point of the row goes there, with its delay, in both directions,
     and the search's outcome becomes the size by the index's rule (bracketed: the critical
     size; every size returned: the gap range; still open: no number, a reason code)."""
-    import maglev_match.maps as maps
-    import maglev_match.simulation as simulation
+    import maglev_match.analyses.maps as maps
+    import maglev_match.analyses.simulation as simulation
 
     calls = []
     outcomes = {0.5e-3: ("bracketed", 2.5e-3), 1e-3: ("all_return", None),

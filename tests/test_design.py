@@ -11,8 +11,7 @@ import pytest
 from systems import NF_DESIGN as DESIGN
 from systems import normal_form_system
 
-from maglev_match.cli import main
-from maglev_match.design import (
+from maglev_match.analyses.design import (
     DesignProblem,
     DesignStatus,
     Goal,
@@ -25,8 +24,9 @@ from maglev_match.design import (
     parse_requirement,
     parse_vary,
 )
-from maglev_match.matching import matching_index
-from maglev_match.params import ParameterError, load_preset
+from maglev_match.analyses.matching import matching_index
+from maglev_match.cli import main
+from maglev_match.core.params import ParameterError, load_preset
 
 W0 = 0.1
 

@@ -75,7 +75,7 @@ def test_mkdocs_build_strict(tmp_path, monkeypatch):
     for name in ("design_map", "matching_index", "cycle_branch", "hopf_curve", "simulate"):
         assert f'id="maglev_match.api.{name}"' in api, name
     # the parameter table lists every parameter with its unit
-    from maglev_match.params import PARAMETER_DOCS
+    from maglev_match.core.params import PARAMETER_DOCS
 
     for name in PARAMETER_DOCS:
         assert f"<code>{name}</code>" in model, name

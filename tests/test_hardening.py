@@ -121,7 +121,7 @@ def test_restart_without_parameter_options_continues_the_saved_branch(capsys, fi
     assert "searching Hopf points" not in err
     files = [Path(f) for f in doc["files"]]
     assert all(f.exists() for f in files) and any(f.suffix == ".png" for f in files)
-    from maglev_match.restart import load_cycle_restart
+    from maglev_match.analyses.restart import load_cycle_restart
 
     again = next(f for f in files if f.suffix == ".nc")
     assert load_cycle_restart(again, "P0").path == str(again)  # restartable in turn
@@ -196,9 +196,9 @@ def test_restart_loader_on_mutated_files_gives_a_clean_error_or_the_same_restart
     """A property test: whatever is dropped, reshaped, NaN'ed or set wrong in a saved branch,
     the loader either refuses with one line naming the file or returns exactly the restart
     of the undamaged file (a mutation of data the restart does not use changes nothing)."""
-    from maglev_match.models import build_system
-    from maglev_match.params import load_params
-    from maglev_match.restart import RestartFileError, load_cycle_restart
+    from maglev_match.analyses.restart import RestartFileError, load_cycle_restart
+    from maglev_match.core.params import load_params
+    from maglev_match.maglev import build_system
 
     system = build_system(load_params("alpha1"), "unit")
     good = load_cycle_restart(saved_branch, label, system)
@@ -223,13 +223,13 @@ def test_restart_cycle_branch_equals_the_uninterrupted_branch():
     gives the uninterrupted branch's next points; other parameter values are refused."""
     from systems import HOPF_NF, Q_CRIT
 
-    from maglev_match.dynamics.cycles import cycle_branch, hopf_start
-    from maglev_match.restart import (
+    from maglev_match.analyses.restart import (
         RestartKind,
         RestartMismatch,
         restart_cycle_branch,
         stamp,
     )
+    from maglev_match.dynamics.cycles import cycle_branch, hopf_start
 
     start = hopf_start(HOPF_NF, np.zeros(5), HOPF_NF.params_with(mu=0.0, l1=1.0), "mu",
                        2.0, Q_CRIT, 1.0)
@@ -283,7 +283,7 @@ def test_hopf_curve_restart_extends_the_closed_form_curve(capsys, fixtures):
                                  "--label", "P3", "--set", "beta=3"])
     assert code == 2 and "beta = 3 given, 2.666666667 saved" in err
     # the API's restart finds the model file from the saved curve
-    from maglev_match.restart import restart
+    from maglev_match.analyses.restart import restart
 
     curve, rs = restart(saved, "P3", bounds={"rho": (5.0, 200.0), "sigma": (5.0, 40.0)},
                         max_step=0.05)
@@ -300,13 +300,13 @@ def test_equilibrium_branch_restart_finds_the_same_special_points(tmp_path):
     the uninterrupted branch does, and the closed form says."""
     from systems import s_shaped_hopf
 
-    from maglev_match.dynamics.equilibria import equilibrium_branch
-    from maglev_match.restart import (
+    from maglev_match.analyses.restart import (
         RestartFileError,
         load_equilibrium_restart,
         restart_equilibrium_branch,
         save_equilibrium_branch,
     )
+    from maglev_match.dynamics.equilibria import equilibrium_branch
 
     system = s_shaped_hopf()
     full = equilibrium_branch(system, "mu", -2.0, 2.0)
@@ -331,8 +331,8 @@ def test_design_ranges_refuse_constants_derived_values_and_meaningless_chi():
     """parse_vary refuses g, mu0 and derived quantities; check_vary_ranges accepts the
     README's beam range and refuses a range whose static deflection falls below W0_MIN
     (chi = h / w0 beyond ~1000), naming the point, before any index is computed."""
-    from maglev_match.design import W0_MIN, check_vary_ranges, parse_vary
-    from maglev_match.params import ParameterError, load_params
+    from maglev_match.analyses.design import W0_MIN, check_vary_ranges, parse_vary
+    from maglev_match.core.params import ParameterError, load_params
 
     for text, rule in (("g=1:20", "constant of nature"), ("mu0=1e-7:2e-6", "constant"),
                        ("w0=1e-4:1e-3", "derived"), ("i0=10:30", "derived"),

@@ -140,8 +140,8 @@ def _injected_full_disk(tmp_path: Path) -> None:
     import contextlib
     import io
 
-    from maglev_match import io as mio
     from maglev_match.cli import main
+    from maglev_match.core import io as mio
 
     def run(out, *extra):
         err = io.StringIO()

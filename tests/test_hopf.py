@@ -107,8 +107,8 @@ def test_hopf_curve_passes_turning_point():
 # ----- model A ---------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def unit():
-    from maglev_match.models import build_system
-    from maglev_match.params import load_preset
+    from maglev_match.core.params import load_preset
+    from maglev_match.maglev import build_system
 
     return build_system(load_preset("turnout-soft"), "unit")
 

@@ -27,7 +27,7 @@ from maglev_match.dynamics.hybrid import (
     segments_from_flow,
     shoot_hybrid_orbit,
 )
-from maglev_match.dynamics.simulate import SimulationOptions, simulate
+from maglev_match.dynamics.integrate.simulate import SimulationOptions, simulate
 
 
 @pytest.fixture(scope="module")

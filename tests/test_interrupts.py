@@ -28,8 +28,8 @@ from pathlib import Path
 
 import pytest
 
-from maglev_match import interrupts
 from maglev_match.cli.interrupts import GRACE_S
+from maglev_match.core import interrupts
 
 #: The longest wait for exit after SIGINT that the tests accept: the watchdog's grace plus a
 #: margin for a machine with both cores busy (the normal path takes 0.1 s in-process and
@@ -136,7 +136,7 @@ def test_ctrl_c_during_the_work(tmp_path, args, trigger, resume):
 # ----- a phase that never looks for signals ---------------------------------------------
 STALLED_MAP = """
 import hashlib, sys
-import maglev_match.maps as maps
+import maglev_match.analyses.maps as maps
 
 compute = maps.compute_tile
 

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from maglev_match.io import atomic_open, atomic_write, atomic_write_text
+from maglev_match.core.io import atomic_open, atomic_write, atomic_write_text
 
 
 def _leftovers(folder):
@@ -82,7 +82,7 @@ def test_kill_during_write_leaves_the_old_file(tmp_path, how):
     flag = tmp_path / "writing"
     code = textwrap.dedent(f"""
         import pathlib, time
-        from maglev_match.io import atomic_open, atomic_write
+        from maglev_match.core.io import atomic_open, atomic_write
         target = pathlib.Path({str(target)!r}); flag = pathlib.Path({str(flag)!r})
         def slow(fh):
             fh.write(b"new partial" * 1000); fh.flush()
@@ -126,8 +126,8 @@ def _enospc(*_a, **_k):
 def test_full_disk_is_disk_full_with_the_old_file_intact(tmp_path, monkeypatch, where):
     """ENOSPC inside the writer or at the final rename: DiskFull naming the target, the
     previous content untouched, no temporary file left."""
-    from maglev_match import io as mio
-    from maglev_match.io import DiskFull, is_disk_full
+    from maglev_match.core import io as mio
+    from maglev_match.core.io import DiskFull, is_disk_full
 
     target = tmp_path / "map.nc"
     target.write_bytes(b"old content")
@@ -145,8 +145,8 @@ def test_full_disk_is_disk_full_with_the_old_file_intact(tmp_path, monkeypatch, 
 def test_full_disk_in_atomic_open_and_a_quota(tmp_path, monkeypatch):
     import errno
 
-    from maglev_match import io as mio
-    from maglev_match.io import DiskFull
+    from maglev_match.core import io as mio
+    from maglev_match.core.io import DiskFull
 
     target = tmp_path / "rows.csv"
     target.write_text("old\n")
@@ -163,8 +163,8 @@ def test_netcdf_is_written_from_memory_and_reads_back(tmp_path, monkeypatch):
     touches the target path itself (a full disk is then a plain write error)."""
     import xarray as xr
 
-    from maglev_match import io as mio
-    from maglev_match.io import DiskFull, atomic_write_netcdf
+    from maglev_match.core import io as mio
+    from maglev_match.core.io import DiskFull, atomic_write_netcdf
 
     ds = xr.Dataset({"chi": (("y", "x"), np.arange(6.0).reshape(2, 3), {"units": "1"})},
                     coords={"x": [1.0, 2.0, 3.0], "y": [4.0, 5.0]}, attrs={"title": "t"})

@@ -11,7 +11,8 @@ import maglev_match
 
 ROOT = Path(maglev_match.__file__).parent
 # what the numerics layer may import from the package besides itself
-NUMERICS_ALLOWED = {"maglev_match.aot", "maglev_match.jax_setup", "maglev_match.reprs"}
+NUMERICS_ALLOWED = {"maglev_match.core.aot", "maglev_match.core.jax_setup",
+"maglev_match.core.reprs"}
 
 
 def _modules() -> dict[str, Path]:

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from maglev_match.maps import Axis, MapSpec, map_dataset, parse_axis, run_map
-from maglev_match.params import ParameterError, load_preset
+from maglev_match.analyses.maps import Axis, MapSpec, map_dataset, parse_axis, run_map
+from maglev_match.core.params import ParameterError, load_preset
 
 BASE = load_preset("alpha1")
 
@@ -108,7 +108,7 @@ def test_resumed_map_equals_one_go_bit_for_bit(tmp_path):
 def test_map_row_agrees_with_pointwise_index(tmp_path):
     """h read off the branch continued along the row matches the point-wise index (which
     continues from the nearest Hopf point to the point itself)."""
-    from maglev_match.matching import matching_index
+    from maglev_match.analyses.matching import matching_index
 
     spec = MapSpec(base=BASE.as_input_dict(), x=Axis("omega1", 118.0, 130.0, 5),
                    y=Axis("sigma", 4e-4, 4.5e-4, 2), rows_per_tile=1, ntst=40,
@@ -172,8 +172,8 @@ def test_row_with_hopf_point_just_outside_the_grid_matches_pointwise_index():
     """`map --x omega1=60:140:13 --y kD=80:250:13`, row kD = 221.7: the Hopf point lies
     just beyond omega1 = 140; its cycle bounds the basin at omega1 = 133.3. The map once
     missed it (coarse extension) and gave h = 10 mm; the point-wise index gives 5.156 mm."""
-    from maglev_match.maps import compute_row
-    from maglev_match.matching import matching_index
+    from maglev_match.analyses.maps import compute_row
+    from maglev_match.analyses.matching import matching_index
 
     row = compute_row(KD_ROWS, 0)
     j = 11
@@ -196,8 +196,8 @@ def test_row_without_a_hopf_point_on_its_path_takes_the_pointwise_index():
     along omega1 bounds the basin at each of its points. The row must not claim "no cycle
     within limits" (h = 10 mm, as it once did): its points agree with the point-wise
     index."""
-    from maglev_match.maps import CASE_CODES, compute_row
-    from maglev_match.matching import matching_index
+    from maglev_match.analyses.maps import CASE_CODES, compute_row
+    from maglev_match.analyses.matching import matching_index
 
     spec = MapSpec(base=load_preset("turnout-soft").as_input_dict(),
                    x=Axis("kD", 148.0, 152.0, 3), y=Axis("sigma", 4.718e-4, 4.8e-4, 2),
@@ -216,13 +216,13 @@ def test_unmatched_sign_change_is_unresolved_with_its_reason(monkeypatch):
     made to find nothing), the stable points next to it are unresolved with reason code
     REASON_NO_HOPF, never silently given h = gap_max - c0."""
     import maglev_match.dynamics.hopf as hopf
-    from maglev_match.maps import REASON_CODES, REASON_NO_HOPF, compute_row
+    from maglev_match.analyses.maps import REASON_CODES, REASON_NO_HOPF, compute_row
 
     def nothing(system, param, start, stop, p=None, n_scan=200, progress=None):
         return hopf.HopfScan(param, start, stop, [], np.linspace(start, stop, 2),
                              np.zeros(2), ())
 
-    import maglev_match.maps as maps_mod
+    import maglev_match.analyses.maps as maps_mod
 
     monkeypatch.setattr(hopf, "locate_hopf_points", nothing)  # the fine re-scan
     monkeypatch.setattr(maps_mod, "_scan_hopf_points", lambda *args: [])  # the row scan
@@ -238,7 +238,7 @@ def test_unmatched_sign_change_is_unresolved_with_its_reason(monkeypatch):
 
 
 def test_spot_check_catches_a_wrong_map(tmp_path):
-    from maglev_match.maps import spot_check
+    from maglev_match.analyses.maps import spot_check
 
     spec = small_spec()
     data = run_map(spec, tmp_path / "s", workers=0)
@@ -266,7 +266,7 @@ def test_headline_map_equals_pointwise_index_at_every_spot_point():
     search's within that tolerance (both bracket the critical size to it)."""
     import json
 
-    from maglev_match.maps import compute_tile, simulation_settings
+    from maglev_match.analyses.maps import compute_tile, simulation_settings
 
     base = load_preset("turnout-soft")
     spec = MapSpec(base=base.as_input_dict(), x=Axis("omega1", 60.0, 80.0, 20),
@@ -295,7 +295,7 @@ def test_headline_map_equals_pointwise_index_at_every_spot_point():
 
 
 def test_no_simulation_map_is_the_papers_index_and_says_so():
-    from maglev_match.maps import compute_tile
+    from maglev_match.analyses.maps import compute_tile
 
     spec = small_spec()
     data = compute_tile(spec, (1, 2))
@@ -317,9 +317,9 @@ def test_unresolved_critical_disturbance_is_marked_with_its_reason(monkeypatch, 
                                                                    code):
     """A critical disturbance the search cannot resolve leaves the point unresolved with
     its reason code; the headline is NaN there, never filled in; the paper's part stays."""
-    import maglev_match.maps as maps_mod
-    from maglev_match.dynamics.threshold import ThresholdBatch, ThresholdStatus
-    from maglev_match.maps import REASON_CODES, compute_tile
+    import maglev_match.analyses.maps as maps_mod
+    from maglev_match.analyses.maps import REASON_CODES, compute_tile
+    from maglev_match.dynamics.integrate.threshold import ThresholdBatch, ThresholdStatus
 
     def nothing(P, directions, guesses=None, spreads=None, *, gap_limits, cost=None):
         n = len(P)
@@ -352,7 +352,7 @@ def test_dask_messages_go_to_the_log_not_the_terminal(tmp_path):
 
     import distributed
 
-    from maglev_match.maps import dask_log_capture
+    from maglev_match.analyses.maps import dask_log_capture
 
     node = str(Path(distributed.__file__).parent / "node.py")
     log = tmp_path / "map.log"
@@ -414,10 +414,10 @@ def test_delay_axis_extension_stays_within_the_discretisation_bound():
     """A row along tau is extended beyond the grid only as far as the discretisation
     resolves a delay (else a valid axis near the bound, tau = 0..0.05 s, failed in every row
     when its extension reached 0.075 s); the grid's own bound is refused up front."""
+    from maglev_match.analyses.maps import _extension
+    from maglev_match.core.params import ParameterError
     from maglev_match.dynamics.delay import max_delay_for
-    from maglev_match.maps import _extension
-    from maglev_match.models.unit import unit_dde
-    from maglev_match.params import ParameterError
+    from maglev_match.maglev.unit import unit_dde
 
     base = load_preset("turnout-soft").as_input_dict()
     for stop in (0.004, 0.05):

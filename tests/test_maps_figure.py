@@ -9,8 +9,8 @@ matplotlib.use("Agg")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from maglev_match.maps import Axis, MapSpec, compute_tile, map_dataset  # noqa: E402
-from maglev_match.params import load_preset  # noqa: E402
+from maglev_match.analyses.maps import Axis, MapSpec, compute_tile, map_dataset  # noqa: E402
+from maglev_match.core.params import load_preset  # noqa: E402
 from maglev_match.plots.maps import BOUNDARY_LABEL, ROW_HOPF_LABEL, map_figure  # noqa: E402
 
 BASE = load_preset("turnout-soft")
@@ -58,7 +58,7 @@ def test_figure_boundary_lies_on_the_hopf_curve_of_hopf_curve(coarse_map):
     # each other's polylines to the chord error of a step of at most 1 % of the ranges
     assert d.max() < 1e-4
     # every drawn vertex is a Hopf point: a pair of eigenvalues on the imaginary axis
-    from maglev_match.models.unit import unit_system
+    from maglev_match.maglev.unit import unit_system
 
     system = unit_system(BASE)
     for w, s in drawn[:: max(1, len(drawn) // 12)]:

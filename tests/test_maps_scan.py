@@ -5,7 +5,7 @@ refinement): the same Hopf points, and the eigenvalues at the nodes are those of
 import numpy as np
 import pytest
 
-from maglev_match.maps import (
+from maglev_match.analyses.maps import (
     SCAN_PER_NODE,
     Axis,
     MapSpec,
@@ -14,7 +14,7 @@ from maglev_match.maps import (
     _path_eigenvalues,
     _scan_hopf_points,
 )
-from maglev_match.params import load_preset
+from maglev_match.core.params import load_preset
 
 SPEC = MapSpec(base=load_preset("turnout-soft").as_input_dict(),
                x=Axis("omega1", 40.0, 190.0, 12), y=Axis("sigma", 2e-4, 6e-4, 3), ntst=30)
@@ -22,7 +22,7 @@ SPEC = MapSpec(base=load_preset("turnout-soft").as_input_dict(),
 
 def _row_path(spec, row):
     from maglev_match.dynamics.paths import path_system
-    from maglev_match.models.unit import param_vector, unit_system
+    from maglev_match.maglev.unit import param_vector, unit_system
 
     yv = spec.y.values[row]
     lo, hi = _extension(spec, spec.x.values, yv)

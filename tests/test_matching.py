@@ -11,8 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from maglev_match.dynamics.system import System
-from maglev_match.matching import (
+from maglev_match.analyses.matching import (
     CASES,
     READING_LEVELS,
     index_of_system,
@@ -21,8 +20,9 @@ from maglev_match.matching import (
     reading_rank,
     with_simulation,
 )
-from maglev_match.params import load_params
-from maglev_match.simulation import CriticalDisturbance, critical_disturbance_of_system
+from maglev_match.analyses.simulation import CriticalDisturbance, critical_disturbance_of_system
+from maglev_match.core.params import load_params
+from maglev_match.dynamics.system import System
 
 
 def normal_form_rhs(x, p):
@@ -109,7 +109,7 @@ def test_h_and_h_simulation_shrink_towards_subcritical_hopf():
     """Model A at sigma = 4e-4: along omega1 towards the Hopf point from the stable side both
     h (cycle amplitude) and h_simulation (critical disturbance) decrease, and the bracket of
     the simulation reading is valid (just inside returns, just outside collides)."""
-    from maglev_match.simulation import initial_state, simulate_maglev
+    from maglev_match.analyses.simulation import initial_state, simulate_maglev
 
     base = load_params("alpha1")
     hopf = None
@@ -321,7 +321,7 @@ def test_turnout_soft_headline_is_the_solved_chi_simulation():
     """The shipped default: the headline is chi_simulation, beam down decides, and both
     directions are decided by a grazing contact that was solved (so chi_simulation has a
     derivative)."""
-    from maglev_match.params import load_preset
+    from maglev_match.core.params import load_preset
 
     res = matching_index(load_preset("turnout-soft"))
     assert res.reading_basis == "simulation" and res.chi == res.chi_simulation

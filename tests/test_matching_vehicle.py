@@ -5,8 +5,8 @@ cycle that decides h agrees with an independent single-shooting solution of the 
 import numpy as np
 import pytest
 
-from maglev_match.matching import matching_index
-from maglev_match.params import load_preset
+from maglev_match.analyses.matching import matching_index
+from maglev_match.core.params import load_preset
 
 SOFT = load_preset("turnout-soft")
 
@@ -25,7 +25,7 @@ def test_vehicle_unstable_equilibrium_gives_chi_exactly_zero():
 def test_vehicle_w0_is_the_static_mid_span_deflection():
     """w0 of the vehicle = sum_n q_n* sin(n pi / 2) with q_n* the static modal
     coordinates under the six point loads (m_s / 2 + m_b / 6) g."""
-    from maglev_match.simulation import vehicle_disturbance_geometry
+    from maglev_match.analyses.simulation import vehicle_disturbance_geometry
 
     p = SOFT
     _, _, w_mid = vehicle_disturbance_geometry(p)
@@ -42,7 +42,7 @@ def test_vehicle_w0_is_the_static_mid_span_deflection():
 @pytest.mark.slow
 def test_vehicle_cycle_agrees_with_shooting():
     from maglev_match.dynamics.shooting import shoot_periodic_orbit, trajectory_extrema
-    from maglev_match.models.vehicle import vehicle_system
+    from maglev_match.maglev.vehicle import vehicle_system
 
     p = SOFT.replace(omega1=124.0)
     res = matching_index(p, model="vehicle", simulate=False)
@@ -65,12 +65,12 @@ def test_vehicle_cycle_agrees_with_shooting():
 def test_vehicle_critical_disturbance_bracket_is_consistent():
     """The pressed-state line: the size just inside the bracket returns, the one just outside
     collides (simulated independently), and d = w0 is the paper's pressed state."""
-    from maglev_match.models.vehicle import pressed_initial_state
-    from maglev_match.simulation import (
+    from maglev_match.analyses.simulation import (
         simulate_maglev,
         vehicle_critical_disturbance,
         vehicle_disturbance_geometry,
     )
+    from maglev_match.maglev.vehicle import pressed_initial_state
 
     p = SOFT
     x_eq, delta, w_mid = vehicle_disturbance_geometry(p)

@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from maglev_match.params import (
+from maglev_match.core.params import (
     ParameterError,
     available_presets,
     load_params,
@@ -162,7 +162,7 @@ def test_unknown_preset():
 import os  # noqa: E402
 import warnings  # noqa: E402
 
-from maglev_match.params import RANGES, ParameterWarning, load_toml  # noqa: E402
+from maglev_match.core.params import RANGES, ParameterWarning, load_toml  # noqa: E402
 
 
 @pytest.mark.parametrize("name,value", [

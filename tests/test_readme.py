@@ -161,8 +161,8 @@ def test_readme_design_answer_meets_the_headline_and_one_percent_less_does_not(r
     """The README's design example as the README ran it: the beam it answers (the EI the
     README quotes) meets chi >= 5 on the headline index with both parts, re-checked by the
     full index, and 1 % less EI does not; the requirement binds chi_simulation."""
-    from maglev_match.matching import matching_index
-    from maglev_match.params import load_preset
+    from maglev_match.analyses.matching import matching_index
+    from maglev_match.core.params import load_preset
 
     _, results = runs
     line = next(k for k in results if k.startswith("design "))

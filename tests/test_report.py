@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from maglev_match.params import load_preset
-from maglev_match.report import (
+from maglev_match.core.params import load_preset
+from maglev_match.present.report import (
     ReportContext,
     ReportSettings,
     figure_html,
@@ -139,7 +139,7 @@ def test_failing_section_renders_not_available_box(tmp_path):
 
 
 def test_numeric_claim_verdict_rule():
-    from maglev_match.reproduce import _numeric
+    from maglev_match.present.reproduce import _numeric
 
     assert _numeric("k", "s", "c", 100.0, 100.5, "x").verdict == "agree"
     assert _numeric("k", "s", "c", 100.0, 97.0, "x").verdict == "close"
@@ -150,7 +150,7 @@ def test_numeric_claim_verdict_rule():
 def test_beam_claims_are_the_geometry_formulas():
     """The beam claims report omega_n = (n pi / L)^2 sqrt(EI / mbar) and
     w0 = sigma (m + M) g / omega1^2 computed here independently."""
-    from maglev_match.reproduce import Study, compute_claims
+    from maglev_match.present.reproduce import Study, compute_claims
 
     claims = {c.key: c for c in compute_claims(Study(ReportSettings.quick_settings()),
                                                ["beam values"])}
@@ -167,8 +167,8 @@ def test_variant_search_finds_a_stability_boundary():
     """The kD value returned puts a root of max Re(lambda) at (102.5 rad/s, 4e-4): the
     equilibrium changes stability across it (checked by eigenvalues on both sides)."""
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.models import build_system
-    from maglev_match.reproduce import VARIANT_TARGET, variant_search
+    from maglev_match.maglev import build_system
+    from maglev_match.present.reproduce import VARIANT_TARGET, variant_search
 
     v = variant_search("kD", n_scan=21)
     assert v.value is not None
@@ -196,7 +196,7 @@ def test_cli_report_rejects_non_html_output(tmp_path):
 @pytest.fixture(scope="module")
 def reproduce_report(tmp_path_factory):
     """A cheap reproduction: the beam-value claims and Figs. 6-8 (model A runs)."""
-    from maglev_match.reproduce import reproduce
+    from maglev_match.present.reproduce import reproduce
 
     out = tmp_path_factory.mktemp("repro")
     report, claims = reproduce(out, ReportSettings.quick_settings(), only=["fig6-8"],
@@ -270,7 +270,7 @@ def test_variant_presets_reconcile_the_papers_stability_statements(param):
     alpha2 = [105, 5e-4] unstable, alpha3 = [85, 3.7e-4] stable, the stiff turnout beam
     unstable and the soft one stable."""
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.models import build_system
+    from maglev_match.maglev import build_system
 
     variant, soft = load_preset(f"paper-variant-{param}"), load_preset("turnout-soft")
     changed = {k for k, v in variant.as_dict().items() if v != soft.as_dict()[k]}

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 import maglev_match as mm
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.hopf import locate_hopf_points
-from maglev_match.reprs import compact_repr
 
 
 @dataclass(frozen=True)

@@ -10,12 +10,8 @@ import pytest
 from systems import nf_amplitude as amplitude
 from systems import normal_form_system
 
-from maglev_match.dynamics.cycles import orbit_extrema
-from maglev_match.dynamics.equilibria import stability
-from maglev_match.matching import index_of_system, matching_index
-from maglev_match.models.unit import unit_system
-from maglev_match.params import load_preset
-from maglev_match.sensitivity import (
+from maglev_match.analyses.matching import index_of_system, matching_index
+from maglev_match.analyses.sensitivity import (
     DerivativeStatus,
     derived_map,
     engineering_names,
@@ -23,6 +19,10 @@ from maglev_match.sensitivity import (
     linearised_spread,
     system_sensitivity,
 )
+from maglev_match.core.params import load_preset
+from maglev_match.dynamics.cycles import orbit_extrema
+from maglev_match.dynamics.equilibria import stability
+from maglev_match.maglev.unit import unit_system
 
 W0 = 0.1
 
@@ -159,8 +159,8 @@ def test_stability_boundary_is_a_zero_of_the_margin(soft):
 
 
 def test_sampled_spread_matches_first_order_and_resumes(soft, tmp_path, monkeypatch):
-    import maglev_match.sensitivity as S
-    from maglev_match.params import ParameterError
+    import maglev_match.analyses.sensitivity as S
+    from maglev_match.core.params import ParameterError
 
     p, sens = soft
     scatter = {"EI": 0.1, "kD": 0.1}  # small: chi is linear over the spread

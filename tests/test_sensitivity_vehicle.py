@@ -17,19 +17,19 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from maglev_match.cli import main
-from maglev_match.dynamics.equilibria import stability
-from maglev_match.matching import matching_index
-from maglev_match.models.vehicle import vehicle_system
-from maglev_match.params import load_preset
-from maglev_match.sensitivity import (
+from maglev_match.analyses.matching import matching_index
+from maglev_match.analyses.sensitivity import (
     DerivativeStatus,
     derived_map,
     engineering_names,
     index_sensitivity,
     linearised_spread,
 )
-from maglev_match.simulation import vehicle_disturbance_geometry
+from maglev_match.analyses.simulation import vehicle_disturbance_geometry
+from maglev_match.cli import main
+from maglev_match.core.params import load_preset
+from maglev_match.dynamics.equilibria import stability
+from maglev_match.maglev.vehicle import vehicle_system
 
 CYCLE_POINT = load_preset("turnout-soft").replace(EI=3.2e10)
 
@@ -180,7 +180,7 @@ def test_cli_vehicle_design_meets_its_requirement_and_1pct_cheaper_does_not(caps
 def test_report_section_shows_the_vehicle_table(cyc, tmp_path):
     from dataclasses import replace
 
-    from maglev_match.report import ReportContext, ReportSettings, section_sensitivity
+    from maglev_match.present.report import ReportContext, ReportSettings, section_sensitivity
 
     p, sens = cyc
     settings = replace(ReportSettings.quick_settings(), include_vehicle=True)

@@ -11,11 +11,7 @@ import scipy.linalg
 import scipy.optimize
 
 from maglev_match import load_preset
-from maglev_match.dynamics.simulate import SimulationOptions, simulate, simulate_batch
-from maglev_match.dynamics.system import System
-from maglev_match.models import build_system
-from maglev_match.models import vehicle as vehicle_model
-from maglev_match.simulation import (
+from maglev_match.analyses.simulation import (
     critical_disturbance,
     describe_event,
     gap_limit_events,
@@ -24,6 +20,10 @@ from maglev_match.simulation import (
     save_history,
     simulate_maglev,
 )
+from maglev_match.dynamics.integrate.simulate import SimulationOptions, simulate, simulate_batch
+from maglev_match.dynamics.system import System
+from maglev_match.maglev import build_system
+from maglev_match.maglev import vehicle as vehicle_model
 
 
 # ---------------------------------------------------------------------------------------
@@ -327,7 +327,7 @@ def test_initial_condition_names():
     assert np.array_equal(np.delete(pressed, np.r_[L["q"]]), np.delete(eq, np.r_[L["q"]]))
     q = initial_state(P, "vehicle", initial="pressed", q1=3e-3)
     assert q[L["q"].start] == 3e-3
-    from maglev_match.params import ParameterError
+    from maglev_match.core.params import ParameterError
 
     with pytest.raises(ParameterError):
         initial_state(P, "unit", initial="pressed")

@@ -1,4 +1,4 @@
-"""The vehicle at speed over identical spans (maglev_match.speed, models/moving.py,
+"""The vehicle at speed over identical spans (maglev_match.analyses.speed.sweep, models/moving.py,
 dynamics/passage.py): the moving-force closed form, the periodic response against a long
 simulation and its multipliers against finite differences, the low-speed limit, and the
 standstill models recovered at v = 0."""
@@ -11,16 +11,8 @@ import numpy as np
 import pytest
 
 from maglev_match import load_preset
-from maglev_match.dynamics.passage import (
-    PassageOptions,
-    finite_difference_jacobian,
-    passage_multipliers,
-    reduced_factors,
-    run_passage,
-)
-from maglev_match.models import build_system
-from maglev_match.models import moving as mv
-from maglev_match.speed import (
+from maglev_match.analyses.speed.spans import simulate_over_spans
+from maglev_match.analyses.speed.sweep import (
     KMH,
     SpeedOptions,
     SpeedPoint,
@@ -33,7 +25,15 @@ from maglev_match.speed import (
     speed_point,
     standstill_point,
 )
-from maglev_match.speed_spans import simulate_over_spans
+from maglev_match.dynamics.integrate.passage import (
+    PassageOptions,
+    finite_difference_jacobian,
+    passage_multipliers,
+    reduced_factors,
+    run_passage,
+)
+from maglev_match.maglev import build_system
+from maglev_match.maglev import moving as mv
 
 SOFT = load_preset("turnout-soft")
 # the unit with one mode per span (model A's beam): the properties tested do not depend on
@@ -225,8 +225,8 @@ def test_unit_at_standstill_is_model_a():
 def test_low_speed_multiplier_follows_the_standstill_eigenvalues():
     """The adiabatic limit: at low speed ln|mu_max| / T approaches the mean over the passage
     of the rightmost real part of the frozen model (the vehicle standing at each position,
-    :func:`maglev_match.speed.adiabatic_rate`)."""
-    from maglev_match.speed import adiabatic_rate
+    :func:`maglev_match.analyses.speed.sweep.adiabatic_rate`)."""
+    from maglev_match.analyses.speed.sweep import adiabatic_rate
 
     v = 4.0 * KMH
     sol = periodic_response(UNIT1, "unit", v, SpeedOptions(critical=False))
@@ -241,7 +241,7 @@ def test_low_speed_multiplier_follows_the_standstill_eigenvalues():
 # ---------------------------------------------------------------------------------------
 def _fate(problem, system, events, x_periodic, d_mid, spans):
     """One disturbed run, span after span: 'collision', 'return' or 'undecided'."""
-    from maglev_match.dynamics.simulate import SimulationOptions
+    from maglev_match.dynamics.integrate.simulate import SimulationOptions
 
     sl = mv.slot_slices("unit", UNIT1.n_modes)
     x = np.array(x_periodic, float)
@@ -261,7 +261,7 @@ def test_critical_disturbance_bracket_holds_in_single_runs():
     """The bracket of the critical initial deflection of the entering span (beam up, a beam
     stiffer than the standstill Hopf point) is confirmed by single runs: the largest size
     reported to return returns, the smallest reported to collide collides."""
-    from maglev_match.dynamics.simulate import EventsWithArgs
+    from maglev_match.dynamics.integrate.simulate import EventsWithArgs
 
     p = UNIT1.replace(EI=3.45e10)
     v = 60 * KMH
@@ -281,7 +281,7 @@ def test_critical_disturbance_bracket_holds_in_single_runs():
 
 
 def _critical(direction, status, size, gap_range):
-    from maglev_match.speed import SpeedCritical
+    from maglev_match.analyses.speed.sweep import SpeedCritical
 
     bracketed = status == "bracketed"
     return SpeedCritical(direction, status, size if bracketed else None,
@@ -322,7 +322,7 @@ def test_vehicle_at_standstill_is_model_b_up_to_the_suspension_preload():
     different deflections; a few newtons against 33 kN per point), which model B's zero
     (its equilibrium on the deflected beam) leaves out."""
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.models import vehicle as vehicle_model
+    from maglev_match.maglev import vehicle as vehicle_model
 
     p = SOFT
     lay = mv.layout_of(p, "vehicle")
@@ -348,7 +348,7 @@ def test_stability_change_is_located_by_solving():
     90 km/h, where the vehicle crosses the unstable middle of the span faster. The speed
     between, where a complex pair of multipliers enters the unit circle (NS), is located to
     |mu| = 1 by solving."""
-    from maglev_match.speed import locate_stability_change
+    from maglev_match.analyses.speed.sweep import locate_stability_change
 
     p = UNIT1.replace(EI=4.0e10)
     opts = SpeedOptions(critical=False)

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from maglev_match import load_preset
+from maglev_match.analyses.speed.sweep import KMH, SpeedOptions, speed_point, speed_sweep
 from maglev_match.cli import main
-from maglev_match.speed import KMH, SpeedOptions, speed_point, speed_sweep
 
 # the same models as tests/test_speed.py (their compiled kernels are shared)
 FORCE_SETS = ["--set", "n_modes=1", "--set", "xi1=0", "--set", "omega1=10"]

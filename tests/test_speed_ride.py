@@ -1,4 +1,5 @@
-"""Sperling's ride index Wz (maglev_match.ride) against worked numbers and independent forms
+"""Sperling's ride index Wz (maglev_match.analyses.speed.ride) against worked numbers and
+independent forms
 of the same standard."""
 
 from __future__ import annotations
@@ -8,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from maglev_match.ride import (
+from maglev_match.analyses.speed.ride import (
     sperling_line,
     sperling_of_lines,
     sperling_of_periodic,

@@ -9,13 +9,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from maglev_match.dynamics.system import System
-from maglev_match.dynamics.threshold import (
+from maglev_match.analyses.simulation import critical_disturbance_of_system
+from maglev_match.dynamics.integrate.threshold import (
     ThresholdOptions,
     ThresholdStatus,
     bracket_thresholds,
 )
-from maglev_match.simulation import critical_disturbance_of_system
+from maglev_match.dynamics.system import System
 
 TOL = 1e-3
 OPTS = ThresholdOptions(tol=TOL, t_max=10.0, chunk=8)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from maglev_match.cli import main
-from maglev_match.models.user import ModelFileError, load_model
+from maglev_match.maglev.user import ModelFileError, load_model
 
 LORENZ = '''\
 import jax.numpy as jnp

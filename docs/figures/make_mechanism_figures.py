@@ -22,13 +22,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from maglev_match.critical import Mechanism, critical_from_bisection  # noqa: E402
-from maglev_match.params import load_preset  # noqa: E402
-from maglev_match.simulation import (  # noqa: E402
+from maglev_match.analyses.critical import Mechanism, critical_from_bisection  # noqa: E402
+from maglev_match.analyses.simulation import (  # noqa: E402
     critical_disturbance,
     initial_state,
     simulate_maglev,
 )
+from maglev_match.core.params import load_preset  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "img"
 

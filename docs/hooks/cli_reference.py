@@ -72,7 +72,7 @@ SECTIONS = {
 def parameter_table() -> str:
     """Every parameter with its unit, meaning and default (the default preset's value for
     the derived ones), from the parameter table of the package."""
-    from maglev_match.params import PARAMETER_DOCS, load_preset
+    from maglev_match.core.params import PARAMETER_DOCS, load_preset
 
     p = load_preset()
     derived = {"omega1", "sigma", "s", "s0"}

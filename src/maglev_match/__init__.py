@@ -23,15 +23,19 @@ import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from maglev_match import _compat
+
+_compat.install()  # the module paths of version 0.1 keep working, with a warning
+
 __version__ = "0.1.0"
 
 # public name -> module that defines it
 _LAZY: dict[str, str] = {
-    "Params": "maglev_match.params",
-    "ParameterError": "maglev_match.params",
-    "load_params": "maglev_match.params",
-    "load_preset": "maglev_match.params",
-    "available_presets": "maglev_match.params",
+    "Params": "maglev_match.core.params",
+    "ParameterError": "maglev_match.core.params",
+    "load_params": "maglev_match.core.params",
+    "load_preset": "maglev_match.core.params",
+    "available_presets": "maglev_match.core.params",
     "System": "maglev_match.dynamics.system",
     "build_system": "maglev_match.api",
     "stability": "maglev_match.api",
@@ -58,11 +62,11 @@ _LAZY: dict[str, str] = {
     "map_figure": "maglev_match.plots.maps",
     "tornado_figure": "maglev_match.plots.design",
     "design_path_figure": "maglev_match.plots.design",
-    "load_model": "maglev_match.models.user",
+    "load_model": "maglev_match.maglev.user",
 }
 
 # the user-model loader ships in its own module; list it only where that module exists
-if not (Path(__file__).parent / "models" / "user.py").exists():
+if not (Path(__file__).parent / "maglev" / "user.py").exists():
     del _LAZY["load_model"]
 
 __all__ = sorted([*_LAZY, "__version__"])
@@ -84,14 +88,14 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         stability,
         study_report,
     )
-    from maglev_match.dynamics.system import System  # noqa: F401
-    from maglev_match.params import (  # noqa: F401
+    from maglev_match.core.params import (  # noqa: F401
         ParameterError,
         Params,
         available_presets,
         load_params,
         load_preset,
     )
+    from maglev_match.dynamics.system import System  # noqa: F401
     from maglev_match.plots import figure_of, plot  # noqa: F401
 
 

@@ -2,7 +2,7 @@
 
 Every function has one signature style, ``function(params, ..., **overrides)``:
 
-* ``params`` (first) — a :class:`~maglev_match.params.Params`, the name of a shipped
+* ``params`` (first) — a :class:`~maglev_match.core.params.Params`, the name of a shipped
   preset (``"turnout-soft"``, ``"alpha1"``, ...) or ``None`` for the default preset;
 * then what the analysis varies (``param``, ``values``, the axes ``x=("omega1", 40, 190,
   100)`` of a map ...) and its keyword options (``model="unit"`` or ``"vehicle"`` wherever
@@ -16,13 +16,14 @@ params)``, ``root_locus("omega1", values, params)``, ``hopf_curve(params, names=
 bounds=...)``, ``design_map("omega1=40:190:100", "sigma=...", preset)``) still work and
 warn (:class:`DeprecationWarning`). The sensitivities, the design search and the report
 are :func:`index_sensitivity`, :func:`design_search` and :func:`study_report`
-(``maglev_match.sensitivity``, ``.design`` and ``.report`` name the modules). Every result
+(``maglev_match.analyses.sensitivity``, ``.design`` and ``.report`` name the modules). Every result
 with a figure has ``.plot(path=None)``; :func:`maglev_match.plots.plot` draws any of them.
 
 The functions call the same library routines as the command line and return its result
 objects (frozen dataclasses carrying their diagnostics). They add nothing numerical; the
 methods and their sources are documented where they are implemented
-(:mod:`maglev_match.dynamics`, :mod:`maglev_match.matching`, :mod:`maglev_match.maps`).
+(:mod:`maglev_match.dynamics`, :mod:`maglev_match.analyses.matching`,
+:mod:`maglev_match.analyses.maps`).
 """
 
 from __future__ import annotations
@@ -34,23 +35,23 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from maglev_match import jax_setup  # noqa: F401  (float64 before any model is built)
-from maglev_match.params import DEFAULT_PRESET, ParameterError, Params, load_params
+from maglev_match.core import jax_setup  # noqa: F401  (float64 before any model is built)
+from maglev_match.core.params import DEFAULT_PRESET, ParameterError, Params, load_params
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray as xr
 
-    from maglev_match.design import DesignResult
+    from maglev_match.analyses.design import DesignResult
+    from maglev_match.analyses.matching import MatchingIndex
+    from maglev_match.analyses.sensitivity import IndexSensitivity
+    from maglev_match.analyses.simulation import MaglevSimulation
+    from maglev_match.analyses.speed.sweep import SpeedSweep
     from maglev_match.dynamics.cycles import CycleBranch
     from maglev_match.dynamics.equilibria import RootLocusResult, StabilityResult
     from maglev_match.dynamics.hopf import HopfScan
     from maglev_match.dynamics.hopf_curve import HopfCurve
     from maglev_match.dynamics.system import System
-    from maglev_match.matching import MatchingIndex
-    from maglev_match.report import ReportResult
-    from maglev_match.sensitivity import IndexSensitivity
-    from maglev_match.simulation import MaglevSimulation
-    from maglev_match.speed import SpeedSweep
+    from maglev_match.present.report import ReportResult
 
 __all__ = [
     "resolve_params",
@@ -84,7 +85,7 @@ def _deprecated(old: str, new: str) -> None:
 def _names_a_preset(value: Any) -> bool:
     """Whether a positional string is a parameter set (a preset name) rather than the
     parameter name of an earlier signature."""
-    from maglev_match.params import available_presets
+    from maglev_match.core.params import available_presets
 
     return isinstance(value, str) and value in available_presets()
 
@@ -95,7 +96,7 @@ def resolve_params(params: Params | str | None = None, **overrides: Any) -> Para
     Parameters
     ----------
     params : Params | str | None
-        A [`Params`][maglev_match.params.Params], the name of a shipped preset, or None for
+        A [`Params`][maglev_match.core.params.Params], the name of a shipped preset, or None for
         the default preset `turnout-soft`.
     **overrides : float
         Values applied on top (beam data such as `EI` re-derive omega1 and sigma).
@@ -131,7 +132,7 @@ def build_system(params: Params | str | None = None, model: str = "unit", *,
     Parameters
     ----------
     params : Params | str | None
-        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        The parameter set: a [`Params`][maglev_match.core.params.Params], the name of a shipped
         preset, or None for the default preset `turnout-soft`.
     model : str
         `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
@@ -146,7 +147,7 @@ def build_system(params: Params | str | None = None, model: str = "unit", *,
         The [`System`][maglev_match.dynamics.system.System] (vector field, parameter
         vector, state names, read-outs).
     """
-    from maglev_match.models import build_system as _build
+    from maglev_match.maglev import build_system as _build
 
     return _build(resolve_params(params, **overrides), _check_model(model), limited=limited)
 
@@ -161,7 +162,7 @@ def stability(params: Params | str | None = None, *, model: str = "unit",
     Parameters
     ----------
     params : Params | str | None
-        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        The parameter set: a [`Params`][maglev_match.core.params.Params], the name of a shipped
         preset, or None for the default preset `turnout-soft`.
     model : str
         `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
@@ -188,7 +189,7 @@ def root_locus(params: Params | str | None = None, param: str = "omega1",
     Parameters
     ----------
     params : Params | str | None
-        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        The parameter set: a [`Params`][maglev_match.core.params.Params], the name of a shipped
         preset, or None for the default preset `turnout-soft`.
     param : str
         The parameter to vary (any parameter of the model).
@@ -236,7 +237,7 @@ def hopf_points(params: Params | str | None = None, param: str = "omega1",
     Parameters
     ----------
     params : Params | str | None
-        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        The parameter set: a [`Params`][maglev_match.core.params.Params], the name of a shipped
         preset, or None for the default preset `turnout-soft`.
     param : str
         The parameter to vary.
@@ -277,7 +278,7 @@ def hopf_points(params: Params | str | None = None, param: str = "omega1",
 
 
 def _validate_value(params: Params, name: str, value: float) -> None:
-    from maglev_match.params import PARAMETER_DOCS
+    from maglev_match.core.params import PARAMETER_DOCS
 
     if name in PARAMETER_DOCS:
         params.replace(**{name: value})
@@ -394,7 +395,7 @@ def cycle_branch(params: Params | str | None = None, param: str = "omega1", *,
     Parameters
     ----------
     params : Params | str | None
-        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        The parameter set: a [`Params`][maglev_match.core.params.Params], the name of a shipped
         preset, or None for the default preset `turnout-soft`.
     param : str
         The continuation parameter.
@@ -422,7 +423,7 @@ def cycle_branch(params: Params | str | None = None, param: str = "omega1", *,
     """
     from maglev_match.dynamics.cycles import cycle_branch as _cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.limits_check import cycle_limit_margins
+    from maglev_match.maglev.limits_check import cycle_limit_margins
 
     if isinstance(params, str) and not _names_a_preset(params):  # cycle_branch(param, p)
         _deprecated("cycle_branch(param, params)", "cycle_branch(params, param)")
@@ -465,7 +466,7 @@ def simulate(params: Params | str | None = None, *, model: str = "unit",
     Parameters
     ----------
     params : Params | str | None
-        The parameter set: a [`Params`][maglev_match.params.Params], the name of a shipped
+        The parameter set: a [`Params`][maglev_match.core.params.Params], the name of a shipped
         preset, or None for the default preset `turnout-soft`.
     model : str
         `"unit"` (model A, 9 states) or `"vehicle"` (model B, 40 states with 3 modes).
@@ -493,10 +494,10 @@ def simulate(params: Params | str | None = None, *, model: str = "unit",
     -------
     MaglevSimulation
         Outcome (collision / converged / running / failed), collision time, limit and
-        point; see [`MaglevSimulation`][maglev_match.simulation.MaglevSimulation].
+        point; see [`MaglevSimulation`][maglev_match.analyses.simulation.MaglevSimulation].
     """
-    from maglev_match.dynamics.simulate import SimulationOptions
-    from maglev_match.simulation import initial_state, simulate_maglev
+    from maglev_match.analyses.simulation import initial_state, simulate_maglev
+    from maglev_match.dynamics.integrate.simulate import SimulationOptions
 
     _check_model(model)
     if not t_end > 0:
@@ -536,9 +537,9 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
     -------
     MatchingIndex
         chi, h, w0, the case that decided h and its diagnostics; see
-        [`MatchingIndex`][maglev_match.matching.MatchingIndex].
+        [`MatchingIndex`][maglev_match.analyses.matching.MatchingIndex].
     """
-    from maglev_match.matching import matching_index as _matching_index
+    from maglev_match.analyses.matching import matching_index as _matching_index
 
     return _matching_index(resolve_params(params, **overrides), model=_check_model(model),
                            simulate=simulate)
@@ -570,10 +571,10 @@ def index_sensitivity(params: Params | str | None = None, *, model: str = "unit"
     Returns
     -------
     IndexSensitivity
-        See `maglev_match.sensitivity.IndexSensitivity`; `.plot()`
+        See `maglev_match.analyses.sensitivity.IndexSensitivity`; `.plot()`
         draws the tornado figure.
     """
-    from maglev_match.sensitivity import index_sensitivity as _index_sensitivity
+    from maglev_match.analyses.sensitivity import index_sensitivity as _index_sensitivity
 
     base = resolve_params(params, **overrides)
     if not base.w0 > 0:
@@ -621,9 +622,9 @@ def design_search(params: Params | str | None = None, *,
     Returns
     -------
     DesignResult
-        See `maglev_match.design.DesignResult`; `.plot()` draws the search.
+        See `maglev_match.analyses.design.DesignResult`; `.plot()` draws the search.
     """
-    from maglev_match.design import (
+    from maglev_match.analyses.design import (
         DesignProblem,
         Goal,
         MaglevEvaluator,
@@ -663,14 +664,14 @@ def restart_branch(source: str | Path | Any, label: str, system: System | None =
             **options: Any) -> Any:
     """Continue a saved branch from one of its points (`cycles --restart FILE --label L`,
     `hopf-curve --restart FILE --label L`). The file says what it holds; no Hopf point is
-    searched again. (Named `restart_branch` because `maglev_match.restart` is the module
+    searched again. (Named `restart_branch` because `maglev_match.analyses.restart` is the module
     that reads the files.)
 
     Parameters
     ----------
     source : str, Path or xarray.Dataset
         A branch file written by `cycles --out` or `hopf-curve --out` (or by
-        `maglev_match.restart.save_equilibrium_branch`).
+        `maglev_match.analyses.restart.save_equilibrium_branch`).
     label : str
         The point to continue from: `P<k>` for the k-th saved point, or a special point's
         label (`LPC1`, `PD1`, `GH1`, ...).
@@ -690,10 +691,10 @@ def restart_branch(source: str | Path | Any, label: str, system: System | None =
     Returns
     -------
     RestartedCycleBranch, or (HopfCurve, HopfCurveRestart), or (EquilibriumBranch,
-    EquilibriumRestart); see `maglev_match.restart`. A damaged or mismatched file raises
-    `maglev_match.restart.RestartFileError` naming the file and the problem.
+    EquilibriumRestart); see `maglev_match.analyses.restart`. A damaged or mismatched file raises
+    `maglev_match.analyses.restart.RestartFileError` naming the file and the problem.
     """
-    from maglev_match.restart import restart as _restart
+    from maglev_match.analyses.restart import restart as _restart
 
     return _restart(source, label, system, param=param, stop=stop, bounds=bounds, **options)
 
@@ -730,10 +731,10 @@ def study_report(params: Params | str | None = None, out: str | Path = "report.h
     -------
     ReportResult
         The written file, its figures and every section's data; see
-        `maglev_match.report.ReportResult`.
+        `maglev_match.present.report.ReportResult`.
     """
-    from maglev_match.report import ReportSettings
-    from maglev_match.report import study_report as _study_report
+    from maglev_match.present.report import ReportSettings
+    from maglev_match.present.report import study_report as _study_report
 
     if not t_end > 0:
         raise ParameterError("t_end", t_end, "the horizon must be > 0 s")
@@ -748,7 +749,7 @@ def study_report(params: Params | str | None = None, out: str | Path = "report.h
 def _map_axis(axis: Any, field: str) -> str:
     """A map axis as the command line writes it (NAME=START:STOP:COUNT) from the keyword
     form (name, start, stop, count); the command-line string itself is the deprecated
-    form. Validation (names, counts, order) is :func:`maglev_match.maps.parse_axis`'s."""
+    form. Validation (names, counts, order) is :func:`maglev_match.analyses.maps.parse_axis`'s."""
     if isinstance(axis, str):
         _deprecated(f'design_map({field}="NAME=START:STOP:COUNT")',
                     f'design_map(params, {field}=("NAME", START, STOP, COUNT))')
@@ -783,7 +784,7 @@ def design_map(params: Params | str | None = None,
     Parameters
     ----------
     params : Params | str | None
-        The base point: a [`Params`][maglev_match.params.Params], a preset name or None
+        The base point: a [`Params`][maglev_match.core.params.Params], a preset name or None
         for the default preset.
     x, y : tuple
         The axes, `(name, start, stop, count)`, e.g. `("omega1", 40, 190, 100)`; name is
@@ -826,7 +827,7 @@ def design_map(params: Params | str | None = None,
         rows' Hopf points hopf_x and, for two model parameters as axes, the continued Hopf
         curve; units and long names, the base parameter set and the package version as
         attributes. Equal, value for value, to the netCDF file `maglev-match map` writes
-        for the same grid (see `maglev_match.maps.map_dataset`);
+        for the same grid (see `maglev_match.analyses.maps.map_dataset`);
         `maglev_match.plots.plot(ds)` draws the map figure.
     """
     if isinstance(params, str) and "=" in params:  # design_map("NAME=A:B:N", "NAME=...", p)
@@ -846,8 +847,8 @@ def design_map(params: Params | str | None = None,
         base = load_params(params or DEFAULT_PRESET, config, dict(overrides))
     else:
         base = resolve_params(params, **overrides)
-    from maglev_match.datasets import annotate_map
-    from maglev_match.maps import MapSpec, compute_tile, map_dataset, parse_axis, run_map
+    from maglev_match.analyses.maps import MapSpec, compute_tile, map_dataset, parse_axis, run_map
+    from maglev_match.core.datasets import annotate_map
 
     ax, ay = parse_axis(x, "x"), parse_axis(y, "y")
     if rows_per_tile < 1:
@@ -904,12 +905,13 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     Returns
     -------
     SpeedSweep
-        One [`SpeedPoint`][maglev_match.speed.SpeedPoint] per speed, the resonance speeds
+        One [`SpeedPoint`][maglev_match.analyses.speed.sweep.SpeedPoint] per speed, the resonance
+        speeds
         and the stability changes; `.to_xarray()` and `.plot()` give the netCDF dataset and
         the figure of the command line.
     """
-    from maglev_match.speed import KMH, SpeedOptions, speeds_kmh
-    from maglev_match.speed import speed_sweep as _speed_sweep
+    from maglev_match.analyses.speed.sweep import KMH, SpeedOptions, speeds_kmh
+    from maglev_match.analyses.speed.sweep import speed_sweep as _speed_sweep
 
     p = resolve_params(params, **overrides)
     if speeds is None:
@@ -934,7 +936,7 @@ def _compute_tiles(spec, compute_tile, workers, scheduler, progress) -> dict:
         return out
     from dask.distributed import Client, as_completed
 
-    from maglev_match.maps import local_cluster
+    from maglev_match.analyses.maps import local_cluster
 
     cluster = None
     if scheduler is None:

@@ -40,7 +40,7 @@ import typer
 from typer.core import TyperGroup
 
 from maglev_match.cli.common import UserError, console_err, print_error, print_warnings
-from maglev_match.params import ParameterError
+from maglev_match.core.params import ParameterError
 
 # Where unexpected errors should be reported.
 REPORT_TO = "the maglev-match issue tracker"
@@ -358,8 +358,8 @@ def _main(argv: list[str] | None) -> int:
         args = [a for a in args if a != "--debug"]
         args = ["--debug", *args]
     from maglev_match.cli.terminal import encoding_note, guard_output
-    from maglev_match.errors import CheckpointLocked, MapStopped, ModelFileError
-    from maglev_match.io import DiskFull, is_disk_full
+    from maglev_match.core.errors import CheckpointLocked, MapStopped, ModelFileError
+    from maglev_match.core.io import DiskFull, is_disk_full
 
     guard_output()  # a non-UTF-8 terminal: ASCII stand-ins, never a lost result
     old_show = warnings.showwarning
@@ -381,7 +381,7 @@ def _main(argv: list[str] | None) -> int:
     except typer.Exit as exc:
         return int(exc.exit_code or 0)
     except (typer.Abort, KeyboardInterrupt):
-        from maglev_match.interrupts import stop_note
+        from maglev_match.core.interrupts import stop_note
 
         _stopped(stop_note())
         return 130
@@ -395,7 +395,7 @@ def _main(argv: list[str] | None) -> int:
             print_error(text)
         return code
     except RuntimeError as exc:  # a map's checkpoint errors (their module loads with maps)
-        cp = sys.modules.get("maglev_match.checkpoint")
+        cp = sys.modules.get("maglev_match.core.checkpoint")
         if cp is not None and isinstance(exc, cp.CheckpointLocked):
             print_error(str(exc))
             return 2

@@ -18,7 +18,7 @@ import typer
 from rich.console import Console
 from rich.text import Text
 
-from maglev_match.options import (
+from maglev_match.core.options import (
     MC_SAMPLES_MAX,
     NCOL_MAX,
     NCOL_MIN,
@@ -29,7 +29,7 @@ from maglev_match.options import (
     TOL_MAX,
     WORKERS_MAX,
 )
-from maglev_match.params import (
+from maglev_match.core.params import (
     DEFAULT_PRESET,
     PARAMETER_DOCS,
     ParameterError,
@@ -71,7 +71,7 @@ OutOpt = Annotated[Path | None, typer.Option("--out", help="Output file or folde
 DEFAULT_PRESET_NAME = DEFAULT_PRESET
 
 #: Help text of a ``--param`` option that accepts beam and vehicle data (the list of those
-#: names is :data:`maglev_match.engineering.ENGINEERING_PARAMS`; kept here so that help
+#: names is :data:`maglev_match.maglev.engineering.ENGINEERING_PARAMS`; kept here so that help
 #: texts need no numerical module).
 PARAM_HELP = ("Parameter to vary: a model parameter (omega1, sigma, kD ...) or beam/vehicle "
               "data L, EI, mbar, l, k, s, s0 (omega1 and sigma follow).")
@@ -245,7 +245,7 @@ def write_result_json(out: Path | None, command: str, stem: str, data: Any,
     holds the same object). Returns the written files."""
     if json_out and out is None:
         return []
-    from maglev_match.io import atomic_write_text
+    from maglev_match.core.io import atomic_write_text
 
     folder, name = output_target(out, command, stem)
     path = folder / f"{name}.json"
@@ -267,7 +267,7 @@ def output_path(out: Path | None, default: str) -> Path:
 # Bounds of the numerical options. Each is enforced while the command line is parsed
 # (before any computation) and reported as "Invalid value for '--opt': ..." with exit code 2.
 
-# NTST_MIN: the smallest mesh that resolves a cycle (measured; see maglev_match.options).
+# NTST_MIN: the smallest mesh that resolves a cycle (measured; see maglev_match.core.options).
 SCAN_MAX = 20_000  # values of an eigenvalue scan (each one an eigenvalue problem)
 GRID_MAX = 400  # stability-grid points per axis (GRID_MAX^2 eigenvalue problems)
 N_SAVE_MAX = 1_000_000  # saved time points of a simulation

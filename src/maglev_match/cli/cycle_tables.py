@@ -12,8 +12,8 @@ from rich import box
 from rich.table import Table
 
 from maglev_match.cli.common import UserError, console
-from maglev_match.io import atomic_open, atomic_write_text
-from maglev_match.params import ParameterError, Params, warn_overridden
+from maglev_match.core.io import atomic_open, atomic_write_text
+from maglev_match.core.params import ParameterError, Params, warn_overridden
 
 if TYPE_CHECKING:  # the numerics (and JAX) are imported when a command runs
     from maglev_match.dynamics.cycles import CycleBranch
@@ -79,9 +79,9 @@ def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
 
 def _write_csv(path: Path, rows: list[dict[str, Any]], param: str | None = None) -> None:
     """Rows as CSV, SI values, each header ``name (unit)`` (the continued parameter's unit
-    from the parameter table, the others from :mod:`maglev_match.units`)."""
+    from the parameter table, the others from :mod:`maglev_match.core.units`)."""
     from maglev_match.cli.common import unit_of
-    from maglev_match.units import header
+    from maglev_match.core.units import header
 
     if not rows:
         atomic_write_text(path, "")

@@ -44,7 +44,7 @@ from maglev_match.cli.cycle_tables import (  # noqa: F401 (apply_at: also used b
     apply_at,
 )
 from maglev_match.cli.models import MAGLEV_DELAYS, is_model_file, user_cycles
-from maglev_match.params import ParameterError
+from maglev_match.core.params import ParameterError
 
 if TYPE_CHECKING:  # the numerics (and JAX) are imported when the command runs
     from maglev_match.dynamics.cycles import CycleBranch
@@ -126,12 +126,12 @@ def cycles_command(
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.engineering import engineering_system, is_engineering
-    from maglev_match.limits_check import cycle_limit_margins
-    from maglev_match.models import build_system
+    from maglev_match.maglev import build_system
+    from maglev_match.maglev.engineering import engineering_system, is_engineering
+    from maglev_match.maglev.limits_check import cycle_limit_margins
 
     if out is not None or not json_out:  # files at the end: load their writers meanwhile
-        preload("maglev_match.plots.cycles", "maglev_match.datasets", "xarray", "h5netcdf")
+        preload("maglev_match.plots.cycles", "maglev_match.core.datasets", "xarray", "h5netcdf")
     system = build_system(params, model)
     try:
         design = getattr(params, param) if is_engineering(param) else (
@@ -243,11 +243,11 @@ def _write_outputs(out, param, model, scan, branches, params, at, system=None) -
     _write_csv(folder / f"{stem}_special_points.csv", specials, param)
     files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
     # the full branches (profiles, multipliers, special points, restart data) as netCDF
+    from maglev_match.analyses.restart import RestartKind, stamp
     from maglev_match.cli.common import unit_of
-    from maglev_match.datasets import annotate
-    from maglev_match.io import atomic_write_netcdf
-    from maglev_match.models import build_system
-    from maglev_match.restart import RestartKind, stamp
+    from maglev_match.core.datasets import annotate
+    from maglev_match.core.io import atomic_write_netcdf
+    from maglev_match.maglev import build_system
 
     system = build_system(params, model) if system is None else system
     for k, br in enumerate(branches):

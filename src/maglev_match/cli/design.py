@@ -32,8 +32,8 @@ from maglev_match.cli.common import (
     seed_option,
     workers_option,
 )
-from maglev_match.options import SCATTER_PCT_MAX, check_scatter_percent
-from maglev_match.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
+from maglev_match.core.options import SCATTER_PCT_MAX, check_scatter_percent
+from maglev_match.core.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
 
 MODEL_TEXT = {"unit": "model A (one levitation unit)",
               "vehicle": "model B (full vehicle, six levitation points)"}
@@ -77,7 +77,7 @@ def _monte_carlo(params, scatter: dict[str, float], n: int | None, spread: dict 
                  command: str = "design"):
     if n is None:
         return None  # (a --monte-carlo without --scatter was refused by scatter_options)
-    from maglev_match.sensitivity import sampled_spread
+    from maglev_match.analyses.sensitivity import sampled_spread
 
     with progress_report(command) as prog:
         prog.stage(f"Monte Carlo, {n} samples ...")
@@ -130,7 +130,7 @@ def check_scatter_names(params, scatter: dict[str, float], model: str) -> None:
     before any computation, so a typo costs no index)."""
     if not scatter:
         return  # (no import of the sensitivity module, ~0.2 s, when there is nothing to check)
-    from maglev_match.sensitivity import engineering_names
+    from maglev_match.analyses.sensitivity import engineering_names
 
     rows = engineering_names(params, model)
     for name in scatter:
@@ -161,12 +161,13 @@ def scatter_options(params, items: list[str] | None, monte_carlo: int | None,
 def check_monte_carlo_folder(out, command: str, stem: str, monte_carlo: int | None) -> None:
     """Before any work: the --out of a Monte Carlo study can be written, and its checkpoint
     folder (``<out>/monte-carlo``) is not in use by another run (the lock is tried and let
-    go; the study holds it while it runs, see :func:`maglev_match.sensitivity.sampled_spread`).
+    go; the study holds it while it runs, see
+    :func:`maglev_match.analyses.sensitivity.sampled_spread`).
     A second run on the same folder is thus refused at once, not after its index."""
     if monte_carlo is None:
         return
-    from maglev_match.checkpoint import lock_folder
     from maglev_match.cli.common import check_output_path
+    from maglev_match.core.checkpoint import lock_folder
 
     check_output_path(out)
     folder, _ = output_target(out, command, stem)
@@ -177,7 +178,7 @@ def check_monte_carlo_folder(out, command: str, stem: str, monte_carlo: int | No
 def _spread(sens, scatter: dict[str, float]) -> dict | None:
     if not scatter:
         return None
-    from maglev_match.sensitivity import linearised_spread
+    from maglev_match.analyses.sensitivity import linearised_spread
 
     for name in scatter:
         try:
@@ -197,7 +198,7 @@ def scatter_report(params, index, scatter: dict[str, float], monte_carlo: int | 
     --scatter."""
     if not scatter:
         return None, None
-    from maglev_match.sensitivity import index_sensitivity
+    from maglev_match.analyses.sensitivity import index_sensitivity
 
     with progress_report("index") as prog:
         prog.stage("sensitivities for the linearised spread ...")
@@ -259,9 +260,9 @@ def sensitivity_command(
     sc = scatter_options(params, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "sensitivity", "tornado", monte_carlo)
     # the numerics (and JAX) and the figures once the options are known to be good
+    from maglev_match.analyses.sensitivity import DerivativeStatus, index_sensitivity
     from maglev_match.plots import save_figure
     from maglev_match.plots.design import tornado_figure
-    from maglev_match.sensitivity import DerivativeStatus, index_sensitivity
 
     with progress_report("sensitivity") as prog:
         prog.stage("computing the index and its sensitivities ...")
@@ -375,7 +376,7 @@ def design_command(
     """The cheapest design (or the largest chi) meeting the requirements on the headline
     chi (both the paper's chi and chi_simulation; --no-simulation: the paper's chi alone):
     SLSQP with exact gradients from several grid starts, every candidate the full index."""
-    from maglev_match.design import (
+    from maglev_match.analyses.design import (
         DesignProblem,
         DesignStatus,
         Goal,
@@ -420,7 +421,7 @@ def design_command(
     spread = None
     design_params = evaluator.params([res.values[n] for n in problem.names])
     if sc:
-        from maglev_match.sensitivity import index_sensitivity
+        from maglev_match.analyses.sensitivity import index_sensitivity
 
         spread = _spread(index_sensitivity(design_params, res.index, boundaries=False,
                                            model=model), sc)

@@ -37,9 +37,9 @@ from maglev_match.cli.common import (
     unit_of,
     validate_value,
 )
-from maglev_match.io import atomic_open
-from maglev_match.params import ParameterError
-from maglev_match.units import header
+from maglev_match.core.io import atomic_open
+from maglev_match.core.params import ParameterError
+from maglev_match.core.units import header
 
 if TYPE_CHECKING:  # the numerics (and JAX) are imported when a command runs
     from maglev_match.dynamics.hopf import HopfPoint
@@ -101,7 +101,7 @@ def hopf_command(
     rm = resolve_model(model, set_, preset, config, delay_axis=(param, stop))
     from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.engineering import engineering_hopf_points, is_engineering
+    from maglev_match.maglev.engineering import engineering_hopf_points, is_engineering
 
     params, system, model = rm.params, rm.system, rm.label
     engineering = params is not None and is_engineering(param)
@@ -405,8 +405,8 @@ def hopf_curve_command(
         rs = restarted[1]
         mark_restart_point(fig.axes[0], *rs.values, label=rs.label, source=Path(rs.path).name)
     figs = save_figure(fig, folder / stem)
-    from maglev_match.datasets import annotate
-    from maglev_match.io import atomic_write_netcdf
+    from maglev_match.core.datasets import annotate
+    from maglev_match.core.io import atomic_write_netcdf
 
     nc_files = []
     for k, c in enumerate(curves):
@@ -460,9 +460,9 @@ def hopf_curve_command(
 def _restartable_curve(ds, system, model: str, names: tuple[str, str],
                        bounds: dict[str, tuple[float, float]],
                        model_file: str | None = None) -> None:
-    """What a restart of the saved curve needs (:mod:`maglev_match.restart`): the curve's
+    """What a restart of the saved curve needs (:mod:`maglev_match.analyses.restart`): the curve's
     two parameters, their bounds, the full parameter vector and the kind attributes."""
-    from maglev_match.restart import RestartKind, stamp
+    from maglev_match.analyses.restart import RestartKind, stamp
 
     stamp(ds, RestartKind.HOPF_CURVE, system, model, "hopf-curve")
     if model_file is not None:  # a user model: the API's restart loads it again

@@ -79,7 +79,7 @@ def index_command(
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "index", "index", monte_carlo)
-    from maglev_match.matching import matching_index  # (after the checks: JAX loads here)
+    from maglev_match.analyses.matching import matching_index  # (after the checks: JAX loads here)
     with progress_report("index") as prog:
         prog.stage("computing the matching index ...")
         res = matching_index(params, model=model, simulate=not no_simulation)
@@ -165,7 +165,7 @@ def _print_critical_delay(res) -> None:
 
 
 def print_index(res, preset: str, config, set_) -> None:
-    """The text form of a :class:`~maglev_match.matching.MatchingIndex` (every warning
+    """The text form of a :class:`~maglev_match.analyses.matching.MatchingIndex` (every warning
     of the JSON form is printed here too): the headline chi first, then the paper's
     definition, the simulation and the reading."""
     mm = 1e3
@@ -263,8 +263,7 @@ def map_command(
         return speed_map_command(x, y, preset, config, set_, out, resume, scheduler, workers,
                                  json_out, model)
     refuse_model_file(model, "map")
-    from maglev_match.io import atomic_write_netcdf
-    from maglev_match.maps import (
+    from maglev_match.analyses.maps import (
         MapSpec,
         map_dataset,
         map_warnings,
@@ -272,7 +271,8 @@ def map_command(
         remove_checkpoint,
         run_map,
     )
-    from maglev_match.params import ParameterError
+    from maglev_match.core.io import atomic_write_netcdf
+    from maglev_match.core.params import ParameterError
 
     check_output_path(out)
     base = params_from_options(preset, config, set_)
@@ -300,7 +300,7 @@ def map_command(
         # the self-check gets 10 % of the map's time (at least one point is checked)
         prog.stage("spot check: recomputing sample points one by one ...")
         ds = map_dataset(spec, data, budget=0.1 * elapsed)
-    from maglev_match.datasets import annotate_map
+    from maglev_match.core.datasets import annotate_map
 
     ds = annotate_map(ds, base)
     warnings = map_warnings(ds)

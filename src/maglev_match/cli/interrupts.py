@@ -19,7 +19,7 @@ and prints how to resume. A watcher thread learns of the signal at once, from th
 C-level handler writes to a pipe (:func:`signal.set_wakeup_fd`), whatever the main thread is
 doing (a compile releases the GIL, so the watcher runs while it goes on). If the process is
 still alive :data:`GRACE_S` seconds after the signal, the watcher prints the running job's
-stop note (:func:`maglev_match.interrupts.stop_note`: the pieces kept and the ``--resume``
+stop note (:func:`maglev_match.core.interrupts.stop_note`: the pieces kept and the ``--resume``
 hint), ends the worker processes this process started and ends the process with exit code
 130 (:func:`os._exit`: no interpreter teardown that could wait for a compile or crash in the
 middle of one). Finished pieces are on disk already (written atomically, each as it
@@ -70,7 +70,7 @@ def finish(text: str | None = None, code: int = 130) -> None:
     """Print the one 'stopped: ...' line (``text``, default the running job's stop note),
     end the worker processes and end this process with ``code``. Whoever calls this second
     waits for the first to end the process."""
-    from maglev_match.interrupts import stop_note
+    from maglev_match.core.interrupts import stop_note
 
     if not _finishing.acquire(blocking=False):
         time.sleep(GRACE_S)  # the other path is printing and exiting; a last resort below

@@ -1,6 +1,6 @@
 """``--model``: the built-in maglev models (``unit``, ``vehicle``) or a user model file.
 
-A value ending in ``.py`` is a user model (see :mod:`maglev_match.models.user`): ``--set
+A value ending in ``.py`` is a user model (see :mod:`maglev_match.maglev.user`): ``--set
 NAME=VALUE`` then applies to the file's PARAMS and ``--preset``/``--config`` (maglev parameter
 sets) do not apply. Commands whose physics only make sense for the maglev models refuse a
 file with one clear line (:func:`refuse_model_file`). The user-model versions of ``cycles``
@@ -40,18 +40,18 @@ from maglev_match.cli.restart import (
     _restart_json,
     restart_errors,
 )
-from maglev_match.params import ParameterError, Params
+from maglev_match.core.params import ParameterError, Params
 
 if TYPE_CHECKING:  # the user-model loader and System import JAX: loaded when used
     import numpy as np
 
     from maglev_match.dynamics.system import System
-    from maglev_match.models.user import UserModel
+    from maglev_match.maglev.user import UserModel
 
 
 def is_model_file(model: str) -> bool:
     """True when a ``--model`` value names a Python file rather than a built-in model
-    (the same rule as :func:`maglev_match.models.user.is_model_file`, without importing
+    (the same rule as :func:`maglev_match.maglev.user.is_model_file`, without importing
     that module: a usage error must not wait for JAX)."""
     return str(model).endswith(".py")
 
@@ -105,7 +105,7 @@ def parse_sets(user: UserModel, sets: list[str] | None, option: str = "--set"
 
 def load_user_model(path: str) -> UserModel:
     """:func:`load_model` with its error turned into a command-line error (exit code 2)."""
-    from maglev_match.models.user import ModelFileError, load_model
+    from maglev_match.maglev.user import ModelFileError, load_model
 
     try:
         return load_model(path)
@@ -167,7 +167,7 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
     from maglev_match.cli.common import DEFAULT_PRESET_NAME
 
     params = params_from_options(preset or DEFAULT_PRESET_NAME, config, sets)
-    from maglev_match.models import build_system  # (after the checks: JAX loads here)
+    from maglev_match.maglev import build_system  # (after the checks: JAX loads here)
 
     desc = (f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
             f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg")
@@ -293,8 +293,8 @@ def user_cycles(model: str, sets: list[str] | None, at: list[str] | None, param:
     if out is not None:
         import csv
 
-        from maglev_match.io import atomic_open, atomic_write_netcdf
-        from maglev_match.restart import RestartKind, stamp
+        from maglev_match.analyses.restart import RestartKind, stamp
+        from maglev_match.core.io import atomic_open, atomic_write_netcdf
 
         folder, stem = output_target(out, "cycles", f"cycles_{user.name}_{param}")
         path = folder / f"{stem}.csv"
@@ -339,7 +339,7 @@ def user_simulate(model: str, sets: list[str] | None, t: float, state: np.ndarra
     guess), without physical limits; reports the outcome and the final state."""
     import numpy as np
 
-    from maglev_match.dynamics.simulate import SimulationOptions, simulate
+    from maglev_match.dynamics.integrate.simulate import SimulationOptions, simulate
 
     user = load_user_model(model)
     system = user_system(user, parse_sets(user, sets))
@@ -387,7 +387,7 @@ def user_cycles_restart(*, user, model: str, restart: Path | None, label: str | 
                         param: str, sets: list[str] | None, at: list[str] | None, ntst: int,
                         ncol: int, max_steps: int, json_out: bool, out: Path | None) -> None:
     """`cycles --restart` on a user model file (its own cycles file)."""
-    from maglev_match.restart import (
+    from maglev_match.analyses.restart import (
         RestartKind,
         check_parameters,
         load_cycle_restart,
@@ -431,7 +431,7 @@ def user_cycles_restart(*, user, model: str, restart: Path | None, label: str | 
     if out is not None:
         import csv
 
-        from maglev_match.io import atomic_open, atomic_write_netcdf
+        from maglev_match.core.io import atomic_open, atomic_write_netcdf
 
         folder, stem = output_target(out, "cycles", f"cycles_{user.name}_{param}_restart")
         rows = _cycle_rows(br, param)

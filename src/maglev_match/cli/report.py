@@ -34,7 +34,7 @@ QuickOpt = Annotated[
 
 
 def _progress(prog, total: int | None = None):
-    """A section callback for :func:`~maglev_match.report.study_report`: one stage line per
+    """A section callback for :func:`~maglev_match.present.report.study_report`: one stage line per
     section, numbered ``[k/n]`` when the number of sections is known."""
     count = [0]
 
@@ -64,7 +64,7 @@ def report_command(
     """Self-contained HTML study report of one vehicle-beam pair (figures embedded; the
     PNG/SVG files are written to <out stem>_figures/ beside it)."""
     refuse_model_file(model, "report")
-    from maglev_match.report import ReportSettings, study_report
+    from maglev_match.present.report import ReportSettings, study_report
 
     if out is not None and is_file_name(out) and out.suffix.lower() not in (".html", ".htm"):
         raise UserError(f"--out {out}: the report is an HTML file; give a name ending in .html "
@@ -80,7 +80,7 @@ def report_command(
     settings = ReportSettings(**{**base.as_dict(), "include_vehicle": model_b, "t_end": t_end})
     label = preset + (f" + {config}" if config else "") + (
         " + " + ", ".join(set_) if set_ else "")
-    from maglev_match.report import study_sections
+    from maglev_match.present.report import study_sections
 
     with progress_report("report") as prog:
         res = study_report(params, out, settings, label=label,
@@ -115,8 +115,8 @@ def reproduce_command(
     """Recompute the paper's figures (Figs. 4-8, 11-13) and its claims with the printed
     defaults; writes reproduce.html, claims.csv, claims.json and figures/ into --out."""
     refuse_model_file(model, "reproduce")
-    from maglev_match.report import ReportSettings
-    from maglev_match.reproduce import SECTIONS, reproduce
+    from maglev_match.present.report import ReportSettings
+    from maglev_match.present.reproduce import SECTIONS, reproduce
 
     keys = [k for k, _, _ in SECTIONS]
     for k in only or []:

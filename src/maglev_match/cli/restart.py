@@ -7,7 +7,7 @@ in its figure, and refuses every option that would not apply: the Hopf search's 
 sampling, a mesh other than the saved one, and parameter values other than the saved ones
 (give none, and the saved values are used; give them, and they must be the saved ones:
 the restart continues the saved orbit, which belongs to those values). The library side
-is :mod:`maglev_match.restart`.
+is :mod:`maglev_match.analyses.restart`.
 """
 
 from __future__ import annotations
@@ -48,7 +48,11 @@ def restart_errors(fn):
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        from maglev_match.restart import RestartFileError, RestartLabelError, RestartMismatch
+        from maglev_match.analyses.restart import (
+            RestartFileError,
+            RestartLabelError,
+            RestartMismatch,
+        )
 
         try:
             return fn(*args, **kwargs)
@@ -147,22 +151,22 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
     """`cycles --restart` on model A or B."""
     import numpy as np
 
-    from maglev_match.cli.cycle_tables import (
-        _branch_rows,
-        _special_rows,
-        _write_csv,
-        apply_at,
-    )
-    from maglev_match.engineering import is_engineering
-    from maglev_match.limits_check import cycle_limit_margins
-    from maglev_match.models import build_system
-    from maglev_match.restart import (
+    from maglev_match.analyses.restart import (
         RestartKind,
         check_parameters,
         load_cycle_restart,
         saved_params,
         stamp,
     )
+    from maglev_match.cli.cycle_tables import (
+        _branch_rows,
+        _special_rows,
+        _write_csv,
+        apply_at,
+    )
+    from maglev_match.maglev import build_system
+    from maglev_match.maglev.engineering import is_engineering
+    from maglev_match.maglev.limits_check import cycle_limit_margins
 
     _need_label(restart, label)
     refuse_given(HOPF_SEARCH_OPTIONS, "a restart searches no Hopf point: it continues the "
@@ -171,7 +175,7 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
         raise UserError(f"--param {param}: a restart continues in a model parameter "
                         "(omega1, sigma, kD, ...), not along beam or vehicle data")
     # the model: the one named, or the one the file was saved for
-    from maglev_match.restart import open_saved
+    from maglev_match.analyses.restart import open_saved
 
     saved_model = open_saved(restart)[0].attrs.get("model")
     if not given("model") and saved_model in ("unit", "vehicle"):
@@ -234,8 +238,8 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
         files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
         if br.points:
             from maglev_match.cli.common import unit_of
-            from maglev_match.datasets import annotate
-            from maglev_match.io import atomic_write_netcdf
+            from maglev_match.core.datasets import annotate
+            from maglev_match.core.io import atomic_write_netcdf
 
             nc_ds = annotate(br.to_xarray(build_system(params, model),
                                           param_unit=unit_of(param)), params)
@@ -298,7 +302,7 @@ def hopf_curve_restart(*, rm, restart: Path | None, label: str | None,
 
     import numpy as np
 
-    from maglev_match.restart import (
+    from maglev_match.analyses.restart import (
         load_hopf_curve_restart,
         restart_hopf_curve,
         saved_params,
@@ -320,7 +324,7 @@ def hopf_curve_restart(*, rm, restart: Path | None, label: str | None,
     if not any(given(n) for n in PARAMETER_OPTIONS):  # the saved values
         saved = saved_params(rs) if not rm.is_user else None
         if saved is not None:
-            from maglev_match.models import build_system
+            from maglev_match.maglev import build_system
 
             params, system = saved, build_system(saved, rm.label)
         else:

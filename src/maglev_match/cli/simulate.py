@@ -143,8 +143,8 @@ def simulate_command(
         return user_simulate(model, set_, t, state, n_save, rtol, atol, json_out, out)
     params = params_from_options(preset, config, set_)
     # the numerics (and JAX) once the options are known to be good
-    from maglev_match.dynamics.simulate import SimulationOptions
-    from maglev_match.simulation import initial_state, save_history, simulate_maglev
+    from maglev_match.analyses.simulation import initial_state, save_history, simulate_maglev
+    from maglev_match.dynamics.integrate.simulate import SimulationOptions
 
     x_init = initial_state(params, model, initial=initial, x5=x5, q1=q1, state=state)
     with progress_report("simulate") as prog:

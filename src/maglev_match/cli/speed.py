@@ -15,6 +15,7 @@ import typer
 from rich import box
 from rich.table import Table
 
+from maglev_match.analyses.speed.grid import KMH, SPEED_MAX, speeds_kmh
 from maglev_match.cli import app
 from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,
@@ -33,8 +34,7 @@ from maglev_match.cli.common import (
     scheduler_option,
     workers_option,
 )
-from maglev_match.params import ParameterError
-from maglev_match.speed_grid import KMH, SPEED_MAX, speeds_kmh
+from maglev_match.core.params import ParameterError
 
 SPEED_MODELS = ("unit", "vehicle", "force")
 KMH_MAX = SPEED_MAX / KMH  # km/h (900): the sweep's bound, for one run at speed too
@@ -75,7 +75,7 @@ def _table(sweep) -> Table:
 
 
 def _summary_lines(sweep) -> list[str]:
-    from maglev_match.ride import sperling_reading
+    from maglev_match.analyses.speed.ride import sperling_reading
 
     out = []
     daf, v_daf = sweep.largest("daf")
@@ -142,7 +142,8 @@ def speed_command(
     check_output_path(out)
     params = params_from_options(preset, config, set_)
     kmh = speeds_kmh(from_, to, step)
-    from maglev_match.speed import (  # the numerics (and JAX) once the options are good
+    # the numerics (and JAX) once the options are good
+    from maglev_match.analyses.speed.sweep import (
         SpeedOptions,
         check_speed_setup,
         speed_sweep,
@@ -187,7 +188,7 @@ def speed_command(
 
 
 def _write_sweep(sweep, folder: Path, stem: str) -> list[Path]:
-    from maglev_match.io import atomic_write_netcdf
+    from maglev_match.core.io import atomic_write_netcdf
     from maglev_match.plots import save_figure
     from maglev_match.plots.speed import speed_figure
 
@@ -205,8 +206,8 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
                       out: Path | None, plot: Path | None, json_out: bool) -> None:
     """`simulate --speed V --spans N`: the run over N spans from rigid ground and off again,
     with the periodic response overlaid (called by the simulate command)."""
-    from maglev_match.speed import SpeedOptions, check_speed_setup
-    from maglev_match.speed_spans import simulate_over_spans
+    from maglev_match.analyses.speed.spans import simulate_over_spans
+    from maglev_match.analyses.speed.sweep import SpeedOptions, check_speed_setup
 
     _check_model(model)
     n = 10 if spans is None else spans
@@ -225,7 +226,7 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
         prog.stage(f"run done: {run.outcome}")
         folder, stem = output_target(out, "simulate", f"simulation_{model}_speed")
         folder.mkdir(parents=True, exist_ok=True)
-        from maglev_match.io import atomic_write_netcdf
+        from maglev_match.core.io import atomic_write_netcdf
 
         nc = folder / f"{stem}.nc"
         ds = run.to_xarray()
@@ -272,8 +273,8 @@ def speed_map_command(x: str, y: str, preset: str, config, set_, out: Path | Non
                       json_out: bool, model: str | None) -> None:
     """`map` with the speed v (km/h) on one axis: every grid point a periodic response at
     speed with its read-outs (netCDF + figure)."""
-    from maglev_match.speed import SpeedOptions
-    from maglev_match.speed_maps import parse_speed_axes, run_speed_map
+    from maglev_match.analyses.speed.maps import parse_speed_axes, run_speed_map
+    from maglev_match.analyses.speed.sweep import SpeedOptions
 
     kind = _check_model(model or "unit")
     check_output_path(out)
@@ -287,7 +288,7 @@ def speed_map_command(x: str, y: str, preset: str, config, set_, out: Path | Non
                    f"{len(spec.tiles)} rows ...")
         ds = run_speed_map(spec, tiles, resume=resume, scheduler=scheduler, workers=workers,
                            progress=prog.tiles)
-        from maglev_match.io import atomic_write_netcdf
+        from maglev_match.core.io import atomic_write_netcdf
         from maglev_match.plots import save_figure
         from maglev_match.plots.speed import speed_map_figure
 

@@ -32,9 +32,9 @@ from maglev_match.cli.common import (
     unit_of,
     validate_value,
 )
-from maglev_match.params import ParameterError, available_presets, load_preset, preset_info
-from maglev_match.units import header, shown
-from maglev_match.units import label as unit_label
+from maglev_match.core.params import ParameterError, available_presets, load_preset, preset_info
+from maglev_match.core.units import header, shown
+from maglev_match.core.units import label as unit_label
 
 # The numerical modules (and JAX with them) are imported inside the commands, so that
 # `presets`, `--help` and a usage error answer without loading them.
@@ -139,7 +139,7 @@ def _write_eigenvalues(out, model: str, res):
     """Every eigenvalue of the equilibrium as CSV (units in the headers)."""
     import numpy as np
 
-    from maglev_match.io import atomic_open
+    from maglev_match.core.io import atomic_open
 
     folder, stem = output_target(out, "stability", f"stability_{model}")
     path = folder / f"{stem}.csv"
@@ -172,7 +172,7 @@ def root_locus_command(
     import numpy as np
 
     from maglev_match.cli.models import resolve_model
-    from maglev_match.io import atomic_open
+    from maglev_match.core.io import atomic_open
 
     check_output_path(out)
     if steps < 2:
@@ -181,7 +181,7 @@ def root_locus_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
-    from maglev_match.engineering import is_engineering
+    from maglev_match.maglev.engineering import is_engineering
 
     engineering = params is not None and is_engineering(param)
     if not engineering:
@@ -194,7 +194,7 @@ def root_locus_command(
         prog.stage(f"eigenvalues at {steps} values of {param} ...")
         if engineering:  # the path through the model parameters at each value: t = k exact
             from maglev_match.dynamics.paths import PATH_PARAM, path_system
-            from maglev_match.engineering import engineering_nodes
+            from maglev_match.maglev.engineering import engineering_nodes
 
             path = path_system(system, engineering_nodes(params, model, param, values))
             res = root_locus(path, PATH_PARAM, np.arange(steps, dtype=float))
@@ -295,7 +295,7 @@ def presets_command(out: OutOpt = None, json_out: JsonOpt = False) -> None:
 
 def _write_presets(out, rows: list[dict]):
     """The presets table as CSV: SI values, units in the headers."""
-    from maglev_match.io import atomic_open
+    from maglev_match.core.io import atomic_open
 
     folder, stem = output_target(out, "presets", "presets")
     path = folder / f"{stem}.csv"

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.cycles import CycleBranch, CyclePoint, CycleStop, cycle_branch
 from maglev_match.dynamics.hopf import HopfPoint, locate_hopf_points
 from maglev_match.dynamics.system import System
-from maglev_match.reprs import compact_repr
 
 __all__ = ["CycleBound", "bounding_cycle"]
 

@@ -51,7 +51,7 @@ import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
 
-from maglev_match.aot import cached_kernel
+from maglev_match.core.aot import cached_kernel
 from maglev_match.dynamics.system import System
 
 __all__ = ["CollocationProblem", "LinearSolver"]

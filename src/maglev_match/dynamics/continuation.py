@@ -46,7 +46,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from maglev_match.reprs import compact_repr
+from maglev_match.core.reprs import compact_repr
 
 __all__ = [
     "signed_geometric_mean",

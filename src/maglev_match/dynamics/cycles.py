@@ -41,7 +41,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from maglev_match.aot import cached_kernel
+from maglev_match.core.aot import cached_kernel
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.collocation import (
     CondensedLU,
     LinearSolver,
@@ -72,7 +73,6 @@ from maglev_match.dynamics.continuation import (
 )
 from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 from maglev_match.dynamics.system import System, chart_kernels
-from maglev_match.reprs import compact_repr
 
 __all__ = [
     "HopfStart",

@@ -100,9 +100,9 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
 
-from maglev_match import jax_setup  # noqa: F401  (float64 on)
+from maglev_match.core import jax_setup  # noqa: F401  (float64 on)
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.system import System
-from maglev_match.reprs import compact_repr
 
 Array = Any
 
@@ -706,7 +706,7 @@ def refine_characteristic_root(A0: np.ndarray, As: Sequence[np.ndarray],
 
 def _one_thread():
     """Small dense eigenproblems in a loop: BLAS threads only contend for the cores there
-    (as in :mod:`maglev_match.matching`)."""
+    (as in :mod:`maglev_match.analyses.matching`)."""
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(1)

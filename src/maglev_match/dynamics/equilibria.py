@@ -30,7 +30,8 @@ import jax
 import numpy as np
 import scipy.linalg
 
-from maglev_match.aot import cached_kernel
+from maglev_match.core.aot import cached_kernel
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.continuation import (
     SOLVED,
     BranchPoint,
@@ -43,7 +44,6 @@ from maglev_match.dynamics.continuation import (
     label_points,
 )
 from maglev_match.dynamics.system import System
-from maglev_match.reprs import compact_repr
 
 __all__ = [
     "EquilibriumResult",

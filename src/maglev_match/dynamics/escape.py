@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.hybrid import (
     FlowOptions,
     FlowStatus,
@@ -51,7 +52,6 @@ from maglev_match.dynamics.hybrid import (
     LinearStop,
     hybrid_flow,
 )
-from maglev_match.reprs import compact_repr
 
 __all__ = ["GrazingSolution", "solve_grazing", "grazing_derivative", "extrema_walk",
            "run_to_extremum", "BoundarySolution", "solve_basin_boundary", "section_walk",

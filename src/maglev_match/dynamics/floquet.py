@@ -65,8 +65,8 @@ from enum import StrEnum
 import numpy as np
 import scipy.linalg
 
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.collocation import _tables
-from maglev_match.reprs import compact_repr
 
 __all__ = [
     "FloquetMethod",

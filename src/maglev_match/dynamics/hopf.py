@@ -28,14 +28,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from maglev_match.aot import cached_kernel
+from maglev_match.core.aot import cached_kernel
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.normal_forms import (
     first_lyapunov_coefficient,
     hopf_eigenvectors,
     second_lyapunov_coefficient,
 )
 from maglev_match.dynamics.system import System
-from maglev_match.reprs import compact_repr
 
 __all__ = [
     "HopfPoint",

@@ -21,7 +21,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from maglev_match.aot import cached_kernel
+from maglev_match.core.aot import cached_kernel
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.continuation import (
     SOLVED,
     BranchPoint,
@@ -50,7 +51,6 @@ from maglev_match.dynamics.normal_forms import (
     second_lyapunov_coefficient,
 )
 from maglev_match.dynamics.system import System
-from maglev_match.reprs import compact_repr
 
 __all__ = [
     "HopfCurvePoint",

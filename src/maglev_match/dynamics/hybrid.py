@@ -69,9 +69,9 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
-from maglev_match import jax_setup  # noqa: F401  (float64)
-from maglev_match.aot import cached_kernel
-from maglev_match.reprs import compact_repr
+from maglev_match.core import jax_setup  # noqa: F401  (float64)
+from maglev_match.core.aot import cached_kernel
+from maglev_match.core.reprs import compact_repr
 
 Array = Any
 

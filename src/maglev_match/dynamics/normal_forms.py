@@ -25,7 +25,7 @@ import jax
 import numpy as np
 import scipy.linalg
 
-from maglev_match.aot import cached_kernel
+from maglev_match.core.aot import cached_kernel
 from maglev_match.dynamics.system import System
 
 __all__ = [

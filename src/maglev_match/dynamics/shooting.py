@@ -23,8 +23,8 @@ import numpy as np
 import scipy.integrate
 import scipy.optimize
 
+from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.system import System
-from maglev_match.reprs import compact_repr
 
 __all__ = ["ShootingResult", "shoot_periodic_orbit", "trajectory_extrema"]
 

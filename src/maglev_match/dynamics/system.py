@@ -15,7 +15,7 @@ Derivatives come from automatic differentiation (never finite differences):
 ``B`` and ``C`` accept complex directions (by multilinearity), as the Lyapunov-coefficient
 formulas need. Compiled functions are cached per right-hand side, so building many
 :class:`System` objects for the same model costs no recompilation, and exported ahead of
-time (:mod:`maglev_match.aot`), so a new process does not trace them again.
+time (:mod:`maglev_match.core.aot`), so a new process does not trace them again.
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from maglev_match import jax_setup  # noqa: F401  (float64 on, compilation cache)
-from maglev_match.aot import cached_kernel
-from maglev_match.reprs import compact_repr
+from maglev_match.core import jax_setup  # noqa: F401  (float64 on, compilation cache)
+from maglev_match.core.aot import cached_kernel
+from maglev_match.core.reprs import compact_repr
 
 Array = Any
 RHS = Callable[[Array, Array], Array]

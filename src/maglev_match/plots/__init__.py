@@ -21,10 +21,10 @@ def figure_of(result, **kw):
       curve with l1 along it;
     * :class:`~maglev_match.dynamics.cycles.CycleBranch` (or a list): the bifurcation
       diagram of the cycles (max/min gap deviation);
-    * :class:`~maglev_match.simulation.MaglevSimulation` (or a list): the time histories;
+    * :class:`~maglev_match.analyses.simulation.MaglevSimulation` (or a list): the time histories;
     * an :class:`xarray.Dataset` with ``chi``: the design map;
-    * :class:`~maglev_match.sensitivity.IndexSensitivity`: the tornado figure;
-    * :class:`~maglev_match.design.DesignResult`: the design search path.
+    * :class:`~maglev_match.analyses.sensitivity.IndexSensitivity`: the tornado figure;
+    * :class:`~maglev_match.analyses.design.DesignResult`: the design search path.
 
     Keyword arguments go to the figure function. Returns the matplotlib figure."""
     items = list(result) if isinstance(result, list | tuple) else [result]

@@ -13,7 +13,7 @@ if "inline" not in str(matplotlib.rcParams.get("backend", "")).lower():
     matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from maglev_match.io import atomic_write  # noqa: E402
+from maglev_match.core.io import atomic_write  # noqa: E402
 
 STYLE = {
     "figure.figsize": (7.0, 4.5),
@@ -48,6 +48,6 @@ def save_figure(fig, path: str | Path, formats: tuple[str, ...] = ("png", "svg")
 
 
 def _units(*names: str) -> tuple[str, ...]:
-    from maglev_match.units import unit
+    from maglev_match.core.units import unit
 
     return tuple(unit(n) for n in names)

@@ -31,7 +31,7 @@ def limit_touched(detail: str) -> str:
     """Which extremum of the gap a limit contact concerns: 'low' (gap 0: the cycle's
     minimum), 'high' (the upper gap limit: its maximum) or 'other' (e.g. the coil current
     reaching 0, marked at both gap extrema of that cycle)."""
-    from maglev_match.limits_check import GAP_HIGH, GAP_LOW
+    from maglev_match.maglev.limits_check import GAP_HIGH, GAP_LOW
 
     if detail == GAP_LOW:
         return "low"

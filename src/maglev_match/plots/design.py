@@ -14,7 +14,8 @@ from maglev_match.plots.base import new_figure
 def tornado_figure(sens, top: int = 15, title: str = ""):
     """Horizontal bars of the elasticity of chi (left panel) and of the margin's elasticity
     (p / |margin|) d margin / d p (right panel) for the ``top`` parameters with the largest
-    |elasticity of chi|. ``sens``: an :class:`~maglev_match.sensitivity.IndexSensitivity`."""
+    |elasticity of chi|. ``sens``: an
+    :class:`~maglev_match.analyses.sensitivity.IndexSensitivity`."""
     rows = sens.sorted_rows()[:top][::-1]
     names = [r.name for r in rows]
     chi = sens.index.chi
@@ -40,7 +41,7 @@ def tornado_figure(sens, top: int = 15, title: str = ""):
 
 def _axis_label(name: str) -> str:
     """A parameter's axis label with its unit ("EI (N m^2)"; none for dimensionless)."""
-    from maglev_match.params import PARAMETER_DOCS
+    from maglev_match.core.params import PARAMETER_DOCS
 
     unit = PARAMETER_DOCS.get(name, ("-", ""))[0]
     return name if unit == "-" else f"{name} ({unit})"
@@ -48,7 +49,7 @@ def _axis_label(name: str) -> str:
 
 def design_path_figure(result, title: str = ""):
     """The coarse chi map used for the starts and every optimiser path, the design marked.
-    ``result``: a :class:`~maglev_match.design.DesignResult`."""
+    ``result``: a :class:`~maglev_match.analyses.design.DesignResult`."""
     prob = result.problem
     names = prob.names
     chi_req = [r.bound for r in prob.requirements if r.quantity == "chi"]

@@ -25,7 +25,8 @@ _COLOUR_LABELS = {
 
 def map_figure(ds, title: str = "", design_point: tuple[float, float] | None = None,
                variable: str = "chi"):
-    """The map of :func:`maglev_match.maps.map_dataset` (or :func:`maglev_match.design_map`).
+    """The map of :func:`maglev_match.analyses.maps.map_dataset` (or
+    :func:`maglev_match.design_map`).
 
     Parameters
     ----------

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from maglev_match.analyses.simulation import MaglevSimulation, equilibrium_state, history_dataset
+from maglev_match.core.units import label as unit_label
+from maglev_match.core.units import shown as shown_in
 from maglev_match.plots.base import new_figure, save_figure
-from maglev_match.simulation import MaglevSimulation, equilibrium_state, history_dataset
-from maglev_match.units import label as unit_label
-from maglev_match.units import shown as shown_in
 
 __all__ = ["plot_simulation", "simulation_figure", "describe_initial", "describe_outcome",
            "fitted_time_window", "transient_end"]
@@ -30,7 +30,7 @@ _LIMIT_STYLE = {"color": "k", "ls": ":", "lw": 1.0}
 def describe_initial(sim: MaglevSimulation) -> str:
     """The initial state in words: the states that differ from the equilibrium (at most
     three, SI units shown in mm, mm/s or A), or 'pressed onto the free beam' for model B."""
-    from maglev_match.models import vehicle as vehicle_model
+    from maglev_match.maglev import vehicle as vehicle_model
 
     p = sim.params
     eq = equilibrium_state(p, sim.model)
@@ -61,8 +61,8 @@ def describe_initial(sim: MaglevSimulation) -> str:
 
 
 def _state_names(sim: MaglevSimulation) -> tuple[str, ...]:
-    from maglev_match.models import unit as unit_model
-    from maglev_match.models import vehicle as vehicle_model
+    from maglev_match.maglev import unit as unit_model
+    from maglev_match.maglev import vehicle as vehicle_model
 
     if sim.model == "unit":
         return unit_model.STATE_NAMES

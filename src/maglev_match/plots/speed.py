@@ -71,7 +71,7 @@ def speed_figure(sweep):
 
 
 def span_run_figure(run):
-    """Time histories of a run over spans (:class:`maglev_match.speed.SpanRun`): gap
+    """Time histories of a run over spans (:class:`maglev_match.analyses.speed.sweep.SpanRun`): gap
     deviation per levitation point, the car body's acceleration and the mid-span deflection
     of every span, with the periodic response repeated span after span (dashed) and the span
     boundaries (the front of the vehicle reaching a support) marked. Returns the figure."""
@@ -111,7 +111,8 @@ def span_run_figure(run):
 
 
 def speed_map_figure(ds):
-    """A map at speed (:func:`maglev_match.speed.run_speed_map`): chi(v) as colour at stable
+    """A map at speed (:func:`maglev_match.analyses.speed.sweep.run_speed_map`): chi(v) as colour at
+    stable
     points, unstable points crossed, lower bounds (h(v) = the gap range) marked by open
     triangles, the speed axis in km/h. Returns the figure."""
     yname, xname = ds["chi"].dims

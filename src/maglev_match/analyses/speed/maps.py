@@ -1,0 +1,165 @@
+"""Maps at speed: the read-outs of :mod:`maglev_match.analyses.speed.sweep` over a grid of the
+speed v and
+another parameter (behind ``maglev-match map --x v=START:STOP:COUNT``), row by row on Dask
+with checkpoint tiles."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from maglev_match.analyses.speed.sweep import (
+    KMH,
+    SWEEP_NAMES,
+    SpeedOptions,
+    check_speed_setup,
+    run_tiles,
+    speed_point,
+)
+from maglev_match.core.params import ParameterError, Params
+from maglev_match.maglev.moving import MovingModel
+
+__all__ = ["MAP_SPEED_VARIABLES", "SpeedMapSpec", "parse_speed_axes", "run_speed_map",
+           "compute_speed_map_tile"]
+
+
+# ---------------------------------------------------------------------------------------
+MAP_SPEED_VARIABLES = ("converged", "stable", "largest_multiplier", "daf", "gap_dev_abs_max",
+                       "wz", "body_acc_peak", "h", "h_at_ceiling", "chi")
+
+
+@dataclass(frozen=True)
+class SpeedMapSpec:
+    """A map of read-outs at speed over two axes, one of them the speed ``v`` (m/s; km/h on
+    the command line): the base parameters, the model, the axes
+    (:class:`maglev_match.analyses.maps.Axis`) and the settings. Tiles are rows (fixed y)."""
+
+    base: dict[str, Any]
+    model: str
+    x: Any
+    y: Any
+    options: dict[str, Any]
+
+    def key(self) -> str:
+        d = {"kind": "speed-map", "base": {k: self.base[k] for k in sorted(self.base)},
+             "model": self.model, "x": self.x.__dict__, "y": self.y.__dict__,
+             "options": self.options}
+        return json.dumps(d, sort_keys=True, default=float)
+
+    @property
+    def tiles(self) -> list[tuple[int, int]]:
+        return [(i, i + 1) for i in range(self.y.count)]
+
+    def point(self, xv: float, yv: float) -> tuple[Params, float]:
+        """(parameters, speed in m/s) of a grid point."""
+        from maglev_match.core.params import make_params
+
+        values = dict(self.base)
+        v = None
+        for ax, val in ((self.x, xv), (self.y, yv)):
+            if ax.name == "v":
+                v = float(val)
+            else:
+                values[ax.name] = float(val)
+        return make_params(values), float(v)  # type: ignore[arg-type]
+
+
+def parse_speed_axes(params: Params, model: str, x: str, y: str,
+                     options: SpeedOptions) -> SpeedMapSpec:
+    """Both axes of a map with the speed on one of them: ``v=START:STOP:COUNT`` in km/h (0 <=
+    START < STOP), the other ``NAME=START:STOP:COUNT`` as for ``map``; every grid point is
+    validated (parameters and speed) before any work."""
+    from maglev_match.analyses.maps import Axis, parse_axis
+
+    axes = []
+    for text, option in ((x, "--x"), (y, "--y")):
+        name = text.split("=", 1)[0].strip()
+        if name != "v":
+            axes.append(parse_axis(text, option))
+            continue
+        parts = text.split("=", 1)[1].split(":")
+        try:
+            a, b, c = float(parts[0]), float(parts[1]), int(parts[2])
+        except (ValueError, IndexError):
+            raise ParameterError(option, text, "expected v=START:STOP:COUNT (km/h)") from None
+        if not (math.isfinite(a) and math.isfinite(b)) or not 0 <= a < b:
+            raise ParameterError(option, text, "the speed range must satisfy 0 <= START < STOP "
+                                 "(km/h)")
+        if c < 2:
+            raise ParameterError(option, text, "COUNT must be at least 2")
+        axes.append(Axis("v", a * KMH, b * KMH, c))
+    ax, ay = axes
+    if ax.name == ay.name:
+        raise ParameterError("--y", y, "the two axes must be different parameters")
+    spec = SpeedMapSpec(base=params.as_input_dict(), model=MovingModel(model).value, x=ax,
+                        y=ay, options=options.key())
+    if spec.x.count * spec.y.count > 100_000:
+        raise ParameterError("--x", x, "the grid has more than 100000 points")
+    for yv in ay.values:
+        for xv in ax.values:
+            p, v = spec.point(xv, yv)
+            check_speed_setup(p, model, [v], options.spans)
+    return spec
+
+
+def compute_speed_map_tile(spec: SpeedMapSpec, rows: tuple[int, int]
+                           ) -> dict[str, np.ndarray]:
+    """Rows rows[0]..rows[1]-1 of a speed map: (rows, nx) arrays of
+    :data:`MAP_SPEED_VARIABLES`."""
+    opts = SpeedOptions(**spec.options)
+    out = {k: np.full((rows[1] - rows[0], spec.x.count), np.nan) for k in MAP_SPEED_VARIABLES}
+    for r in range(*rows):
+        for c, xv in enumerate(spec.x.values):
+            p, v = spec.point(xv, spec.y.values[r])
+            pt = speed_point(p, spec.model, v, opts)
+            for k in MAP_SPEED_VARIABLES:
+                val = getattr(pt, k)
+                out[k][r - rows[0], c] = (np.nan if val is None else float(val))
+    return out
+
+
+def run_speed_map(spec: SpeedMapSpec, checkpoint: Path | None = None, *, resume: bool = False,
+                  scheduler: str | None = None, workers: int | None = 0,
+                  progress: Callable[[int, int], None] | None = None):
+    """The speed map as an :class:`xarray.Dataset` over (y, x), computed row by row here or
+    on Dask with checkpoint tiles (:func:`run_tiles`)."""
+    import xarray as xr
+
+    from maglev_match.core.datasets import annotate
+    from maglev_match.core.params import PARAMETER_DOCS
+
+    tiles = run_tiles(spec, compute_speed_map_tile, checkpoint, MAP_SPEED_VARIABLES,
+                       spec.x.count, resume=resume, scheduler=scheduler, workers=workers,
+                       progress=progress)
+    data = {k: np.concatenate([t[k] for t in tiles], axis=0) for k in MAP_SPEED_VARIABLES}
+    dims = (spec.y.name, spec.x.name)
+    units = {"converged": "1", "stable": "1", "largest_multiplier": "1", "daf": "1",
+             "gap_dev_abs_max": "m", "wz": "1", "body_acc_peak": "m/s^2", "h": "m",
+             "h_at_ceiling": "1", "chi": "1", "v": "m/s"}
+    names = {"converged": SWEEP_NAMES["converged"], "stable": SWEEP_NAMES["stable"],
+             "largest_multiplier": SWEEP_NAMES["largest_multiplier"],
+             "daf": SWEEP_NAMES["daf"],
+             "gap_dev_abs_max": "largest |gap deviation| over the levitation points",
+             "wz": SWEEP_NAMES["wz"], "body_acc_peak": SWEEP_NAMES["body_acc_peak"],
+             "h": SWEEP_NAMES["h"], "h_at_ceiling": SWEEP_NAMES["h_at_ceiling"],
+             "chi": SWEEP_NAMES["chi"], "v": "vehicle speed"}
+
+    def coord(ax):
+        unit = "m/s" if ax.name == "v" else PARAMETER_DOCS.get(ax.name, ("",))[0]
+        return (ax.name, ax.values, {"units": unit})
+
+    ds = xr.Dataset({k: (dims, data[k]) for k in MAP_SPEED_VARIABLES},
+                    coords={spec.x.name: coord(spec.x), spec.y.name: coord(spec.y)})
+    ds["stable"] = xr.where(np.isfinite(ds["stable"]), ds["stable"], -1).astype(np.int8)
+    ds["converged"] = ds["converged"].fillna(0).astype(np.int8)
+    ds.attrs.update({"title": "maglev-match map at speed", "model": spec.model,
+                     "spec": spec.key()})
+    from maglev_match.core.params import make_params
+
+    return annotate(ds, make_params(dict(spec.base)), units=units, long_names=names)

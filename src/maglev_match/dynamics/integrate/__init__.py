@@ -1,0 +1,3 @@
+"""Integration in time: ODE runs with events (simulate), periodic responses
+of segmented systems (passage) and batched return/collision thresholds
+(threshold)."""

@@ -1,0 +1,2 @@
+"""Documents built from results: the HTML study report and the paper's
+reproduction."""
