@@ -39,8 +39,8 @@ from maglev_match.core.params import load_preset  # noqa: E402
 from maglev_match.dynamics.cycles import cycle_branch  # noqa: E402
 from maglev_match.dynamics.hopf import locate_hopf_points  # noqa: E402
 from maglev_match.dynamics.shooting import shoot_periodic_orbit, trajectory_extrema  # noqa: E402
-from maglev_match.maglev import build_system  # noqa: E402
-from maglev_match.maglev.limits_check import cycle_limit_margins  # noqa: E402
+from maglev_match.maglev.limits import cycle_limit_margins  # noqa: E402
+from maglev_match.maglev.models import build_system  # noqa: E402
 
 
 def branch_job() -> None:

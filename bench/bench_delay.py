@@ -29,8 +29,8 @@ from maglev_match.dynamics.cycles import cycle_branch
 from maglev_match.dynamics.delay import critical_delay, delay_hopf_points
 from maglev_match.dynamics.equilibria import find_equilibrium
 from maglev_match.dynamics.hopf import locate_hopf_points
-from maglev_match.maglev import build_system
-from maglev_match.maglev.limits_check import cycle_limit_margins
+from maglev_match.maglev.limits import cycle_limit_margins
+from maglev_match.maglev.models import build_system
 from maglev_match.maglev.unit import unit_dde
 from maglev_match.maglev.vehicle import vehicle_dde
 

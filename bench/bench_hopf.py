@@ -28,7 +28,7 @@ from maglev_match.dynamics.hopf import (
     locate_hopf_points,
 )
 from maglev_match.dynamics.hopf_curve import hopf_curve, stability_grid
-from maglev_match.maglev import build_system
+from maglev_match.maglev.models import build_system
 
 CPU: dict[str, float] = {}
 

@@ -30,14 +30,17 @@ import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 from maglev_match import load_preset  # noqa: E402
-from maglev_match.analyses.simulation import gap_limit_events, initial_state  # noqa: E402
+from maglev_match.analyses.simulation import initial_state  # noqa: E402
 from maglev_match.dynamics.integrate.simulate import (  # noqa: E402
     SimulationOptions,
     simulate,
     simulate_batch,
 )
-from maglev_match.maglev import build_system  # noqa: E402
 from maglev_match.maglev import vehicle as vm  # noqa: E402
+from maglev_match.maglev.limits import gap_limit_events  # noqa: E402
+from maglev_match.maglev.models import build_system  # noqa: E402
+from maglev_match.maglev.unit import gap as unit_gap  # noqa: E402
+from maglev_match.maglev.vehicle import gap_function as vehicle_gap_function  # noqa: E402
 
 RTOL, ATOL = 1e-8, 1e-8  # ATOL in units of each state's typical size (both sides)
 
@@ -169,7 +172,7 @@ def main(quick: bool) -> None:
     # ---------------- model A, 5 s
     PA = load_preset("alpha1")
     SA = build_system(PA, "unit", limited=True)
-    evA = gap_limit_events("unit", 0, PA.gap_min, PA.gap_max)
+    evA = gap_limit_events(unit_gap, PA.gap_min, PA.gap_max)
     xA = initial_state(PA, "unit", x5=-1.5e-3)
     fA, gA = unit_rhs_numpy(PA)
     for _ in range(3):  # the NumPy RHS is the same vector field
@@ -198,7 +201,7 @@ def main(quick: bool) -> None:
     # ---------------- model B, 5 s
     PB = load_preset("turnout-soft")
     SB = build_system(PB, "vehicle", limited=True)
-    evB = gap_limit_events("vehicle", PB.n_modes, PB.gap_min, PB.gap_max)
+    evB = gap_limit_events(vehicle_gap_function(PB.n_modes), PB.gap_min, PB.gap_max)
     xB = initial_state(PB, "vehicle", initial="pressed")
     fB, gB = vehicle_rhs_numpy(PB)
     x = xB + np.random.default_rng(1).standard_normal(SB.dim) * SB.state_scale * 0.1
@@ -257,14 +260,19 @@ def main(quick: bool) -> None:
           f"{sp_b_cpu / CPU['batch']:.1f}x")
 
     # ---------------- gap limits are traced: another limit value compiles nothing
-    ev2 = gap_limit_events("unit", 0, PA.gap_min, 0.9 * PA.gap_max)
+    ev2 = gap_limit_events(unit_gap, PA.gap_min, 0.9 * PA.gap_max)
     t0 = time.perf_counter()
     r2 = simulate(SA, xA, 5.0, event_fn=ev2, options=opts, n_save=2001)
     print(f"other gap limit (gap_max x 0.9), first call: {(time.perf_counter() - t0) * 1e3:.1f}"
           f" ms ({r2.outcome}; a compilation would take seconds)")
 
     # ---------------- simulated critical disturbance (the index's h_simulation)
-    from maglev_match.analyses.simulation import critical_disturbance, vehicle_critical_disturbance
+    from functools import partial
+
+    from maglev_match.analyses.simulation import critical_disturbance
+
+    vehicle_critical_disturbance = partial(critical_disturbance, model="vehicle")
+    vehicle_critical_disturbance.__name__ = "vehicle_critical_disturbance"
 
     def crit(fn, P, direction, batch, reps):
         fn(P, direction=direction, batch=batch)  # compile

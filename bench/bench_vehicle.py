@@ -33,7 +33,7 @@ def _vehicle_problem():
     from maglev_match.dynamics import collocation as C
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     system = build_system(load_preset("turnout-soft"), "vehicle")
     scan = locate_hopf_points(system, "omega1", 60.0, 160.0, n_scan=30)

@@ -15,7 +15,7 @@ import maglev_match as mm
 from maglev_match.api import resolve_params
 from maglev_match.cli import main as cli_main
 from maglev_match.dynamics.equilibria import stability as lib_stability
-from maglev_match.maglev import build_system
+from maglev_match.maglev.models import build_system
 
 PUBLIC = ("load_preset", "load_params", "Params", "System", "stability", "hopf_points",
           "hopf_curve", "cycle_branch", "simulate", "matching_index", "design_map",

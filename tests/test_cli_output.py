@@ -159,7 +159,7 @@ def test_hopf_param_L_agrees_with_the_direct_omega1_search(capsys):
     assert direct[0]["frequency"] == pytest.approx(pts[0]["frequency"], rel=1e-6)
     # the crossing speed is per metre of span: a central difference of max Re(lambda) in L
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     assert pts[0]["others_stable"]
     h = 1e-4

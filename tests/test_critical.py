@@ -26,15 +26,11 @@ from maglev_match.analyses.critical import (
     solve_critical,
     solve_critical_batch,
 )
-from maglev_match.analyses.simulation import (
-    _events_for,
-    _system,
-    critical_disturbance,
-    critical_disturbance_of_system,
-)
+from maglev_match.analyses.simulation import critical_disturbance, critical_disturbance_of_system
 from maglev_match.core.params import ParameterError, load_preset
 from maglev_match.dynamics.escape import extrema_walk, grazing_derivative, solve_grazing
 from maglev_match.dynamics.integrate.simulate import SimulationOptions, simulate_batch
+from maglev_match.maglev.models import maglev_model
 
 W = np.array([1.0, 0.0, 0.0])  # the oscillator's limited observable: x
 
@@ -219,7 +215,8 @@ def test_smallest_collision_quoted_is_the_smallest_that_collides():
         assert hi < known and hi - cd.largest_undecided <= 1e-6 * 1.0001
         x0 = np.zeros((2, 9))
         x0[:, 4] = d * np.array([hi, cd.largest_undecided])
-        b = simulate_batch(_system(P, "unit", True), x0, 2.0, event_fn=_events_for(P, "unit"))
+        m = maglev_model(P)
+        b = simulate_batch(m.system(limited=True), x0, 2.0, event_fn=m.gap_events())
         assert list(b.outcome) == ["collision", "running"]
 
 
@@ -244,6 +241,7 @@ def test_near_hopf_beam_up_is_decided_by_a_basin_boundary():
     # collision times grow without bound towards the solved size from above
     x0 = np.zeros((2, 9))
     x0[:, 4] = -r.size * np.array([1 + 1e-4, 1 + 1e-7])
-    b = simulate_batch(_system(P, "unit", True), x0, 30.0, event_fn=_events_for(P, "unit"))
+    m = maglev_model(P)
+    b = simulate_batch(m.system(limited=True), x0, 30.0, event_fn=m.gap_events())
     assert list(b.outcome) == ["collision", "collision"]
     assert b.event_time[1] > b.event_time[0] + 1.0

@@ -102,8 +102,8 @@ def test_two_branch_points_of_cycles_near_a_fold_are_both_solved():
 @pytest.fixture(scope="module")
 def alpha1_contact():
     from maglev_match.core.params import load_preset
-    from maglev_match.maglev import build_system
-    from maglev_match.maglev.limits_check import cycle_limit_margins
+    from maglev_match.maglev.limits import cycle_limit_margins
+    from maglev_match.maglev.models import build_system
 
     params = load_preset("alpha1").replace(sigma=4e-4)
     system = build_system(params, "unit")

@@ -126,7 +126,7 @@ def test_correct_cycle_and_floquet_recomputation():
 @pytest.fixture(scope="module")
 def model_a():
     from maglev_match.core.params import load_preset
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     return build_system(load_preset("alpha1").replace(sigma=4e-4), "unit")
 

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from maglev_match.analyses.simulation import gap_limit_events, simulate_maglev
+from maglev_match.analyses.simulation import simulate_maglev
 from maglev_match.core.params import ParameterError, load_preset
 from maglev_match.dynamics.delay import (
     DiscretisedSystem,
@@ -21,7 +21,8 @@ from maglev_match.dynamics.equilibria import stability
 from maglev_match.dynamics.hopf import locate_hopf_points, refine_hopf_point
 from maglev_match.dynamics.normal_forms import first_lyapunov_coefficient
 from maglev_match.dynamics.system import System
-from maglev_match.maglev import build_system
+from maglev_match.maglev.limits import gap_limit_events
+from maglev_match.maglev.models import build_system
 from maglev_match.maglev.unit import (
     STATE_SCALE,
     param_vector,
@@ -30,6 +31,7 @@ from maglev_match.maglev.unit import (
     unit_rhs_limited,
     unit_system,
 )
+from maglev_match.maglev.unit import gap as unit_gap
 
 
 @pytest.fixture(scope="module")
@@ -156,7 +158,7 @@ def test_simulation_with_delay_matches_the_method_of_steps(soft):
     1e-10 s; the states to 2e-4 of their scale (the coil current, near t = tau, where the
     constant past's kink is transported through the history)."""
     p = soft.replace(tau=1e-3)
-    ev = gap_limit_events("unit", 0, p.gap_min, p.gap_max)
+    ev = gap_limit_events(unit_gap, p.gap_min, p.gap_max)
     dde = unit_dde(p, limited=True)
     for x5, end in ((-1e-3, "running"), (-6e-3, "collision")):
         x0 = np.zeros(9)

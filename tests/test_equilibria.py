@@ -76,7 +76,7 @@ def test_neutral_saddle_is_not_a_hopf_point():
 
 def test_refine_rejects_a_hopf_point_outside_its_range():
     from maglev_match.core.params import load_preset
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     unit = build_system(load_preset("turnout-soft"), "unit")
     free = dataclasses.replace(unit, param_ranges={})  # the model without its valid ranges
@@ -110,7 +110,7 @@ def test_equilibrium_branch_stops_at_the_end_of_the_valid_range():
     asked to start at -50 does not start."""
     from maglev_match.core.params import load_preset
     from maglev_match.dynamics.equilibria import equilibrium_branch
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     unit = build_system(load_preset("alpha1"), "unit")
     br = equilibrium_branch(unit, "omega1", 50.0, -50.0, n_points=20)

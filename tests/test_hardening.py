@@ -198,7 +198,7 @@ def test_restart_loader_on_mutated_files_gives_a_clean_error_or_the_same_restart
     of the undamaged file (a mutation of data the restart does not use changes nothing)."""
     from maglev_match.analyses.restart import RestartFileError, load_cycle_restart
     from maglev_match.core.params import load_params
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     system = build_system(load_params("alpha1"), "unit")
     good = load_cycle_restart(saved_branch, label, system)

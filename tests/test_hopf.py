@@ -108,7 +108,7 @@ def test_hopf_curve_passes_turning_point():
 @pytest.fixture(scope="module")
 def unit():
     from maglev_match.core.params import load_preset
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     return build_system(load_preset("turnout-soft"), "unit")
 

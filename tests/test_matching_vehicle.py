@@ -7,6 +7,7 @@ import pytest
 
 from maglev_match.analyses.matching import matching_index
 from maglev_match.core.params import load_preset
+from maglev_match.maglev.models import VehicleModel
 
 SOFT = load_preset("turnout-soft")
 
@@ -25,10 +26,9 @@ def test_vehicle_unstable_equilibrium_gives_chi_exactly_zero():
 def test_vehicle_w0_is_the_static_mid_span_deflection():
     """w0 of the vehicle = sum_n q_n* sin(n pi / 2) with q_n* the static modal
     coordinates under the six point loads (m_s / 2 + m_b / 6) g."""
-    from maglev_match.analyses.simulation import vehicle_disturbance_geometry
 
     p = SOFT
-    _, _, w_mid = vehicle_disturbance_geometry(p)
+    _, _, w_mid = VehicleModel(p).pressed_geometry
     load = (p.m_s / 2 + p.m_b / 6) * p.g
     xj = p.L / 2 + np.array([-p.s0 - p.s, -p.s0 + p.s, -p.s, p.s, p.s0 - p.s, p.s0 + p.s])
     w = 0.0
@@ -65,17 +65,13 @@ def test_vehicle_cycle_agrees_with_shooting():
 def test_vehicle_critical_disturbance_bracket_is_consistent():
     """The pressed-state line: the size just inside the bracket returns, the one just outside
     collides (simulated independently), and d = w0 is the paper's pressed state."""
-    from maglev_match.analyses.simulation import (
-        simulate_maglev,
-        vehicle_critical_disturbance,
-        vehicle_disturbance_geometry,
-    )
+    from maglev_match.analyses.simulation import critical_disturbance, simulate_maglev
     from maglev_match.maglev.vehicle import pressed_initial_state
 
     p = SOFT
-    x_eq, delta, w_mid = vehicle_disturbance_geometry(p)
+    x_eq, delta, w_mid = VehicleModel(p).pressed_geometry
     np.testing.assert_allclose(x_eq + delta, pressed_initial_state(p), atol=1e-15)
-    cd = vehicle_critical_disturbance(p, direction=-1)
+    cd = critical_disturbance(p, model="vehicle", direction=-1)
     assert cd.status == "bracketed", cd
     assert cd.smallest_collision - cd.largest_return <= cd.tol * 1.0000001
     inside = x_eq + cd.largest_return / w_mid * delta

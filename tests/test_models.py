@@ -6,7 +6,7 @@ import pytest
 from maglev_match.core.params import load_preset
 from maglev_match.dynamics.equilibria import eigenvalue_analysis, find_equilibrium, stability
 from maglev_match.dynamics.system import System
-from maglev_match.maglev import build_system
+from maglev_match.maglev.models import build_system
 from maglev_match.maglev.unit import unit_system
 from maglev_match.maglev.vehicle import layout, pressed_initial_state, vehicle_system
 

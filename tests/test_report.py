@@ -167,7 +167,7 @@ def test_variant_search_finds_a_stability_boundary():
     """The kD value returned puts a root of max Re(lambda) at (102.5 rad/s, 4e-4): the
     equilibrium changes stability across it (checked by eigenvalues on both sides)."""
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
     from maglev_match.present.reproduce import VARIANT_TARGET, variant_search
 
     v = variant_search("kD", n_scan=21)
@@ -270,7 +270,7 @@ def test_variant_presets_reconcile_the_papers_stability_statements(param):
     alpha2 = [105, 5e-4] unstable, alpha3 = [85, 3.7e-4] stable, the stiff turnout beam
     unstable and the soft one stable."""
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     variant, soft = load_preset(f"paper-variant-{param}"), load_preset("turnout-soft")
     changed = {k for k, v in variant.as_dict().items() if v != soft.as_dict()[k]}

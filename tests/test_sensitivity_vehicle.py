@@ -25,10 +25,10 @@ from maglev_match.analyses.sensitivity import (
     index_sensitivity,
     linearised_spread,
 )
-from maglev_match.analyses.simulation import vehicle_disturbance_geometry
 from maglev_match.cli import main
 from maglev_match.core.params import load_preset
 from maglev_match.dynamics.equilibria import stability
+from maglev_match.maglev.models import VehicleModel
 from maglev_match.maglev.vehicle import vehicle_system
 
 CYCLE_POINT = load_preset("turnout-soft").replace(EI=3.2e10)
@@ -68,7 +68,7 @@ def test_vehicle_w0_formula_and_its_derivatives():
     fmap = derived_map(p, "vehicle")
     pm, w0, hmax = fmap(jnp.asarray(q))
     # the same number as the index's w0 (there from the solved equilibrium)
-    assert float(w0) == pytest.approx(vehicle_disturbance_geometry(p)[2], rel=1e-12)
+    assert float(w0) == pytest.approx(VehicleModel(p).pressed_geometry[2], rel=1e-12)
     np.testing.assert_allclose(np.asarray(pm), vehicle_system(p).p, rtol=1e-14)
     assert float(hmax) == pytest.approx(p.gap_max - p.c0, rel=1e-14)
     dw0 = np.asarray(jax.jacfwd(lambda x: fmap(x)[1])(jnp.asarray(q)))

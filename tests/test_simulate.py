@@ -14,7 +14,6 @@ from maglev_match import load_preset
 from maglev_match.analyses.simulation import (
     critical_disturbance,
     describe_event,
-    gap_limit_events,
     history_dataset,
     initial_state,
     save_history,
@@ -22,8 +21,11 @@ from maglev_match.analyses.simulation import (
 )
 from maglev_match.dynamics.integrate.simulate import SimulationOptions, simulate, simulate_batch
 from maglev_match.dynamics.system import System
-from maglev_match.maglev import build_system
 from maglev_match.maglev import vehicle as vehicle_model
+from maglev_match.maglev.limits import gap_limit_events
+from maglev_match.maglev.models import build_system
+from maglev_match.maglev.unit import gap as unit_gap
+from maglev_match.maglev.vehicle import gap_function as vehicle_gap_function
 
 
 # ---------------------------------------------------------------------------------------
@@ -245,7 +247,7 @@ def test_vehicle_symmetric_disturbance_stays_symmetric():
     rng = np.random.default_rng(1)
     asym = sym + (rng.standard_normal(sys_.dim) * sys_.state_scale * 0.2)
     batch = np.stack([sym, asym, M @ asym])
-    events = gap_limit_events("vehicle", P.n_modes, P.gap_min, P.gap_max)
+    events = gap_limit_events(vehicle_gap_function(P.n_modes), P.gap_min, P.gap_max)
     b = simulate_batch(sys_, batch, 1.0, event_fn=events, n_save=101)
     assert not np.any(b.outcome == "collision")
     x = b.x / sys_.state_scale
@@ -258,7 +260,7 @@ def test_batch_equals_single_runs():
     """A batched call gives the same outcomes and collision times as single runs."""
     P = load_preset("alpha3")
     sys_ = build_system(P, "unit", limited=True)
-    events = gap_limit_events("unit", 0, P.gap_min, P.gap_max)
+    events = gap_limit_events(unit_gap, P.gap_min, P.gap_max)
     sizes = np.array([-2e-3, -8e-3, 3e-3, -9e-3])
     x0 = np.zeros((4, 9))
     x0[:, 4] = sizes
@@ -283,7 +285,7 @@ def test_critical_disturbance_bracket_is_consistent():
     assert 0 < c.largest_return < c.smallest_collision < c.gap_range
     assert c.unresolved == 0 and c.runs >= 16
     sys_ = build_system(P, "unit", limited=True)
-    events = gap_limit_events("unit", 0, P.gap_min, P.gap_max)
+    events = gap_limit_events(unit_gap, P.gap_min, P.gap_max)
     x0 = np.zeros((2, 9))
     x0[:, 4] = [-c.largest_return, -c.smallest_collision]
     b = simulate_batch(sys_, x0, 80.0, event_fn=events,
@@ -452,10 +454,10 @@ def test_gap_limits_are_traced_arguments():
     sys_ = build_system(P, "unit", limited=True)
     x0 = initial_state(P, "unit", x5=-1.5e-3)  # the gap starts at 9.5 mm, peaks at 10.6
     opts = SimulationOptions(stop_on_converged=True)
-    wide = simulate(sys_, x0, 5.0, event_fn=gap_limit_events("unit", 0, P.gap_min, P.gap_max),
+    wide = simulate(sys_, x0, 5.0, event_fn=gap_limit_events(unit_gap, P.gap_min, P.gap_max),
                     options=opts, n_save=11)
     misses = sim_mod._compiled_kernel.cache_info().misses
-    tight = simulate(sys_, x0, 5.0, event_fn=gap_limit_events("unit", 0, 0.0, 10.2e-3),
+    tight = simulate(sys_, x0, 5.0, event_fn=gap_limit_events(unit_gap, 0.0, 10.2e-3),
                      options=opts, n_save=11)
     assert sim_mod._compiled_kernel.cache_info().misses == misses  # no new kernel
     assert wide.outcome == "converged" and tight.outcome == "collision"

@@ -32,8 +32,8 @@ from maglev_match.dynamics.integrate.passage import (
     reduced_factors,
     run_passage,
 )
-from maglev_match.maglev import build_system
 from maglev_match.maglev import moving as mv
+from maglev_match.maglev.models import build_system
 
 SOFT = load_preset("turnout-soft")
 # the unit with one mode per span (model A's beam): the properties tested do not depend on

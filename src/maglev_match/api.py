@@ -147,7 +147,7 @@ def build_system(params: Params | str | None = None, model: str = "unit", *,
         The [`System`][maglev_match.dynamics.system.System] (vector field, parameter
         vector, state names, read-outs).
     """
-    from maglev_match.maglev import build_system as _build
+    from maglev_match.maglev.models import build_system as _build
 
     return _build(resolve_params(params, **overrides), _check_model(model), limited=limited)
 
@@ -423,7 +423,7 @@ def cycle_branch(params: Params | str | None = None, param: str = "omega1", *,
     """
     from maglev_match.dynamics.cycles import cycle_branch as _cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.maglev.limits_check import cycle_limit_margins
+    from maglev_match.maglev.limits import cycle_limit_margins
 
     if isinstance(params, str) and not _names_a_preset(params):  # cycle_branch(param, p)
         _deprecated("cycle_branch(param, params)", "cycle_branch(params, param)")

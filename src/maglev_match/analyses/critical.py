@@ -73,6 +73,8 @@ from maglev_match.dynamics.hybrid import (
     orbit_parameter_derivative,
     segments_from_flow,
 )
+from maglev_match.maglev.base import MaglevModel
+from maglev_match.maglev.models import maglev_model
 
 __all__ = ["Mechanism", "CriticalSize", "solve_critical", "solve_critical_batch",
            "critical_from_bisection", "critical_derivative", "MECHANISM_TEXT",
@@ -217,35 +219,24 @@ class _Line:
         return np.broadcast_to(self.dirn, (d.size, self.dirn.size)).copy()
 
 
-def disturbance_line(params: Params, direction: int, model: str = "unit") -> _Line:
-    """The disturbance line of :func:`maglev_match.analyses.simulation.critical_disturbance` (model
-    A:
-    x5(0) = direction d) or of
-    :func:`~maglev_match.analyses.simulation.vehicle_critical_disturbance`
-    (model B: x_eq + s (pressed - x_eq), d = s w_mid), with the clamped system."""
-    from maglev_match.maglev.clamp import clamped_system
-
-    if direction not in (-1, 1):
-        raise ParameterError("direction", direction, "must be -1 or +1")
-    hs = clamped_system(params, model)
+def disturbance_line(params: Params | MaglevModel, direction: int, model: str = "unit"
+                     ) -> _Line:
+    """The index's disturbance line of a maglev model
+    (:meth:`~maglev_match.maglev.base.MaglevModel.disturbance`: model A x5(0) = direction
+    d; model B x_eq + s (pressed - x_eq), d = s w_mid) with its clamped system."""
+    m = maglev_model(params, model)
+    dist = m.disturbance(direction)  # (checks the direction)
+    params = m.params
+    hs = m.clamped()
     n = hs.dim
-    if model == "unit":
-        base = np.zeros(n)
-        dirn = np.zeros(n)
-        dirn[4] = float(direction)
-    else:
-        from maglev_match.analyses.simulation import vehicle_disturbance_geometry
-
-        x_eq, delta, w_mid = vehicle_disturbance_geometry(params)
-        base = x_eq
-        dirn = (-direction) * delta / w_mid
     g = hs.observables["gap_deviation"]
     pj = jnp.asarray(hs.p)
     W = np.atleast_2d(np.asarray(jax.jacfwd(lambda x: jnp.atleast_1d(g(x, pj)))(
         jnp.zeros(n))))
     g0 = np.atleast_1d(np.asarray(g(jnp.zeros(n), pj)))
-    return _Line(hs=hs, base=base, dirn=dirn, W=W, g0=g0,
-                 upper=float(params.gap_max - params.c0), lower=float(params.gap_min - params.c0))
+    return _Line(hs=hs, base=dist.base, dirn=dist.step, W=W, g0=g0,
+                 upper=float(params.gap_max - params.c0),
+                 lower=float(params.gap_min - params.c0))
 
 
 def _entry(cd: Any, size: float | None) -> int:
@@ -289,7 +280,7 @@ def _simple(cd: Any, direction: int, model: str) -> CriticalSize | None:
     return None
 
 
-def critical_from_bisection(params: Params, cd: Any, *, model: str = "unit",
+def critical_from_bisection(params: Params | MaglevModel, cd: Any, *, model: str = "unit",
                             derivative: bool = False, orbit_hint: Any = None) -> CriticalSize:
     """Classify the bracket ``cd`` (a
     :class:`~maglev_match.analyses.simulation.CriticalDisturbance`)
@@ -303,6 +294,8 @@ def critical_from_bisection(params: Params, cd: Any, *, model: str = "unit",
     the clamped system already computed at these parameters (the other direction's)."""
     from dataclasses import replace
 
+    m = maglev_model(params, model)
+    model = m.name
     direction = int(cd.direction)
     simple = _simple(cd, direction, model)
     if simple is not None:
@@ -332,15 +325,15 @@ def critical_from_bisection(params: Params, cd: Any, *, model: str = "unit",
                 and not growing else "mixed" if tangent and growing else None)
     bisect = replace(bisect, margin_below=margin, evidence=evidence)
     if tangent and not (growth is not None and growth > 4 * GROWTH_BASIN):
-        res = _solve_grazing_direction(params, cd, bisect, model=model, derivative=derivative)
+        res = _solve_grazing_direction(m, cd, bisect, derivative=derivative)
         if res.solved or not growing:
             return res
     if growing or not tangent:
-        res = _solve_basin_direction(params, cd, bisect, model=model, derivative=derivative,
+        res = _solve_basin_direction(m, cd, bisect, derivative=derivative,
                                      orbit_hint=orbit_hint)
         if res.solved or not tangent:
             return res
-    return _solve_grazing_direction(params, cd, bisect, model=model, derivative=derivative)
+    return _solve_grazing_direction(m, cd, bisect, derivative=derivative)
 
 
 def _with_reason(res: CriticalSize, reason: str) -> CriticalSize:
@@ -366,11 +359,11 @@ def _window(line: _Line, w: np.ndarray, side: int, d: float, t_coll: float, p: n
     return 0.5 * (t_prev + t_star), t_star + 0.75 * max(t_next - t_star, 1e-4)
 
 
-def _solve_grazing_direction(params: Params, cd: Any, bisect: CriticalSize, *, model: str,
+def _solve_grazing_direction(m: MaglevModel, cd: Any, bisect: CriticalSize, *,
                              derivative: bool) -> CriticalSize:
     from dataclasses import replace
 
-    line = disturbance_line(params, bisect.direction, model)
+    line = disturbance_line(m, bisect.direction)
     p = line.hs.p
     j = (bisect.point or 1) - 1
     side = 1 if bisect.limit == "upper" else -1
@@ -382,7 +375,7 @@ def _solve_grazing_direction(params: Params, cd: Any, bisect: CriticalSize, *, m
     d_mid = 0.5 * (lo + hi)
     win = _window(line, w, side, d_mid, t_coll, p)
     what = (f"collision at the {bisect.limit} gap limit"
-            + (f" of point {bisect.point}" if model == "vehicle" else "")
+            + (f" of point {bisect.point}" if m.n_points > 1 else "")
             + f" at {t_coll:.4g} s, collision times "
             + ("steady" if bisect.growth is None else f"{100 * bisect.growth:+.0f} %")
             + " towards the bracket")
@@ -415,7 +408,7 @@ def _solve_grazing_direction(params: Params, cd: Any, bisect: CriticalSize, *, m
                   t_star=float(sol.t_star), iterations=sol.iterations,
                   residual=float(sol.residual), window=win, derivative_available=True)
     if derivative:
-        res = critical_derivative(params, res)
+        res = critical_derivative(m, res)
     return res
 
 
@@ -447,12 +440,12 @@ def _saddle_cycle(line: _Line, x: np.ndarray, s: np.ndarray, p: np.ndarray, t_fr
     return orbit, ""
 
 
-def _solve_basin_direction(params: Params, cd: Any, bisect: CriticalSize, *, model: str,
+def _solve_basin_direction(m: MaglevModel, cd: Any, bisect: CriticalSize, *,
                            derivative: bool, orbit_hint: HybridOrbit | None = None
                            ) -> CriticalSize:
     from dataclasses import replace
 
-    line = disturbance_line(params, bisect.direction, model)
+    line = disturbance_line(m, bisect.direction)
     p = line.hs.p
     sc = np.asarray(line.hs.state_scale, float)
     lo, hi = bisect.bracket
@@ -541,33 +534,36 @@ def _solve_basin_direction(params: Params, cd: Any, bisect: CriticalSize, *, mod
                   residual=float(sol.residual), window=win, derivative_available=True,
                   landing=landing, **info)
     if derivative:
-        res = critical_derivative(params, res)
+        res = critical_derivative(m, res)
     return res
 
 
-def critical_derivative(params: Params, res: CriticalSize) -> CriticalSize:
+def critical_derivative(params: Params | MaglevModel, res: CriticalSize) -> CriticalSize:
     """``res`` with dsize/dp (model parameters) and dsize/dlimit filled in (a solved
-    grazing size; other mechanisms are returned unchanged, without a derivative)."""
+    grazing size; other mechanisms are returned unchanged, without a derivative).
+    ``params``: the parameter set of ``res`` (its model is ``res.model``) or the model."""
     from dataclasses import replace
 
+    m = maglev_model(params, res.model)
+
     if res.mechanism == Mechanism.BASIN_BOUNDARY and res.landing is not None:
-        line = disturbance_line(params, res.direction, res.model)
+        line = disturbance_line(m, res.direction)
         lnd = res.landing
         dxs = orbit_parameter_derivative(line.hs, res.orbit, lnd["segment"], lnd["node"])
         dd = basin_boundary_derivative(
             line.hs, float(res.size), line.x0_of, line.dx0_dd, lnd["x_star"], lnd["left"],
             lnd["normal"], dxs, res.window[0], res.window[1], p=line.hs.p,
-            dx0_dp=_dx0_dp(params, res.direction, res.model, res.size), options=FLOW)
+            dx0_dp=m.disturbance_derivative(res.direction, res.size), options=FLOW)
         if not np.all(np.isfinite(dd)):
             return replace(res, derivative_available=False,
                            reason=res.reason + "; the derivative run lost the section")
         return replace(res, dsize_dp=dd, dsize_dlimit=0.0)
     if res.mechanism != Mechanism.GRAZING or res.window is None or res.size is None:
         return res
-    line = disturbance_line(params, res.direction, res.model)
+    line = disturbance_line(m, res.direction)
     j = (res.point or 1) - 1
     side = 1 if res.limit == "upper" else -1
-    dx0_dp = _dx0_dp(params, res.direction, res.model, res.size)
+    dx0_dp = m.disturbance_derivative(res.direction, res.size)
     dd_dp, dd_dL, _ = grazing_derivative(line.hs, [res.size], line.x0_of, line.dx0_dd,
                                          line.W[j], side, res.window[0], res.window[1],
                                          p=line.hs.p, dx0_dp=dx0_dp, options=FLOW)
@@ -576,64 +572,27 @@ def critical_derivative(params: Params, res: CriticalSize) -> CriticalSize:
                        reason=res.reason + "; the derivative run lost the tangency")
     # the gap deviation g = w . x + g0(p) and the limit L = (gap limit - c0) - g0: both move
     # with the parameters; L's dependence on the model parameters enters through dd/dL
-    dL_dp = _dlimit_dp(params, res.model, j, side)
+    dL_dp = _dlimit_dp(m, j)
     return replace(res, dsize_dp=dd_dp[0] + dd_dL[0] * dL_dp, dsize_dlimit=float(dd_dL[0]))
 
 
-def _dx0_dp(params: Params, direction: int, model: str, size: float) -> np.ndarray | None:
-    """dx0/dp along the disturbance line: zero for model A; model B's line moves with the
-    parameters (equilibrium, pressed state, mid-span deflection)."""
-    if model == "unit":
-        return None
-    from maglev_match.maglev import vehicle as vm
-
-    n_modes = params.n_modes
-    lay = vm.layout(n_modes)
-    mid = jnp.sin(jnp.arange(1, n_modes + 1, dtype=jnp.float64) * jnp.pi / 2.0)
-
-    def x0(p):
-        *_, i0, q_static = vm._geometry(p, n_modes)
-        x_eq = jnp.zeros(34 + 2 * n_modes).at[lay["q"]].set(q_static).at[lay["i"]].set(i0)
-        delta = jnp.zeros_like(x_eq).at[lay["q"]].set(-q_static)
-        w_mid = q_static @ mid
-        return x_eq + (-direction) * size / w_mid * delta
-
-    return np.asarray(jax.jacfwd(x0)(jnp.asarray(vm.param_vector(params))))
-
-
-def _dlimit_dp(params: Params, model: str, j: int, side: int) -> np.ndarray:
+def _dlimit_dp(m: MaglevModel, j: int) -> np.ndarray:
     """d L / dp with L = (gap limit - c0) - g0_j(p), per model parameter."""
-    line_p = (np.asarray(_unit_p(params)) if model == "unit"
-              else np.asarray(_vehicle_p(params)))
-    from maglev_match.maglev.clamp import clamped_system
-
-    hs = clamped_system(params, model)
+    hs = m.clamped()
     g = hs.observables["gap_deviation"]
     n = hs.dim
     dg0 = np.atleast_2d(np.asarray(jax.jacfwd(
-        lambda p: jnp.atleast_1d(g(jnp.zeros(n), p)))(jnp.asarray(line_p))))
+        lambda p: jnp.atleast_1d(g(jnp.zeros(n), p)))(jnp.asarray(m.param_vector()))))
     names = list(hs.param_names)
     dc0 = np.zeros(len(names))
     dc0[names.index("c0")] = 1.0
     return -dc0 - dg0[j]
 
 
-def _unit_p(params: Params) -> np.ndarray:
-    from maglev_match.maglev.unit import param_vector
-
-    return param_vector(params)
-
-
-def _vehicle_p(params: Params) -> np.ndarray:
-    from maglev_match.maglev.vehicle import param_vector
-
-    return param_vector(params)
-
-
 # ---------------------------------------------------------------------------------------
 # entry points
 # ---------------------------------------------------------------------------------------
-def solve_critical(params: Params, direction: int, *, model: str = "unit",
+def solve_critical(params: Params | MaglevModel, direction: int, *, model: str = "unit",
                    bisection: Any = None, derivative: bool = False,
                    bisection_kwargs: dict[str, Any] | None = None) -> CriticalSize:
     """The critical disturbance of one direction, solved where a grazing or basin-boundary
@@ -648,15 +607,12 @@ def solve_critical(params: Params, direction: int, *, model: str = "unit",
         this direction (computed when None, with ``bisection_kwargs``).
     derivative : also dsize/dp (solved sizes only).
     """
+    m = maglev_model(params, model)
     if bisection is None:
-        from maglev_match.analyses.simulation import (
-            critical_disturbance,
-            vehicle_critical_disturbance,
-        )
+        from maglev_match.analyses.simulation import critical_disturbance
 
-        run = critical_disturbance if model == "unit" else vehicle_critical_disturbance
-        bisection = run(params, direction=direction, **(bisection_kwargs or {}))
-    return critical_from_bisection(params, bisection, model=model, derivative=derivative)
+        bisection = critical_disturbance(m, direction=direction, **(bisection_kwargs or {}))
+    return critical_from_bisection(m, bisection, derivative=derivative)
 
 
 def solve_critical_batch(
@@ -755,7 +711,6 @@ def solve_critical_batch(
 def _verify(params_list, warm, sols, ok, sides, direction, model) -> list[bool]:
     """Two limited simulations per warm-started solution: 1 - 1e-4 must not collide,
     1 + 1e-4 must collide at the same limit (one batched call per model point set)."""
-    from maglev_match.analyses.simulation import _events_for, _system, equilibrium_state
     from maglev_match.dynamics.integrate.simulate import (
         COLLISION,
         SimulationOptions,
@@ -767,14 +722,13 @@ def _verify(params_list, warm, sols, ok, sides, direction, model) -> list[bool]:
     for i, k in enumerate(warm):
         if not ok[i]:
             continue
-        params = params_list[k]
-        line = disturbance_line(params, direction, model)
+        m = maglev_model(params_list[k], model)
+        line = disturbance_line(m, direction)
         d = sols[i].size
         x0 = line.x0_of(np.array([d * (1 - 1e-4), d * (1 + 1e-4)]))
         horizon = 2.0 * float(sols[i].t_star) + 0.5
-        b = simulate_batch(_system(params, model, True), x0, horizon,
-                           event_fn=_events_for(params, model),
-                           x_ref=equilibrium_state(params, model), options=opts)
+        b = simulate_batch(m.system(limited=True), x0, horizon, event_fn=m.gap_events(),
+                           x_ref=m.equilibrium(), options=opts)
         below_ok = int(b.outcome_code[0]) != COLLISION
         above_ok = (int(b.outcome_code[1]) == COLLISION
                     and int(b.event_index[1]) % 2 == (1 if sides[i] > 0 else 0))

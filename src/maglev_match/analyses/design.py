@@ -44,6 +44,8 @@ import numpy as np
 
 from maglev_match.core.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError, Params
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
+from maglev_match.maglev.catalog import ModelInfo, model_info
 
 if TYPE_CHECKING:  # the index and its sensitivities (and JAX) load when a design runs, so
     # that the parsers below answer a bad --vary or --require at once
@@ -199,11 +201,10 @@ class MaglevEvaluator:
         for n in names:
             if n not in FIELD_NAMES:
                 raise ParameterError("--vary", n, "unknown parameter")
-        if model not in ("unit", "vehicle"):
-            raise ParameterError("--model", model, "must be 'unit' or 'vehicle'")
+        self.info = model_info(model, "--model")
         self.base = base
         self.names = tuple(names)
-        self.model = model
+        self.model = self.info.name
         self.simulate = bool(simulate)
 
     def params(self, values: np.ndarray) -> Params:
@@ -222,8 +223,8 @@ class MaglevEvaluator:
         if gradient:
             sens = index_sensitivity(p, idx, boundaries=False, model=self.model)
             status = sens.status
-            dchi = np.array([_row(sens, n, "dchi_paper", self.model) for n in self.names])
-            dmargin = np.array([_row(sens, n, "dmargin", self.model) for n in self.names])
+            dchi = np.array([_row(sens, n, "dchi_paper", self.info) for n in self.names])
+            dmargin = np.array([_row(sens, n, "dmargin", self.info) for n in self.names])
             rows = [sens.row(n) if n in sens._by_name else None for n in self.names]
             if all(r is not None and r.dchi_simulation is not None for r in rows):
                 dsim = np.array([r.dchi_simulation for r in rows])
@@ -245,10 +246,11 @@ class MaglevEvaluator:
         instead of a full index per point. Only for ranking starts: each start is then
         evaluated by the full index. Model A with one or two varied parameters; None
         otherwise (the caller falls back to full indices)."""
+        from maglev_match.analyses.maps import MAP_MODELS, Axis, MapSpec, compute_row
+
         d = len(problem.variables)
-        if self.model != "unit" or d > 2:
+        if self.model not in MAP_MODELS or d > 2:
             return None
-        from maglev_match.analyses.maps import Axis, MapSpec, compute_row
         from maglev_match.analyses.matching import cycle_settings
 
         v = problem.variables
@@ -264,14 +266,14 @@ class MaglevEvaluator:
         return chi, margin
 
 
-def _row(sens, name: str, attr: str, model: str = "unit") -> float:
+def _row(sens, name: str, attr: str, info: ModelInfo) -> float:
     """A derivative by a varied parameter; a derivable value (omega1, sigma) that is varied
     becomes explicit, so it has its own row."""
     try:
         return float(getattr(sens.row(name), attr))
     except KeyError:
-        which = "model A's" if model == "unit" else "the vehicle's"
-        raise ParameterError("--vary", name, f"not a parameter of {which} index") from None
+        raise ParameterError("--vary", name,
+                             f"not a parameter of {info.short}'s index") from None
 
 
 class SystemEvaluator:
@@ -328,7 +330,7 @@ class Candidate:
 
 
 @dataclass(frozen=True)
-class DesignResult:
+class DesignResult(Plottable):
     """The design, its full index, active constraints and how it was found."""
 
     __repr__ = compact_repr
@@ -349,14 +351,6 @@ class DesignResult:
     message: str = ""
     warnings: tuple[str, ...] = ()
     margin_scale: float = field(default=1.0, repr=False)
-
-    def plot(self, path=None, **kw):
-        """This result's figure, as the command line draws it
-        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
-        (returns the files), else returned."""
-        from maglev_match.plots import plot
-
-        return plot(self, path, **kw)
 
     def as_json(self) -> dict[str, Any]:
         return {

@@ -94,6 +94,10 @@ SPOT_CHECK_TOL = 0.03
 # One worker process per core, each single-threaded: on 2 cores a row of 100 points ran in
 # 1.6 s single-threaded against 2.3 s with XLA's and BLAS's own thread pools (measured before
 # the row scan of issue 14; a warm single-threaded row now takes ~0.8 s).
+#: the maglev models whose map rows this module computes (model A: its rows are written on
+#: model A's parameter vector and its limited system)
+MAP_MODELS = ("unit",)
+
 SINGLE_THREADED_ENV = {
     "OMP_NUM_THREADS": "1",
     "OPENBLAS_NUM_THREADS": "1",
@@ -236,7 +240,7 @@ def compute_row(spec: MapSpec, row: int) -> dict[str, np.ndarray]:
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.dynamics.paths import PATH_PARAM, path_system
-    from maglev_match.maglev.limits_check import cycle_limit_margins
+    from maglev_match.maglev.limits import cycle_limit_margins
 
     yv = spec.y.values[row]
     xs = spec.x.values
@@ -649,8 +653,9 @@ def critical_sizes_batch(P: np.ndarray, directions: np.ndarray,
     returned, 0 when every size collided, NaN when unresolved), ``status``, ``unresolved``
     (runs left undecided) and the bracket.
     """
-    from maglev_match.analyses.simulation import gap_limit_events
     from maglev_match.dynamics.integrate.threshold import ThresholdBatch, bracket_thresholds
+    from maglev_match.maglev import unit
+    from maglev_match.maglev.limits import gap_limit_events
     from maglev_match.maglev.unit import PARAM_NAMES, STATE_NAMES
 
     w_state = STATE_NAMES.index("w")  # x5, the beam deflection
@@ -677,7 +682,7 @@ def critical_sizes_batch(P: np.ndarray, directions: np.ndarray,
 
         parts.append((sel, bracket_thresholds(
             system, P[sel], x0_of, upper[sel], guesses=guesses[sel], spreads=spreads[sel],
-            cost=cost[sel], events=gap_limit_events("unit", 0, float(lim[0]), float(lim[1])),
+            cost=cost[sel], events=gap_limit_events(unit.gap, float(lim[0]), float(lim[1])),
             x_ref=np.zeros(system.dim), options=simulation_settings())))
     if len(parts) == 1:
         return parts[0][1]

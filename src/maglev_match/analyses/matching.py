@@ -53,8 +53,8 @@ from maglev_match.dynamics.basin import bounding_cycle
 from maglev_match.dynamics.cycles import CyclePoint
 from maglev_match.dynamics.equilibria import StabilityResult, stability
 from maglev_match.dynamics.system import System
-from maglev_match.maglev.limits_check import cycle_limit_margins
-from maglev_match.maglev.unit import unit_system
+from maglev_match.maglev.base import MaglevModel
+from maglev_match.maglev.models import maglev_model
 
 __all__ = ["MatchingIndex", "matching_index", "index_of_system", "reading", "reading_rank",
            "search_ranges", "CASES", "Case", "Basis", "with_simulation", "cycle_settings",
@@ -204,17 +204,15 @@ def reading(chi: float, case: str = "", stable: bool = True) -> str:
 
 
 def search_ranges(params: Params) -> dict[str, tuple[float, float]]:
-    """Where to look for the nearest Hopf point: omega1 within a factor 4 of the design
-    value (sigma fixed), sigma within a factor 10 (omega1 fixed), inside the valid ranges."""
-    w, s = float(params.omega1), float(params.sigma)  # type: ignore[arg-type]
-    out = {"omega1": (w / 4.0, min(4.0 * w, 1e5))}
-    if s > 0:
-        out["sigma"] = (s / 10.0, min(10.0 * s, 0.1))
-    return out
+    """Where model A looks for the nearest Hopf point (its
+    :meth:`~maglev_match.maglev.base.MaglevModel.hopf_search`): omega1 within a factor 4 of
+    the design value (sigma fixed), sigma within a factor 10 (omega1 fixed), inside the
+    valid ranges."""
+    return maglev_model(params, "unit").hopf_search()
 
 
 def matching_index(
-    params: Params,
+    params: Params | MaglevModel,
     *,
     model: str = "unit",
     simulate: bool = True,
@@ -228,11 +226,14 @@ def matching_index(
 
     Parameters
     ----------
-    params : the parameter set (omega1 and sigma as given or derived from the beam).
+    params : the parameter set (omega1 and sigma as given or derived from the beam), with
+        ``model`` naming the model, or a :class:`~maglev_match.maglev.base.MaglevModel`.
     model : 'unit' (model A, 9 states) or 'vehicle' (model B, 34 + 2 n_modes states). For
         the vehicle, h is the largest gap deviation over the six levitation points on the
         cycle, w0 the static mid-span beam deflection under the whole vehicle, and the
-        Hopf points are looked for along omega1 (the beam stiffness).
+        Hopf points are looked for along omega1 (the beam stiffness): each model's
+        :attr:`~maglev_match.maglev.base.MaglevModel.w0` and
+        :meth:`~maglev_match.maglev.base.MaglevModel.hopf_search`.
     simulate : also compute h_simulation (both directions) by bracketing on simulations
         with the limits on; the equilibrium must be stable for this to be meaningful.
     stability_result : reuse an already computed stability result.
@@ -241,64 +242,44 @@ def matching_index(
         a basin boundary decides it (:mod:`maglev_match.analyses.critical`); False keeps the
         bisection's midpoints.
     """
-    from maglev_match.core.params import ParameterError
-
-    if model == "unit":
-        system = unit_system(params)
-        w0 = float(params.w0)
-        search = search_ranges(params)
-    elif model == "vehicle":
-        from maglev_match.analyses.simulation import vehicle_disturbance_geometry
-        from maglev_match.maglev.vehicle import vehicle_system
-
-        system = vehicle_system(params)
-        w0 = vehicle_disturbance_geometry(params)[2]
-        search = {"omega1": search_ranges(params)["omega1"]}
-    else:
-        raise ParameterError("model", model, "must be 'unit' or 'vehicle'")
     from threadpoolctl import threadpool_limits
 
-    # The collocation blocks are small dense matrices; BLAS threads only contend for the
-    # cores there (the vehicle's Floquet condensation: 1.5 s per cycle with OpenBLAS's
-    # threads on the 2-core machine under load, 0.05 s single-threaded; measured).
-    with threadpool_limits(1 if model == "vehicle" else None):
+    m = maglev_model(params, model)
+    params = m.params
+    system = m.system()
+    with threadpool_limits(m.blas_threads):
         res = index_of_system(
-            system, system.p, w0=w0, h_max=params.gap_max - params.c0,
-            search=search,
-            limits=cycle_limit_margins(params, include_current=False),
+            system, system.p, w0=m.w0, h_max=params.gap_max - params.c0,
+            search=m.hopf_search(),
+            limits=m.cycle_limits(include_current=False),
             stability_result=stability_result,
             omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
-            newton="chord" if model == "vehicle" else "full",
+            newton=m.cycle_newton,
         )
-    res = replace(res, model=model, critical_delay=critical_delay_info(params, model))
+    res = replace(res, model=m.name, critical_delay=critical_delay_info(m))
     if not simulate:
         return replace(res, headline=headline_text(res))
     if not res.stable:
         res = replace(res, simulation={"status": "skipped",
                                        "reason": "the equilibrium is unstable"})
         return replace(res, headline=headline_text(res))
-    from maglev_match.analyses.simulation import critical_disturbance, vehicle_critical_disturbance
+    from maglev_match.analyses.simulation import critical_disturbance
 
-    run = critical_disturbance if model == "unit" else vehicle_critical_disturbance
     kw = simulation_kwargs or {}
-    up = run(params, direction=-1, **kw)
-    down = run(params, direction=1, **kw)
+    up = critical_disturbance(m, direction=-1, **kw)
+    down = critical_disturbance(m, direction=1, **kw)
     solved = None
     if solve:
         from maglev_match.analyses.critical import critical_from_bisection
 
-        c_up = critical_from_bisection(params, up, model=model)
+        c_up = critical_from_bisection(m, up)
         # the saddle cycle of a basin boundary is the same set for both directions
-        c_down = critical_from_bisection(params, down, model=model, orbit_hint=c_up.orbit)
+        c_down = critical_from_bisection(m, down, orbit_hint=c_up.orbit)
         solved = (c_up, c_down)
-    return with_simulation(res, up, down, labels=SIM_LABELS[model], rule=SIM_RULE,
+    return with_simulation(res, up, down, labels=m.info.disturbance_labels, rule=SIM_RULE,
                            solved=solved)
 
 
-SIM_LABELS = {
-    "unit": ("beam up, x5(0) < 0", "beam down, x5(0) > 0"),
-    "vehicle": ("beam lifted towards the free beam", "beam pushed down"),
-}
 SIM_RULE = ("limits on: the coil current is clamped at zero (force from max(i, 0), di/dt held "
             "at 0 while i <= 0 and falling) and a gap leaving [gap_min, gap_max] is a "
             "collision; sizes are searched inside the gap range, so a direction where every "
@@ -561,8 +542,10 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
 # ---------------------------------------------------------------------------------------
 # the critical delay of the controller (issue 23)
 # ---------------------------------------------------------------------------------------
-def critical_delay_info(params: Params, model: str = "unit") -> dict[str, Any]:
-    """The critical delay of the outer control loop at ``params``: the smallest tau (s) at
+def critical_delay_info(params: Params | MaglevModel, model: str = "unit"
+                        ) -> dict[str, Any]:
+    """The critical delay of the outer control loop at ``params`` (or of a maglev model):
+    the smallest tau (s) at
     which the equilibrium loses stability, with the frequency (rad/s) of the crossing pair,
     l1 (1/s, |q| = 1 on the state; > 0 subcritical) and whether ``params.tau`` lies below
     it. From the characteristic equation of the delay system
@@ -574,10 +557,10 @@ def critical_delay_info(params: Params, model: str = "unit") -> dict[str, Any]:
     from maglev_match.core.params import RANGES
     from maglev_match.dynamics.delay import critical_delay
     from maglev_match.dynamics.equilibria import find_equilibrium
-    from maglev_match.maglev.unit import unit_dde
-    from maglev_match.maglev.vehicle import vehicle_dde
 
-    dde = unit_dde(params) if model == "unit" else vehicle_dde(params)
+    m = maglev_model(params, model)
+    params = m.params
+    dde = m.dde()
     eq = find_equilibrium(dde.ode_system(), dde.ode_params(dde.p))
     tau_max = RANGES["tau"][1]
     cd = critical_delay(dde, "tau", eq.x, dde.p, tau_max=tau_max)

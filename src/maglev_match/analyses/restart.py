@@ -41,6 +41,8 @@ from typing import Any
 
 import numpy as np
 
+from maglev_match.maglev.catalog import MODEL_NAMES
+
 __all__ = [
     "RestartKind", "RestartFileError", "RestartLabelError", "RestartMismatch", "stamp",
     "open_saved",
@@ -889,9 +891,9 @@ def saved_system(source: Any) -> tuple[Any, Any]:
         raise RestartFileError(where, f"not a saved branch (it is {what})")
     model = ds.attrs.get(MODEL_ATTR)
     pj = ds.attrs.get("params")
-    if model in ("unit", "vehicle") and isinstance(pj, str):
+    if model in MODEL_NAMES and isinstance(pj, str):
         from maglev_match.core.params import FIELD_NAMES, ParameterError, make_params
-        from maglev_match.maglev import build_system
+        from maglev_match.maglev.models import build_system
 
         try:
             params = make_params({k: v for k, v in json.loads(pj).items()
@@ -943,7 +945,7 @@ def restart(source: Any, label: str, system: Any = None, *, param: str | None = 
         system, params = saved_system(source)
     if kind is RestartKind.CYCLE_BRANCH:
         if params is not None and "limits" not in options:
-            from maglev_match.maglev.limits_check import cycle_limit_margins
+            from maglev_match.maglev.limits import cycle_limit_margins
 
             options["limits"] = cycle_limit_margins(params)
         return restart_cycle_branch(source, label, system, param=param, **options)

@@ -69,19 +69,18 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 
-from maglev_match.analyses.matching import (
-    MatchingIndex,
-    matching_index,
-    search_ranges,
-)
+from maglev_match.analyses.matching import MatchingIndex, matching_index
 from maglev_match.core import jax_setup  # noqa: F401  (float64)
 from maglev_match.core.params import PARAMETER_DOCS, Params
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.cycles import PeriodicOrbit
 from maglev_match.dynamics.equilibria import find_equilibrium
 from maglev_match.dynamics.system import System
-from maglev_match.maglev.unit import PARAM_NAMES as MODEL_A_PARAMS
-from maglev_match.maglev.unit import unit_system
+from maglev_match.maglev.base import MaglevModel
+from maglev_match.maglev.beam import LIMITS as _LIMITS
+from maglev_match.maglev.catalog import DEFAULT_MODEL
+from maglev_match.maglev.models import maglev_model
 
 __all__ = [
     "DerivativeStatus",
@@ -259,7 +258,7 @@ class ParameterSensitivity:
 
 
 @dataclass(frozen=True)
-class IndexSensitivity:
+class IndexSensitivity(Plottable):
     """Sensitivities of chi, the margin and the Hopf distance of model A at one point."""
 
     __repr__ = compact_repr
@@ -275,14 +274,6 @@ class IndexSensitivity:
     switch_note: str = ""  # the headline at a switch between its parts: one-sided values
     _by_name: dict[str, ParameterSensitivity] = field(default_factory=dict, repr=False,
                                                      compare=False)
-
-    def plot(self, path=None, **kw):
-        """This result's figure, as the command line draws it
-        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
-        (returns the files), else returned."""
-        from maglev_match.plots import plot
-
-        return plot(self, path, **kw)
 
     def __post_init__(self) -> None:
         self._by_name.update({r.name: r for r in self.rows})
@@ -657,121 +648,26 @@ def system_sensitivity(system: System, index: MatchingIndex, p: np.ndarray | Non
 
 
 # ---------------------------------------------------------------------------------------
-# maglev layer: engineering parameters -> model parameters, w0, h_max
+# beam and vehicle data -> model parameters, w0, h_max (the model's own map)
 # ---------------------------------------------------------------------------------------
-_BEAM_OMEGA = ("L", "EI", "mbar")
-_BEAM_SIGMA = ("L", "mbar", "l", "k")
-_LIMITS = ("gap_max",)
 _FAR = 4.0  # boundaries are looked for within a factor 4 of the design value
-MODELS = ("unit", "vehicle")
-
-
-def _model_names(model: str) -> tuple[str, ...]:
-    from maglev_match.core.params import ParameterError
-
-    if model == "unit":
-        return MODEL_A_PARAMS
-    if model == "vehicle":
-        from maglev_match.maglev.vehicle import PARAM_NAMES as MODEL_B_PARAMS
-
-        return MODEL_B_PARAMS
-    raise ParameterError("model", model, "must be 'unit' or 'vehicle'")
 
 
 def engineering_names(params: Params, model: str = "unit") -> tuple[str, ...]:
-    """The parameters with a d chi / d p row: the model's own parameters, with the derived
-    modal values replaced by the beam's where they are derived, and gap_max.
-
-    Model A: omega1 and sigma become L, EI, mbar, l, k. Model B (the vehicle): omega1
-    becomes EI (L and mbar are parameters of the vehicle model already: mode shapes and
-    modal masses); sigma does not enter model B.
-    """
-    derived_w = "omega1" not in params.explicit
-    if model == "vehicle":
-        out = [n for n in _model_names(model) if n != "omega1"]
-        out.append("EI" if derived_w else "omega1")
-        return tuple(out + list(_LIMITS))
-    out = [n for n in _model_names(model) if n not in ("omega1", "sigma")]
-    derived_s = "sigma" not in params.explicit
-    beam = [n for n in ("L", "EI", "mbar", "l", "k")
-            if (derived_w and n in _BEAM_OMEGA) or (derived_s and n in _BEAM_SIGMA)]
-    out += beam
-    out += [n for n, d in (("omega1", derived_w), ("sigma", derived_s)) if not d]
-    out += list(_LIMITS)
-    return tuple(out)
+    """The parameters with a d chi / d p row (the model's
+    :meth:`~maglev_match.maglev.base.MaglevModel.engineering_names`): its own parameters,
+    with the derived modal values replaced by the beam's where they are derived, and
+    gap_max. Model A: omega1 and sigma become L, EI, mbar, l, k; model B: omega1 becomes EI
+    (:mod:`maglev_match.maglev.beam`)."""
+    return maglev_model(params, model).engineering_names()
 
 
 def derived_map(params: Params, model: str = "unit") -> Callable:
-    """q (values of :func:`engineering_names`) -> (model parameter vector, w0, h_max),
-    a JAX function so its Jacobian is exact. omega1 and sigma follow the simply supported
-    Euler-Bernoulli beam unless set explicitly:
-
-        omega1 = (pi / L)^2 sqrt(EI / mbar),
-        sigma = 8 k L / (pi^2 l^2 mbar) sin^2(pi l / (2 L)),
-        h_max = gap_max - c0,
-
-    and w0 is the static mid-span deflection: model A w0 = sigma (m + M) g / omega1^2;
-    model B the modal sum (Clough & Penzien, Dynamics of Structures, ch. 18)
-
-        w0 = sum_n q_n* sin(n pi / 2),
-        q_n* = 2 / (mbar L omega_n^2) sum_j F sin(n pi x_j / L),  omega_n = n^2 omega1,
-
-    with F the weight per levitation point and x_j the six points' positions on the span.
-    """
-    if model == "vehicle":
-        return _vehicle_derived_map("omega1" not in params.explicit, int(params.n_modes))
-    _model_names(model)
-    return _derived_map("omega1" not in params.explicit, "sigma" not in params.explicit)
-
-
-def _first_frequency(v: dict, derived_w: bool):
-    """omega1 = (pi / L)^2 sqrt(EI / mbar) from the beam's values in ``v`` (traced), or
-    ``v["omega1"]`` when omega1 was given explicitly."""
-    if derived_w:
-        return (jnp.pi / v["L"]) ** 2 * jnp.sqrt(v["EI"] / v["mbar"])
-    return v["omega1"]
-
-
-@cache
-def _derived_map(derived_w: bool, derived_s: bool) -> Callable:
-    names = engineering_names(Params(**({} if derived_w else {"omega1": 100.0}),
-                                     **({} if derived_s else {"sigma": 4e-4})))
-    pos = {n: i for i, n in enumerate(names)}
-
-    def fmap(q):
-        v = {n: q[i] for n, i in pos.items()}
-        w1 = _first_frequency(v, derived_w)
-        if derived_s:
-            sg = (8.0 * v["k"] * v["L"] / (jnp.pi**2 * v["l"] ** 2 * v["mbar"])
-                  * jnp.sin(jnp.pi * v["l"] / (2.0 * v["L"])) ** 2)
-        else:
-            sg = v["sigma"]
-        full = dict(v, omega1=w1, sigma=sg)
-        p = jnp.stack([full[n] for n in MODEL_A_PARAMS])
-        w0 = sg * (v["m"] + v["M"]) * v["g"] / w1**2
-        return p, w0, v["gap_max"] - v["c0"]
-
-    return fmap
-
-
-@cache
-def _vehicle_derived_map(derived_w: bool, n_modes: int) -> Callable:
-    from maglev_match.maglev.vehicle import _geometry
-
-    model_names = _model_names("vehicle")
-    names = engineering_names(Params(**({} if derived_w else {"omega1": 100.0})), "vehicle")
-    pos = {n: i for i, n in enumerate(names)}
-    mid = jnp.sin(jnp.arange(1, n_modes + 1, dtype=jnp.float64) * jnp.pi / 2.0)
-
-    def fmap(q):
-        v = {n: q[i] for n, i in pos.items()}
-        w1 = _first_frequency(v, derived_w)
-        full = dict(v, omega1=w1)
-        p = jnp.stack([full[n] for n in model_names])
-        q_static = _geometry(p, n_modes)[-1]
-        return p, q_static @ mid, v["gap_max"] - v["c0"]
-
-    return fmap
+    """q (values of :func:`engineering_names`) -> (model parameter vector, w0, h_max), a
+    JAX function so its Jacobian is exact (the model's
+    :meth:`~maglev_match.maglev.base.MaglevModel.derived_map`, formulas in
+    :mod:`maglev_match.maglev.beam`)."""
+    return maglev_model(params, model).derived_map()
 
 
 def _values(params: Params, names: tuple[str, ...]) -> np.ndarray:
@@ -810,15 +706,12 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     h_simulation between its two directions) the one-sided derivatives are given
     (``dchi_left``, ``dchi_right``).
     """
-    model = model or (index.model if index is not None else "unit")
-    _model_names(model)
-    if model == "vehicle":
-        from threadpoolctl import threadpool_limits
+    from threadpoolctl import threadpool_limits
 
-        # small dense blocks: BLAS threads only contend (as in matching_index)
-        with threadpool_limits(1):
-            return _index_sensitivity(params, index, boundaries, model, simulate)
-    return _index_sensitivity(params, index, boundaries, model, simulate)
+    m = maglev_model(params, model or (index.model if index is not None else "unit"))
+    # small dense blocks: BLAS threads only contend (as in matching_index)
+    with threadpool_limits(m.blas_threads):
+        return _index_sensitivity(m, index, boundaries, simulate)
 
 
 #: two parts of the headline (or two directions of h_simulation) within this relative
@@ -826,7 +719,7 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
 SWITCH_TOL = 1e-6
 
 
-def _simulation_derivative(params: Params, idx: MatchingIndex, Pq: np.ndarray,
+def _simulation_derivative(m: MaglevModel, idx: MatchingIndex, Pq: np.ndarray,
                            names: tuple[str, ...]) -> tuple[dict[str, np.ndarray], str]:
     """d h_simulation / dq of each direction whose critical size was solved (keys 'up',
     'down'), in the engineering parameters q, and a text on how (or why not)."""
@@ -839,7 +732,7 @@ def _simulation_derivative(params: Params, idx: MatchingIndex, Pq: np.ndarray,
             if crit is not None:
                 why.append(f"{key}: {crit.mechanism} (no derivative)")
             continue
-        c = crit if crit.dsize_dp is not None else critical_derivative(params, crit)
+        c = crit if crit.dsize_dp is not None else critical_derivative(m, crit)
         if c.dsize_dp is None:
             why.append(f"{key}: {c.mechanism}, derivative run failed")
             continue
@@ -852,21 +745,15 @@ def _simulation_derivative(params: Params, idx: MatchingIndex, Pq: np.ndarray,
     return out, "; ".join(why)
 
 
-def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: bool,
-                       model: str, simulate: bool = True) -> IndexSensitivity:
-    idx = index if index is not None else matching_index(params, model=model,
-                                                         simulate=simulate)
-    if model == "vehicle":
-        from maglev_match.maglev.vehicle import vehicle_system
-
-        system = vehicle_system(params)
-        search = {"omega1": search_ranges(params)["omega1"]}
-    else:
-        system = unit_system(params)
-        search = search_ranges(params)
-    names = engineering_names(params, model)
+def _index_sensitivity(m: MaglevModel, index: MatchingIndex | None, boundaries: bool,
+                       simulate: bool = True) -> IndexSensitivity:
+    params = m.params
+    idx = index if index is not None else matching_index(m, simulate=simulate)
+    system = m.system()
+    search = m.hopf_search()
+    names = m.engineering_names()
     q = _values(params, names)
-    fmap = derived_map(params, model)
+    fmap = m.derived_map()
     jac = _map_jacobian(fmap)
     (pm, w0, hmax), (Pq, W0q, Hq) = jac(jnp.asarray(q))
     Pq, W0q, Hq = np.asarray(Pq), np.asarray(W0q), np.asarray(Hq)
@@ -895,7 +782,7 @@ def _index_sensitivity(params: Params, index: MatchingIndex | None, boundaries: 
     sim_status = ""
     switch_note = ""
     if idx.chi_simulation is not None and idx.h_simulation is not None:
-        dh_sims, sim_status = _simulation_derivative(params, idx, Pq, names)
+        dh_sims, sim_status = _simulation_derivative(m, idx, Pq, names)
         sizes = {"up": idx.h_simulation_up, "down": idx.h_simulation_down}
         near = [k for k, v in sizes.items() if v is not None
                 and abs(v - idx.h_simulation) <= SWITCH_TOL * idx.h_simulation]
@@ -1170,7 +1057,7 @@ def _chunk_key(base: Params, scatter: Mapping[str, float], n: int, seed: int,
 
     d = {"base": {k: v for k, v in sorted(base.as_input_dict().items())},
          "scatter": dict(sorted(scatter.items())), "n": n, "seed": seed, "chunk": chunk}
-    if model != "unit":  # model A's key as before, so its existing checkpoints resume
+    if model != DEFAULT_MODEL:  # model A's key as before: its existing checkpoints resume
         d["model"] = model
     return json.dumps(d, sort_keys=True, default=float)
 

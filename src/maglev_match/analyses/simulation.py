@@ -32,28 +32,25 @@ import numpy as np
 from maglev_match.core.io import atomic_write, atomic_write_netcdf
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.integrate.simulate import (
     COLLISION,
     CONVERGED,
-    EventsWithArgs,
     SimulationOptions,
     SimulationResult,
     simulate,
     simulate_batch,
 )
 from maglev_match.dynamics.system import System
-from maglev_match.maglev import build_system
-from maglev_match.maglev import unit as unit_model
-from maglev_match.maglev import vehicle as vehicle_model
-from maglev_match.maglev.limits import gap_margins
+from maglev_match.maglev.base import INITIAL_CONDITIONS, MaglevModel
+from maglev_match.maglev.limits import describe_event
+from maglev_match.maglev.models import maglev_model
 
 __all__ = [
     "INITIAL_CONDITIONS",
     "MaglevSimulation",
     "CriticalDisturbance",
     "Run",
-    "gap_limit_events",
-    "describe_event",
     "equilibrium_state",
     "initial_state",
     "simulate_maglev",
@@ -65,90 +62,31 @@ __all__ = [
     "vehicle_disturbance_geometry",
 ]
 
-INITIAL_CONDITIONS = ("equilibrium", "pressed")
-LIMITS = ("lower", "upper")
-_C0_A = unit_model.PARAM_NAMES.index("c0")
-_C0_B = vehicle_model.PARAM_NAMES.index("c0")
-
-
-# ---------------------------------------------------------------------------------------
-# gaps and events
-# ---------------------------------------------------------------------------------------
-def _unit_gap(x, p):
-    """Model A gap c = c0 + x1 - x5 (m), as a 1-element array."""
-    return jnp.reshape(p[_C0_A] + x[0] - x[4], (1,))
-
-
-@cache
-def _vehicle_gap(n_modes: int):
-    def gap(x, p):
-        return vehicle_model.point_kinematics(x, p, n_modes)[2]
-
-    return gap
-
-
-def _gap_function(model: str, n_modes: int):
-    return _unit_gap if model == "unit" else _vehicle_gap(n_modes)
-
-
-@cache
-def _gap_events(model: str, n_modes: int):
-    """``g(x, p, (gap_min, gap_max))``: the gap-limit margins with the limits as an argument
-    (one function object per model, so the compiled integrator is shared by all limits)."""
-    gap = _gap_function(model, n_modes)
-
-    def events(x, p, limits):
-        return jnp.reshape(gap_margins(gap(x, p), limits[0], limits[1]), (-1,))
-
-    return events
-
-
-def gap_limit_events(model: str, n_modes: int, gap_min: float, gap_max: float
-                     ) -> EventsWithArgs:
-    """Event function ``g(x, p)`` of the gap limits: entries ``2(j-1)`` and ``2(j-1)+1``
-    are ``gap_j - gap_min`` and ``gap_max - gap_j`` (m) of levitation point j; negative
-    means the gap left [gap_min, gap_max]. The limits are traced arguments of the compiled
-    integrator (:class:`~maglev_match.dynamics.integrate.simulate.EventsWithArgs`), so other limit
-    values reuse the same compiled kernel."""
-    return EventsWithArgs(_gap_events(model, int(n_modes)), (float(gap_min), float(gap_max)))
-
-
-def describe_event(index: int) -> tuple[int, str]:
-    """(levitation point, 'lower'|'upper') of an entry of :func:`gap_limit_events`."""
-    return index // 2 + 1, LIMITS[index % 2]
-
-
-def _events_for(params: Params, model: str):
-    return gap_limit_events(model, params.n_modes if model == "vehicle" else 0,
-                            float(params.gap_min), float(params.gap_max))
-
 
 # ---------------------------------------------------------------------------------------
 # initial conditions
 # ---------------------------------------------------------------------------------------
-def equilibrium_state(params: Params, model: str) -> np.ndarray:
-    """The static equilibrium: x = 0 for model A; the closed-form equilibrium of model B
-    (beam statically deflected, gaps at c0, currents at the levitation current)."""
-    if model == "unit":
-        return np.zeros(len(unit_model.STATE_NAMES))
-    if model == "vehicle":
-        return vehicle_model.equilibrium_guess(params)
-    raise ParameterError("model", model, "must be 'unit' or 'vehicle'")
+def equilibrium_state(params: Params | MaglevModel, model: str = "unit") -> np.ndarray:
+    """The static equilibrium of the model (:meth:`MaglevModel.equilibrium`): x = 0 for
+    model A; the closed-form equilibrium of model B (beam statically deflected, gaps at c0,
+    currents at the levitation current)."""
+    return maglev_model(params, model).equilibrium()
 
 
 def initial_state(
-    params: Params,
-    model: str,
+    params: Params | MaglevModel,
+    model: str = "unit",
     *,
     initial: str = "equilibrium",
     x5: float | None = None,
     q1: float | None = None,
     state: np.ndarray | None = None,
 ) -> np.ndarray:
-    """An initial state by name.
+    """An initial state by name (:meth:`MaglevModel.initial_state`).
 
     Parameters
     ----------
+    params : the parameter set (``model`` names the model) or a maglev model.
     initial : 'equilibrium' (both models) or 'pressed' (model B: vehicle pressed onto the
         free beam, i.e. every vehicle and controller state at equilibrium and q_n = 0,
         q_n' = 0).
@@ -159,43 +97,14 @@ def initial_state(
         except q1 = 3 mm", with absolute q) is ``initial='pressed', q1=3e-3``.
     state : an explicit full state (overrides everything else).
     """
-    if state is not None:
-        x = np.asarray(state, dtype=float).ravel()
-        n = _dim(params, model)
-        if x.shape != (n,):
-            raise ParameterError("x0", f"{x.size} values", f"model '{model}' has {n} states")
-        if not np.all(np.isfinite(x)):
-            raise ParameterError("x0", "non-finite", "every state must be a finite number")
-        return x
-    if initial not in INITIAL_CONDITIONS:
-        raise ParameterError("initial", initial, "must be one of " + ", ".join(INITIAL_CONDITIONS))
-    if model == "unit":
-        if initial == "pressed":
-            raise ParameterError("initial", initial, "'pressed' applies to model B (vehicle)")
-        if q1 is not None:
-            raise ParameterError("q1", q1, "modal coordinates apply to model B (vehicle)")
-        x = equilibrium_state(params, model)
-        if x5 is not None:
-            x[4] = float(x5)
-        return x
-    if x5 is not None:
-        raise ParameterError("x5", x5, "the beam deflection x5 applies to model A (unit)")
-    x = (vehicle_model.pressed_initial_state(params) if initial == "pressed"
-         else equilibrium_state(params, model))
-    if q1 is not None:
-        x[vehicle_model.layout(params.n_modes)["q"].start] = float(q1)
-    return x
-
-
-def _dim(params: Params, model: str) -> int:
-    return len(unit_model.STATE_NAMES) if model == "unit" else 34 + 2 * params.n_modes
+    return maglev_model(params, model).initial_state(initial, x5=x5, q1=q1, state=state)
 
 
 # ---------------------------------------------------------------------------------------
 # one run
 # ---------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class MaglevSimulation:
+class MaglevSimulation(Plottable):
     """One simulated run of model A or B.
 
     outcome : 'collision' | 'converged' | 'running' | 'failed'.
@@ -204,6 +113,9 @@ class MaglevSimulation:
     final_gap_deviation : gap minus c0 at the end of the run (m): a float for model A, a
         list of six for model B.
     result : the integrator's :class:`SimulationResult` (histories, diagnostics).
+    initial_text : the initial state in words (the model's
+        :meth:`~maglev_match.maglev.base.MaglevModel.describe_state`).
+    levitation_current : the coil current at the equilibrium (A), per levitation point.
     """
 
     params: Params
@@ -218,14 +130,8 @@ class MaglevSimulation:
     final_gap_deviation: float | list[float]
     result: SimulationResult
     warnings: tuple[str, ...] = field(default=())
-
-    def plot(self, path=None, **kw):
-        """This result's figure, as the command line draws it
-        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
-        (returns the files), else returned."""
-        from maglev_match.plots import plot
-
-        return plot(self, path, **kw)
+    initial_text: str = ""
+    levitation_current: float = float("nan")
 
     def __repr__(self) -> str:
         """One line: model, limits, horizon and outcome (not the histories)."""
@@ -240,8 +146,10 @@ class MaglevSimulation:
         """The history as an :class:`xarray.Dataset` with units, long names, the parameter
         set and the package version (:func:`maglev_match.core.datasets.simulation_dataset`)."""
         from maglev_match.core.datasets import annotate_history
+        from maglev_match.maglev.catalog import model_info
 
-        return annotate_history(history_dataset(self), self)
+        return annotate_history(history_dataset(self), self,
+                                f"maglev-match simulation, {model_info(self.model).label}")
 
     def summary(self) -> dict[str, Any]:
         """The outcome of the run in machine-readable form (SI units)."""
@@ -254,10 +162,6 @@ class MaglevSimulation:
         }
 
 
-def _system(params: Params, model: str, limited: bool) -> System:
-    return build_system(params, model, limited=limited)
-
-
 def _lifted(system: System, x: np.ndarray) -> np.ndarray:
     """State(s) of the model (rows) as states of ``system``: with a delay (tau > 0) the
     system is the discretised delay system, whose extra states hold the past; a model state
@@ -267,7 +171,7 @@ def _lifted(system: System, x: np.ndarray) -> np.ndarray:
 
 
 def simulate_maglev(
-    params: Params,
+    params: Params | MaglevModel,
     model: str = "unit",
     x0: np.ndarray | None = None,
     t_end: float = 5.0,
@@ -276,7 +180,8 @@ def simulate_maglev(
     n_save: int = 2001,
     options: SimulationOptions | None = None,
 ) -> MaglevSimulation:
-    """Simulate model A ('unit') or B ('vehicle') from ``x0`` over [0, t_end] (s).
+    """Simulate a maglev model (``params`` with ``model`` 'unit' or 'vehicle', or a
+    :class:`MaglevModel`) from ``x0`` over [0, t_end] (s).
 
     With ``limited`` (default) the current clamp (no current reversal) is in the vector field
     and leaving the gap range [gap_min, gap_max] ends the run as a collision; without it
@@ -286,25 +191,28 @@ def simulate_maglev(
     eigenvalue of its Jacobian has a negative real part); a run that stays near an unstable
     equilibrium is ``running``, with a warning saying why.
     """
-    system = _system(params, model, limited)
-    x_start = equilibrium_state(params, model) if x0 is None else np.asarray(x0, float)
+    m = maglev_model(params, model)
+    params = m.params
+    system = m.system(limited=limited)
+    x_start = m.equilibrium() if x0 is None else np.asarray(x0, float)
     res = simulate(
         system, _lifted(system, x_start), t_end,
-        event_fn=_events_for(params, model) if limited else None,
-        x_ref=_lifted(system, equilibrium_state(params, model)),
+        event_fn=m.gap_events() if limited else None,
+        x_ref=_lifted(system, m.equilibrium()),
         options=options, n_save=n_save,
     )
     point = limit = None
     if res.event_index is not None:
         point, limit = describe_event(res.event_index)
-    gap_dev = np.asarray(_gap_function(model, params.n_modes)(
-        jnp.asarray(res.final_state), jnp.asarray(system.p))) - params.c0
-    final_gap: float | list[float] = (float(gap_dev[0]) if model == "unit"
+    gap_dev = np.asarray(m.gap()(jnp.asarray(res.final_state), jnp.asarray(system.p))) \
+        - params.c0
+    final_gap: float | list[float] = (float(gap_dev[0]) if m.n_points == 1
                                       else [float(v) for v in gap_dev])
     return MaglevSimulation(
-        params=params, model=model, limited=limited, x0=x_start, t_end=float(t_end),
+        params=params, model=m.name, limited=limited, x0=x_start, t_end=float(t_end),
         outcome=res.outcome, collision_time=res.event_time, limit=limit, point=point,
         final_gap_deviation=final_gap, result=res, warnings=res.warnings,
+        initial_text=m.describe_state(x_start), levitation_current=m.levitation_current,
     )
 
 
@@ -333,20 +241,19 @@ def history_dataset(sim: MaglevSimulation):
 
     res = sim.result
     params = sim.params
-    system = _system(params, sim.model, sim.limited)
+    m = maglev_model(params, sim.model)
+    system = m.system(limited=sim.limited)
     keep = np.all(np.isfinite(res.x), axis=1)
     t, x = res.t[keep], res.x[keep]
     # append the collision instant so the history ends exactly at the limit
     if res.event_time is not None and res.event_state is not None:
         t = np.append(t, res.event_time)
         x = np.vstack([x, res.event_state])
-    gap_fn = _gap_function(sim.model, params.n_modes)
     p = jnp.asarray(system.p)
     if len(t):
-        gap, rate = (np.asarray(a) for a in _gap_and_rate(system.rhs, gap_fn)(jnp.asarray(x), p))
+        gap, rate = (np.asarray(a) for a in _gap_and_rate(system.rhs, m.gap())(jnp.asarray(x), p))
     else:
-        n_pts = 1 if sim.model == "unit" else 6
-        gap = rate = np.zeros((0, n_pts))
+        gap = rate = np.zeros((0, m.n_points))
     points = np.arange(1, gap.shape[1] + 1)
     data: dict[str, Any] = {}
     for k, name in enumerate(system.state_names):
@@ -354,19 +261,12 @@ def history_dataset(sim: MaglevSimulation):
     data["gap"] = (("time", "point"), gap)
     data["gap_deviation"] = (("time", "point"), gap - params.c0)
     data["gap_rate"] = (("time", "point"), rate)
-    if sim.model == "unit":
-        current = x[:, 6] + params.i0
-        data["beam_deflection"] = ("time", x[:, 4])
-    else:
-        L = vehicle_model.layout(params.n_modes)
-        current = x[:, L["i"]]
-        data["beam_deflection"] = (("time", "mode"), x[:, L["q"]])
+    current, beam, beam_coords = m.history_parts(x)
+    data["beam_deflection"] = beam
     if sim.limited:
         current = np.maximum(current, 0.0)
     data["current"] = (("time", "point"), np.reshape(current, (len(t), -1)))
-    coords: dict[str, Any] = {"time": t, "point": points}
-    if sim.model == "vehicle":
-        coords["mode"] = np.arange(1, params.n_modes + 1)
+    coords: dict[str, Any] = {"time": t, "point": points, **beam_coords}
     ds = xr.Dataset(data, coords=coords)
     units = {"gap": "m", "gap_deviation": "m", "gap_rate": "m/s", "current": "A",
              "beam_deflection": "m", "time": "s"}
@@ -490,19 +390,23 @@ class CriticalDisturbance:
 
 
 def critical_disturbance(
-    params: Params,
+    params: Params | MaglevModel,
     *,
+    model: str = "unit",
     direction: int = -1,
-    t_max: float = 20.0,
-    tol: float = 1e-5,
-    max_extend: int = 2,
-    batch: int = 10,
-    max_rounds: int = 12,
+    t_max: float | None = None,
+    tol: float | None = None,
+    max_extend: int | None = None,
+    batch: int | None = None,
+    max_rounds: int | None = None,
     options: SimulationOptions | None = None,
 ) -> CriticalDisturbance:
-    """Critical beam-deflection disturbance of model A with the limits on (the
-    simulation cross-check of h): the size d such that x5(0) = direction * d returns to the
-    equilibrium for smaller d and collides for larger d.
+    """The critical disturbance of a maglev model with the limits on (the simulation
+    cross-check of h): the size d along the model's disturbance line
+    (:meth:`MaglevModel.disturbance`) that returns to the equilibrium for smaller d and
+    collides for larger d. Model A: x5(0) = direction * d; model B: the state
+    x_eq + s (pressed - x_eq), d = s w_mid measured as the mid-span beam displacement (m)
+    from its static position (direction -1 lifts the beam towards the free beam).
 
     The runs use the limited model: the coil current is clamped at zero (the force uses
     max(i, 0) and di/dt is held at 0 while i <= 0 and falling) and leaving the gap range
@@ -511,92 +415,52 @@ def critical_disturbance(
 
     Parameters
     ----------
-    params : parameter set (model A).
-    direction : -1 for x5(0) < 0 (beam above its static position, the gap opens: the
-        paper's Figs. 6-8), +1 for x5(0) > 0 (beam pressed further down, the gap closes).
+    params : the parameter set (``model`` names the model) or a maglev model.
+    direction : -1 for the beam above its static position (model A: x5(0) < 0, the gap
+        opens: the paper's Figs. 6-8), +1 for the beam pressed further down.
     t_max : first horizon (s). tol : bracket width to reach (m).
     max_extend : how many times the horizon may double for undecided runs.
-    batch : sizes per batched call (10: three rounds reach the default tol over a 10 mm
-        range, 11^3 > 1e-2 / 1e-5). max_rounds : bound on rounds.
+    batch : sizes per batched call. max_rounds : bound on rounds. Each defaults to the
+        model's :attr:`~MaglevModel.critical_search` (model A: 20 s, 1e-5 m, 2, 10 sizes,
+        12 rounds: three rounds reach the tolerance over a 10 mm range, 11^3 > 1e-2 / 1e-5;
+        model B: 10 s, 2e-5 m, 1, 8 sizes, 8 rounds, 9^3 > 1e-2 / 2e-5).
     options : integrator options (``stop_on_converged`` is forced on).
 
     Returns
     -------
     :class:`CriticalDisturbance`.
     """
-    if direction not in (-1, 1):
-        raise ParameterError("direction", direction, "must be -1 or +1")
-    system = _system(params, "unit", True)
-    events = _events_for(params, "unit")
-    # x5 = -d opens the gap (c = c0 + d): upper limit at d = gap_max - c0
-    gap_range = (params.gap_max - params.c0) if direction < 0 else (params.c0 - params.gap_min)
-
-    def x0_of(sizes: np.ndarray) -> np.ndarray:
-        x0 = np.zeros((sizes.size, system.dim))
-        x0[:, 4] = direction * sizes
-        return x0
-
+    m = maglev_model(params, model)
+    line = m.disturbance(direction)  # (checks the direction)
+    given = {"t_max": t_max, "tol": tol, "max_extend": max_extend, "batch": batch,
+             "max_rounds": max_rounds}
+    search = {**m.critical_search.as_kwargs(),
+              **{k: v for k, v in given.items() if v is not None}}
     return critical_disturbance_of_system(
-        system, x0_of, gap_range, events=events, x_ref=np.zeros(system.dim),
-        direction=direction, t_max=t_max, tol=tol, max_extend=max_extend, batch=batch,
-        max_rounds=max_rounds, options=options)
+        m.system(limited=True), line.x0_of, line.gap_range, events=m.gap_events(),
+        x_ref=m.equilibrium(), direction=line.direction, options=options, **search)
 
 
 def vehicle_disturbance_geometry(params: Params) -> tuple[np.ndarray, np.ndarray, float]:
-    """Model B's "pressed" disturbance line: (x_eq, delta, w_mid).
+    """Model B's "pressed" disturbance line: (x_eq, delta, w_mid); deprecated, use
+    ``VehicleModel(params).pressed_geometry``."""
+    import warnings
 
-    x_eq is the static equilibrium, ``delta = pressed - x_eq`` the step to the vehicle
-    pressed onto the free beam (every modal coordinate from q_n* to 0), and w_mid the
-    static mid-span deflection sum_n q_n* sin(n pi / 2) (m). The state
-    x_eq + (d / w_mid) * delta lifts the beam's mid-span by d metres above its static
-    position (d = w_mid is the paper's initial state)."""
-    x_eq = equilibrium_state(params, "vehicle")
-    delta = vehicle_model.pressed_initial_state(params) - x_eq
-    q_static = x_eq[vehicle_model.layout(params.n_modes)["q"]]
-    n = np.arange(1, params.n_modes + 1)
-    w_mid = float(np.sum(q_static * np.sin(n * np.pi / 2.0)))
-    return x_eq, delta, w_mid
+    warnings.warn("vehicle_disturbance_geometry(params) is deprecated: use "
+                  "maglev_match.maglev.models.VehicleModel(params).pressed_geometry (goes away "
+                  "in 0.4)", DeprecationWarning, stacklevel=2)
+    return maglev_model(params, "vehicle").pressed_geometry
 
 
-def vehicle_critical_disturbance(
-    params: Params,
-    *,
-    direction: int = -1,
-    t_max: float = 10.0,
-    tol: float = 2e-5,
-    max_extend: int = 1,
-    batch: int = 8,
-    max_rounds: int = 8,
-    options: SimulationOptions | None = None,
-) -> CriticalDisturbance:
-    """Critical disturbance of model B along the paper's initial state: the
-    state x_eq + s (pressed - x_eq), sizes d = s w_mid measured as the mid-span beam
-    displacement (m) from its static position. direction -1: the beam lifted towards the
-    free beam (d = w_mid is "pressed onto the free beam"); +1: the beam pushed further down.
-    Limits on (current clamp, gap range at all six points). Same bracketing as model A;
-    8 sizes per round (9^3 > 1e-2 / 2e-5: three rounds reach the default tol)."""
-    if direction not in (-1, 1):
-        raise ParameterError("direction", direction, "must be -1 or +1")
-    system = _system(params, "vehicle", True)
-    events = _events_for(params, "vehicle")
-    x_eq, delta, w_mid = vehicle_disturbance_geometry(params)
-    gap_fn = _vehicle_gap(params.n_modes)
-    # gap change per metre of mid-span lift, at each point: c_j(s) - c0 is linear in s
-    dgap = (np.asarray(gap_fn(jnp.asarray(x_eq + delta), jnp.asarray(system.p)))
-            - params.c0) / w_mid
-    # lifting (direction -1) opens the gaps (dgap > 0); pushing down closes them
-    slope = float(np.max(np.abs(dgap)))
-    room = (params.gap_max - params.c0) if direction < 0 else (params.c0 - params.gap_min)
-    gap_range = room / slope
+def vehicle_critical_disturbance(params: Params, **kwargs: Any) -> CriticalDisturbance:
+    """Model B's critical disturbance; deprecated, use
+    ``critical_disturbance(params, model="vehicle", ...)``."""
+    import warnings
 
-    def x0_of(sizes: np.ndarray) -> np.ndarray:
-        s = (-direction) * sizes / w_mid
-        return x_eq[None, :] + s[:, None] * delta[None, :]
-
-    return critical_disturbance_of_system(
-        system, x0_of, gap_range, events=events, x_ref=x_eq, direction=direction,
-        t_max=t_max, tol=tol, max_extend=max_extend, batch=batch, max_rounds=max_rounds,
-        options=options)
+    warnings.warn("vehicle_critical_disturbance(params, ...) is deprecated: use "
+                  "critical_disturbance(params, model='vehicle', ...) (goes away in 0.4)",
+                  DeprecationWarning, stacklevel=2)
+    return critical_disturbance(params, model="vehicle", **kwargs)
 
 
 def critical_disturbance_of_system(

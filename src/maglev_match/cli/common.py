@@ -71,7 +71,7 @@ OutOpt = Annotated[Path | None, typer.Option("--out", help="Output file or folde
 DEFAULT_PRESET_NAME = DEFAULT_PRESET
 
 #: Help text of a ``--param`` option that accepts beam and vehicle data (the list of those
-#: names is :data:`maglev_match.maglev.engineering.ENGINEERING_PARAMS`; kept here so that help
+#: names is :data:`maglev_match.analyses.engineering.ENGINEERING_PARAMS`; kept here so that help
 #: texts need no numerical module).
 PARAM_HELP = ("Parameter to vary: a model parameter (omega1, sigma, kD ...) or beam/vehicle "
               "data L, EI, mbar, l, k, s, s0 (omega1 and sigma follow).")
@@ -123,9 +123,12 @@ def check_model(model: str) -> str:
         raise ParameterError("--model", model, "this command works on the maglev models "
                              "'unit' and 'vehicle' only; user model files are accepted by "
                              f"{USER_MODEL_COMMANDS}")
-    if model not in ("unit", "vehicle"):
+    from maglev_match.maglev.catalog import MODEL_NAMES, names_text
+
+    if model not in MODEL_NAMES:
         raise ParameterError("--model", model,
-                             "must be 'unit', 'vehicle' or a model file ending in .py")
+                             f"must be {names_text().replace(' or ', ', ')} or a model file "
+                             "ending in .py")
     return model
 
 

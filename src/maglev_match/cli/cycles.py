@@ -123,12 +123,12 @@ def cycles_command(
     check_model(model)
     params = apply_at(_params(preset, config, set_), at)
     # the numerics (and JAX) once the options are known to be good
+    from maglev_match.analyses.engineering import engineering_system, is_engineering
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.maglev import build_system
-    from maglev_match.maglev.engineering import engineering_system, is_engineering
-    from maglev_match.maglev.limits_check import cycle_limit_margins
+    from maglev_match.maglev.limits import cycle_limit_margins
+    from maglev_match.maglev.models import build_system
 
     if out is not None or not json_out:  # files at the end: load their writers meanwhile
         preload("maglev_match.plots.cycles", "maglev_match.core.datasets", "xarray", "h5netcdf")
@@ -247,7 +247,7 @@ def _write_outputs(out, param, model, scan, branches, params, at, system=None) -
     from maglev_match.cli.common import unit_of
     from maglev_match.core.datasets import annotate
     from maglev_match.core.io import atomic_write_netcdf
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     system = build_system(params, model) if system is None else system
     for k, br in enumerate(branches):

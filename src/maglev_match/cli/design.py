@@ -34,6 +34,7 @@ from maglev_match.cli.common import (
 )
 from maglev_match.core.options import SCATTER_PCT_MAX, check_scatter_percent
 from maglev_match.core.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
+from maglev_match.maglev.catalog import model_info
 
 MODEL_TEXT = {"unit": "model A (one levitation unit)",
               "vehicle": "model B (full vehicle, six levitation points)"}
@@ -457,7 +458,8 @@ def design_command(
                      if idx.chi_simulation is not None else "")
                   + f"; h = {idx.h * 1e3:.4g} mm, w0 = {idx.w0 * 1e3:.4g} mm, margin = "
                   f"{-idx.max_real_part:.4g} 1/s, omega1 = {idx.omega1:.5g} rad/s"
-                  + (f", sigma = {idx.sigma:.4g} 1/kg" if model == "unit" else ""),
+                  + (f", sigma = {idx.sigma:.4g} 1/kg"
+                     if "sigma" in model_info(model).beam_params else ""),
                   highlight=False)
     console.print("  active: " + (", ".join(res.active) if res.active else "none"))
     if goal == Goal.MAXIMIZE and idx.case == "no_cycle_within_limits":

@@ -40,6 +40,7 @@ from maglev_match.cli.common import (
 from maglev_match.core.io import atomic_open
 from maglev_match.core.params import ParameterError
 from maglev_match.core.units import header
+from maglev_match.maglev.catalog import model_info
 
 if TYPE_CHECKING:  # the numerics (and JAX) are imported when a command runs
     from maglev_match.dynamics.hopf import HopfPoint
@@ -99,9 +100,9 @@ def hopf_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     # --model unit|vehicle|FILE.py; along a delay: the discretised delay system (tau <= --to)
     rm = resolve_model(model, set_, preset, config, delay_axis=(param, stop))
+    from maglev_match.analyses.engineering import engineering_hopf_points, is_engineering
     from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.maglev.engineering import engineering_hopf_points, is_engineering
 
     params, system, model = rm.params, rm.system, rm.label
     engineering = params is not None and is_engineering(param)
@@ -391,11 +392,11 @@ def hopf_curve_command(
     from maglev_match.plots import save_figure
     from maglev_match.plots.hopf import hopf_curve_figure
 
-    title = (f"Hopf curve, model {model}" if rm.is_user else
-             f"Hopf curve, model {'A' if model == 'unit' else 'B'} ({preset})")
+    which = f"model {model}" if rm.is_user else model_info(model).short
+    title = f"Hopf curve, {which}" + ("" if rm.is_user else f" ({preset})")
     if restarted is not None:  # the saved values, not the preset's
-        title = (f"Hopf curve, model {model if rm.is_user else 'A' if model == 'unit' else 'B'}"
-                 f", restarted from {restarted[1].label} of {Path(restarted[1].path).name}")
+        title = (f"Hopf curve, {which}, restarted from {restarted[1].label} of "
+                 f"{Path(restarted[1].path).name}")
     units = ("", "") if rm.is_user else (unit_of(names[0]), unit_of(names[1]))
     fig = hopf_curve_figure(curves, names, units, grid_data, title=title,
                             design_point=(system.param(names[0]), system.param(names[1])))

@@ -32,6 +32,7 @@ from maglev_match.cli.common import (
 )
 from maglev_match.cli.design import McOpt, ResumeOpt, ScatterOpt, SeedOpt, WorkersOpt
 from maglev_match.cli.models import MaglevOnlyModelOpt, is_model_file, refuse_model_file
+from maglev_match.maglev.catalog import model_info
 
 CASE_TEXT = {
     "unstable_equilibrium": "the equilibrium is unstable (h = 0)",
@@ -170,8 +171,8 @@ def print_index(res, preset: str, config, set_) -> None:
     definition, the simulation and the reading."""
     mm = 1e3
     verdict = "[bold green]stable[/]" if res.stable else "[bold red]unstable[/]"
-    name = "model A (one levitation unit)" if res.model == "unit" else \
-        "model B (full vehicle, six levitation points)"
+    info = model_info(res.model)
+    name = info.label
     console.print(f"[bold]maglev-match index[/] — {name}, preset {preset}"
                   + (f", config {config}" if config else "")
                   + (f", set {' '.join(set_)}" if set_ else ""), highlight=False)
@@ -187,8 +188,7 @@ def print_index(res, preset: str, config, set_) -> None:
     _print_critical_delay(res)
     console.print("  [bold]by the paper's definition[/]:")
     console.print(f"    h  = {res.h * mm:.4g} mm: {CASE_TEXT.get(res.case, res.case)}")
-    w0_text = ("static beam deflection" if res.model == "unit"
-               else "static mid-span beam deflection under the vehicle")
+    w0_text = info.w0_text
     console.print(f"    w0 = {res.w0 * mm:.4g} mm ({w0_text})")
     console.print(f"    chi_paper = h / w0 = {res.chi_paper:.4g} (the paper's definition)")
     sim = res.simulation

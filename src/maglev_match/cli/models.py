@@ -41,6 +41,7 @@ from maglev_match.cli.restart import (
     restart_errors,
 )
 from maglev_match.core.params import ParameterError, Params
+from maglev_match.maglev.catalog import model_info
 
 if TYPE_CHECKING:  # the user-model loader and System import JAX: loaded when used
     import numpy as np
@@ -167,9 +168,10 @@ def resolve_model(model: str, sets: list[str] | None, preset: str | None = None,
     from maglev_match.cli.common import DEFAULT_PRESET_NAME
 
     params = params_from_options(preset or DEFAULT_PRESET_NAME, config, sets)
-    from maglev_match.maglev import build_system  # (after the checks: JAX loads here)
+    from maglev_match.maglev.models import build_system  # (after the checks: JAX loads here)
 
-    desc = (f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
+    info = model_info(model)
+    desc = (f"Model {info.letter} ({info.title}), "
             f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg")
     tau_max = (delay_axis[1] if delay_axis is not None and delay_axis[0] in MAGLEV_DELAYS
                else None)

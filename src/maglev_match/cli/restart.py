@@ -30,6 +30,7 @@ from maglev_match.cli.common import (
     progress_report,
     refuse_given,
 )
+from maglev_match.maglev.catalog import MODEL_NAMES
 
 __all__ = ["cycles_restart", "hopf_curve_restart", "restart_errors"]
 
@@ -151,6 +152,7 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
     """`cycles --restart` on model A or B."""
     import numpy as np
 
+    from maglev_match.analyses.engineering import is_engineering
     from maglev_match.analyses.restart import (
         RestartKind,
         check_parameters,
@@ -164,9 +166,8 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
         _write_csv,
         apply_at,
     )
-    from maglev_match.maglev import build_system
-    from maglev_match.maglev.engineering import is_engineering
-    from maglev_match.maglev.limits_check import cycle_limit_margins
+    from maglev_match.maglev.limits import cycle_limit_margins
+    from maglev_match.maglev.models import build_system
 
     _need_label(restart, label)
     refuse_given(HOPF_SEARCH_OPTIONS, "a restart searches no Hopf point: it continues the "
@@ -178,7 +179,7 @@ def cycles_restart(*, restart: Path | None, label: str | None, param: str, model
     from maglev_match.analyses.restart import open_saved
 
     saved_model = open_saved(restart)[0].attrs.get("model")
-    if not given("model") and saved_model in ("unit", "vehicle"):
+    if not given("model") and saved_model in MODEL_NAMES:
         model = saved_model
     check_model(model)
     own_values = any(given(n) for n in PARAMETER_OPTIONS)
@@ -324,7 +325,7 @@ def hopf_curve_restart(*, rm, restart: Path | None, label: str | None,
     if not any(given(n) for n in PARAMETER_OPTIONS):  # the saved values
         saved = saved_params(rs) if not rm.is_user else None
         if saved is not None:
-            from maglev_match.maglev import build_system
+            from maglev_match.maglev.models import build_system
 
             params, system = saved, build_system(saved, rm.label)
         else:

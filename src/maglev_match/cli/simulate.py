@@ -36,6 +36,7 @@ from maglev_match.cli.common import (
     tolerance_option,
 )
 from maglev_match.cli.models import is_model_file, user_simulate
+from maglev_match.maglev.catalog import model_info
 
 
 def _read_state(text: str) -> np.ndarray:
@@ -148,7 +149,7 @@ def simulate_command(
 
     x_init = initial_state(params, model, initial=initial, x5=x5, q1=q1, state=state)
     with progress_report("simulate") as prog:
-        prog.stage(f"simulating model {'A' if model == 'unit' else 'B'} for {t:g} s ...")
+        prog.stage(f"simulating {model_info(model).short} for {t:g} s ...")
         sim = simulate_maglev(params, model, x_init, t, limited=limits, n_save=n_save,
                               options=SimulationOptions(rtol=rtol, atol=atol))
         prog.stage(f"simulation done: {sim.outcome}")
@@ -174,7 +175,8 @@ def simulate_command(
         print_warnings(sim.warnings)
         return
     res = sim.result
-    console.print(f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
+    info = model_info(model)
+    console.print(f"Model {info.letter} ({info.title}), "
                   f"omega1 = {params.omega1:.4g} rad/s, sigma = {params.sigma:.4g} 1/kg, "
                   f"limits {'on' if limits else 'off'}", highlight=False)
     if sim.outcome == "collision":

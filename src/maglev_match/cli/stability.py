@@ -35,6 +35,7 @@ from maglev_match.cli.common import (
 from maglev_match.core.params import ParameterError, available_presets, load_preset, preset_info
 from maglev_match.core.units import header, shown
 from maglev_match.core.units import label as unit_label
+from maglev_match.maglev.catalog import model_info
 
 # The numerical modules (and JAX with them) are imported inside the commands, so that
 # `presets`, `--help` and a usage error answer without loading them.
@@ -113,7 +114,7 @@ def stability_command(
         }
         if rm.is_user:
             out["parameters"] = dict(zip(system.param_names, system.p.tolist(), strict=True))
-        if model == "vehicle" or rm.is_user:
+        if rm.is_user or model_info(model).points > 1:
             out["equilibrium"] = res.equilibrium.x.tolist()
             out["state_names"] = list(system.state_names)
         emit_json(out)
@@ -181,7 +182,7 @@ def root_locus_command(
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
     rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
     params, system, model = rm.params, rm.system, rm.label
-    from maglev_match.maglev.engineering import is_engineering
+    from maglev_match.analyses.engineering import is_engineering
 
     engineering = params is not None and is_engineering(param)
     if not engineering:
@@ -193,8 +194,8 @@ def root_locus_command(
     with progress_report("root-locus") as prog:
         prog.stage(f"eigenvalues at {steps} values of {param} ...")
         if engineering:  # the path through the model parameters at each value: t = k exact
+            from maglev_match.analyses.engineering import engineering_nodes
             from maglev_match.dynamics.paths import PATH_PARAM, path_system
-            from maglev_match.maglev.engineering import engineering_nodes
 
             path = path_system(system, engineering_nodes(params, model, param, values))
             res = root_locus(path, PATH_PARAM, np.arange(steps, dtype=float))

@@ -171,17 +171,16 @@ def simulation_dataset(sim: Any) -> xr.Dataset:
     return sim.to_xarray()
 
 
-def annotate_history(ds: xr.Dataset, sim: Any) -> xr.Dataset:
+def annotate_history(ds: xr.Dataset, sim: Any, title: str) -> xr.Dataset:
     """The history dataset of a simulated run (``simulation.history_dataset``) with units,
-    long names, a title, the parameter set and the version."""
+    long names, the ``title``, the parameter set and the version."""
     extra_u, extra_l = {}, {}
     for name in ds.data_vars:
         if name in UNITS:
             continue
         u, lname = state_units(str(name))
         extra_u[str(name)], extra_l[str(name)] = u, lname
-    ds.attrs["title"] = (f"maglev-match simulation, model "
-                         f"{'A (levitation unit)' if sim.model == 'unit' else 'B (vehicle)'}")
+    ds.attrs["title"] = title
     return annotate(ds, sim.params, units=extra_u, long_names=extra_l)
 
 

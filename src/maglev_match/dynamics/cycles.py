@@ -43,6 +43,7 @@ import numpy as np
 
 from maglev_match.core.aot import cached_kernel
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.collocation import (
     CondensedLU,
     LinearSolver,
@@ -214,7 +215,7 @@ class CyclePoint:
 
 
 @dataclass(frozen=True)
-class CycleBranch:
+class CycleBranch(Plottable):
     """A branch of periodic orbits continued in one parameter from a Hopf point."""
 
     __repr__ = compact_repr
@@ -239,14 +240,6 @@ class CycleBranch:
         """The Hopf point where the family of cycles ends (special point H), if it does."""
         return next((sp for sp in self.special_points
                      if sp.type == SpecialPointKind.HOPF), None)
-
-    def plot(self, path=None, **kw):
-        """This result's figure, as the command line draws it
-        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
-        (returns the files), else returned."""
-        from maglev_match.plots import plot
-
-        return plot(self, path, **kw)
 
     @property
     def values(self) -> np.ndarray:

@@ -32,6 +32,7 @@ import scipy.linalg
 
 from maglev_match.core.aot import cached_kernel
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.continuation import (
     SOLVED,
     BranchPoint,
@@ -97,7 +98,7 @@ class StabilityResult:
 
 
 @dataclass(frozen=True)
-class RootLocusResult:
+class RootLocusResult(Plottable):
     """Eigenvalues of the equilibrium along one parameter."""
 
     __repr__ = compact_repr
@@ -110,14 +111,6 @@ class RootLocusResult:
     equilibria: np.ndarray  # (n_values, dim)
     warnings: tuple[str, ...] = field(default=())
     param_unit: str = ""  # the unit of ``param`` (from the system's param_units)
-
-    def plot(self, path=None, **kw):
-        """This result's figure, as the command line draws it
-        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
-        (returns the files), else returned."""
-        from maglev_match.plots import plot
-
-        return plot(self, path, **kw)
 
     def to_xarray(self, params: Any = None, state_names: tuple[str, ...] | None = None):
         """The locus as an :class:`xarray.Dataset` over (parameter value, eigenvalue index):

@@ -30,6 +30,7 @@ import numpy as np
 
 from maglev_match.core.aot import cached_kernel
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.normal_forms import (
     first_lyapunov_coefficient,
     hopf_eigenvectors,
@@ -79,7 +80,7 @@ class HopfPoint:
 
 
 @dataclass(frozen=True)
-class HopfScan:
+class HopfScan(Plottable):
     """Hopf points found along one parameter interval."""
 
     __repr__ = compact_repr
@@ -92,14 +93,6 @@ class HopfScan:
     max_real_part: np.ndarray  # max Re(lambda) there (1/s)
     warnings: tuple[str, ...] = ()
     special_points: tuple = ()  # LP, BP, H of the equilibrium branch (EquilibriumSpecialPoint)
-
-    def plot(self, path=None, **kw):
-        """This result's figure, as the command line draws it
-        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
-        (returns the files), else returned."""
-        from maglev_match.plots import plot
-
-        return plot(self, path, **kw)
 
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from maglev_match.core.aot import cached_kernel
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.continuation import (
     SOLVED,
     BranchPoint,
@@ -83,7 +84,7 @@ CodimTwoPoint = SpecialPoint
 
 
 @dataclass(frozen=True)
-class HopfCurve:
+class HopfCurve(Plottable):
     """A branch of the Hopf curve in the plane of two parameters."""
 
     __repr__ = compact_repr
@@ -96,14 +97,6 @@ class HopfCurve:
     steps: int
     closed: bool = False  # the branch came back to its start
     warnings: tuple[str, ...] = ()
-
-    def plot(self, path=None, **kw):
-        """This result's figure, as the command line draws it
-        (:func:`maglev_match.plots.plot`); saved as PNG and SVG at ``path`` when given
-        (returns the files), else returned."""
-        from maglev_match.plots import plot
-
-        return plot(self, path, **kw)
 
     def values(self) -> np.ndarray:
         """(n, 2) array of the two parameter values along the branch."""

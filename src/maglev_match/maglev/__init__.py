@@ -1,21 +1,28 @@
-"""Physics only: the maglev vector fields as pure JAX functions, no solver code."""
+"""The maglev models: what a maglev model is (:mod:`~maglev_match.maglev.base`), the
+shipped models and their table (:mod:`~maglev_match.maglev.models`), their names for the
+command line (:mod:`~maglev_match.maglev.catalog`, light), their equations (``unit``,
+``vehicle``), their forms with the current clamp (``clamp``) and at speed (``moving``),
+their physical limits (``limits``), the beam formulas (``beam``) and user model files
+(``user``). Physics only: the numerical methods are in :mod:`maglev_match.dynamics`.
 
-from maglev_match.maglev.unit import unit_system
-from maglev_match.maglev.vehicle import vehicle_system
+Importing this package loads nothing else (the command line reads the catalog before JAX).
+"""
 
-__all__ = ["unit_system", "vehicle_system", "build_system"]
+from __future__ import annotations
+
+from typing import Any
 
 
-def build_system(params, model: str = "unit", limited: bool = False, *,
-                 tau_max: float | None = None):
-    """The :class:`~maglev_match.dynamics.system.System` of model ``'unit'`` (A) or
-    ``'vehicle'`` (B) for a parameter set: the ODE when ``params.tau = 0``, the discretised
-    delay system (:mod:`maglev_match.dynamics.delay`) when ``params.tau > 0`` or when
-    ``tau_max`` asks for a delay axis up to that value."""
-    if model == "unit":
-        return unit_system(params, limited=limited, tau_max=tau_max)
-    if model == "vehicle":
-        return vehicle_system(params, limited=limited, tau_max=tau_max)
-    from maglev_match.core.params import ParameterError
+def __getattr__(name: str) -> Any:
+    """``maglev_match.models.build_system`` of version 0.1 (deprecated)."""
+    if name == "build_system":
+        import warnings
 
-    raise ParameterError("model", model, "must be 'unit' or 'vehicle'")
+        warnings.warn("maglev_match.models.build_system is deprecated: use "
+                      "maglev_match.maglev.models.maglev_model(params, name).system() (or "
+                      "maglev_match.build_system); it goes away in 0.4", DeprecationWarning,
+                      stacklevel=2)
+        from maglev_match.maglev.models import build_system
+
+        return build_system
+    raise AttributeError(f"module 'maglev_match.maglev' has no attribute '{name}'")

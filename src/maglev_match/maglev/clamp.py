@@ -43,7 +43,7 @@ from maglev_match.dynamics.hybrid import HybridSystem
 from maglev_match.maglev import unit as unit_model
 from maglev_match.maglev import vehicle as vehicle_model
 
-__all__ = ["unit_clamped", "vehicle_clamped", "clamped_system"]
+__all__ = ["unit_clamped", "vehicle_clamped"]
 
 _I = 6  # model A: x7 = i - i0
 
@@ -121,7 +121,7 @@ def _vehicle_functions(n_modes: int):
 
     def guards(x, p, s):
         ud = vehicle_model.point_kinematics(x, p, n_modes)[1]
-        i0 = vehicle_model._geometry(p, n_modes)[7]
+        i0 = vehicle_model.geometry(p, n_modes)[7]
         demand = p[kP] * x[iy1] + p[kD] * (x[iv] + ud) + i0
         return jnp.where(s > 0.5, -demand, x[idx])
 
@@ -151,14 +151,3 @@ def vehicle_clamped(params: Params) -> HybridSystem:
         state_scale=np.asarray(system.state_scale), observables=dict(system.observables),
         name=f"vehicle ({n} modes, current clamp)",
     )
-
-
-def clamped_system(params: Params, model: str = "unit") -> HybridSystem:
-    """The clamped model A ('unit') or B ('vehicle')."""
-    if model == "unit":
-        return unit_clamped(params)
-    if model == "vehicle":
-        return vehicle_clamped(params)
-    from maglev_match.core.params import ParameterError
-
-    raise ParameterError("model", model, "must be 'unit' or 'vehicle'")

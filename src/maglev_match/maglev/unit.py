@@ -175,6 +175,12 @@ def gap_deviation(x, p):
     return x[0] - x[4]
 
 
+def gap(x, p):
+    """Model A's gap c = c0 + x1 - x5 (m), as a 1-element array (its one levitation
+    point)."""
+    return jnp.reshape(p[_IDX["c0"]] + x[0] - x[4], (1,))
+
+
 def coil_current(x, p):
     """Coil current i = x7 + i0 (A)."""
     return x[6] + levitation_current(p)

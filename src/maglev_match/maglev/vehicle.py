@@ -72,7 +72,7 @@ def layout(n_modes: int) -> dict[str, slice]:
     }
 
 
-def _geometry(p, n_modes: int):
+def geometry(p, n_modes: int):
     q = {k: p[v] for k, v in _IDX.items()}
     b = jnp.asarray(FRAME_SIGN) * q["s0"]
     a = jnp.asarray(POINT_SIGN) * q["s"]
@@ -89,7 +89,7 @@ def _geometry(p, n_modes: int):
 
 def point_kinematics(x, p, n_modes: int):
     """Magnet displacement u_j, its rate, gap c_j and gap rate at every levitation point."""
-    q, a, b, xj, phi, omega, K, i0, q_static = _geometry(p, n_modes)
+    q, a, b, xj, phi, omega, K, i0, q_static = geometry(p, n_modes)
     L = layout(n_modes)
     body, body_dot = x[L["body"]], x[L["body_dot"]]
     z, th = body[0:6:2], body[1:6:2]
@@ -138,7 +138,7 @@ def loop_rates(q, K, i0, r, c, cd, ud, i, y1, v, limited: bool, command=None):
 
 
 def _rhs(x, p, n_modes: int, limited: bool, command=None):
-    q, a, b, xj, phi, omega, K, i0, q_static = _geometry(p, n_modes)
+    q, a, b, xj, phi, omega, K, i0, q_static = geometry(p, n_modes)
     L = layout(n_modes)
     body, body_dot = x[L["body"]], x[L["body_dot"]]
     u, ud, c, cd = point_kinematics(x, p, n_modes)
@@ -197,12 +197,44 @@ def param_vector(params: Params) -> np.ndarray:
     return np.array([float(getattr(params, n)) for n in PARAM_NAMES])
 
 
+@cache
+def gap_function(n_modes: int):
+    """``gap(x, p)``: the gaps c_j of the six levitation points (m) (one function object per
+    number of modes, so compiled code is shared)."""
+
+    def gap(x, p):
+        return point_kinematics(x, p, n_modes)[2]
+
+    return gap
+
+
+def pressed_line_derivative(params: Params, direction: int, size: float) -> np.ndarray:
+    """d x0 / dp of the index's disturbance line at ``size`` (m): the state
+    x_eq + (-direction) size / w_mid (pressed - x_eq) moves with the parameters through the
+    equilibrium, the pressed state and the mid-span deflection w_mid; exact, by forward-mode
+    differentiation (rows: states, columns: :data:`PARAM_NAMES`)."""
+    import jax
+
+    n_modes = params.n_modes
+    lay = layout(n_modes)
+    mid = jnp.sin(jnp.arange(1, n_modes + 1, dtype=jnp.float64) * jnp.pi / 2.0)
+
+    def x0(p):
+        *_, i0, q_static = geometry(p, n_modes)
+        x_eq = jnp.zeros(34 + 2 * n_modes).at[lay["q"]].set(q_static).at[lay["i"]].set(i0)
+        delta = jnp.zeros_like(x_eq).at[lay["q"]].set(-q_static)
+        w_mid = q_static @ mid
+        return x_eq + (-direction) * size / w_mid * delta
+
+    return np.asarray(jax.jacfwd(x0)(jnp.asarray(param_vector(params))))
+
+
 def equilibrium_guess(params: Params) -> np.ndarray:
     """Static equilibrium in closed form: beam statically deflected (q = q*), every gap at
     c0, currents at the vehicle's levitation current, all else zero."""
     n_modes = params.n_modes
     p = param_vector(params)
-    *_, i0, q_static = _geometry(jnp.asarray(p), n_modes)
+    *_, i0, q_static = geometry(jnp.asarray(p), n_modes)
     x = np.zeros(34 + 2 * n_modes)
     L = layout(n_modes)
     x[L["q"]] = np.asarray(q_static)

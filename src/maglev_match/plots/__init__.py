@@ -1,14 +1,30 @@
 """Figures. One module per analysis (``rootlocus``, ``hopf``, ``cycles``, ``simulate``,
-``maps``); the shared style and the saving helper live in ``plots.base`` and are
-re-exported here; :func:`figure_of` and :func:`plot` draw any result."""
+``maps``, ``design``, ``speed``); the shared style and the saving helper live in
+``plots.base``. Each module registers the drawer of its result types with
+:data:`maglev_match.core.results.figure` when it is imported (this package imports them
+all), so that every result's ``.plot()`` finds its figure; :func:`figure_of` and
+:func:`plot` draw any result.
+
+Figures depend on results, never the reverse: no numerical module imports this package.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from maglev_match.plots.base import STYLE, _units, new_figure, plt, save_figure
+from maglev_match.core.results import draw, figure_for
+from maglev_match.plots import (  # noqa: F401  (each registers its drawers)
+    cycles,
+    design,
+    hopf,
+    maps,
+    rootlocus,
+    simulate,
+    speed,
+)
+from maglev_match.plots.base import STYLE, new_figure, plt, save_figure
 
-__all__ = ["STYLE", "new_figure", "save_figure", "figure_of", "plot", "plt", "_units"]
+__all__ = ["STYLE", "new_figure", "save_figure", "figure_of", "plot", "plt"]
 
 
 def figure_of(result, **kw):
@@ -21,57 +37,19 @@ def figure_of(result, **kw):
       curve with l1 along it;
     * :class:`~maglev_match.dynamics.cycles.CycleBranch` (or a list): the bifurcation
       diagram of the cycles (max/min gap deviation);
-    * :class:`~maglev_match.analyses.simulation.MaglevSimulation` (or a list): the time histories;
+    * :class:`~maglev_match.analyses.simulation.MaglevSimulation` (or a list): the time
+      histories;
     * an :class:`xarray.Dataset` with ``chi``: the design map;
     * :class:`~maglev_match.analyses.sensitivity.IndexSensitivity`: the tornado figure;
-    * :class:`~maglev_match.analyses.design.DesignResult`: the design search path.
+    * :class:`~maglev_match.analyses.design.DesignResult`: the design search path;
+    * :class:`~maglev_match.analyses.speed.sweep.SpeedSweep` and
+      :class:`~maglev_match.analyses.speed.spans.SpanRun`: the figures at speed.
 
     Keyword arguments go to the figure function. Returns the matplotlib figure."""
-    items = list(result) if isinstance(result, list | tuple) else [result]
-    if not items:
-        raise ValueError("nothing to plot")
-    kind = type(items[0]).__name__
-    if kind == "RootLocusResult":
-        from maglev_match.plots.rootlocus import root_locus_figure
-
-        r = items[0]
-        return root_locus_figure(r.values, r.eigenvalues, r.param, _units(r.param)[0], **kw)
-    if kind == "HopfScan":
-        from maglev_match.plots.hopf import hopf_scan_figure
-
-        return hopf_scan_figure(items[0], items[0].param, _units(items[0].param)[0], **kw)
-    if kind == "HopfCurve":
-        from maglev_match.plots.hopf import hopf_curve_figure
-
-        names = tuple(items[0].params)
-        return hopf_curve_figure(items, names, _units(*names), **kw)
-    if kind == "CycleBranch":
-        from maglev_match.plots.cycles import cycle_diagram
-
-        return cycle_diagram(items, items[0].param, **kw)[0]
-    if kind == "MaglevSimulation":
-        from maglev_match.plots.simulate import simulation_figure
-
-        return simulation_figure(items, **kw)[0]
-    if kind == "Dataset" and "chi" in getattr(items[0], "data_vars", {}):
-        from maglev_match.plots.maps import map_figure
-
-        return map_figure(items[0], **kw)
-    if kind == "IndexSensitivity":
-        from maglev_match.plots.design import tornado_figure
-
-        return tornado_figure(items[0], **kw)
-    if kind == "DesignResult":
-        from maglev_match.plots.design import design_path_figure
-
-        return design_path_figure(items[0], **kw)
-    raise TypeError(f"no figure for a {kind}")
+    return figure_for(result, **kw)
 
 
 def plot(result, path: str | Path | None = None, **kw):
     """Draw ``result`` (see :func:`figure_of`); with ``path``, save it as PNG and SVG
     there (suffix replaced) and return the written files, else return the figure."""
-    fig = figure_of(result, **kw)
-    if path is None:
-        return fig
-    return save_figure(fig, path)
+    return draw(result, path, **kw)

@@ -47,7 +47,8 @@ def save_figure(fig, path: str | Path, formats: tuple[str, ...] = ("png", "svg")
     return written
 
 
-def _units(*names: str) -> tuple[str, ...]:
+def param_unit(name: str) -> str:
+    """The SI unit of a parameter, for axis labels ('' for a dimensionless one)."""
     from maglev_match.core.units import unit
 
-    return tuple(unit(n) for n in names)
+    return unit(name)

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.lines import Line2D
 
+from maglev_match.core.results import figure, figure_of_many
 from maglev_match.dynamics.cycles import CycleBranch
 from maglev_match.plots.base import new_figure
 
@@ -31,7 +32,7 @@ def limit_touched(detail: str) -> str:
     """Which extremum of the gap a limit contact concerns: 'low' (gap 0: the cycle's
     minimum), 'high' (the upper gap limit: its maximum) or 'other' (e.g. the coil current
     reaching 0, marked at both gap extrema of that cycle)."""
-    from maglev_match.maglev.limits_check import GAP_HIGH, GAP_LOW
+    from maglev_match.maglev.limits import GAP_HIGH, GAP_LOW
 
     if detail == GAP_LOW:
         return "low"
@@ -164,3 +165,13 @@ def cycle_diagram(
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
               frameon=False)
     return fig, ax
+
+
+@figure.register(CycleBranch)
+def _cycle_branch(branch: CycleBranch, **kw):
+    return _cycle_branches(branch, [branch], **kw)
+
+
+@figure_of_many.register(CycleBranch)
+def _cycle_branches(first: CycleBranch, branches, **kw):
+    return cycle_diagram(list(branches), first.param, **kw)[0]

@@ -8,6 +8,9 @@ import math
 
 import numpy as np
 
+from maglev_match.analyses.design import DesignResult
+from maglev_match.analyses.sensitivity import IndexSensitivity
+from maglev_match.core.results import figure
 from maglev_match.plots.base import new_figure
 
 
@@ -96,3 +99,13 @@ def design_path_figure(result, title: str = ""):
                  + ", ".join(str(r) for r in prob.requirements))
     ax.legend(fontsize=8, loc="best")
     return fig
+
+
+@figure.register(IndexSensitivity)
+def _tornado(sens: IndexSensitivity, **kw):
+    return tornado_figure(sens, **kw)
+
+
+@figure.register(DesignResult)
+def _design_path(result: DesignResult, **kw):
+    return design_path_figure(result, **kw)

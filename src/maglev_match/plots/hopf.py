@@ -11,6 +11,8 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 from scipy import ndimage
 
+from maglev_match.core.results import figure, figure_of_many
+from maglev_match.dynamics.hopf import HopfScan
 from maglev_match.dynamics.hopf_curve import HopfCurve
 from maglev_match.plots.base import new_figure
 
@@ -220,3 +222,23 @@ def hopf_scan_figure(scan, param: str, unit: str = ""):
     ax.set_title(f"Equilibrium along {param}: unstable above 0")
     ax.legend(loc="best", fontsize=8)
     return fig
+
+
+@figure.register(HopfScan)
+def _hopf_scan(scan: HopfScan, **kw):
+    from maglev_match.plots.base import param_unit
+
+    return hopf_scan_figure(scan, scan.param, param_unit(scan.param), **kw)
+
+
+@figure.register(HopfCurve)
+def _hopf_curve(curve: HopfCurve, **kw):
+    return _hopf_curves(curve, [curve], **kw)
+
+
+@figure_of_many.register(HopfCurve)
+def _hopf_curves(first: HopfCurve, curves, **kw):
+    from maglev_match.plots.base import param_unit
+
+    names = tuple(first.params)
+    return hopf_curve_figure(list(curves), names, tuple(param_unit(n) for n in names), **kw)

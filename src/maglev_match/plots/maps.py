@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import matplotlib.pyplot as plt
 import numpy as np
+import xarray as xr
 from matplotlib.colors import ListedColormap
 from matplotlib.patches import Patch
 
+from maglev_match.core.results import figure
 from maglev_match.plots.base import new_figure
 
 __all__ = ["map_figure", "BOUNDARY_LABEL", "ROW_HOPF_LABEL"]
@@ -118,3 +120,10 @@ def _boundary(ax, ds, xname: str, x: np.ndarray) -> list:
                            zorder=4)
             return [pts]
     return []
+
+
+@figure.register(xr.Dataset)
+def _map(ds: xr.Dataset, **kw):
+    if "chi" not in ds.data_vars:
+        raise TypeError("no figure for a Dataset without chi (a design map has one)")
+    return map_figure(ds, **kw)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from maglev_match.core.results import figure
+from maglev_match.dynamics.equilibria import RootLocusResult
 from maglev_match.plots.base import new_figure
 
 __all__ = ["root_locus_figure", "axis_crossings", "zoom_window", "NEAR_TRACKS"]
@@ -146,3 +148,11 @@ def root_locus_figure(values: np.ndarray, eigenvalues: np.ndarray, param: str, u
         ax1.legend(loc="upper left", fontsize=8)
     ax2.legend(loc="upper left", fontsize=8)
     return fig
+
+
+@figure.register(RootLocusResult)
+def _root_locus(result: RootLocusResult, **kw):
+    from maglev_match.plots.base import param_unit
+
+    return root_locus_figure(result.values, result.eigenvalues, result.param,
+                             param_unit(result.param), **kw)

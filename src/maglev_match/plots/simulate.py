@@ -15,9 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from maglev_match.analyses.simulation import MaglevSimulation, equilibrium_state, history_dataset
+from maglev_match.analyses.simulation import MaglevSimulation, history_dataset
+from maglev_match.core.results import figure, figure_of_many
 from maglev_match.core.units import label as unit_label
 from maglev_match.core.units import shown as shown_in
+from maglev_match.maglev.catalog import model_info
 from maglev_match.plots.base import new_figure, save_figure
 
 __all__ = ["plot_simulation", "simulation_figure", "describe_initial", "describe_outcome",
@@ -29,54 +31,9 @@ _LIMIT_STYLE = {"color": "k", "ls": ":", "lw": 1.0}
 
 def describe_initial(sim: MaglevSimulation) -> str:
     """The initial state in words: the states that differ from the equilibrium (at most
-    three, SI units shown in mm, mm/s or A), or 'pressed onto the free beam' for model B."""
-    from maglev_match.maglev import vehicle as vehicle_model
-
-    p = sim.params
-    eq = equilibrium_state(p, sim.model)
-    x0 = np.asarray(sim.x0, float)
-    if sim.model == "vehicle":
-        lay = vehicle_model.layout(p.n_modes)
-        pressed = vehicle_model.pressed_initial_state(p)
-        if np.allclose(x0, pressed, rtol=0, atol=1e-15):
-            return "vehicle pressed onto the free beam"
-        q = x0[lay["q"]]
-        rest = np.delete(x0 - pressed, np.r_[lay["q"]])
-        if np.allclose(rest, 0.0, atol=1e-15) and np.allclose(q[1:], 0.0, atol=1e-15):
-            return f"pressed onto the free beam, q1(0) = {q[0] * 1e3:.3g} mm"
-    diff = np.nonzero(np.abs(x0 - eq) > 1e-15)[0]
-    if diff.size == 0:
-        return "from the equilibrium"
-    names = _state_names(sim)
-    if sim.model == "unit":  # the paper's numbering x1..x9, as in --x5
-        names = tuple(f"x{k + 1}" for k in range(len(names)))
-    parts = []
-    relative = "" if sim.model == "unit" else " from equilibrium"
-    for k in diff[:3]:
-        unit, scale = _display_unit(names[k])
-        parts.append(f"{names[k]}(0) = {(x0[k] - eq[k]) * scale:.3g} {unit}{relative}")
-    if diff.size > 3:
-        parts.append(f"and {diff.size - 3} more states")
-    return ", ".join(parts)
-
-
-def _state_names(sim: MaglevSimulation) -> tuple[str, ...]:
-    from maglev_match.maglev import unit as unit_model
-    from maglev_match.maglev import vehicle as vehicle_model
-
-    if sim.model == "unit":
-        return unit_model.STATE_NAMES
-    return vehicle_model.state_names(sim.params.n_modes)
-
-
-def _display_unit(name: str) -> tuple[str, float]:
-    if name.endswith("_dot") or name in ("v",) or (name.startswith("v") and name[1:].isdigit()):
-        return "mm/s", 1e3
-    if name in ("di",) or (name.startswith("i") and name[1:].isdigit()):
-        return "A", 1.0
-    if name.startswith("th"):
-        return "mrad", 1e3
-    return "mm", 1e3
+    three, SI units shown in mm, mm/s or A), or 'pressed onto the free beam' for model B
+    (the run's :attr:`~maglev_match.analyses.simulation.MaglevSimulation.initial_text`)."""
+    return sim.initial_text
 
 
 def describe_outcome(sim: MaglevSimulation) -> str:
@@ -84,7 +41,8 @@ def describe_outcome(sim: MaglevSimulation) -> str:
     if sim.outcome == "collision":
         where = "magnet hits the rail (gap 0)" if sim.limit == "lower" else \
             f"gap opens to its upper limit ({sim.params.gap_max * 1e3:g} mm)"
-        point = f" at levitation point {sim.point}" if sim.model == "vehicle" else ""
+        point = f" at levitation point {sim.point}" if model_info(sim.model).points > 1 \
+            else ""
         return f"collision at t = {sim.collision_time:.3f} s: {where}{point}"
     if sim.outcome == "converged":
         t = sim.result.converged_time
@@ -145,6 +103,8 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
     model = sims[0].model
     if any(s.model != model for s in sims):
         raise ValueError("all runs of one figure must be of the same model")
+    info = model_info(model)
+    several = info.points > 1  # every levitation point of the first run
     p = sims[0].params
     fig, axes = new_figure(2, 2, figsize=(11.0, 7.2))
     ax_g, ax_i, ax_w, ax_p = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
@@ -157,26 +117,26 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
         rate = shown_in("gap_rate", ds.gap_rate.values)
         bw = ds.beam_deflection.values * 1e3
         ls = "-" if k == 0 else "--"
-        if model == "unit" or k > 0:
+        if not several or k > 0:
             pts = [0]
         else:
             pts = list(range(gd.shape[1]))
         for j in pts:
-            colour = _COLOURS[j % len(_COLOURS)] if (model == "vehicle" and k == 0) else \
+            colour = _COLOURS[j % len(_COLOURS)] if (several and k == 0) else \
                 _COLOURS[k % len(_COLOURS)]
-            name = lab if model == "unit" else (f"point {j + 1}" if k == 0 else
-                                                f"point 1 ({lab})")
-            if model == "vehicle" and k == 0 and j == 0:
+            name = lab if not several else (f"point {j + 1}" if k == 0 else
+                                            f"point 1 ({lab})")
+            if several and k == 0 and j == 0:
                 name = f"point 1 ({lab})"
             ax_g.plot(t, gd[:, j], color=colour, ls=ls, lw=1.0, label=name)
             ax_i.plot(t, cur[:, j], color=colour, ls=ls, lw=1.0)
             shown = t <= t_max
             ax_p.plot(gd[shown, j], rate[shown, j], color=colour, ls=ls, lw=0.8)
-            if sim.outcome == "collision" and len(t) and (model == "unit"
+            if sim.outcome == "collision" and len(t) and (not several
                                                            or sim.point == j + 1):
                 ax_g.plot(t[-1], gd[-1, j], "x", color=colour, ms=8, mew=2)
                 ax_p.plot(gd[-1, j], rate[-1, j], "x", color=colour, ms=8, mew=2)
-        if model == "unit":
+        if bw.ndim == 1:  # one deflection (model A's w), else modal coordinates
             ax_w.plot(t, bw, color=_COLOURS[k % len(_COLOURS)], ls=ls, lw=1.0)
         else:
             for n in range(bw.shape[1] if k == 0 else 1):
@@ -191,7 +151,7 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
     if any(s.outcome == "collision" for s in sims):
         ax_g.plot([], [], "kx", ms=7, mew=2, label="collision")
     ax_i.axhline(0.0, **_LIMIT_STYLE, label="zero current (never reverses)")
-    i0 = p.i0 if model == "unit" else p.i0_vehicle
+    i0 = sims[0].levitation_current
     ax_i.axhline(i0, color="0.6", lw=0.8, ls="-.", label=f"levitation current {i0:.3g} A")
     for ax in (ax_g, ax_i, ax_w):
         ax.set_xlim(0.0, t_max)
@@ -201,7 +161,7 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
     ax_i.set_ylabel("coil current i (A)")
     ax_i.set_title("coil current" + (" (force-producing, max(i, 0))" if sims[0].limited
                                       else ""))
-    if model == "unit":
+    if bw.ndim == 1:
         ax_w.set_ylabel("beam deflection w (mm, down positive)")
         ax_w.set_title("beam deflection under the unit")
     else:
@@ -218,7 +178,7 @@ def simulation_figure(sims: Sequence[MaglevSimulation], labels: Sequence[str] | 
     ax_g.legend(fontsize=7, loc="best")
     ax_i.legend(fontsize=7, loc="best")
     if title is None:
-        what = (f"Model {'A (levitation unit)' if model == 'unit' else 'B (full vehicle)'}, "
+        what = (f"Model {info.letter} ({info.title}), "
                 f"omega1 = {float(p.omega1):.4g} rad/s, sigma = {float(p.sigma):.3g} 1/kg, "
                 f"limits {'on' if sims[0].limited else 'off'}")
         outcomes = [f"{lab}: {describe_outcome(s)}" for s, lab in zip(sims, labels,
@@ -236,3 +196,13 @@ def plot_simulation(sims: MaglevSimulation | Sequence[MaglevSimulation], path: s
     runs = [sims] if isinstance(sims, MaglevSimulation) else list(sims)
     fig, _ = simulation_figure(runs, labels, title)
     return save_figure(fig, path)
+
+
+@figure.register(MaglevSimulation)
+def _simulation(sim: MaglevSimulation, **kw):
+    return _simulations(sim, [sim], **kw)
+
+
+@figure_of_many.register(MaglevSimulation)
+def _simulations(first: MaglevSimulation, sims, **kw):
+    return simulation_figure(list(sims), **kw)[0]

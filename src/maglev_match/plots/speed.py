@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from maglev_match.analyses.speed.spans import SpanRun
+from maglev_match.analyses.speed.sweep import SpeedSweep
+from maglev_match.core.results import figure
 from maglev_match.plots.base import new_figure
 
 __all__ = ["speed_figure", "span_run_figure"]
@@ -143,3 +146,13 @@ def speed_map_figure(ds):
     ax.set_title(f"At speed ({ds.attrs.get('model', '')}): chi(v) over {xname} and {yname}")
     fig.tight_layout()
     return fig
+
+
+@figure.register(SpeedSweep)
+def _speed_sweep(sweep: SpeedSweep, **kw):
+    return speed_figure(sweep, **kw)
+
+
+@figure.register(SpanRun)
+def _span_run(run: SpanRun, **kw):
+    return span_run_figure(run, **kw)

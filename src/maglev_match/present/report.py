@@ -42,6 +42,7 @@ import numpy as np
 from maglev_match.core.io import atomic_write_text
 from maglev_match.core.params import PARAMETER_DOCS, Params
 from maglev_match.core.units import label as unit_label
+from maglev_match.maglev.catalog import model_info
 
 log = logging.getLogger(__name__)
 
@@ -351,9 +352,9 @@ def section_parameters(params: Params, ctx: ReportContext) -> tuple[str, list[Pa
 def stability_summary(params: Params, model: str = "unit") -> dict[str, Any]:
     """Equilibrium stability of model A ('unit') or B ('vehicle')."""
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import maglev_model
 
-    res = stability(build_system(params, model))
+    res = stability(maglev_model(params, model).system())
     return {"model": model, "stable": res.stable, "max_real_part": res.max_real_part,
             "eigenvalues": res.eigenvalues, "converged": res.equilibrium.converged,
             "warnings": list(res.warnings)}
@@ -376,6 +377,10 @@ def eigen_table_html(eigenvalues: np.ndarray, limit: int | None = None) -> str:
                       eigen_rows(eigenvalues, limit), "eig")
 
 
+#: eigenvalue rows shown per model (the rightmost; a 40-state model shows 12 of its pairs)
+EIGEN_ROWS = 12
+
+
 def section_stability(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
     """Stability verdict and eigenvalues, model A and (optionally) model B."""
     models = ["unit"] + (["vehicle"] if ctx.settings.include_vehicle else [])
@@ -383,12 +388,12 @@ def section_stability(params: Params, ctx: ReportContext) -> tuple[str, list[Pat
     for model in models:
         s = stability_summary(params, model)
         data[model] = s
-        limit = 12 if model == "vehicle" else None
+        info = model_info(model)
+        rows = eigen_rows(s["eigenvalues"])
         shown.append({
-            "label": "Model A (one levitation unit, 9 states)" if model == "unit" else
-                     "Model B (full vehicle on a multi-mode beam)",
+            "label": f"Model {info.letter} ({info.title}, {len(s['eigenvalues'])} states)",
             "stable": s["stable"], "max_real_part": s["max_real_part"],
-            "rows": eigen_rows(s["eigenvalues"], limit), "truncated": limit is not None,
+            "rows": rows[:EIGEN_ROWS], "truncated": len(rows) > EIGEN_ROWS,
             "warnings": s["warnings"]})
     return render("stability.html.j2", models=shown), [], data
 
@@ -396,7 +401,7 @@ def section_stability(params: Params, ctx: ReportContext) -> tuple[str, list[Pat
 def section_root_locus(params: Params, ctx: ReportContext) -> tuple[str, list[Path], Any]:
     """Root locus of model A along omega1 through the design point."""
     from maglev_match.dynamics.equilibria import root_locus
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
     from maglev_match.plots.rootlocus import root_locus_figure
 
     lo, hi = ctx.settings.hopf_omega1_range
@@ -447,8 +452,8 @@ def cycle_diagram(params: Params, param: str, lo: float, hi: float,
     a physical gap limit or leaves [lo, hi]."""
     from maglev_match.dynamics.cycles import cycle_branch
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.maglev import build_system
-    from maglev_match.maglev.limits_check import cycle_limit_margins
+    from maglev_match.maglev.limits import cycle_limit_margins
+    from maglev_match.maglev.models import build_system
 
     system = build_system(params, "unit")
     n = n_scan or (60 if settings.quick else 160)
@@ -569,14 +574,13 @@ def section_bifurcation_diagrams(params: Params, ctx: ReportContext
 def run_time_history(params: Params, model: str, t_end: float, *, x5: float | None = None,
                      initial: str = "equilibrium", q1: float | None = None):
     """One simulation with the physical limits on, and its history as an xarray Dataset."""
-    from maglev_match.analyses.simulation import history_dataset, initial_state, simulate_maglev
+    from maglev_match.analyses.simulation import history_dataset, simulate_maglev
+    from maglev_match.maglev.models import maglev_model
 
-    if model == "unit":
-        x0 = initial_state(params, "unit", x5=x5)
-    else:
-        x0 = initial_state(params, "vehicle", initial=initial, q1=q1)
+    m = maglev_model(params, model)
+    x0 = m.initial_state(initial, x5=x5, q1=q1)
     # 10001 saved points (0.3-0.5 ms apart): smooth phase portraits of 20 Hz oscillations
-    sim = simulate_maglev(params, model, x0, t_end, n_save=10001)
+    sim = simulate_maglev(m, x0=x0, t_end=t_end, n_save=10001)
     return sim, history_dataset(sim)
 
 
@@ -609,7 +613,7 @@ def converges(sim: Any) -> bool:
 def outcome_text(sim: Any) -> str:
     """The outcome of a run in words."""
     if sim.outcome == "collision":
-        where = f" at levitation point {sim.point}" if sim.model == "vehicle" else ""
+        where = f" at levitation point {sim.point}" if model_info(sim.model).points > 1 else ""
         return f"collision with the {sim.limit} gap limit{where} at t = {sim.collision_time:.4g} s"
     if sim.outcome == "running":
         early, late = late_amplitude(sim)
@@ -864,7 +868,7 @@ def hopf_curves(params: Params, settings: ReportSettings) -> list[Any]:
     omega1 (duplicates of one branch are kept once)."""
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.dynamics.hopf_curve import hopf_curve
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     system = build_system(params, "unit")
     w_lo, w_hi = settings.hopf_omega1_range
@@ -901,7 +905,7 @@ def stability_region(params: Params, settings: ReportSettings
     eigenvalues): an independent picture of the regions the Hopf curve separates.
     Returns (omega1 values, sigma values, max real part shaped (n_sigma, n_omega1))."""
     from maglev_match.dynamics.hopf_curve import stability_grid
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     n1, n2 = (50, 40) if settings.quick else (120, 90)
     w = np.linspace(*settings.hopf_omega1_range, n1)

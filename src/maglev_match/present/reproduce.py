@@ -210,7 +210,7 @@ class Study:
 # ---------------------------------------------------------------------------------------
 def _max_re(params: Params) -> float:
     from maglev_match.dynamics.equilibria import stability
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     return float(stability(build_system(params, "unit")).max_real_part)
 
@@ -218,7 +218,7 @@ def _max_re(params: Params) -> float:
 def _a1(params: Params) -> float | None:
     """The lowest Hopf point along omega1 in [40, 400] rad/s at sigma = 4e-4."""
     from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     p = params.replace(sigma=4e-4, omega1=100.0)
     scan = locate_hopf_points(build_system(p, "unit"), "omega1", 40.0, 400.0, n_scan=90)
@@ -723,7 +723,7 @@ def _fig12(st: Study, ctx: ReportContext) -> tuple[str, list[Path], Any]:
         raise SectionUnavailable(f"no unstable cycle decides h for turnout-soft (case "
                                  f"{mi.case}: {mi.message})")
     orbit = mi.cycle.orbit
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     p = st.preset("turnout-soft")
     system = build_system(p, "unit")

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,6 +27,7 @@ from maglev_match.analyses.speed.sweep import (
 )
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.integrate.simulate import EventsWithArgs, SimulationOptions, simulate
 from maglev_match.maglev import moving as mv
 from maglev_match.maglev.moving import MovingModel
@@ -36,7 +36,7 @@ __all__ = ["SpanRun", "simulate_over_spans"]
 
 
 @dataclass(frozen=True)
-class SpanRun:
+class SpanRun(Plottable):
     """A run from rigid ground (the abutment) over ``spans`` spans and off onto rigid
     ground again, at constant speed (m/s): N + 1 passages, passage k starting when the
     front of the vehicle reaches support k - 1.
@@ -125,17 +125,6 @@ class SpanRun:
                 "periodic_gap_deviation": "gap deviation of the periodic response",
                 "periodic_body_acceleration": "car-body acceleration of the periodic "
                                               "response"})
-
-    def plot(self, path: str | Path | None = None):
-        from maglev_match.plots.speed import span_run_figure
-
-        fig = span_run_figure(self)
-        if path is None:
-            return fig
-        from maglev_match.plots import save_figure
-
-        return save_figure(fig, Path(path))
-
 
 def _integrate_events(system, x_start, t_rel, p, sim, events):
     """As :func:`integrate_saving`, with an event function: returns (states up to the

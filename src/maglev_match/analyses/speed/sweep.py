@@ -70,6 +70,7 @@ from maglev_match.analyses.speed.ride import sperling_of_periodic
 from maglev_match.core.aot import cached_kernel
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.integrate.passage import (
     SAVE_SLOTS,
     PassageOptions,
@@ -229,9 +230,9 @@ def w0_of(params: Params, kind: MovingModel) -> float:
     sigma (m + M) g / omega1^2 for the unit and the force, model B's static mid-span
     deflection under the vehicle for the vehicle."""
     if MovingModel(kind) is MovingModel.VEHICLE:
-        from maglev_match.analyses.simulation import vehicle_disturbance_geometry
+        from maglev_match.maglev.models import VehicleModel
 
-        return float(vehicle_disturbance_geometry(params)[2])
+        return float(VehicleModel(params).w0)
     return float(params.w0)
 
 
@@ -1218,7 +1219,7 @@ def run_speed_sweep(spec: SweepSpec, checkpoint: Path | None = None, *, resume: 
 
 
 @dataclass(frozen=True)
-class SpeedSweep:
+class SpeedSweep(Plottable):
     """A sweep over speed: one :class:`SpeedPoint` per speed, the resonance speeds in the
     range, the located stability changes and the sweep's warnings."""
 
@@ -1261,18 +1262,6 @@ class SpeedSweep:
         units and long names, the parameter set, the resonance speeds, the stability changes
         and the warnings as (JSON) attributes."""
         return sweep_dataset(self)
-
-    def plot(self, path: str | Path | None = None):
-        """The sweep's figure (:func:`maglev_match.plots.speed.speed_figure`); with ``path``
-        also saved (PNG and SVG). Returns the figure (or the written paths)."""
-        from maglev_match.plots.speed import speed_figure
-
-        fig = speed_figure(self)
-        if path is None:
-            return fig
-        from maglev_match.plots import save_figure
-
-        return save_figure(fig, Path(path))
 
     def summary(self) -> dict[str, Any]:
         """Machine-readable summary (SI units)."""

@@ -54,7 +54,7 @@ def is_engineering(name: str) -> bool:
 
 
 def _model_vector(params: Params, model: str, name: str, value: float) -> np.ndarray:
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     value = int(round(value)) if name == "k" else float(value)
     return np.asarray(build_system(params.replace(**{name: value}), model).p, float)
@@ -101,7 +101,7 @@ def engineering_hopf_points(params: Params, model: str, name: str, start: float,
     engineering quantity, ``p`` the model's parameter vector there and ``crossing_speed``
     d Re(lambda)/d name; and the model's System (read omega1, sigma off ``p`` with it).
     """
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     system = build_system(params, model)
     values = np.linspace(start, stop, int(n_scan))
@@ -171,7 +171,7 @@ def engineering_system(params: Params, model: str, name: str, start: float, stop
     (``locate_hopf_points``, ``cycle_branch``) then works in E directly, with E's value
     at the parameter set's own value of ``name`` (clipped into [start, stop]).
     """
-    from maglev_match.maglev import build_system
+    from maglev_match.maglev.models import build_system
 
     system = build_system(params, model)
     values = np.linspace(start, stop, int(n_nodes))
