@@ -87,11 +87,11 @@ def main() -> None:
           f"branch in omega1 ({len(br0.points)} cycles) {t_br0:.3f} s ({CPU['branch0']:.3f} s "
           f"CPU): ratio {t_br / t_br0:.2f}")
 
-    from maglev_match.dynamics.cycles import _blocks_at, _Problem
+    from maglev_match.dynamics.cycles import CollocationBVP, _blocks_at
     from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 
     c = br.points[len(br.points) // 2]
-    prob = _Problem(system=system, ipar=system.param_index("tau"), p0=c.orbit.p,
+    prob = CollocationBVP(system=system, ipar=system.param_index("tau"), p0=c.orbit.p,
                     mesh=c.orbit.mesh, m=c.orbit.ncol, scale=system.state_scale,
                     T_scale=c.period, lam_scale=1.0)
     J, Tb, h = _blocks_at(prob, prob.pack(c.orbit.states, c.period, c.value), prob.mesh)

@@ -14,9 +14,9 @@ from maglev_match.dynamics.collocation import (
     CollocationProblem,
     CondensedLU,
     LinearSolver,
-    _factorize,
-    _newton,
     _sparse_matrix,
+    collocation_newton,
+    factorize,
 )
 from maglev_match.dynamics.cycles import cycle_branch, hopf_start
 
@@ -62,16 +62,16 @@ def test_condensed_solve_equals_the_sparse_lu_of_the_whole_system(m, blocks, mon
         prob = CollocationProblem(system=HOPF_NF, ipar=0, p0=o.p, mesh=o.mesh, m=m,
                                   scale=np.asarray(HOPF_NF.state_scale, float),
                                   T_scale=o.period, lam_scale=0.1)
-        from maglev_match.dynamics.collocation import _node_times
+        from maglev_match.dynamics.collocation import node_times
 
-        s = _node_times(o.mesh, m)
+        s = node_times(o.mesh, m)
         U = o.evaluate(s % 1.0 * (1 - 1e-15))
         rng = np.random.default_rng(1)
         Y = prob.pack(U, o.period, c.value) * (1.0 + 1e-3 * rng.standard_normal(prob.size))
         row = prob.W() * rng.standard_normal(prob.size)
         pa = prob.parts(Y, prob.phase_row(U), U, row, float(row @ Y))
     A = _sparse_matrix(prob, pa)
-    lu = _factorize(A)
+    lu = factorize(A)
     b0 = -pa.resid
     cl = CondensedLU(prob, pa, b0)
     e_last = np.zeros(prob.size)
@@ -94,7 +94,7 @@ def test_condensed_solve_on_the_lorenz_cycle_near_its_homoclinic_end():
                       ntst=40, ncol=4, max_steps=300)
     c = br.points[-1]
     prob, Y, pa = _problem_near(c, sys_, sys_.param_index("rho"), 4, seed=3)
-    lu = _factorize(_sparse_matrix(prob, pa))
+    lu = factorize(_sparse_matrix(prob, pa))
     x_ref = lu.solve(-pa.resid)
     x = CondensedLU(prob, pa, -pa.resid).solve(-pa.resid)
     assert np.max(np.abs(x - x_ref)) <= 1e-12 * np.max(np.abs(x_ref))
@@ -135,7 +135,7 @@ def test_newton_stops_only_when_converged():
     row = np.zeros(prob.size)
     row[-1] = 1.0
     Uref = c.orbit.states
-    Yc, ok, its, _, _, _ = _newton(prob, Y, Uref, row, c.value / 0.1, 1e-10, 12)
+    Yc, ok, its, _, _, _ = collocation_newton(prob, Y, Uref, row, c.value / 0.1, 1e-10, 12)
     assert ok and its >= 2
     pa = prob.parts(Yc, prob.phase_row(Uref), Uref, row, c.value / 0.1)
     assert np.max(np.abs(pa.resid)) < 1e-11
@@ -201,7 +201,7 @@ def test_chord_newton_reaches_the_newton_solution_with_one_kept_factorisation():
     unperturbed cycle converges to the solution Newton's method finds (to the tolerance),
     factorising only once more (at the solution, for the tangent and the multipliers);
     the factorisation it returns is the one at its solution."""
-    from maglev_match.dynamics.collocation import NewtonStats, _chord_newton
+    from maglev_match.dynamics.collocation import NewtonStats, chord_newton
 
     br = _branch("condensed")
     c = br.points[-1]
@@ -214,8 +214,8 @@ def test_chord_newton_reaches_the_newton_solution_with_one_kept_factorisation():
     pa0 = prob.parts(Y_exact, prob.phase_row(Uref), Uref, row, target)
     lu0 = CondensedLU(prob, pa0)
     stats = NewtonStats()
-    cr = _chord_newton(prob, Y, Uref, row, target, 1e-10, 30, lu0=lu0, stats=stats)
-    Yn, ok, _, _, _, _ = _newton(prob, Y, Uref, row, target, 1e-10, 12)
+    cr = chord_newton(prob, Y, Uref, row, target, 1e-10, 30, lu0=lu0, stats=stats)
+    Yn, ok, _, _, _, _ = collocation_newton(prob, Y, Uref, row, target, 1e-10, 12)
     assert cr.converged and ok
     assert np.max(np.abs(cr.Y - Yn)) < 1e-10
     pa = prob.parts(cr.Y, prob.phase_row(Uref), Uref, row, target)

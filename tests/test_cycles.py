@@ -12,7 +12,7 @@ import scipy.integrate
 from systems import CYCLE_OMEGA, FOLD_NF, HOPF_NF, LINEAR_PART, Q5, Q_CRIT
 
 from maglev_match.dynamics.cycles import (
-    _adapt_mesh,
+    adapt_mesh,
     correct_cycle,
     cycle_branch,
     floquet_multipliers,
@@ -104,7 +104,7 @@ def test_mesh_adaptation_concentrates_points_at_a_sharp_pulse():
     mesh = np.linspace(0, 1, ntst + 1)
     t = np.linspace(0, 1, ntst * m + 1)
     U = np.exp(-(((t - 0.5) / 0.03) ** 2))[:, None]
-    new = _adapt_mesh(mesh, m, U, np.ones(1))
+    new = adapt_mesh(mesh, m, U, np.ones(1))
     h = np.diff(new)
     assert new[0] == 0 and new[-1] == 1 and np.all(h > 0)
     centre = h[np.searchsorted(new, 0.5) - 1]

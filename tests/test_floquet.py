@@ -10,7 +10,7 @@ import pytest
 from scipy.linalg import block_diag, expm
 
 from maglev_match.dynamics import floquet as fq
-from maglev_match.dynamics.collocation import _tables
+from maglev_match.dynamics.collocation import collocation_tables
 
 # ---------------------------------------------------------------------------------------
 # helpers
@@ -22,7 +22,7 @@ def gauss_point_jacobians(jac, ntst: int, m: int, T: float, mesh=None):
     collocation code hands to the multiplier routine): (NTST, m, n, n) and the interval
     lengths. ``jac(t)`` is the Jacobian at time t (s)."""
     mesh = np.linspace(0.0, 1.0, ntst + 1) if mesh is None else np.asarray(mesh)
-    _, z, _, _, _ = _tables(m)
+    _, z, _, _, _ = collocation_tables(m)
     h = np.diff(mesh)
     s = mesh[:-1, None] + z[None, :] * h[:, None]
     return np.array([[jac(si * T) for si in row] for row in s]), h
@@ -233,7 +233,7 @@ def _lorenz(x, p):
 def _orbit_gauss_jacobians(system, orbit):
     """Jacobian at the Gauss points of a collocation orbit (its node values interpolated)."""
     m, ntst = orbit.ncol, orbit.ntst
-    _, _, _, L, _ = _tables(m)
+    _, _, _, L, _ = collocation_tables(m)
     U = np.asarray(orbit.states).reshape(-1, system.dim)
     J = np.empty((ntst, m, system.dim, system.dim))
     for j in range(ntst):

@@ -29,7 +29,7 @@ import numpy as np
 
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.dynamics.hopf import HopfPoint, HopfScan, locate_hopf_points
-from maglev_match.dynamics.paths import PATH_PARAM, _interpolate, path_system
+from maglev_match.dynamics.paths import PATH_PARAM, interpolate_path, path_system
 from maglev_match.dynamics.system import System
 
 __all__ = ["ENGINEERING_PARAMS", "PARAM_HELP", "is_engineering", "engineering_nodes",
@@ -154,7 +154,7 @@ def engineering_hopf_points(params: Params, model: str, name: str, start: float,
 def _quantity_rhs(rhs, n_nodes: int, n_params: int):
     def quantity_rhs(x, q):
         t = (q[0] - q[1]) / q[2]
-        return rhs(x, _interpolate(jnp.concatenate([t[None], q[3:]]), n_nodes, n_params))
+        return rhs(x, interpolate_path(jnp.concatenate([t[None], q[3:]]), n_nodes, n_params))
 
     return quantity_rhs
 

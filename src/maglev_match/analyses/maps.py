@@ -519,7 +519,7 @@ def _scan_hopf_points(path, w: np.ndarray, t_end: float, system, nodes: np.ndarr
     without a sign change) are scanned again by equilibrium continuation with
     :data:`FINE_SCAN` samples (which splits steps until each crossing has its own).
     """
-    from maglev_match.dynamics.equilibria import _pair_crossings
+    from maglev_match.dynamics.equilibria import pair_crossings
     from maglev_match.dynamics.hopf import locate_hopf_points
     from maglev_match.dynamics.paths import PATH_PARAM
 
@@ -536,7 +536,7 @@ def _scan_hopf_points(path, w: np.ndarray, t_end: float, system, nodes: np.ndarr
     for i in range(len(w) - 1):
         wa, wb = w[i], w[i + 1]
         flip = sign[i] != sign[i + 1]
-        crossings = _pair_crossings(wa, wb)
+        crossings = pair_crossings(wa, wb)
         if not flip and crossings == 0:
             continue
         if flip and crossings == 1:
@@ -899,7 +899,7 @@ def _simulate_row_pointwise(pts: list, stable: np.ndarray) -> dict[str, np.ndarr
     search on the delay system (:func:`maglev_match.analyses.simulation.critical_disturbance`, the
     index's own search and rule), since the batched search of
     :func:`critical_sizes_batch` integrates model A's ODE."""
-    from maglev_match.analyses.matching import _supported_size
+    from maglev_match.analyses.matching import supported_size
     from maglev_match.analyses.simulation import critical_disturbance
 
     settings = simulation_settings()
@@ -912,7 +912,7 @@ def _simulate_row_pointwise(pts: list, stable: np.ndarray) -> dict[str, np.ndarr
         for d in DIRECTIONS:
             cd = critical_disturbance(p, direction=d, tol=settings.tol)
             if cd.status in ("bracketed", "all_return", "all_collide"):
-                size[d][j] = _supported_size(cd)  # the index's rule
+                size[d][j] = supported_size(cd)  # the index's rule
             elif reason[j] == 0:  # open: runs left undecided; no number
                 reason[j] = REASON_SIM_UNDECIDED
     return {"h_up": size[-1], "h_down": size[1], "reason": reason}

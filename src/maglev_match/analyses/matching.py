@@ -392,7 +392,7 @@ def index_of_system(
     )
 
 
-def _supported_size(cd: Any, crit: Any = None) -> float | None:
+def supported_size(cd: Any, crit: Any = None) -> float | None:
     """The disturbance size a simulation search supports (m): a solved critical size (the
     grazing or basin-boundary condition, inside a bracket whose lower end returned), else
     the bracket's midpoint,
@@ -469,7 +469,7 @@ def with_simulation(res: MatchingIndex, up: Any, down: Any | None = None, *,
             sizes.append(None)
             continue
         info[key] = _sim_info(cd, label, crit)
-        size = _supported_size(cd, crit)
+        size = supported_size(cd, crit)
         sizes.append(size)
         warnings.extend(f"simulation ({label}): {w}" for w in cd.warnings)
         if cd.status == "open":

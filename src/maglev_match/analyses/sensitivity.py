@@ -147,10 +147,10 @@ def _collocation_system(system: System, orbit: PeriodicOrbit) -> _Collocation:
     """
     from maglev_match.dynamics.collocation import (
         CollocationProblem,
-        _factorize,
-        _interval_index,
-        _lagrange,
-        _tables,
+        collocation_tables,
+        factorize,
+        interval_nodes,
+        lagrange_basis,
     )
 
     p = np.asarray(orbit.p, float)
@@ -164,8 +164,8 @@ def _collocation_system(system: System, orbit: PeriodicOrbit) -> _Collocation:
     last_row[-1] = 1.0
     phase = prob.phase_row(orbit.states)
     _, A, _ = prob.evaluate(Y, phase, orbit.states, last_row, float(Y[-1]))
-    _, _, _, L, _ = _tables(m)
-    idx = _interval_index(ntst, m)
+    _, _, _, L, _ = collocation_tables(m)
+    idx = interval_nodes(ntst, m)
     Uc = np.einsum("lk,jkn->jln", L, orbit.states[idx])  # (ntst, m, n) at Gauss points
     fp = np.asarray(_param_jacobian_batch(system.rhs)(jnp.asarray(Uc.reshape(-1, n)),
                                                       jnp.asarray(p)))  # (ntst m, n, np)
@@ -175,10 +175,10 @@ def _collocation_system(system: System, orbit: PeriodicOrbit) -> _Collocation:
     rows = (-orbit.period * h[:, None, None, None] * fp / sc[None, None, :, None])
     dF = np.zeros((prob.size, p.size))
     dF[: ntst * m * n] = rows.reshape(ntst * m * n, p.size)
-    lu = _factorize(A)
+    lu = factorize(A)
     nodes = np.linspace(0.0, 1.0, m + 1)
     return _Collocation(A=A, dF_dp=dF, S=prob.S(), idx=idx, solve=lu.solve,
-                        basis=lambda s: _lagrange(nodes, np.atleast_1d(s))[0])
+                        basis=lambda s: lagrange_basis(nodes, np.atleast_1d(s))[0])
 
 
 @cache

@@ -30,7 +30,7 @@ Linear algebra (:class:`LinearSolver`): by default each Newton step condenses th
 nodes of every interval out of the system (:class:`CondensedLU`, as AUTO does) and solves
 the remaining mesh-node system, of fixed sparsity pattern, by sparse LU; ``"sparse_lu"``
 factorises the whole bordered matrix (the earlier code path, kept for comparison).
-Continuation uses the chord iteration (:func:`_chord_newton`): the factorisation made at
+Continuation uses the chord iteration (:func:`chord_newton`): the factorisation made at
 one solution serves the next corrector while the iteration contracts fast, and the same
 factorisation gives the tangent and the Floquet transfer matrices
 (:meth:`CondensedLU.transfer_matrices`).
@@ -58,17 +58,17 @@ __all__ = ["CollocationProblem", "LinearSolver"]
 
 
 @cache
-def _tables(m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def collocation_tables(m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Nodes c_k = k/m, Gauss points z_l, weights w_l on [0, 1]; L[l,k] = ell_k(z_l),
     D[l,k] = ell_k'(z_l) for the Lagrange basis on the nodes."""
     c = np.linspace(0.0, 1.0, m + 1)
     g, w = np.polynomial.legendre.leggauss(m)
     z, w = 0.5 * (g + 1.0), 0.5 * w
-    L, D = _lagrange(c, z)
+    L, D = lagrange_basis(c, z)
     return c, z, w, L, D
 
 
-def _lagrange(c: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lagrange_basis(c: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Values and derivatives of the Lagrange basis on nodes c at points s: (len(s), len(c))."""
     s = np.asarray(s, float)
     n = c.size
@@ -90,30 +90,30 @@ def _lagrange(c: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return L, D
 
 
-def _node_times(mesh: np.ndarray, m: int) -> np.ndarray:
+def node_times(mesh: np.ndarray, m: int) -> np.ndarray:
     h = np.diff(mesh)
     t = (mesh[:-1, None] + h[:, None] * (np.arange(m) / m)[None, :]).ravel()
     return np.append(t, mesh[-1])
 
 
-def _interval_index(ntst: int, m: int) -> np.ndarray:
+def interval_nodes(ntst: int, m: int) -> np.ndarray:
     return np.arange(ntst)[:, None] * m + np.arange(m + 1)[None, :]
 
 
-def _evaluate_profile(mesh: np.ndarray, m: int, U: np.ndarray, s: np.ndarray) -> np.ndarray:
+def evaluate_profile(mesh: np.ndarray, m: int, U: np.ndarray, s: np.ndarray) -> np.ndarray:
     ntst = mesh.size - 1
     j = np.clip(np.searchsorted(mesh, s, side="right") - 1, 0, ntst - 1)
     loc = (s - mesh[j]) / (mesh[j + 1] - mesh[j])
     c = np.linspace(0.0, 1.0, m + 1)
-    L, _ = _lagrange(c, loc)  # (len(s), m+1)
-    nodes = U[_interval_index(ntst, m)[j]]  # (len(s), m+1, dim)
+    L, _ = lagrange_basis(c, loc)  # (len(s), m+1)
+    nodes = U[interval_nodes(ntst, m)[j]]  # (len(s), m+1, dim)
     return np.einsum("sk,skn->sn", L, nodes)
 
 
 @cache
-def _kernel(rhs: Callable, m: int) -> Callable:
+def collocation_kernel(rhs: Callable, m: int) -> Callable:
     """Jitted collocation kernel for one right-hand side and NCOL (cached)."""
-    _, _, _, L, D = _tables(m)
+    _, _, _, L, D = collocation_tables(m)
     Lj, Dj = jnp.asarray(L), jnp.asarray(D)
     jac = jax.jacfwd(rhs, argnums=0)
 
@@ -141,9 +141,9 @@ def _parts_kernel(rhs: Callable, m: int) -> Callable:
 
     Returns (r_col (NTST, m, n), colT (NTST, m, n), colL (NTST, m, n), blk (NTST, m n,
     (m+1) n) with rows (l, a) and columns (k, b), J (NTST, m, n, n))."""
-    _, _, _, L, D = _tables(m)
+    _, _, _, L, D = collocation_tables(m)
     Lj, Dj = jnp.asarray(L), jnp.asarray(D)
-    base = _kernel(rhs, m)
+    base = collocation_kernel(rhs, m)
 
     def parts(Ui, h, T, p, e, sc, T_scale, lam_scale):
         res, F, J, Fp = base(Ui, h, T, p, e)
@@ -166,7 +166,7 @@ def _residual_kernel(rhs: Callable, m: int) -> Callable:
     """Jitted scaled residual of the collocation rows alone, (NTST, m, n), as
     :meth:`CollocationProblem.parts` scales it (for the chord iterations, which need no
     Jacobian)."""
-    _, _, _, L, D = _tables(m)
+    _, _, _, L, D = collocation_tables(m)
     Lj, Dj = jnp.asarray(L), jnp.asarray(D)
     f2 = jax.vmap(jax.vmap(rhs, (0, None)), (0, None))
 
@@ -278,8 +278,8 @@ class CollocationProblem:
     def phase_row(self, Uref: np.ndarray) -> np.ndarray:
         """Coefficients c (N, n) with int <u, u_ref'> dt = sum c * U."""
         ntst, m = self.mesh.size - 1, self.m
-        _, _, w, L, D = _tables(m)
-        idx = _interval_index(ntst, m)
+        _, _, w, L, D = collocation_tables(m)
+        idx = interval_nodes(ntst, m)
         Ui = Uref[idx]  # (ntst, m+1, n)
         dref = np.einsum("lk,jkn->jln", D, Ui)  # h_j u_ref' at Gauss points (h cancels)
         coef = np.einsum("l,lk,jln->jkn", w, L, dref)
@@ -304,7 +304,7 @@ class CollocationProblem:
         h = np.diff(self.mesh)
         e = np.zeros_like(p)
         e[self.ipar] = 1.0
-        idx = _interval_index(ntst, m)
+        idx = interval_nodes(ntst, m)
         sc = self.scale
         out = _parts_kernel(self.system.rhs, m)(
             U[idx], h, T, p, e, sc, self.T_scale, self.lam_scale)
@@ -330,12 +330,13 @@ class CollocationProblem:
         last_rhs: float,
     ) -> np.ndarray:
         """The residual of the bordered system alone (equal to ``parts(...).resid``), one
-        compiled call without the Jacobian blocks (the chord iterations of :func:`_newton`)."""
+        compiled call without the Jacobian blocks (the chord iterations of
+        :func:`collocation_newton`)."""
         ntst, m = self.mesh.size - 1, self.m
         U, T, lam = self.unpack(Y)
         sc = self.scale
         r_col = np.asarray(_residual_kernel(self.system.rhs, m)(
-            U[_interval_index(ntst, m)], np.diff(self.mesh), T, self.params(lam), sc))
+            U[interval_nodes(ntst, m)], np.diff(self.mesh), T, self.params(lam), sc))
         pnorm = np.max(np.abs(phase * sc)) or 1.0
         return np.concatenate([
             r_col.ravel(),
@@ -351,8 +352,8 @@ class CollocationProblem:
         U, T, lam = self.unpack(Y)
         p = self.params(lam)
         h = np.diff(self.mesh)
-        idx = _interval_index(ntst, m)
-        _, _, J, _ = _kernel(self.system.rhs, m)(
+        idx = interval_nodes(ntst, m)
+        _, _, J, _ = collocation_kernel(self.system.rhs, m)(
             jnp.asarray(U[idx]), jnp.asarray(h), T, jnp.asarray(p), jnp.zeros_like(p))
         return np.asarray(J), T, h
 
@@ -381,8 +382,8 @@ class CollocationProblem:
         h = np.diff(self.mesh)
         e = np.zeros_like(p)
         e[self.system.param_index(name)] = 1.0
-        idx = _interval_index(ntst, m)
-        _, _, _, Fp = _kernel(self.system.rhs, m)(
+        idx = interval_nodes(ntst, m)
+        _, _, _, Fp = collocation_kernel(self.system.rhs, m)(
             jnp.asarray(U[idx]), jnp.asarray(h), T, jnp.asarray(p), jnp.asarray(e))
         col = (-T * np.asarray(Fp) * h[:, None, None] / self.scale).ravel()
         return np.concatenate([col, np.zeros(n + 2)])
@@ -395,8 +396,8 @@ class CollocationProblem:
         s = float(s) % 1.0
         j = int(np.clip(np.searchsorted(self.mesh, s, side="right") - 1, 0, ntst - 1))
         loc = (s - self.mesh[j]) / (self.mesh[j + 1] - self.mesh[j])
-        L, _ = _lagrange(np.linspace(0.0, 1.0, m + 1), np.array([loc]))
-        nodes = _interval_index(ntst, m)[j]  # (m+1,)
+        L, _ = lagrange_basis(np.linspace(0.0, 1.0, m + 1), np.array([loc]))
+        nodes = interval_nodes(ntst, m)[j]  # (m+1,)
         U, _, _ = self.unpack(Y)
         u = L[0] @ U[nodes]
         rows = np.repeat(np.arange(n)[None, :], m + 1, axis=0).ravel()
@@ -406,7 +407,7 @@ class CollocationProblem:
         return u, D
 
 
-_Problem = CollocationProblem  # the name used inside the package
+CollocationBVP = CollocationProblem  # the name used inside the package
 
 
 def _sparse_matrix(prob: CollocationProblem, pa: _Parts) -> scipy.sparse.csc_matrix:
@@ -434,7 +435,7 @@ def _sparse_matrix(prob: CollocationProblem, pa: _Parts) -> scipy.sparse.csc_mat
     return scipy.sparse.csc_matrix((vals, (all_rows, all_cols)), shape=(size, size))
 
 
-def _factorize(A: scipy.sparse.csc_matrix):
+def factorize(A: scipy.sparse.csc_matrix):
     """Sparse LU. The minimum-degree ordering on A^T + A keeps the fill of the staircase
     collocation structure small (measured ~3x faster than COLAMD here); threshold
     partial pivoting 0.1 as usual for sparse LU."""
@@ -560,7 +561,7 @@ class CondensedLU:
         A = pa.blk
         B = np.concatenate([A[:, :, :n], A[:, :, m * n:], pa.colT.reshape(ntst, mn, 1),
                             pa.colL.reshape(ntst, mn, 1)], axis=2)  # (ntst, mn, 2n+2)
-        nodes = _interval_index(ntst, m)
+        nodes = interval_nodes(ntst, m)
         inner = nodes[:, 1:m]  # (ntst, m-1) interior node indices
         ph = pa.phase.reshape(-1, n)
         last = pa.last
@@ -672,13 +673,13 @@ def _factor(prob: CollocationProblem, pa: _Parts, solver: str, b0: np.ndarray | 
     right-hand side of the first solve, which the condensed solver handles in its setup)."""
     if solver == LinearSolver.CONDENSED:
         return CondensedLU(prob, pa, b0)
-    return _factorize(_sparse_matrix(prob, pa))
+    return factorize(_sparse_matrix(prob, pa))
 
 
 _EARLY_STOP = True  # the condensed path's predicted-convergence stop (off: for comparisons)
 
 
-def _newton(
+def collocation_newton(
     prob: CollocationProblem,
     Y0: np.ndarray,
     Uref: np.ndarray,
@@ -760,7 +761,7 @@ CHORD_MAX_RATE = 0.1
 
 @dataclass(frozen=True)
 class ChordResult:
-    """What :func:`_chord_newton` returns: the solution Y, whether it converged, the
+    """What :func:`chord_newton` returns: the solution Y, whether it converged, the
     iterations, the residual max-norm of the last iterate it was evaluated at, the
     factorisation of the bordered Jacobian AT Y (for the tangent, the Floquet transfer
     matrices, and as the chord matrix of the next corrector), the blocks (J, T, h) at Y,
@@ -775,7 +776,7 @@ class ChordResult:
     factorizations: int
 
 
-def _chord_newton(
+def chord_newton(
     prob: CollocationProblem,
     Y0: np.ndarray,
     Uref: np.ndarray,
@@ -883,11 +884,11 @@ def _chord_newton(
                        blocks=blocks, factorizations=nfact)
 
 
-def _adapt_mesh(mesh: np.ndarray, m: int, U: np.ndarray, scale: np.ndarray) -> np.ndarray:
+def adapt_mesh(mesh: np.ndarray, m: int, U: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """A new mesh (same NTST) equidistributing |u^(m+1)|^(1/(m+1)) (de Boor)."""
     ntst = mesh.size - 1
     h = np.diff(mesh)
-    idx = _interval_index(ntst, m)
+    idx = interval_nodes(ntst, m)
     Ui = U[idx] / scale  # (ntst, m+1, n)
     # m-th derivative of each interval's polynomial: m-th finite difference / (h/m)^m
     dm = np.diff(Ui, n=m, axis=1)[:, 0, :] / (h[:, None] / m) ** m
@@ -906,6 +907,6 @@ def _adapt_mesh(mesh: np.ndarray, m: int, U: np.ndarray, scale: np.ndarray) -> n
     return new
 
 
-def _remesh(mesh_old, m, U, mesh_new) -> np.ndarray:
-    return _evaluate_profile(mesh_old, m, U, _node_times(mesh_new, m) % 1.0 * (1 - 1e-15))
+def remesh(mesh_old, m, U, mesh_new) -> np.ndarray:
+    return evaluate_profile(mesh_old, m, U, node_times(mesh_new, m) % 1.0 * (1 - 1e-15))
 

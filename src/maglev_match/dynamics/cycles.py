@@ -45,20 +45,20 @@ from maglev_match.core.aot import cached_kernel
 from maglev_match.core.reprs import compact_repr
 from maglev_match.core.results import Plottable
 from maglev_match.dynamics.collocation import (
+    CollocationBVP,
     CondensedLU,
     LinearSolver,
     NewtonStats,
-    _adapt_mesh,
-    _chord_newton,
-    _evaluate_profile,
-    _interval_index,
-    _kernel,
-    _lagrange,
-    _newton,
-    _node_times,
-    _Problem,
-    _remesh,
-    _tables,
+    adapt_mesh,
+    chord_newton,
+    collocation_kernel,
+    collocation_newton,
+    collocation_tables,
+    evaluate_profile,
+    interval_nodes,
+    lagrange_basis,
+    node_times,
+    remesh,
 )
 from maglev_match.dynamics.continuation import (
     SOLVED,
@@ -155,7 +155,7 @@ class PeriodicOrbit:
     @property
     def node_times(self) -> np.ndarray:
         """Normalised times of all nodes (NTST NCOL + 1,)."""
-        return _node_times(self.mesh, self.ncol)
+        return node_times(self.mesh, self.ncol)
 
     @property
     def times(self) -> np.ndarray:
@@ -164,7 +164,7 @@ class PeriodicOrbit:
 
     def evaluate(self, s: Array) -> np.ndarray:
         """States at normalised times s in [0, 1] (periodic extension), shape (len(s), dim)."""
-        return _evaluate_profile(self.mesh, self.ncol, self.states, np.asarray(s, float) % 1.0)
+        return evaluate_profile(self.mesh, self.ncol, self.states, np.asarray(s, float) % 1.0)
 
 
 @dataclass(frozen=True)
@@ -326,9 +326,9 @@ def floquet_multipliers(system: System, orbit: PeriodicOrbit) -> np.ndarray:
     m = orbit.ncol
     ntst = orbit.ntst
     h = np.diff(orbit.mesh)
-    idx = _interval_index(ntst, m)
+    idx = interval_nodes(ntst, m)
     e = np.zeros_like(orbit.p)
-    _, _, J, _ = _kernel(system.rhs, m)(
+    _, _, J, _ = collocation_kernel(system.rhs, m)(
         jnp.asarray(orbit.states[idx]), jnp.asarray(h), orbit.period, jnp.asarray(orbit.p),
         jnp.asarray(e),
     )
@@ -339,7 +339,7 @@ def floquet_multipliers(system: System, orbit: PeriodicOrbit) -> np.ndarray:
 @cache
 def _local_basis(m: int, npts: int) -> np.ndarray:
     """Lagrange basis of degree m at npts equally spaced local points: (npts, m+1)."""
-    return _lagrange(np.linspace(0.0, 1.0, m + 1), np.linspace(0.0, 1.0, npts))[0]
+    return lagrange_basis(np.linspace(0.0, 1.0, m + 1), np.linspace(0.0, 1.0, npts))[0]
 
 
 def _lagrange_jnp(m: int) -> Callable:
@@ -431,7 +431,7 @@ def orbit_extrema(
     for sys_, orb, ref, ext in _EXTREMA_MEMO:
         if sys_ is system and orb is orbit and ref == refine and all(k in ext for k in names):
             return {k: ext[k] for k in names}
-    nodes = orbit.states[_interval_index(orbit.ntst, orbit.ncol)]  # (ntst, m+1, n)
+    nodes = orbit.states[interval_nodes(orbit.ntst, orbit.ncol)]  # (ntst, m+1, n)
     gs = tuple(system.observables[name] for name in names)
     v = np.asarray(_extrema_kernel(gs, orbit.ncol, refine)(nodes, np.asarray(orbit.p, float)))
     out = {name: (float(v[k, 0]), float(v[k, 1])) for k, name in enumerate(names)}
@@ -513,8 +513,8 @@ class CycleStop(StrEnum):
 class NewtonMode(StrEnum):
     """The corrector of a cycle branch."""
 
-    CHORD = "chord"  # kept factorisation, rate-monitored (collocation._chord_newton)
-    FULL = "full"  # a new factorisation every iteration (collocation._newton)
+    CHORD = "chord"  # kept factorisation, rate-monitored (collocation.chord_newton)
+    FULL = "full"  # a new factorisation every iteration (collocation.collocation_newton)
 
 
 class MultipliersAt(StrEnum):
@@ -688,19 +688,19 @@ def cycle_options(options: CycleOptions | None = None, **changes: Any) -> CycleO
     return dataclasses.replace(base, **changes) if changes else base
 
 
-def _blocks_at(prob: _Problem, Y: np.ndarray, mesh: np.ndarray
+def _blocks_at(prob: CollocationBVP, Y: np.ndarray, mesh: np.ndarray
                ) -> tuple[np.ndarray, float, np.ndarray]:
     """(J, T, h) at the solution Y on ``mesh`` (the problem's mesh may have moved on)."""
     m = prob.m
     U, T, lam = prob.unpack(Y)
     h = np.diff(mesh)
     p = prob.params(lam)
-    _, _, J, _ = _kernel(prob.system.rhs, m)(
-        U[_interval_index(mesh.size - 1, m)], h, T, p, np.zeros_like(p))
+    _, _, J, _ = collocation_kernel(prob.system.rhs, m)(
+        U[interval_nodes(mesh.size - 1, m)], h, T, p, np.zeros_like(p))
     return np.asarray(J), T, h
 
 
-def _transfer(prob: _Problem, lu: Any) -> np.ndarray | None:
+def _transfer(prob: CollocationBVP, lu: Any) -> np.ndarray | None:
     """The Floquet transfer matrices from a condensed factorisation at the solution (None
     for the whole-system sparse LU, which does not form them)."""
     return lu.transfer_matrices(prob.scale) if isinstance(lu, CondensedLU) else None
@@ -768,7 +768,7 @@ def stability_of(mult: np.ndarray, tol: float) -> Stability:
 def _first_harmonic_weights(m: int) -> tuple[np.ndarray, np.ndarray]:
     """Gauss weights and the Lagrange basis at the Gauss points (for the quadrature of
     the first Fourier coefficient of a profile)."""
-    _, z, w, L, _ = _tables(m)
+    _, z, w, L, _ = collocation_tables(m)
     return z, w, L
 
 
@@ -782,7 +782,7 @@ def first_harmonic(mesh: np.ndarray, m: int, U: np.ndarray) -> np.ndarray:
     z, w, L = _first_harmonic_weights(m)
     ntst = mesh.size - 1
     h = np.diff(mesh)
-    Ui = U[_interval_index(ntst, m)]  # (ntst, m+1, n)
+    Ui = U[interval_nodes(ntst, m)]  # (ntst, m+1, n)
     Uz = np.einsum("lk,jkn->jln", L, Ui)  # (ntst, m, n) at the Gauss points
     t = mesh[:-1, None] + h[:, None] * z[None, :]
     ph = np.exp(-2j * np.pi * t) * (h[:, None] * w[None, :])
@@ -834,7 +834,7 @@ class CycleProblem:
     the Hopf period ends the branch as a homoclinic approach (:meth:`stop`).
     """
 
-    def __init__(self, prob: _Problem, names, limits, stop_at, options: CycleOptions,
+    def __init__(self, prob: CollocationBVP, names, limits, stop_at, options: CycleOptions,
                  max_period: float, start_orbit):
         self.prob = prob
         self.names = names
@@ -874,7 +874,7 @@ class CycleProblem:
     def correct(self, u_pred, row, target, max_iter):
         Uref, _, _ = self.prob.unpack(u_pred)
         if self.newton == NewtonMode.CHORD:
-            cr = _chord_newton(self.prob, u_pred, Uref, row, target, self.tol, max_iter,
+            cr = chord_newton(self.prob, u_pred, Uref, row, target, self.tol, max_iter,
                                lu0=self.chord_lu, stats=self.stats,
                                at_solution=self.factor_at_solution)
             if not cr.converged:
@@ -886,7 +886,7 @@ class CycleProblem:
                               data=(cr.blocks, self.prob.mesh.copy(),
                                     _transfer(self.prob, cr.lu) if at_solution else None,
                                     np.array(row, float)))
-        Y, ok, its, res, lu, blocks = _newton(self.prob, u_pred, Uref, row, target,
+        Y, ok, its, res, lu, blocks = collocation_newton(self.prob, u_pred, Uref, row, target,
                                               self.tol, max_iter, lazy_blocks=True)
         self.stats.correctors += 1
         self.stats.iterations += its
@@ -980,7 +980,7 @@ class CycleProblem:
         arclength rows; the same function of time on every mesh."""
         prob = self.prob
         m, n = prob.m, prob.n
-        _, z, _, _, _ = _tables(m)
+        _, z, _, _, _ = collocation_tables(m)
         h = np.diff(prob.mesh)
         t = (prob.mesh[:-1, None] + h[:, None] * z[None, :])  # (ntst, m)
         rng = np.random.default_rng(20251)
@@ -1220,13 +1220,13 @@ class CycleProblem:
         U, T, lam = prob.unpack(pt.u)
         Ut, Tt, lt = prob.unpack(pt.t)
         old_mesh = prob.mesh
-        new_mesh = _adapt_mesh(old_mesh, prob.m, U, prob.scale)
-        U2 = _remesh(old_mesh, prob.m, U, new_mesh)
-        Ut2 = _remesh(old_mesh, prob.m, Ut, new_mesh)
+        new_mesh = adapt_mesh(old_mesh, prob.m, U, prob.scale)
+        U2 = remesh(old_mesh, prob.m, U, new_mesh)
+        Ut2 = remesh(old_mesh, prob.m, Ut, new_mesh)
         v = pt.info.get("bp_v")
         if v is not None:  # the BP frame is remapped like the tangent (a function of time)
             Uv, Tv, lv = prob.unpack(v)
-            pt.info["bp_v"] = (_remesh(old_mesh, prob.m, Uv, new_mesh), Tv, lv)
+            pt.info["bp_v"] = (remesh(old_mesh, prob.m, Uv, new_mesh), Tv, lv)
         prob.mesh = new_mesh
         self.chord_lu = None  # the kept factorisation belongs to the old mesh
         if v is not None:
@@ -1404,13 +1404,13 @@ def cycle_branch(
         newton_max_iter=max_newton + (8 if chord else 0),
         predictor_tol=opt.predictor_tol, fast_iterations=5 if chord else 3,
         slow_iterations=10 if chord else 6, param_bounds=bounds)
-    prob = _Problem(system=system, ipar=ipar, p0=np.array(start.p, float),
+    prob = CollocationBVP(system=system, ipar=ipar, p0=np.array(start.p, float),
                     mesh=np.linspace(0.0, 1.0, ntst + 1), m=m,
                     scale=np.asarray(system.state_scale, float), T_scale=T0,
                     lam_scale=float(lam_scale), linear_solver=LinearSolver(opt.linear_solver))
     W = prob.W()
     # --- the start: the Hopf point as a constant profile, tangent = eigenvector profile
-    s_nodes = _node_times(prob.mesh, m)
+    s_nodes = node_times(prob.mesh, m)
     qv = np.asarray(start.q, complex)
     V = np.real(qv[None, :] * np.exp(2j * math.pi * s_nodes)[:, None])
     Ueq = np.tile(start.x, (prob.N, 1))
@@ -1713,19 +1713,19 @@ def first_harmonic_mean(orbit: PeriodicOrbit) -> np.ndarray:
     """The mean state int_0^1 u(t) dt of a collocation orbit (Gauss quadrature)."""
     z, w, L = _first_harmonic_weights(orbit.ncol)
     h = np.diff(orbit.mesh)
-    Ui = orbit.states[_interval_index(orbit.ntst, orbit.ncol)]
+    Ui = orbit.states[interval_nodes(orbit.ntst, orbit.ncol)]
     Uz = np.einsum("lk,jkn->jln", L, Ui)
     return np.einsum("jl,jln->n", h[:, None] * w[None, :], Uz)
 
 
-def _fixed_param(prob: _Problem, Y: np.ndarray, value: float, tol: float, max_iter: int
+def _fixed_param(prob: CollocationBVP, Y: np.ndarray, value: float, tol: float, max_iter: int
                  ) -> BranchPoint | None:
     """The cycle at ``param`` = value exactly, from a nearby point Y (Newton)."""
     row = np.zeros(prob.size)
     row[-1] = 1.0
     Uref, _, _ = prob.unpack(Y)
-    Yv, ok, its, res, lu, blocks = _newton(prob, Y, Uref, row, value / prob.lam_scale, tol,
-                                           max_iter)
+    Yv, ok, its, res, lu, blocks = collocation_newton(
+        prob, Y, Uref, row, value / prob.lam_scale, tol, max_iter)
     if not ok:
         return None
     corr = Correction(u=Yv, iterations=its, residual=res, solve=lu.solve,
@@ -1745,7 +1745,7 @@ def correct_cycle(
     """Solve the periodic BVP at ``param`` = ``value`` (fixed) from a guess ``orbit``."""
     names = tuple(system.observables) if observables is None else tuple(observables)
     ipar = system.param_index(param)
-    prob = _Problem(system=system, ipar=ipar, p0=np.array(orbit.p, float),
+    prob = CollocationBVP(system=system, ipar=ipar, p0=np.array(orbit.p, float),
                     mesh=np.array(orbit.mesh), m=orbit.ncol,
                     scale=np.asarray(system.state_scale, float), T_scale=orbit.period,
                     lam_scale=abs(value) if value != 0 else 1.0)
@@ -1754,7 +1754,7 @@ def correct_cycle(
     Y0 = prob.pack(orbit.states, orbit.period, value)
     row = np.zeros(prob.size)
     row[-1] = 1.0
-    Y, ok, its, res, _, blocks = _newton(prob, Y0, orbit.states, row,
+    Y, ok, its, res, _, blocks = collocation_newton(prob, Y0, orbit.states, row,
                                          value / prob.lam_scale, tol, max_iter)
     if not ok:
         return CorrectionResult(None, False, its, f"no convergence (residual {res:.2e})")

@@ -783,9 +783,9 @@ def characteristic_roots(dde: DelayDifferentialSystem, x: np.ndarray | None = No
 # the first Lyapunov coefficient of a delay system
 # ---------------------------------------------------------------------------------------
 def _forms(F: Callable):
-    from maglev_match.dynamics.normal_forms import _real_forms
+    from maglev_match.dynamics.normal_forms import real_forms
 
-    return _real_forms(F)
+    return real_forms(F)
 
 
 def delay_first_lyapunov_coefficient(dde: DelayDifferentialSystem, x: np.ndarray,
@@ -798,7 +798,7 @@ def delay_first_lyapunov_coefficient(dde: DelayDifferentialSystem, x: np.ndarray
     Parameters: ``x`` the equilibrium (n states), ``omega`` the Hopf frequency (rad/s),
     ``q`` the eigenvector (computed when None). Returns l1 (1/s): > 0 subcritical.
     """
-    from maglev_match.dynamics.normal_forms import _complex_form_eval
+    from maglev_match.dynamics.normal_forms import complex_form_eval
 
     pv = dde.p if p is None else np.asarray(p, float)
     xs = np.asarray(x, float)
@@ -822,7 +822,7 @@ def delay_first_lyapunov_coefficient(dde: DelayDifferentialSystem, x: np.ndarray
     Ux = np.asarray(np.tile(xs, K + 1), np.float64)
 
     def form(k, *us):
-        val = np.asarray(_complex_form_eval(Fm[k], Ux, pv, list(us)))
+        val = np.asarray(complex_form_eval(Fm[k], Ux, pv, list(us)))
         # all-zero directions give a zero of the directions' shape (size n (K+1))
         return val if val.shape == (n,) else np.zeros(n, complex)
 

@@ -345,7 +345,7 @@ def _sorted_eigs(w: np.ndarray) -> np.ndarray:
     return w[np.lexsort((-np.abs(w.imag), -w.real))]
 
 
-def _pair_crossings(wa: np.ndarray, wb: np.ndarray) -> int:
+def pair_crossings(wa: np.ndarray, wb: np.ndarray) -> int:
     """Number of complex eigenvalues (Im > 0) of wa whose nearest eigenvalue in wb has a
     real part of the other sign: complex pairs that crossed the imaginary axis."""
     k = 0
@@ -467,7 +467,7 @@ class EquilibriumProblem:
         wa = a.info.get("eigenvalues")
         if wa is None or s <= self.min_split:
             return True
-        return _pair_crossings(wa, self._eigs_of_correction(u_new)) <= 1
+        return pair_crossings(wa, self._eigs_of_correction(u_new)) <= 1
 
     def _eigs_of_correction(self, u: np.ndarray) -> np.ndarray:
         """Eigenvalues of J at a corrected point, from the corrector's last Jacobian."""

@@ -66,7 +66,7 @@ import numpy as np
 import scipy.linalg
 
 from maglev_match.core.reprs import compact_repr
-from maglev_match.dynamics.collocation import _tables
+from maglev_match.dynamics.collocation import collocation_tables
 
 __all__ = [
     "FloquetMethod",
@@ -110,7 +110,7 @@ def _interval_blocks(J: np.ndarray, T: float, h: np.ndarray, m: int) -> np.ndarr
     interval (k = 0 the left end, k = m the right end): sum_k [D_lk I - T h_j L_lk A(z_l)] v_k.
     """
     ntst, _, n, _ = J.shape
-    _, _, _, L, D = _tables(m)
+    _, _, _, L, D = collocation_tables(m)
     blk = (D[None, :, :, None, None] * np.eye(n)[None, None, None]
            - (T * np.asarray(h, float))[:, None, None, None, None]
            * L[None, :, :, None, None] * J[:, :, None, :, :])  # (ntst, m, m+1, n, n)

@@ -123,7 +123,7 @@ def _criticality(l1: float) -> str:
 
 
 @cache
-def _defining_kernels(rhs, idx: tuple[int, ...]):
+def hopf_defining_kernels(rhs, idx: tuple[int, ...]):
     """Hopf defining system G(z, p, c) and its Jacobian, with z = (x, v1, v2, omega,
     alpha[idx]); G has 3n + 2 components and z has 3n + 1 + len(idx)."""
 
@@ -176,15 +176,15 @@ def _crossing_kernel(rhs):
 # ----------------------------------------------------------------------------------------
 # Hopf points along one parameter
 # ----------------------------------------------------------------------------------------
-def _pack(x, v1, v2, omega, alphas) -> np.ndarray:
+def pack_hopf(x, v1, v2, omega, alphas) -> np.ndarray:
     return np.concatenate([x, v1, v2, [omega], np.atleast_1d(alphas)])
 
 
-def _unpack(z: np.ndarray, n: int):
+def unpack_hopf(z: np.ndarray, n: int):
     return z[:n], z[n : 2 * n], z[2 * n : 3 * n], float(z[3 * n]), z[3 * n + 1 :]
 
 
-def _normalise_pair(v1: np.ndarray, v2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def normalise_pair(v1: np.ndarray, v2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rotate q = v1 + i v2 by a phase so that v1 is orthogonal to v2, scale |v1| = 1."""
     q = v1 + 1j * v2
     # phase theta maximising |Re(e^{i theta} q)|: principal axis of the ellipse
@@ -197,7 +197,7 @@ def _normalise_pair(v1: np.ndarray, v2: np.ndarray) -> tuple[np.ndarray, np.ndar
     return q.real.copy(), q.imag.copy()
 
 
-def _other_eigenvalues(w: np.ndarray, omega: float) -> np.ndarray:
+def other_eigenvalues(w: np.ndarray, omega: float) -> np.ndarray:
     """The eigenvalues other than the pair closest to +-i omega."""
     if w.size < 2:
         return w[:0]
@@ -250,13 +250,13 @@ def refine_hopf_point(
         w, V = np.linalg.eig(system.jacobian(x, pk))
         j = int(np.argmin(np.abs(w - 1j * omega)))
         q = V[:, j]
-    v1, v2 = _normalise_pair(np.real(q), np.imag(q))
+    v1, v2 = normalise_pair(np.real(q), np.imag(q))
     c = v1.copy()
-    z = _pack(np.asarray(x, float), v1, v2, omega, [value])
-    G, DG, _ = _defining_kernels(system.rhs, (k,))
+    z = pack_hopf(np.asarray(x, float), v1, v2, omega, [value])
+    G, DG, _ = hopf_defining_kernels(system.rhs, (k,))
     pj = np.asarray(base)
     cj = np.asarray(c)
-    scale = _z_scale(system, omega, [value_scale or abs(value) or 1.0])
+    scale = eigenvector_scale(system, omega, [value_scale or abs(value) or 1.0])
     converged = False
     res = np.inf
     n_iter = 0
@@ -301,7 +301,7 @@ def refine_hopf_point(
     res = max(res, float(np.max(np.abs(g[n:]) / (abs(z[3 * n]) + 1.0))))
     if not converged and not left_range:
         warnings.append(f"Newton on the Hopf defining system did not converge in {n_iter} steps")
-    xs, v1, v2, om, al = _unpack(z, n)
+    xs, v1, v2, om, al = unpack_hopf(z, n)
     if om < 0:
         om, v2 = -om, -v2
     val = float(al[0])
@@ -360,7 +360,7 @@ def _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings) -> 
     speed = float(np.real(np.vdot(padj, dJq)))
     l1 = first_lyapunov_coefficient(system, xs, pv, om, q, padj)
     w = np.linalg.eigvals(J)
-    others = _other_eigenvalues(w, om)
+    others = other_eigenvalues(w, om)
     others_stable = bool(np.all(others.real < 0))
     if abs(speed) < 1e-12 * max(1.0, om):
         warnings.append("crossing speed is zero: the transversality condition fails")
@@ -371,7 +371,7 @@ def _hopf_point_at(system, param, val, xs, pv, om, converged, res, warnings) -> 
     )
 
 
-def _z_scale(system: System, omega: float, alpha_scales) -> np.ndarray:
+def eigenvector_scale(system: System, omega: float, alpha_scales) -> np.ndarray:
     n = system.dim
     return np.concatenate([
         system.state_scale, np.ones(2 * n), [max(abs(omega), 1.0)], np.asarray(alpha_scales)

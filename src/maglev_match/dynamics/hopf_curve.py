@@ -38,17 +38,17 @@ from maglev_match.dynamics.continuation import (
 )
 from maglev_match.dynamics.hopf import (
     HopfPoint,
-    _defining_kernels,
-    _normalise_pair,
-    _other_eigenvalues,
-    _pack,
-    _unpack,
-    _z_scale,
+    eigenvector_scale,
+    hopf_defining_kernels,
     locate_hopf_points,
+    normalise_pair,
+    other_eigenvalues,
+    pack_hopf,
+    unpack_hopf,
 )
 from maglev_match.dynamics.normal_forms import (
-    _l1_from_forms,
-    _null_vector,
+    l1_from_forms,
+    null_vector,
     second_lyapunov_coefficient,
 )
 from maglev_match.dynamics.system import System
@@ -195,8 +195,8 @@ class _HopfCurveSolver:
         self.base = base
         self.bounds = [tuple(map(float, bounds[k])) for k in params]
         ranges = [abs(b - a) for a, b in self.bounds]
-        self.S = _z_scale(system, omega0, ranges)
-        self.G, self.DG, self.GDG = _defining_kernels(system.rhs, self.idx)
+        self.S = eigenvector_scale(system, omega0, ranges)
+        self.G, self.DG, self.GDG = hopf_defining_kernels(system.rhs, self.idx)
         self.pj = np.asarray(base)
         self.jac = system.derivatives.jacobian
         self.tol = tol
@@ -253,18 +253,18 @@ class _HopfCurveSolver:
         """l1, the numbers of other real / complex eigenvalues with Re > 0, others_stable,
         and the sorted other eigenvalues."""
         n = self.n
-        x, _, _, om, al = _unpack(z, n)
+        x, _, _, om, al = unpack_hopf(z, n)
         pv = self.full_p(al)
         J = np.asarray(self.jac(x, pv))
         w = np.linalg.eigvals(J)
-        others = _other_eigenvalues(w, abs(om))
+        others = other_eigenvalues(w, abs(om))
         others = others[np.lexsort((-np.abs(others.imag), -others.real))]
         if om > 0:
             q = z[n : 2 * n] + 1j * z[2 * n : 3 * n]
             q = q / np.linalg.norm(q[:getattr(self.system, "normal_form_dim", None)])
-            padj = _null_vector(J.T + 1j * om * np.eye(n))
+            padj = null_vector(J.T + 1j * om * np.eye(n))
             padj = padj / np.conj(np.vdot(padj, q))
-            l1 = _l1_from_forms(self.system.rhs, x, pv, J, om, q, padj)
+            l1 = l1_from_forms(self.system.rhs, x, pv, J, om, q, padj)
         else:
             l1 = float("nan")
         imag_tol = 1e-7 * max(1.0, abs(om))
@@ -338,12 +338,12 @@ class _HopfCurveSolver:
         """Store a point; renew the normalisation <c, v1> = 1, <c, v2> = 0 when the
         eigenvector has drifted far from c (returns the c in force, ``c`` itself if kept)."""
         n = self.n
-        x, v1, v2, om, al = _unpack(z, n)
+        x, v1, v2, om, al = unpack_hopf(z, n)
         c_new = c
         if max(np.linalg.norm(v1), np.linalg.norm(v2)) > 2.0 / np.linalg.norm(c):
-            v1, v2 = _normalise_pair(v1, v2)
+            v1, v2 = normalise_pair(v1, v2)
             c_new = v1.copy()
-        br.zs.append(_pack(x, v1, v2, om, al))
+        br.zs.append(pack_hopf(x, v1, v2, om, al))
         br.cs.append(c_new)
         # l1 and the other eigenvalues do not depend on the eigenvector normalisation
         br.info.append((info or self.point_info(br.zs[-1]))[:4])
@@ -535,10 +535,10 @@ def hopf_curve(
                          steps=0)
     solver = _HopfCurveSolver(system, tuple(params), base, valid, start.frequency, tol)
     solver.user_bounds = [tuple(sorted(map(float, bounds[k]))) for k in params]
-    v1, v2 = _normalise_pair(start.q.real, start.q.imag)
+    v1, v2 = normalise_pair(start.q.real, start.q.imag)
     c0 = v1.copy()
     al0 = base[list(solver.idx)]
-    z0 = _pack(start.x, v1, v2, start.frequency, al0)
+    z0 = pack_hopf(start.x, v1, v2, start.frequency, al0)
     warnings: list[str] = []
     # make the start point exact for this normalisation
     u0, _ = solver.correct(z0 / solver.S, c0, np.zeros_like(z0), 0.0)
@@ -575,7 +575,7 @@ def hopf_curve(
     special = label_points(special)
     pts = []
     for z, inf in zip(zs, info, strict=True):
-        x, _, _, om, al = _unpack(z, n)
+        x, _, _, om, al = unpack_hopf(z, n)
         pts.append(HopfCurvePoint(values=(float(al[0]), float(al[1])), x=x, frequency=om,
                                   l1=inf[0], others_stable=inf[3],
                                   n_unstable_others=inf[1] + inf[2]))
@@ -594,7 +594,7 @@ def _codim_two(solver: _HopfCurveSolver, ev, warnings: list[str]) -> list[Specia
                         f"{ev.located}")
         return []
     z = ev.point.u * solver.S
-    x, _, _, om, al = _unpack(z, n)
+    x, _, _, om, al = unpack_hopf(z, n)
     conv = ev.located == "solved"
     if not conv:
         warnings.append(f"{ev.kind} point after step {ev.step}: {ev.located}")

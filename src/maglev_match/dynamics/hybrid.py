@@ -72,6 +72,7 @@ import scipy.sparse.linalg
 from maglev_match.core import jax_setup  # noqa: F401  (float64)
 from maglev_match.core.aot import cached_kernel
 from maglev_match.core.reprs import compact_repr
+from maglev_match.dynamics.collocation import node_times
 
 Array = Any
 
@@ -743,11 +744,11 @@ class HybridOrbit:
         for k, sg in enumerate(self.segments):
             if per_segment:
                 s = np.linspace(0.0, 1.0, per_segment)
-                from maglev_match.dynamics.collocation import _evaluate_profile
+                from maglev_match.dynamics.collocation import evaluate_profile
 
-                X = _evaluate_profile(np.asarray(sg.mesh), self.ncol, sg.states, s)
+                X = evaluate_profile(np.asarray(sg.mesh), self.ncol, sg.states, s)
             else:
-                s = _node_times(np.asarray(sg.mesh), self.ncol)
+                s = node_times(np.asarray(sg.mesh), self.ncol)
                 X = sg.states
             ts.append(t0 + sg.duration * s)
             xs.append(X)
@@ -761,7 +762,7 @@ class HybridOrbit:
         best samples (so the extrema are those of the piecewise polynomial, to ~1e-13)."""
         import scipy.optimize
 
-        from maglev_match.dynamics.collocation import _evaluate_profile
+        from maglev_match.dynamics.collocation import evaluate_profile
 
         pj = jnp.asarray(self.p)
         gb = jax.jit(jax.vmap(lambda x: jnp.atleast_1d(g(x, pj))[0]))
@@ -772,12 +773,12 @@ class HybridOrbit:
                 mesh = np.asarray(sg.mesh)
                 s = np.linspace(0.0, 1.0, per_segment)
                 vals = sign * np.asarray(gb(jnp.asarray(
-                    _evaluate_profile(mesh, self.ncol, sg.states, s))))
+                    evaluate_profile(mesh, self.ncol, sg.states, s))))
                 k = int(np.argmax(vals))
                 lo, hi = s[max(k - 1, 0)], s[min(k + 1, s.size - 1)]
 
                 def neg(u, mesh=mesh, sg=sg, sign=sign):
-                    x = _evaluate_profile(mesh, self.ncol, sg.states, np.array([u]))
+                    x = evaluate_profile(mesh, self.ncol, sg.states, np.array([u]))
                     return -sign * float(np.asarray(gb(jnp.asarray(x)))[0])
 
                 r = scipy.optimize.minimize_scalar(neg, bounds=(lo, hi), method="bounded",
@@ -785,12 +786,6 @@ class HybridOrbit:
                 cand.append(max(vals[k], -float(r.fun)))
             best.append(sign * max(cand))
         return float(best[0]), float(best[1])
-
-
-def _node_times(mesh: np.ndarray, m: int) -> np.ndarray:
-    h = np.diff(mesh)
-    t = (mesh[:-1, None] + h[:, None] * (np.arange(m) / m)[None, :]).ravel()
-    return np.append(t, mesh[-1])
 
 
 @cache
@@ -812,7 +807,7 @@ class _HybridCollocation:
 
     def __init__(self, hs: HybridSystem, modes, switches, meshes, m, p, T_scale,
                  sections=None):
-        from maglev_match.dynamics.collocation import _tables
+        from maglev_match.dynamics.collocation import collocation_tables
 
         self.hs = hs
         self.sections = list(sections) if sections is not None else [None] * len(modes)
@@ -829,7 +824,7 @@ class _HybridCollocation:
         sizes = [Ni * self.n + 1 for Ni in self.N]
         self.off = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
         self.size = int(self.off[-1])
-        _, _, _, self.L, self.D = _tables(self.m)
+        _, _, _, self.L, self.D = collocation_tables(self.m)
         self.gscale = np.ones(self.S)
 
     # ----- packing ---------------------------------------------------------------------
@@ -851,7 +846,7 @@ class _HybridCollocation:
 
     # ----- residual and Jacobian ---------------------------------------------------------
     def evaluate(self, Y: np.ndarray, jac: bool = True):
-        from maglev_match.dynamics.collocation import _interval_index, _kernel
+        from maglev_match.dynamics.collocation import collocation_kernel, interval_nodes
 
         U, T = self.unpack(Y)
         n, m, sc = self.n, self.m, self.sc
@@ -865,10 +860,10 @@ class _HybridCollocation:
             mesh = self.meshes[i]
             ntst = mesh.size - 1
             h = np.diff(mesh)
-            idx = _interval_index(ntst, m)
+            idx = interval_nodes(ntst, m)
             f_i = self.hs.mode_rhs(self.modes[i])
             e0 = jnp.zeros_like(pj)
-            r, F, J, _ = (np.asarray(a) for a in _kernel(f_i, m)(
+            r, F, J, _ = (np.asarray(a) for a in collocation_kernel(f_i, m)(
                 jnp.asarray(U[i][idx]), jnp.asarray(h), T[i], pj, e0))
             r_rows = r * (h[:, None, None] / sc)  # (ntst, m, n)
             o = self.off[i]
@@ -938,7 +933,7 @@ class _HybridCollocation:
     def param_derivative(self, Y: np.ndarray) -> np.ndarray:
         """dF/dp (size, np) at Y: the collocation rows through f_p, the event rows through
         h_p and the reset rows through R_p."""
-        from maglev_match.dynamics.collocation import _interval_index
+        from maglev_match.dynamics.collocation import interval_nodes
 
         U, T = self.unpack(Y)
         n, m, sc = self.n, self.m, self.sc
@@ -950,7 +945,7 @@ class _HybridCollocation:
             mesh = self.meshes[i]
             ntst = mesh.size - 1
             h = np.diff(mesh)
-            idx = _interval_index(ntst, m)
+            idx = interval_nodes(ntst, m)
             Uc = np.einsum("lk,jkn->jln", self.L, U[i][idx]).reshape(-1, n)
             fp = np.asarray(_param_jacobian_gauss(self.hs.mode_rhs(self.modes[i]))(
                 jnp.asarray(Uc), pj)).reshape(ntst, m, n, npar)
@@ -1112,7 +1107,7 @@ def hybrid_floquet(hs: HybridSystem, orbit: HybridOrbit) -> HybridFloquet:
     collocation pairs (:func:`~maglev_match.dynamics.floquet.condensed_pairs`) and the
     saltation matrices at the switches, by the periodic Schur algorithm
     (:func:`~maglev_match.dynamics.floquet.periodic_eigenvalues`)."""
-    from maglev_match.dynamics.collocation import _interval_index, _kernel
+    from maglev_match.dynamics.collocation import collocation_kernel, interval_nodes
     from maglev_match.dynamics.floquet import (
         condensed_pairs,
         periodic_eigenvalues,
@@ -1127,8 +1122,8 @@ def hybrid_floquet(hs: HybridSystem, orbit: HybridOrbit) -> HybridFloquet:
         mesh = np.asarray(sg.mesh)
         ntst = mesh.size - 1
         h = np.diff(mesh)
-        idx = _interval_index(ntst, m)
-        _, _, J, _ = _kernel(hs.mode_rhs(sg.mode), m)(
+        idx = interval_nodes(ntst, m)
+        _, _, J, _ = collocation_kernel(hs.mode_rhs(sg.mode), m)(
             jnp.asarray(sg.states[idx]), jnp.asarray(h), sg.duration, pj, jnp.zeros_like(pj))
         J = np.asarray(J)
         F, E = condensed_pairs(J, sg.duration, h, m)
@@ -1192,7 +1187,7 @@ def segments_from_flow(hs: HybridSystem, x0: np.ndarray, s0: np.ndarray, period:
     nsw = int(fl.n_switches[0])
     if nsw == 0:  # a smooth orbit: one segment closed on a section
         mesh = np.linspace(0.0, 1.0, max(ntst, min_ntst) + 1)
-        tn = period * _node_times(mesh, ncol)
+        tn = period * node_times(mesh, ncol)
         fl2 = hybrid_flow(hs, x0, period, s0=s0, p=pp, t_save=tn[1:], options=opts)
         X = np.vstack([x0[None], fl2.saved[0]])
         f0 = hs.f(x0, s0, pp)
@@ -1229,7 +1224,7 @@ def segments_from_flow(hs: HybridSystem, x0: np.ndarray, s0: np.ndarray, period:
         ta, tb = bounds[i], bounds[i + 1]
         nt = max(min_ntst, int(round(ntst * (tb - ta) / total)))
         mesh = np.linspace(0.0, 1.0, nt + 1)
-        tn = ta + (tb - ta) * _node_times(mesh, ncol)
+        tn = ta + (tb - ta) * node_times(mesh, ncol)
         pieces.append((modes[i], sw[i], tb - ta, mesh, tn))
         t_all.extend(tn)
     t_all = np.unique(np.clip(np.asarray(t_all), 0.0, total))

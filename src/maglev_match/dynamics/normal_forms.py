@@ -51,7 +51,7 @@ def _real_form(rhs, order: int):
 
 
 @cache
-def _real_forms(rhs) -> dict[int, Callable]:
+def real_forms(rhs) -> dict[int, Callable]:
     """Jitted real multilinear forms of orders 2..5 for ``rhs``, vmapped over batches of
     directions (one trace each; complex directions are expanded outside, which keeps the
     compile time small even at order 5)."""
@@ -63,7 +63,7 @@ def _real_forms(rhs) -> dict[int, Callable]:
     return out
 
 
-def _complex_form_eval(real_form, x, p, us) -> np.ndarray:
+def complex_form_eval(real_form, x, p, us) -> np.ndarray:
     """A real k-linear form at complex directions: all 2^k real/imag combinations in one
     batched call."""
     parts = [(np.real(u), np.imag(u)) for u in us]
@@ -79,9 +79,9 @@ def _complex_form_eval(real_form, x, p, us) -> np.ndarray:
     return coef @ vals
 
 
-def _l1_from_forms(rhs, x, p, J, omega, q, padj) -> float:
+def l1_from_forms(rhs, x, p, J, omega, q, padj) -> float:
     """Kuznetsov's l1 (paper eq. 24) from batched real forms B and C (4 calls)."""
-    F = _real_forms(rhs)
+    F = real_forms(rhs)
     xj, pj = np.asarray(x, np.float64), np.asarray(p, np.float64)
     a, b = np.real(q), np.imag(q)
     Baa, Bbb, Bab = np.asarray(F[2](xj, pj, np.asarray(np.stack([a, b, a])),
@@ -102,7 +102,7 @@ def _l1_from_forms(rhs, x, p, J, omega, q, padj) -> float:
     return float(g21.real / (2.0 * omega))
 
 
-def _null_vector(M: np.ndarray) -> np.ndarray:
+def null_vector(M: np.ndarray) -> np.ndarray:
     """Unit vector spanning the (numerical) null space of a square matrix."""
     _, _, vh = scipy.linalg.svd(M)
     return np.conj(vh[-1])
@@ -127,11 +127,11 @@ def hopf_eigenvectors(J: np.ndarray, omega: float, norm_dim: int | None = None
     """
     n = J.shape[0]
     eye = np.eye(n)
-    q = _null_vector(J - 1j * omega * eye)
+    q = null_vector(J - 1j * omega * eye)
     k = int(np.argmax(np.abs(q)))
     q = q * np.exp(-1j * np.angle(q[k]))
     q = q / eigenvector_norm(q, norm_dim)
-    p = _null_vector(J.T + 1j * omega * eye)
+    p = null_vector(J.T + 1j * omega * eye)
     s = np.vdot(p, q)
     p = p / np.conj(s)
     return q, p
@@ -175,7 +175,7 @@ def first_lyapunov_coefficient(
         q = np.asarray(q, complex) / eigenvector_norm(q, norm_dim)
         p_adj = np.asarray(p_adj, complex)
         p_adj = p_adj / np.conj(np.vdot(p_adj, q))
-    return _l1_from_forms(system.rhs, x, pv, J, float(omega), q, p_adj)
+    return l1_from_forms(system.rhs, x, pv, J, float(omega), q, p_adj)
 
 
 def second_lyapunov_coefficient(
@@ -199,11 +199,11 @@ def second_lyapunov_coefficient(
     J = system.jacobian(x, pv)
     if q is None or p_adj is None:
         q, p_adj = hopf_eigenvectors(J, omega, getattr(system, "normal_form_dim", None))
-    F = _real_forms(system.rhs)
+    F = real_forms(system.rhs)
     xj, pj = np.asarray(x), np.asarray(pv)
 
     def form(k, *us):
-        return _complex_form_eval(F[k], xj, pj, [np.asarray(u, complex) for u in us])
+        return complex_form_eval(F[k], xj, pj, [np.asarray(u, complex) for u in us])
 
     def B(a, b):
         return form(2, a, b)

@@ -21,7 +21,7 @@ __all__ = ["path_system", "PATH_PARAM"]
 PATH_PARAM = "t"
 
 
-def _interpolate(q, n_nodes: int, n_params: int):
+def interpolate_path(q, n_nodes: int, n_params: int):
     """The parameter vector at path position t = q[0] (piecewise linear through the nodes)."""
     t = q[0]
     P = q[1:].reshape(n_nodes, n_params)
@@ -33,7 +33,7 @@ def _interpolate(q, n_nodes: int, n_params: int):
 @cache
 def _path_rhs(rhs: RHS, n_nodes: int, n_params: int):
     def path_rhs(x, q):
-        return rhs(x, _interpolate(q, n_nodes, n_params))
+        return rhs(x, interpolate_path(q, n_nodes, n_params))
 
     return path_rhs
 
@@ -41,7 +41,7 @@ def _path_rhs(rhs: RHS, n_nodes: int, n_params: int):
 @cache
 def _path_observable(g, n_nodes: int, n_params: int):
     def g_path(x, q):
-        return g(x, _interpolate(q, n_nodes, n_params))
+        return g(x, interpolate_path(q, n_nodes, n_params))
 
     return g_path
 
