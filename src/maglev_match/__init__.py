@@ -23,9 +23,9 @@ import importlib
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from maglev_match import _compat
+from maglev_match import legacy_paths
 
-_compat.install()  # the module paths of version 0.1 keep working, with a warning
+legacy_paths.install()  # the module paths of version 0.1 keep working, with a warning
 
 __version__ = "0.1.0"
 
@@ -48,7 +48,8 @@ _LAZY: dict[str, str] = {
     "index_sensitivity": "maglev_match.api",
     "design_search": "maglev_match.api",
     "design_map": "maglev_match.api",
-    "study_report": "maglev_match.api",
+    "study_report": "maglev_match.present.documents",
+    "reproduce": "maglev_match.present.documents",
     "restart_branch": "maglev_match.api",
     "speed_sweep": "maglev_match.api",
     # figures: plot(result) draws any result; the figure functions themselves
@@ -86,7 +87,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         simulate,
         speed_sweep,
         stability,
-        study_report,
     )
     from maglev_match.core.params import (  # noqa: F401
         ParameterError,
@@ -97,6 +97,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
     )
     from maglev_match.dynamics.system import System  # noqa: F401
     from maglev_match.plots import figure_of, plot  # noqa: F401
+    from maglev_match.present.documents import reproduce, study_report  # noqa: F401
 
 
 def __getattr__(name: str) -> Any:

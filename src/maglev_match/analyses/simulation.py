@@ -151,6 +151,10 @@ class MaglevSimulation(Plottable):
         return annotate_history(history_dataset(self), self,
                                 f"maglev-match simulation, {model_info(self.model).label}")
 
+    def save_history(self, path: str | Path) -> Path:
+        """Write the history to ``path`` (:func:`save_history`: '.nc' netCDF, else CSV)."""
+        return save_history(self, path)
+
     def summary(self) -> dict[str, Any]:
         """The outcome of the run in machine-readable form (SI units)."""
         return {

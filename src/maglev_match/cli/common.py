@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -642,3 +643,55 @@ def refuse_given(options: dict[str, str], why: str) -> None:
     for name, option in options.items():
         if given(name):
             raise UserError(f"{option}: {why}")
+
+
+# ----- from the command line to the API ---------------------------------------------------
+def set_items(sets: list[str] | None, option: str = "--set") -> dict[str, str]:
+    """``NAME=VALUE`` items as {name: value text} (a user model file's parameters; the API
+    checks the names and the numbers)."""
+    out: dict[str, str] = {}
+    for item in sets or []:
+        if "=" not in item:
+            raise UserError(f"{option} '{item}': expected NAME=VALUE, e.g. a=1.5")
+        name, text = (t.strip() for t in item.split("=", 1))
+        out[name] = text
+    return out
+
+
+#: Options that choose a maglev parameter set (python name -> option as typed).
+PARAMETER_SET_OPTIONS = {"preset": "--preset", "config": "--config", "set_": "--set"}
+
+
+def model_inputs(model: str, preset: str, config: Path | None, sets: list[str] | None,
+                 *, default_params: bool = True) -> tuple[Any, dict[str, Any]]:
+    """``(params, overrides)`` for an API call from ``--model``, ``--preset``, ``--config``
+    and ``--set``: for the maglev models the parameter set (preset, then config, then the
+    overrides; its warnings printed), for a user model file ``FILE.py`` no parameter set
+    and the ``--set`` items as the file's own values (a preset or config does not apply to
+    it). With ``default_params`` False and none of those options given, params is None
+    (the API then takes, for a restart, the saved values)."""
+    if str(model).endswith(".py"):
+        if config is not None:
+            raise UserError(f"--config {config}: maglev parameter files do not apply to a "
+                            f"user model ({model}); use --set NAME=VALUE")
+        refuse_given({"preset": "--preset"}, f"maglev parameter presets do not apply to a "
+                     f"user model ({model}); use --set NAME=VALUE")
+        return None, set_items(sets)
+    if not default_params and not any(given(n) for n in PARAMETER_SET_OPTIONS):
+        return None, {}
+    return params_from_options(preset, config, sets), {}
+
+
+@contextlib.contextmanager
+def api_options(fields: dict[str, str]):
+    """Errors of an API call name the command's options: a
+    :class:`~maglev_match.core.params.ParameterError` whose field is an API keyword of
+    ``fields`` (API keyword -> option as typed, e.g. {"start": "--from"}) is raised again
+    with the option's name."""
+    try:
+        yield
+    except ParameterError as exc:
+        option = fields.get(exc.field)
+        if option is None:
+            raise
+        raise ParameterError(option, exc.value, exc.rule) from None

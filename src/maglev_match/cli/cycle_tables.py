@@ -6,24 +6,20 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rich import box
 from rich.table import Table
 
 from maglev_match.cli.common import UserError, console
 from maglev_match.core.io import atomic_open, atomic_write_text
-from maglev_match.core.params import ParameterError, Params, warn_overridden
+from maglev_match.core.params import ParameterError
 
-if TYPE_CHECKING:  # the numerics (and JAX) are imported when a command runs
-    from maglev_match.dynamics.cycles import CycleBranch
-
-__all__ = ["apply_at", "branch_rows", "special_rows", "write_csv", "print_summary", "shown_rows",
-           "user_cycle_rows", "user_special_rows"]
+__all__ = ["at_values", "write_csv", "print_summary", "print_user_branch", "shown_rows"]
 
 
-def apply_at(params: Params, at: list[str] | None) -> Params:
-    """Apply NAME=VALUE settings to a parameter set (validated)."""
+def at_values(at: list[str] | None) -> dict[str, float]:
+    """``--at NAME=VALUE`` items as numbers (the API checks the names)."""
     values: dict[str, float] = {}
     for item in at or []:
         if "=" not in item:
@@ -33,51 +29,10 @@ def apply_at(params: Params, at: list[str] | None) -> Params:
             values[name.strip()] = float(text)
         except ValueError:
             raise ParameterError(name.strip(), text, "must be a number") from None
-    try:
-        new = params.replace(**values) if values else params
-    except TypeError as exc:
-        raise UserError(f"--at: unknown parameter ({exc})") from None
-    warn_overridden(new, set(values))  # e.g. --at L=20 while omega1 is set explicitly
-    return new
+    return values
 
 
-def _branch_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
-    import numpy as np
-
-    rows = []
-    for c in br.points:
-        gmax, gmin = c.extrema["gap_deviation"]
-        imax, imin = c.extrema["current"]
-        rows.append({
-            param: c.value, "period": c.period, "gap_dev_max": gmax, "gap_dev_min": gmin,
-            "current_min": imin, "current_max": imax, "stable": c.stable,
-            "stability": c.stability or ("stable" if c.stable else "unstable"),
-            "unstable_multipliers": c.n_unstable,
-            "max_abs_multiplier": float(np.max(np.abs(c.multipliers))),
-            "kind": c.kind,
-            "trivial_multiplier_error": float(abs(c.trivial_multiplier - 1.0)),
-            "stability_reliable": c.reliable,
-        })
-    return rows
-
-
-def _special_rows(br: CycleBranch, param: str) -> list[dict[str, Any]]:
-    import numpy as np
-
-    from maglev_match.dynamics.continuation import SpecialPointKind
-
-    rows = []
-    for s in br.special_points:
-        gmax, gmin = s.extrema.get("gap_deviation", (float("nan"), float("nan")))
-        rows.append({"type": s.type, param: s.value, "period": s.period, "gap_dev_max": gmax,
-                     "gap_dev_min": gmin,
-                     "current_min": s.extrema.get("current", (np.nan, np.nan))[1],
-                     "limit": s.detail if s.type == SpecialPointKind.CONTACT else "",
-                     "detail": s.detail, "located": s.located, "label": s.label})
-    return rows
-
-
-def _write_csv(path: Path, rows: list[dict[str, Any]], param: str | None = None) -> None:
+def write_csv(path: Path, rows: list[dict[str, Any]], param: str | None = None) -> None:
     """Rows as CSV, SI values, each header ``name (unit)`` (the continued parameter's unit
     from the parameter table, the others from :mod:`maglev_match.core.units`)."""
     from maglev_match.cli.common import unit_of
@@ -94,9 +49,9 @@ def _write_csv(path: Path, rows: list[dict[str, Any]], param: str | None = None)
         w.writerows([[r.get(k, "") for k in keys] for r in rows])
 
 
-def _print_summary(result, branches, chosen, param, files, first_line: str | None = None
-                   ) -> None:
-    from maglev_match.dynamics.continuation import SpecialPointKind
+def print_summary(branches, chosen, param, files, first_line: str | None = None) -> None:
+    """The branches as text: per branch its Hopf start (or a restart's first line), where it
+    ended, a table of about a dozen cycles, the special points and the warnings."""
 
     for h, br in zip(chosen, branches, strict=True):
         if first_line is not None:  # a restart: its own header, no Hopf point found here
@@ -130,11 +85,11 @@ def _print_summary(result, branches, chosen, param, files, first_line: str | Non
                           "there[/]")
         for s in br.special_points:
             what = (f"contact with the physical limit '{s.detail}'"
-                    if s.type == SpecialPointKind.CONTACT else
+                    if s.type == "contact" else
                     f"{s.type}{': ' + s.detail if s.detail else ''}")
             gap = s.extrema.get("gap_deviation")
             tail = (f", gap dev max {gap[0] * 1e3:.4f} mm, min {gap[1] * 1e3:.4f} mm"
-                    if gap is not None and s.type != SpecialPointKind.HOPF else "")
+                    if gap is not None and s.type != "H" else "")
             console.print(f"  {s.label or s.type}: {what} at {param} = {s.value:.10g} "
                           f"({s.located}){tail}")
         for w in br.warnings:
@@ -143,26 +98,32 @@ def _print_summary(result, branches, chosen, param, files, first_line: str | Non
         console.print(f"wrote {f}")
 
 
-def _cycle_rows(br, param: str) -> list[dict[str, Any]]:
-    """The rows of a user-model cycle branch (CSV and JSON)."""
-    import numpy as np
+def print_user_branch(h, br, param: str, restarted: bool = False) -> None:
+    """A user model's branch as text: its Hopf start and end, about a dozen cycles (value,
+    period, stability) and the special points."""
+    if not restarted:
+        console.print(f"Hopf point {param} = {h.value:.8g}, frequency {h.frequency:.6g} rad/s, "
+                      f"l1 = {h.l1:.4g} ({h.kind}); branch stopped: {br.stopped_reason} after "
+                      f"{br.steps} steps", highlight=False)
+    else:
+        console.print(f"branch stopped: {br.stopped_reason} after {br.steps} steps",
+                      highlight=False)
+    for k in shown_rows(len(br.points)):
+        c = br.points[k]
+        console.print(f"  {param} = {c.value:.8g}  T = {c.period:.6g}  "
+                      f"{'stable' if c.stable else 'unstable'} ({c.n_unstable} unstable "
+                      f"multipliers, |trivial - 1| = {abs(c.trivial_multiplier - 1):.1e})",
+                      highlight=False)
+    for s in br.special_points:
+        if restarted:
+            console.print(f"  {s.label or s.type}: {s.type} at {param} = {s.value:.8g} "
+                          f"({s.located})", highlight=False)
+        else:
+            console.print(f"  {s.type} at {param} = {s.value:.8g} ({s.located})"
+                          f"{': ' + s.detail if s.detail else ''}", highlight=False)
+    from maglev_match.cli.common import print_warnings
 
-    out_rows = []
-    for c in br.points:
-        r = {param: c.value, "period": c.period, "stable": c.stable,
-             "unstable_multipliers": c.n_unstable,
-             "trivial_multiplier_error": abs(c.trivial_multiplier - 1.0),
-             "max_abs_multiplier": float(np.max(np.abs(c.multipliers)))
-             if len(c.multipliers) else 0.0, "kind": c.kind}
-        for k, (hi, lo) in c.extrema.items():
-            r[f"{k}_max"], r[f"{k}_min"] = hi, lo
-        out_rows.append(r)
-    return out_rows
-
-
-def _special_rows_user(br, param: str) -> list[dict[str, Any]]:
-    return [{"type": s.type, param: s.value, "period": s.period, "located": s.located,
-             "detail": s.detail, "label": s.label} for s in br.special_points]
+    print_warnings(br.warnings)
 
 
 def shown_rows(n: int) -> list[int]:
@@ -171,7 +132,4 @@ def shown_rows(n: int) -> list[int]:
     return sorted(set(range(0, n, max(1, n // 12))) | {n - 1}) if n else []
 
 
-# the names the command modules have used
-branch_rows, special_rows, write_csv, print_summary = (_branch_rows, _special_rows, _write_csv,
-                                                       _print_summary)
-user_cycle_rows, user_special_rows = _cycle_rows, _special_rows_user
+

@@ -1,13 +1,13 @@
 """`maglev-match cycles`: periodic orbits born at Hopf points, continued in one parameter
-(paper Fig. 5): max/min gap deviation, period, Floquet stability, folds and limit contacts."""
+(paper Fig. 5): max/min gap deviation, period, Floquet stability, folds and limit contacts.
+Options parsed here, the computation in :mod:`maglev_match.api.cycles` (maglev models, user
+model files, restarts of a saved branch), the answer printed and saved here."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import Annotated
 
-import numpy as np
 import typer
 
 from maglev_match.cli import app
@@ -22,33 +22,25 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
+    api_options,
     bounded,
-    check_model,
     check_output_path,
     console,
     emit_json,
     finite,
+    given,
+    model_inputs,
     ncol_option,
     ntst_option,
     output_target,
     preload,
+    print_error,
     progress_report,
+    refuse_given,
     steps_option,
 )
-from maglev_match.cli.common import params_from_options as _params
-from maglev_match.cli.cycle_tables import (  # noqa: F401 (apply_at: also used by tests)
-    _branch_rows,
-    _print_summary,
-    _special_rows,
-    _write_csv,
-    apply_at,
-)
-from maglev_match.cli.models import MAGLEV_DELAYS, is_model_file, user_cycles
+from maglev_match.cli.cycle_tables import at_values, print_summary, print_user_branch, write_csv
 from maglev_match.core.params import ParameterError
-
-if TYPE_CHECKING:  # the numerics (and JAX) are imported when the command runs
-    from maglev_match.dynamics.cycles import CycleBranch
-    from maglev_match.dynamics.hopf import HopfPoint
 
 AtOpt = Annotated[
     list[str] | None,
@@ -56,11 +48,15 @@ AtOpt = Annotated[
                  "--at sigma=4e-4. Applied after --preset/--config/--set."),
 ]
 
-
-def _hopf_json(h: HopfPoint, param: str) -> dict[str, Any]:
-    return {param: h.value, "l1": h.l1, "kind": h.kind, "frequency": h.frequency,
-            "period": 2 * np.pi / h.frequency, "crossing_speed": h.crossing_speed,
-            "others_stable": h.others_stable, "converged": h.converged}
+#: API keyword -> option, for `cycles`
+CYCLES_OPTIONS = {"param": "--param", "at": "--at", "start": "--from", "stop": "--to",
+                  "start/stop": "--from/--to", "all_hopf": "--all", "n_scan": "--scan",
+                  "ntst": "--ntst", "ncol": "--ncol", "max_steps": "--max-steps",
+                  "ignore_current": "--ignore-current", "model": "--model",
+                  "config": "--config", "restart": "--restart", "label": "--label",
+                  "restart/label": "--restart"}
+#: Options of `cycles` that only steer the Hopf search a restart does not do.
+HOPF_SEARCH_OPTIONS = {"start": "--from", "stop": "--to", "all_hopf": "--all", "n_scan": "--scan"}
 
 
 @app.command("cycles")
@@ -110,165 +106,164 @@ def cycles_command(
         raise ParameterError("--ncol", ncol, "must be between 2 and 7")
     if ntst < 4:
         raise ParameterError("--ntst", ntst, "must be at least 4")
-    if is_model_file(model):  # a user model file: no maglev limits or read-outs
-        return user_cycles(model, set_, at, param, start, stop, all_hopf, n_scan, ntst, ncol,
-                           max_steps, json_out, out, restart=restart, label=label)
-    if restart is not None or label is not None:  # continue a saved branch (cli/restart.py)
-        from maglev_match.cli.restart import cycles_restart
-
-        return cycles_restart(restart=restart, label=label, param=param, model=model,
-                              preset=preset, config=config, set_=set_, at=at, ntst=ntst,
-                              ncol=ncol, max_steps=max_steps, ignore_current=ignore_current,
-                              json_out=json_out, out=out)
-    check_model(model)
-    params = apply_at(_params(preset, config, set_), at)
-    # the numerics (and JAX) once the options are known to be good
-    from maglev_match.analyses.engineering import engineering_system, is_engineering
-    from maglev_match.dynamics.cycles import cycle_branch
-    from maglev_match.dynamics.delay import delay_hopf_points, is_delay_parameter
-    from maglev_match.dynamics.hopf import locate_hopf_points
-    from maglev_match.maglev.limits import cycle_limit_margins
-    from maglev_match.maglev.models import build_system
-
-    if out is not None or not json_out:  # files at the end: load their writers meanwhile
-        preload("maglev_match.plots.cycles", "maglev_match.core.datasets", "xarray", "h5netcdf")
-    system = build_system(params, model)
-    try:
-        design = getattr(params, param) if is_engineering(param) else (
-            params.tau if param in MAGLEV_DELAYS else system.param(param))
-    except KeyError as exc:
-        raise UserError(str(exc).strip("'\"")) from None
-    a = design / 4 if start is None else start
-    b = design * 4 if stop is None else stop
-    if param in MAGLEV_DELAYS:  # a delay axis: the discretised delay system up to its end
-        a = 0.0 if start is None else start
-        if not b > 0:
-            raise UserError(f"--param {param}: give the largest delay with --to (the design "
-                            f"value is {design:g} s)")
-        if min(a, b) < 0:
-            raise ParameterError("--from", min(a, b), f"{param} is a delay: >= 0 s")
-        system = build_system(params, model, tau_max=max(a, b))
-    if is_engineering(param):  # beam/vehicle data: omega1, sigma (geometry) follow it
-        if start is None or stop is None:
-            raise UserError(f"--param {param}: give the range with --from and --to")
-        system = engineering_system(params, model, param, min(a, b), max(a, b))
-    if not (np.isfinite(a) and np.isfinite(b)) or a == b:
-        raise UserError(f"--from/--to: empty search range [{a}, {b}]")
-    t0 = time.perf_counter()
     if n_scan < 3:
         raise ParameterError("--scan", n_scan, "must be at least 3")
-    with progress_report("cycles") as prog:
-        prog.stage(f"searching Hopf points along {param} in [{a:.6g}, {b:.6g}] ...")
-        if is_delay_parameter(system, param):  # crossings of the characteristic equation
-            scan = delay_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
-        else:
-            scan = locate_hopf_points(system, param, min(a, b), max(a, b), n_scan=n_scan)
-        hopfs = [h for h in scan.points if h.converged]
-        if not hopfs:
-            raise UserError(f"no Hopf point of the equilibrium along {param} in "
-                            f"[{a:.6g}, {b:.6g}]; widen --from/--to")
-        hopfs.sort(key=lambda h: abs(h.value - design))
-        chosen = hopfs if all_hopf else hopfs[:1]
-        limits = cycle_limit_margins(params, include_current=not ignore_current)
-        branches: list[CycleBranch] = []
-        for h in chosen:
-            prog.stage(f"continuing cycles from the Hopf point {param} = {h.value:.6g} ...")
+    user = str(model).endswith(".py")
+    restarting = restart is not None or label is not None
+    if user:  # a user model file: no maglev limits or read-outs
+        refuse_given({"ignore_current": "--ignore-current", "config": "--config",
+                      "preset": "--preset"},
+                     f"applies to the maglev models only; a user model ({model}) has no coil "
+                     "current limit and takes its values from --set/--at")
+    if restarting:
+        if restart is None or label is None:
+            raise UserError("--restart FILE and --label LABEL go together (e.g. --restart "
+                            "branch.nc --label P12)")
+        refuse_given(HOPF_SEARCH_OPTIONS, "a restart searches no Hopf point: it continues the "
+                     "saved branch from --label; leave this option out")
+        if not given("model") and not user:  # the model the file was saved for
+            from maglev_match import api
 
-            def report(step, pt, h=h):
-                prog.update(f"cycles from Hopf at {param} = {h.value:.6g}: step {step}, "
-                            f"{param} = {pt.value:.6g}, max gap dev "
-                            f"{pt.extrema['gap_deviation'][0] * 1e3:.3f} mm")
+            model = api.saved_model(restart) or model
+    params, overrides = model_inputs(model, preset, config, set_,
+                                     default_params=not restarting)
+    at_vals = at_values(at)
+    if not user and (out is not None or not json_out):  # files at the end: load writers now
+        preload("maglev_match.plots.cycles", "maglev_match.core.datasets", "xarray",
+                "h5netcdf")
+    from maglev_match import api
+    from maglev_match.cli.restart import restart_error_context
 
-            br = cycle_branch(system, h, param, ntst=ntst, ncol=ncol, max_steps=max_steps,
-                              limits=limits, progress=report)
-            branches.append(br)
-            prog.stage(f"branch from {param} = {h.value:.6g}: {len(br.points)} cycles, "
-                       f"ended: {br.stopped_reason}")
-    elapsed = time.perf_counter() - t0
+    with progress_report("cycles") as prog, api_options(CYCLES_OPTIONS), \
+            restart_error_context():
+        def report(step, pt):
+            if user:
+                return
+            prog.update(f"cycles along {param}: step {step}, {param} = {pt.value:.6g}, max "
+                        f"gap dev {pt.extrema['gap_deviation'][0] * 1e3:.3f} mm")
 
-    main_branch, h0 = branches[0], chosen[0]
-    result: dict[str, Any] = {
-        "model": model,
-        "param": param,
-        "at": {k.split("=")[0]: float(k.split("=")[1]) for k in (at or [])},
-        "hopf": _hopf_json(h0, param),
-        "label": "b1",  # the label of the branch in the figure and the CSV
-        "branch": _branch_rows(main_branch, param),
-        "special_points": _special_rows(main_branch, param),
-        "stopped_reason": main_branch.stopped_reason,
-        "end": main_branch.message,
-        "steps": main_branch.steps,
-        "warnings": list(main_branch.warnings) + list(scan.warnings),
-        "hopf_points": [_hopf_json(h, param) for h in hopfs],
-        "mesh": {"ntst": ntst, "ncol": ncol},
-        "elapsed_s": elapsed,
-    }
-    if all_hopf and len(branches) > 1:
-        result["other_branches"] = [
-            {"label": f"b{k + 2}", "hopf": _hopf_json(h, param),
-             "branch": _branch_rows(br, param),
-             "special_points": _special_rows(br, param), "stopped_reason": br.stopped_reason,
-             "warnings": list(br.warnings)}
-            for k, (h, br) in enumerate(zip(chosen[1:], branches[1:], strict=True))
-        ]
+        st = api.cycle_study(
+            params, param if (given("param") or not restarting) else None, model=model,
+            at=at_vals, start=start, stop=stop, all_hopf=all_hopf, n_scan=n_scan,
+            ntst=ntst if (given("ntst") or not restarting) else None,
+            ncol=ncol if (given("ncol") or not restarting) else None, max_steps=max_steps,
+            ignore_current=ignore_current, restart=restart, label=label, stage=prog.stage,
+            progress=report, **overrides)
+    if user:
+        return _user_outputs(st, model, out, json_out)
+    result = st.as_json()
+    param = st.param
     if json_out:
         if out is not None:
-            files = _write_outputs(out, param, model, scan, branches, params, at, system)
-            result["files"] = [str(f) for f in files]
+            result["files"] = [str(f) for f in _write_outputs(st, out)]
         emit_json(result)
-        return
+        return _fail_if_nothing_continued(st)
     # The answer first, the files after: writing the netCDF and the figure costs about a
     # second (xarray, HDF5 and two renderings), which the reader need not wait for.
-    _print_summary(result, branches, chosen, param, [])
+    first = None
+    if st.restart is not None:
+        br = st.branches[0]
+        header = st.restart.describe() + (f", continued in {param}"
+                                          if param != st.restart.param else "")
+        first = (f"cycles: {header}; no Hopf search; branch stopped: {br.stopped_reason} "
+                 f"after {br.steps} steps")
+    print_summary(st.branches, st.chosen, param, [], first_line=first)
     with progress_report("cycles") as prog:
         prog.stage("writing the branch files and the figure ...")
-        files = _write_outputs(out, param, model, scan, branches, params, at, system)
+        files = _write_outputs(st, out)
     for f in files:
         console.print(f"wrote {f}")
+    _fail_if_nothing_continued(st)
 
 
-def _write_outputs(out, param, model, scan, branches, params, at, system=None) -> list[Path]:
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.cycles import branch_label, cycle_diagram
-
-    folder, stem = output_target(out, "cycles", f"cycles_{model}_{param}")
-    files = []
-    rows, specials = [], []
-    for k, br in enumerate(branches):
-        for r in _branch_rows(br, param):
-            rows.append({"branch": branch_label(k), "hopf": br.hopf.value, **r})
-        for r in _special_rows(br, param):
-            specials.append({"branch": branch_label(k), **r})
-    _write_csv(folder / f"{stem}.csv", rows, param)
-    _write_csv(folder / f"{stem}_special_points.csv", specials, param)
-    files += [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
-    # the full branches (profiles, multipliers, special points, restart data) as netCDF
-    from maglev_match.analyses.restart import RestartKind, stamp
-    from maglev_match.cli.common import unit_of
-    from maglev_match.core.datasets import annotate
+def _write_outputs(st, out) -> list[Path]:
+    """The branches as CSV (points and special points), the restartable netCDF of each
+    branch and the figure."""
+    from maglev_match.api.cycles import branch_label
     from maglev_match.core.io import atomic_write_netcdf
-    from maglev_match.maglev.models import build_system
 
-    system = build_system(params, model) if system is None else system
-    for k, br in enumerate(branches):
+    param = st.param
+    restart = st.restart
+    stem0 = f"cycles_{st.model}_{param}" + ("_restart" if restart is not None else "")
+    folder, stem = output_target(out, "cycles", stem0)
+    rows, specials = [], []
+    for k, br in enumerate(st.branches):
+        extra = ({"restart_of": f"{restart.label} of {restart.path}"} if restart is not None
+                 else {"hopf": br.hopf.value})
+        for r in st.branch_rows(k):
+            rows.append({"branch": branch_label(k), **extra, **r})
+        for r in st.special_rows(k):
+            specials.append({"branch": branch_label(k), **r})
+    write_csv(folder / f"{stem}.csv", rows, param)
+    write_csv(folder / f"{stem}_special_points.csv", specials, param)
+    files = [folder / f"{stem}.csv", folder / f"{stem}_special_points.csv"]
+    for k, br in enumerate(st.branches):
         if not br.points:
             continue
         nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
-        ds = annotate(br.to_xarray(system, param_unit=unit_of(param)), params)
-        stamp(ds, RestartKind.CYCLE_BRANCH, system, model, "cycles")  # restartable
-        atomic_write_netcdf(nc, ds)
+        atomic_write_netcdf(nc, st.branch_dataset(k))
         files.append(nc)
-    lo = min([scan.scan_values[0]] + [float(np.min(b.values)) for b in branches if b.points])
-    hi = max([scan.scan_values[-1]] + [float(np.max(b.values)) for b in branches if b.points])
-    sel = (scan.scan_values >= lo) & (scan.scan_values <= hi)
-    at_text = ", ".join(at or [])
-    fig, _ = cycle_diagram(
-        branches, param, scan.scan_values[sel], scan.max_real_part[sel] < 0,
-        title=f"Cycles along {param}" + (f" ({at_text})" if at_text else ""),
-        limits=(params.gap_min - params.c0, params.gap_max - params.c0),
-        design_value=getattr(params, param, None),
-    )
-    files += save_figure(fig, folder / f"{stem}.png")
+    files += st.plot(folder / f"{stem}.png")
     return files
 
 
+def _user_outputs(st, model: str, out, json_out: bool) -> None:
+    """A user model's branches: the CSV of every point and each restartable branch, the
+    JSON or the text summary."""
+    import csv
+
+    from maglev_match.core.io import atomic_open, atomic_write_netcdf
+
+    result = st.as_json()
+    param = st.param
+    result["model_file"] = str(model)
+    if out is not None:
+        tail = "_restart" if st.restart is not None else ""
+        folder, stem = output_target(out, "cycles", f"cycles_{st.model}_{param}{tail}")
+        path = folder / f"{stem}.csv"
+        if st.restart is not None:
+            allrows = st.branch_rows(0)
+        else:
+            allrows = [{"branch": k, **r} for k in range(len(st.branches))
+                       for r in st.branch_rows(k)]
+        with atomic_open(path, "w", newline="") as fh:
+            if allrows:
+                w = csv.DictWriter(fh, fieldnames=list(allrows[0]))
+                w.writeheader()
+                w.writerows(allrows)
+        result["files"] = [str(path)]
+        for k, br in enumerate(st.branches):  # the full branches, restartable (--restart)
+            if not br.points:
+                continue
+            nc = folder / (f"{stem}.nc" if k == 0 else f"{stem}_{k}.nc")
+            atomic_write_netcdf(nc, st.branch_dataset(k))
+            result["files"].append(str(nc))
+    if json_out:
+        emit_json(result)
+        return _fail_if_nothing_continued(st)
+    if st.restart is not None:
+        header = st.restart.describe() + (f", continued in {param}"
+                                          if param != st.restart.param else "")
+        console.print(f"cycles: {header}; no Hopf search", highlight=False, markup=False)
+    for h, br in zip(st.chosen, st.branches, strict=True):
+        print_user_branch(h, br, param, restarted=st.restart is not None)
+    for f in result.get("files", []):
+        console.print(f"wrote {f}", highlight=False)
+    from maglev_match.cli.common import print_warnings
+
+    print_warnings(st.warnings)
+    _fail_if_nothing_continued(st)
+
+
+def _fail_if_nothing_continued(st) -> None:
+    """A restart whose first point does not converge continued nothing: a numerical
+    failure, exit code 1 (after the result was printed), never a silent exit 0."""
+    rs = st.restart
+    if rs is None or st.branches[0].points:
+        return
+    br = st.branches[0]
+    why = "; ".join(br.warnings) or str(br.stopped_reason)
+    print_error(f"the restart from {rs.label} of {rs.path} continued nothing: {why} "
+                f"(stopped: {br.stopped_reason}); the saved point does not solve the "
+                "periodic problem of this model with these values")
+    raise typer.Exit(1)

@@ -19,6 +19,7 @@ from maglev_match.cli.common import (
     OutOpt,
     PresetOpt,
     SetOpt,
+    api_options,
     bounded,
     check_index_params,
     check_model,
@@ -36,8 +37,15 @@ from maglev_match.core.options import SCATTER_PCT_MAX, check_scatter_percent
 from maglev_match.core.params import FIELD_NAMES, INTEGER_FIELDS, ParameterError
 from maglev_match.maglev.catalog import model_info
 
-MODEL_TEXT = {"unit": "model A (one levitation unit)",
-              "vehicle": "model B (full vehicle, six levitation points)"}
+#: API keyword -> option, for `sensitivity`, `design` and the scatter of `index`
+SCATTER_OPTIONS = {"scatter": "--scatter", "monte_carlo": "--monte-carlo",
+                   "workers": "--workers", "resume": "--resume", "seed": "--seed",
+                   "model": "--model"}
+SENSITIVITY_OPTIONS = {"model": "--model", "boundaries": "--boundaries/--no-boundaries",
+                       "simulate": "--no-simulation", "config": "--config"}
+DESIGN_OPTIONS = {"vary": "--vary", "minimize/maximize": "--minimize/--maximize",
+                  "require": "--require", "model": "--model", "grid": "--grid",
+                  "starts": "--starts", "simulate": "--no-simulation", "config": "--config"}
 
 # `design` exits with this code when no candidate meets the requirements (the best one found
 # is still printed): distinct from 1 (a failure or a bug) and 2 (a usage error).
@@ -73,18 +81,21 @@ NoSimOpt = Annotated[bool, typer.Option(
     "headline chi is the paper's number.")]
 
 
-def _monte_carlo(params, scatter: dict[str, float], n: int | None, spread: dict | None,
-                 folder, workers: int | None, resume: bool, seed: int, model: str = "unit",
-                 command: str = "design"):
-    if n is None:
-        return None  # (a --monte-carlo without --scatter was refused by scatter_options)
-    from maglev_match.analyses.sensitivity import sampled_spread
+def _spread(params, scatter: dict[str, float], n: int | None, folder, workers: int | None,
+            resume: bool, seed: int, model: str, command: str, *, index=None,
+            sensitivity=None):
+    """The linearised spread of chi (and, with ``n``, the Monte Carlo study in
+    ``<folder>/monte-carlo``) through the API: an IndexSpread, or None without --scatter."""
+    if not scatter:
+        return None
+    from maglev_match import api
 
-    with progress_report(command) as prog:
-        prog.stage(f"Monte Carlo, {n} samples ...")
-        return sampled_spread(params, scatter, n, folder / "monte-carlo", seed=seed,
-                              resume=resume, workers=workers, linearised=spread, model=model,
-                              progress=lambda d, t: prog.tiles(d, t, "chunks"))
+    with progress_report(command) as prog, api_options(SCATTER_OPTIONS):
+        return api.index_spread(params, scatter, model=model, index=index,
+                                sensitivity=sensitivity, monte_carlo=n,
+                                checkpoint=None if n is None else folder / "monte-carlo",
+                                seed=seed, resume=resume, workers=workers, stage=prog.stage,
+                                progress=lambda d, t: prog.tiles(d, t, "chunks"))
 
 
 def _print_sampled(mc, bound: float | None = None) -> None:
@@ -131,14 +142,10 @@ def check_scatter_names(params, scatter: dict[str, float], model: str) -> None:
     before any computation, so a typo costs no index)."""
     if not scatter:
         return  # (no import of the sensitivity module, ~0.2 s, when there is nothing to check)
-    from maglev_match.analyses.sensitivity import engineering_names
+    from maglev_match import api
 
-    rows = engineering_names(params, model)
-    for name in scatter:
-        if name not in rows:
-            raise ParameterError("--scatter", name, "has no row in the sensitivity table of "
-                                 f"this model (a derived or unused value; rows: "
-                                 f"{', '.join(rows)})")
+    with api_options(SCATTER_OPTIONS):
+        api.check_scatter(params, scatter, model=model)
 
 
 def scatter_options(params, items: list[str] | None, monte_carlo: int | None,
@@ -176,47 +183,22 @@ def check_monte_carlo_folder(out, command: str, stem: str, monte_carlo: int | No
         pass
 
 
-def _spread(sens, scatter: dict[str, float]) -> dict | None:
-    if not scatter:
-        return None
-    from maglev_match.analyses.sensitivity import linearised_spread
-
-    for name in scatter:
-        try:
-            sens.row(name)
-        except KeyError:
-            raise ParameterError("--scatter", name, "has no row in the sensitivity table "
-                                 "(a derived value: scatter its beam parameters)") from None
-    return linearised_spread(sens, scatter)
-
-
 def scatter_report(params, index, scatter: dict[str, float], monte_carlo: int | None,
-                   out, workers: int | None, resume: bool, seed: int, model: str
-                   ) -> tuple[dict | None, object]:
-    """The linearised spread of chi at an already computed ``index`` (its sensitivities,
-    without stability boundaries) and, with ``monte_carlo``, the sampled distribution in
-    ``<out>/monte-carlo`` (resumable). For `index --scatter`; (None, None) without
+                   out, workers: int | None, resume: bool, seed: int, model: str):
+    """The spread of chi at an already computed ``index`` for `index --scatter` (and
+    --monte-carlo, in ``<out>/monte-carlo``, resumable): an IndexSpread, or None without
     --scatter."""
-    if not scatter:
-        return None, None
-    from maglev_match.analyses.sensitivity import index_sensitivity
-
-    with progress_report("index") as prog:
-        prog.stage("sensitivities for the linearised spread ...")
-        sens = index_sensitivity(params, index, boundaries=False, model=model)
-    spread = _spread(sens, scatter)
-    mc = None
-    if monte_carlo is not None:
-        folder, _ = output_target(out, "index", "index")
-        mc = _monte_carlo(params, scatter, monte_carlo, spread, folder, workers, resume, seed,
-                          model, "index")
-    return spread, mc
+    folder, _ = output_target(out, "index", "index")
+    return _spread(params, scatter, monte_carlo, folder, workers, resume, seed, model, "index",
+                   index=index)
 
 
-def print_scatter(spread: dict | None, mc) -> None:
+def print_scatter(sp) -> None:
     """The text lines of `index --scatter` (and --monte-carlo)."""
-    _print_spread(spread)
-    _print_sampled(mc)
+    if sp is None:
+        return
+    _print_spread(sp.linearised)
+    _print_sampled(sp.sampled)
 
 
 def _print_spread(spread: dict | None) -> None:
@@ -260,20 +242,17 @@ def sensitivity_command(
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "sensitivity", "tornado", monte_carlo)
-    # the numerics (and JAX) and the figures once the options are known to be good
-    from maglev_match.analyses.sensitivity import DerivativeStatus, index_sensitivity
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.design import tornado_figure
+    from maglev_match import api  # (the numerics and JAX, once the options are good)
 
-    with progress_report("sensitivity") as prog:
+    with progress_report("sensitivity") as prog, api_options(SENSITIVITY_OPTIONS):
         prog.stage("computing the index and its sensitivities ...")
-        sens = index_sensitivity(params, boundaries=boundaries, model=model,
-                                 simulate=not no_simulation)
-    spread = _spread(sens, sc)
+        sens = api.index_sensitivity(params, model=model, boundaries=boundaries,
+                                     simulate=not no_simulation)
     folder, stem = output_target(out, "sensitivity", "tornado")
-    figs = save_figure(tornado_figure(sens), folder / stem)
-    mc = _monte_carlo(params, sc, monte_carlo, spread, folder, workers, resume, seed, model,
-                      "sensitivity")
+    figs = sens.plot(folder / stem)
+    sp = _spread(params, sc, monte_carlo, folder, workers, resume, seed, model,
+                 "sensitivity", sensitivity=sens)
+    spread, mc = (None, None) if sp is None else (sp.linearised, sp.sampled)
     if json_out:
         data = sens.as_json()
         data["figures"] = [str(f) for f in figs]
@@ -282,7 +261,7 @@ def sensitivity_command(
         emit_json(data)
         return
     idx = sens.index
-    console.print(f"[bold]maglev-match sensitivity[/] — {MODEL_TEXT[model]}, preset {preset}"
+    console.print(f"[bold]maglev-match sensitivity[/] — {model_info(model).label}, preset {preset}"
                   + (f", config {config}" if config else "")
                   + (f", set {' '.join(set_)}" if set_ else ""))
     console.print(f"  chi = {idx.chi:.5g} (headline: {idx.headline})", highlight=False)
@@ -294,16 +273,16 @@ def sensitivity_command(
                   + (f", Hopf point {idx.hopf_param} = {idx.hopf_value:.6g} "
                      f"({idx.hopf_distance:.1%} away)" if idx.hopf_param else ""))
     status_text = {
-        DerivativeStatus.EXACT: "exact: implicit differentiation of the converged unstable "
+        "exact": "exact: implicit differentiation of the converged unstable "
                                 "cycle",
-        DerivativeStatus.ZERO: "zero: the equilibrium is unstable, chi = 0 on a whole "
+        "zero": "zero: the equilibrium is unstable, chi = 0 on a whole "
                                "neighbourhood",
-        DerivativeStatus.RULE: "case rule: h = gap_max - c0, chi moves only through w0 "
+        "rule": "case rule: h = gap_max - c0, chi moves only through w0 "
                                "(and gap_max, c0)",
-        DerivativeStatus.UNDEFINED: "undefined: the index did not converge",
-        DerivativeStatus.SOLVED: "exact: implicit function theorem on the solved critical "
+        "undefined": "undefined: the index did not converge",
+        "solved": "exact: implicit function theorem on the solved critical "
                                  "disturbance of chi_simulation",
-        DerivativeStatus.UNAVAILABLE: "not available: chi_simulation's critical size is only "
+        "unavailable": "not available: chi_simulation's critical size is only "
                                       "bracketed by bisection here",
     }[sens.status]
     console.print(f"  derivatives of the headline: {status_text}")
@@ -312,7 +291,7 @@ def sensitivity_command(
     if sens.switch_note:
         console.print(f"  [yellow]{sens.switch_note}[/] (columns 'left' and 'right': for a "
                       "decrease and an increase of the parameter)")
-    if sens.status == DerivativeStatus.UNDEFINED:
+    if sens.status == "undefined":
         console.print(f"[bold red]numerical failure:[/] {idx.message}")
     table = Table(show_edge=False, header_style="bold")
     cols = ["parameter", "value", "unit", "d chi/dp", "elasticity", "d chi_paper/dp"]
@@ -377,18 +356,6 @@ def design_command(
     """The cheapest design (or the largest chi) meeting the requirements on the headline
     chi (both the paper's chi and chi_simulation; --no-simulation: the paper's chi alone):
     SLSQP with exact gradients from several grid starts, every candidate the full index."""
-    from maglev_match.analyses.design import (
-        DesignProblem,
-        DesignStatus,
-        Goal,
-        MaglevEvaluator,
-        check_vary_ranges,
-        optimise_design,
-        parse_requirement,
-        parse_vary,
-        refuse_switched_off,
-    )
-
     model = check_model(model)
     if (minimize is None) == (maximize is None):
         raise ParameterError("--minimize/--maximize", minimize or maximize,
@@ -397,40 +364,33 @@ def design_command(
         raise ParameterError("--starts", starts, "must be at least 1")
     if grid is not None and grid < 2:
         raise ParameterError("--grid", grid, "must be at least 2")
-    variables = tuple(parse_vary(v) for v in vary)
-    reqs = tuple(parse_requirement(r) for r in require or [])
-    refuse_switched_off(reqs, require or [], not no_simulation, "--require",
-                        "--no-simulation")
-    goal = Goal.MINIMIZE if minimize is not None else Goal.MAXIMIZE
-    problem = DesignProblem(variables, goal, minimize or maximize or "", reqs)
+    from maglev_match import api
+
+    with api_options(DESIGN_OPTIONS):
+        reqs = api.check_requirements(require or [], simulate=not no_simulation,
+                                      field="--require", switch="--no-simulation")
     base = params_from_options(preset, config, set_)
-    for var in variables:  # both ends must be valid parameter values
-        base.replace(**{var.name: var.lo})
-        base.replace(**{var.name: var.hi})
-    check_vary_ranges(base, variables)  # valid sets with a meaningful chi throughout
     check_index_params(base)
     sc = scatter_options(base, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "design", "design-path", monte_carlo)
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.design import design_path_figure
-
-    evaluator = MaglevEvaluator(base, problem.names, model=model, simulate=not no_simulation)
-    with progress_report("design") as prog:
+    with api_options(DESIGN_OPTIONS):  # every input checked before the progress starts
+        api.design_problem(base, vary=list(vary), minimize=minimize, maximize=maximize,
+                           require=list(require or []), simulate=not no_simulation,
+                           starts=starts, grid=grid)
+    with progress_report("design") as prog, api_options(DESIGN_OPTIONS):
         prog.stage("searching ...")
-        res = optimise_design(problem, evaluator, grid=grid, starts=starts,
-                              progress=prog.stage)
-    spread = None
-    design_params = evaluator.params([res.values[n] for n in problem.names])
-    if sc:
-        from maglev_match.analyses.sensitivity import index_sensitivity
-
-        spread = _spread(index_sensitivity(design_params, res.index, boundaries=False,
-                                           model=model), sc)
+        res = api.design_search(base, vary=list(vary), minimize=minimize, maximize=maximize,
+                                require=list(require or []), model=model, grid=grid,
+                                starts=starts, simulate=not no_simulation,
+                                progress=prog.stage)
+    design_params = base.replace(**{n: float(v) for n, v in res.values.items()})
     folder, stem = output_target(out, "design", "design-path")
-    figs = save_figure(design_path_figure(res), folder / stem)
-    mc = _monte_carlo(design_params, sc, monte_carlo, spread, folder, workers, resume, seed,
-                      model)
+    figs = res.plot(folder / stem)
+    sp = _spread(design_params, sc, monte_carlo, folder, workers, resume, seed, model,
+                 "design", index=res.index)
+    spread, mc = (None, None) if sp is None else (sp.linearised, sp.sampled)
     chi_req = next((r.bound for r in reqs if r.quantity == "chi"), None)
+    goal, objective = ("minimize", minimize) if minimize is not None else ("maximize", maximize)
     if json_out:
         data = res.as_json()
         data["figures"] = [str(f) for f in figs]
@@ -439,19 +399,19 @@ def design_command(
             mc.as_json(), fraction_below_requirement=None if chi_req is None
             else mc.fraction_below(chi_req))
         emit_json(data)
-        if res.status != DesignStatus.FEASIBLE:
+        if res.status != "feasible":
             raise typer.Exit(NO_FEASIBLE_DESIGN)
         return
     idx = res.index
-    console.print(f"[bold]maglev-match design[/] — {MODEL_TEXT[model]}, preset {preset}: "
-                  f"{goal} {problem.objective}"
+    console.print(f"[bold]maglev-match design[/] — {model_info(model).label}, preset {preset}: "
+                  f"{goal} {objective}"
                   + (" subject to " + ", ".join(str(r) for r in reqs) if reqs else ""))
-    ok = res.status == DesignStatus.FEASIBLE
+    ok = res.status == "feasible"
     console.print(("  [bold green]feasible[/]: " if ok else "  [bold red]no feasible design"
                    "[/]: ") + res.message)
-    for n, v in res.values.items():
-        var = next(x for x in variables if x.name == n)
-        console.print(f"  [bold]{n} = {v:.6g}[/] (range {var.lo:g} .. {var.hi:g})")
+    for var in res.problem.variables:
+        console.print(f"  [bold]{var.name} = {res.values[var.name]:.6g}[/] (range "
+                      f"{var.lo:g} .. {var.hi:g})")
     console.print(f"  full index there: chi = {idx.chi:.5g} (headline: {idx.headline}); "
                   f"chi_paper = {idx.chi_paper:.5g} ({idx.case}, the paper's definition)"
                   + (f", chi_simulation = {idx.chi_simulation:.5g}"
@@ -462,7 +422,7 @@ def design_command(
                      if "sigma" in model_info(model).beam_params else ""),
                   highlight=False)
     console.print("  active: " + (", ".join(res.active) if res.active else "none"))
-    if goal == Goal.MAXIMIZE and idx.case == "no_cycle_within_limits":
+    if goal == "maximize" and idx.case == "no_cycle_within_limits":
         console.print("  note: chi is at the ceiling (gap_max - c0) / w0 of the case rule (no "
                       "unstable cycle within the gap range); it grows further only through "
                       "w0, so the optimum is not unique")
@@ -470,7 +430,8 @@ def design_command(
                   f"runs, {res.iterations} SLSQP iterations, {res.evaluations} index "
                   f"evaluations, {res.seconds:.1f} s")
     for k, c in enumerate(res.candidates, 1):
-        d = ", ".join(f"{n} = {v:.5g}" for n, v in zip(problem.names, c.values, strict=True))
+        d = ", ".join(f"{n} = {v:.5g}" for n, v in zip(res.problem.names, c.values,
+                                                          strict=True))
         console.print(f"    run {k}: {d}: chi = {c.chi:.5g} (paper {c.chi_paper:.5g}), "
                       f"margin = {c.margin:.4g}"
                       + (f", chi_simulation = {c.chi_simulation:.4g}"

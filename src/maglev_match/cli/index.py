@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Annotated
 
@@ -16,6 +15,7 @@ from maglev_match.cli.common import (
     ModelOpt,
     PresetOpt,
     SetOpt,
+    api_options,
     check_index_params,
     check_model,
     check_output_path,
@@ -32,7 +32,17 @@ from maglev_match.cli.common import (
 )
 from maglev_match.cli.design import McOpt, ResumeOpt, ScatterOpt, SeedOpt, WorkersOpt
 from maglev_match.cli.models import MaglevOnlyModelOpt, is_model_file, refuse_model_file
+from maglev_match.core.params import ParameterError
 from maglev_match.maglev.catalog import model_info
+
+#: API keyword -> option, for `map`
+MAP_OPTIONS = {"x": "--x", "y": "--y", "workers": "--workers", "scheduler": "--scheduler",
+               "resume": "--resume", "rows_per_tile": "--rows-per-tile", "ntst": "--ntst",
+               "simulate": "--no-simulation", "config": "--config"}
+#: API keyword -> option, for `index`
+INDEX_OPTIONS = {"model": "--model", "simulate": "--no-simulation", "scatter": "--scatter",
+                 "monte_carlo": "--monte-carlo", "workers": "--workers", "resume": "--resume",
+                 "seed": "--seed", "config": "--config"}
 
 CASE_TEXT = {
     "unstable_equilibrium": "the equilibrium is unstable (h = 0)",
@@ -80,21 +90,21 @@ def index_command(
     check_index_params(params)
     sc = scatter_options(params, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "index", "index", monte_carlo)
-    from maglev_match.analyses.matching import matching_index  # (after the checks: JAX loads here)
-    with progress_report("index") as prog:
+    from maglev_match import api  # (after the checks: JAX loads here)
+
+    with progress_report("index") as prog, api_options(INDEX_OPTIONS):
         prog.stage("computing the matching index ...")
-        res = matching_index(params, model=model, simulate=not no_simulation)
-    spread, mc = scatter_report(params, res, sc, monte_carlo, out, workers, resume, seed, model)
+        res = api.matching_index(params, model=model, simulate=not no_simulation)
+    sp = scatter_report(params, res, sc, monte_carlo, out, workers, resume, seed, model)
     data = res.as_json()
     if sc:
-        data["spread"] = spread
-        data["monte_carlo"] = None if mc is None else mc.as_json()
+        data.update(sp.as_json())
     written = write_result_json(out, "index", f"index_{model}", data, json_out)
     if json_out:
         emit_json(data)
         return
     print_index(res, preset, config, set_)
-    print_scatter(spread, mc)
+    print_scatter(sp)
     for f in written:
         console.print(f"wrote {f}", highlight=False)
 
@@ -263,54 +273,33 @@ def map_command(
         return speed_map_command(x, y, preset, config, set_, out, resume, scheduler, workers,
                                  json_out, model)
     refuse_model_file(model, "map")
-    from maglev_match.analyses.maps import (
-        MapSpec,
-        map_dataset,
-        map_warnings,
-        parse_axis,
-        remove_checkpoint,
-        run_map,
-    )
-    from maglev_match.core.io import atomic_write_netcdf
-    from maglev_match.core.params import ParameterError
-
     check_output_path(out)
-    base = params_from_options(preset, config, set_)
-    ax, ay = parse_axis(x, "--x"), parse_axis(y, "--y")
-    folder, stem = output_target(out, "map", f"map_{ax.name}_{ay.name}")
     if rows_per_tile < 1:
         raise ParameterError("--rows-per-tile", rows_per_tile, "must be at least 1")
-    spec = MapSpec(base=base.as_input_dict(), x=ax, y=ay, rows_per_tile=rows_per_tile,
-                   ntst=ntst, simulate=not no_simulation)
-    spec.validate()  # every grid point, before any work starts
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.maps import map_figure
+    base = params_from_options(preset, config, set_)
+    names = [a.split("=", 1)[0].strip() for a in (x, y)]
+    folder, stem = output_target(out, "map", f"map_{names[0]}_{names[1]}")
+    from maglev_match import api
+    from maglev_match.core.io import atomic_write_netcdf
 
     out = folder / f"{stem}.nc"
     checkpoint = out.with_name(out.name + ".tiles")
     log = out.with_suffix(".log")
     debug = bool(ctx.find_root().params.get("debug", False))
-    with progress_report("map") as prog:
-        what = "headline index" if spec.simulate else "paper's index only (--no-simulation)"
-        prog.stage(f"map {ax.name} x {ay.name}, {what}: {len(spec.tiles)} tiles ...")
-        started = time.perf_counter()
-        data = run_map(spec, checkpoint, resume=resume, scheduler=scheduler, workers=workers,
-                       progress=prog.tiles, log=log, echo_dask=debug)
-        elapsed = time.perf_counter() - started
-        # the self-check gets 10 % of the map's time (at least one point is checked)
-        prog.stage("spot check: recomputing sample points one by one ...")
-        ds = map_dataset(spec, data, budget=0.1 * elapsed)
-    from maglev_match.core.datasets import annotate_map
-
-    ds = annotate_map(ds, base)
-    warnings = map_warnings(ds)
+    with progress_report("map") as prog, api_options(MAP_OPTIONS):
+        ds = api.design_map(base, x, y, checkpoint=checkpoint, resume=resume,
+                            scheduler=scheduler, workers=workers, rows_per_tile=rows_per_tile,
+                            ntst=ntst, progress=prog.tiles, simulate=not no_simulation,
+                            log=log, echo_dask=debug, check_fraction=0.1, stage=prog.stage)
+    warns = api.map_warnings(ds)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_netcdf(out, ds)
-    figs = save_figure(map_figure(ds, design_point=(float(getattr(base, ax.name)),
-                                                    float(getattr(base, ay.name)))),
-                       out.with_suffix(""))
-    tiles_left = keep_tiles or not remove_checkpoint(checkpoint)
-    summary = _map_summary(ds, spec, out, figs, warnings,
+    from maglev_match.plots import plot as draw
+
+    figs = draw(ds, out.with_suffix(""), design_point=(float(getattr(base, names[0])),
+                                                       float(getattr(base, names[1]))))
+    tiles_left = keep_tiles or not api.remove_tiles(checkpoint)
+    summary = _map_summary(ds, names, not no_simulation, out, figs, warns,
                            str(checkpoint) if tiles_left else None,
                            str(log) if log.exists() else None)
     if json_out:
@@ -319,7 +308,7 @@ def map_command(
     _print_map(summary)
 
 
-def _map_summary(ds, spec, out, figs, warnings, tiles, log) -> dict:
+def _map_summary(ds, names, simulate, out, figs, warnings, tiles, log) -> dict:
     """The JSON form of a finished map (every number as stored in the netCDF file)."""
     import math
 
@@ -337,16 +326,16 @@ def _map_summary(ds, spec, out, figs, warnings, tiles, log) -> dict:
             "max_rel_diff": float(a["spot_check_max_rel_diff"]),
             "tolerance": float(a["spot_check_tolerance"]),
             "passed": bool(a["spot_check_passed"])}
-    if spec.simulate:
+    if simulate:
         spot.update({"simulation_max_diff": float(a["spot_check_simulation_max_diff"]),
                      "simulation_tolerance": float(a["spot_check_simulation_tolerance"]),
                      "headline_max_diff": float(a["spot_check_headline_max_diff"]),
                      "headline_passed": bool(a["spot_check_headline_passed"])})
     by_sim = int(np.sum((ds["chi_basis"].values == 1) & stable & resolved))
     return {
-        "netcdf": str(out), "figures": [str(f) for f in figs], "x": spec.x.name,
-        "y": spec.y.name, "shape": [spec.y.count, spec.x.count],
-        "index_definition": a["index_definition"], "simulation": bool(spec.simulate),
+        "netcdf": str(out), "figures": [str(f) for f in figs], "x": names[0],
+        "y": names[1], "shape": list(ds["stable"].shape),
+        "index_definition": a["index_definition"], "simulation": bool(simulate),
         "stable_fraction": float(stable.mean()),
         "chi_max": top("chi"), "chi_paper_max": top("chi_paper"),
         "chi_simulation_max": top("chi_simulation"),
@@ -356,7 +345,7 @@ def _map_summary(ds, spec, out, figs, warnings, tiles, log) -> dict:
         "hopf_curve": a.get("hopf_curve", ""),
         "tiles": tiles, "log": log,
         "warnings": warnings,
-        "simulation_tolerance": (None if not spec.simulate
+        "simulation_tolerance": (None if not simulate
                                  or not math.isfinite(a["simulation_tolerance"])
                                  else float(a["simulation_tolerance"])),
     }

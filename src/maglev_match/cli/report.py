@@ -64,7 +64,7 @@ def report_command(
     """Self-contained HTML study report of one vehicle-beam pair (figures embedded; the
     PNG/SVG files are written to <out stem>_figures/ beside it)."""
     refuse_model_file(model, "report")
-    from maglev_match.present.report import ReportSettings, study_report
+    from maglev_match.present.documents import report_sections, study_report
 
     if out is not None and is_file_name(out) and out.suffix.lower() not in (".html", ".htm"):
         raise UserError(f"--out {out}: the report is an HTML file; give a name ending in .html "
@@ -76,15 +76,11 @@ def report_command(
     named = out is not None and is_file_name(out)
     out = folder / (f"{stem}{out.suffix}" if named else f"{stem}.html")
     params = params_from_options(preset, config, set_)
-    base = ReportSettings.quick_settings() if quick else ReportSettings()
-    settings = ReportSettings(**{**base.as_dict(), "include_vehicle": model_b, "t_end": t_end})
     label = preset + (f" + {config}" if config else "") + (
         " + " + ", ".join(set_) if set_ else "")
-    from maglev_match.present.report import study_sections
-
     with progress_report("report") as prog:
-        res = study_report(params, out, settings, label=label,
-                           progress=_progress(prog, len(study_sections())))
+        res = study_report(params, out, quick=quick, vehicle=model_b, t_end=t_end, label=label,
+                           progress=_progress(prog, report_sections()))
     summary = {
         "report": str(res.path),
         "figures": [str(f) for f in res.figures],
@@ -115,10 +111,9 @@ def reproduce_command(
     """Recompute the paper's figures (Figs. 4-8, 11-13) and its claims with the printed
     defaults; writes reproduce.html, claims.csv, claims.json and figures/ into --out."""
     refuse_model_file(model, "reproduce")
-    from maglev_match.present.report import ReportSettings
-    from maglev_match.present.reproduce import SECTIONS, reproduce
+    from maglev_match.present.documents import REPRODUCE_SECTIONS as keys
+    from maglev_match.present.documents import reproduce
 
-    keys = [k for k, _, _ in SECTIONS]
     for k in only or []:
         if k not in keys:
             raise UserError(f"--only {k}: no such section; choose from {', '.join(keys)}")
@@ -128,10 +123,9 @@ def reproduce_command(
     check_output_path(out)
     html_name = out.name if out is not None and is_file_name(out) else None
     out, _ = output_target(out, "reproduce", "reproduce")
-    settings = ReportSettings.quick_settings() if quick else ReportSettings()
     n_sections = len(only) if only else len(keys)
     with progress_report("reproduce") as prog:
-        report, claims = reproduce(out, settings, only=only or None,
+        report, claims = reproduce(out, quick=quick, only=only or None,
                                    progress=_progress(prog, n_sections + 1))  # + claims
     if html_name is not None and html_name != report.path.name:
         import dataclasses

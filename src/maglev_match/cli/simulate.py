@@ -1,5 +1,6 @@
 """`maglev-match simulate`: a time simulation with the physical limits (current clamp,
-gap collision)."""
+gap collision), of a user model file, or at speed over N spans. Options parsed here, the
+computation in :mod:`maglev_match.api.simulation`, the answer printed and saved here."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
+    api_options,
     check_model,
     check_output_path,
     console,
@@ -27,6 +29,7 @@ from maglev_match.cli.common import (
     emit_json,
     horizon_option,
     is_file_name,
+    model_inputs,
     n_save_option,
     output_target,
     params_from_options,
@@ -35,8 +38,15 @@ from maglev_match.cli.common import (
     refuse_given,
     tolerance_option,
 )
-from maglev_match.cli.models import is_model_file, user_simulate
+from maglev_match.cli.models import is_model_file
 from maglev_match.maglev.catalog import model_info
+
+#: API keyword -> option, for `simulate`
+SIMULATE_OPTIONS = {"t_end": "--t", "x5": "--x5", "initial": "--initial", "q1": "--q1",
+                    "x0": "--x0", "limits": "--limits/--no-limits", "n_save": "--n-save",
+                    "rtol": "--rtol", "atol": "--atol", "rtol/atol": "--rtol/--atol",
+                    "model": "--model", "config": "--config", "kmh": "--speed",
+                    "spans": "--spans"}
 
 
 def _read_state(text: str) -> np.ndarray:
@@ -141,32 +151,34 @@ def simulate_command(
                      f"applies to the maglev models (unit, vehicle) only; a user model "
                      f"({model}) starts from --x0 (default: its X0), runs without physical "
                      "limits and writes its history with --out FILE.csv")
-        return user_simulate(model, set_, t, state, n_save, rtol, atol, json_out, out)
-    params = params_from_options(preset, config, set_)
+        if out is not None and is_file_name(out) and out.suffix != ".csv":
+            raise UserError(f"--out {out}: for a user model the history file must end in "
+                            ".csv (or give a folder)")
+    params, overrides = model_inputs(model, preset, config, set_)
     # the numerics (and JAX) once the options are known to be good
-    from maglev_match.analyses.simulation import initial_state, save_history, simulate_maglev
-    from maglev_match.dynamics.integrate.simulate import SimulationOptions
+    from maglev_match import api
 
-    x_init = initial_state(params, model, initial=initial, x5=x5, q1=q1, state=state)
-    with progress_report("simulate") as prog:
-        prog.stage(f"simulating {model_info(model).short} for {t:g} s ...")
-        sim = simulate_maglev(params, model, x_init, t, limited=limits, n_save=n_save,
-                              options=SimulationOptions(rtol=rtol, atol=atol))
+    with progress_report("simulate") as prog, api_options(SIMULATE_OPTIONS):
+        what = Path(model).stem if is_model_file(model) else model_info(model).short
+        prog.stage(f"simulating {what} for {t:g} s ...")
+        sim = api.simulate(params, model=model, t_end=t, x5=x5, initial=initial, q1=q1,
+                           x0=state, limits=limits, n_save=n_save, rtol=rtol, atol=atol,
+                           **overrides)
         prog.stage(f"simulation done: {sim.outcome}")
+    if is_model_file(model):
+        return _user_outputs(sim, model, out, json_out)
     written: list[str] = []
     if out is not None or plot is not None or not json_out:
         # the history and its figure go to --out (default maglev-match-out/simulate/);
         # --plot puts the figure elsewhere. With --json and neither option, nothing is
         # written (the JSON on stdout is the result).
-        from maglev_match.plots.simulate import plot_simulation
-
         folder, stem = output_target(out, "simulate", f"simulation_{model}")
         suffix = out.suffix if out is not None and out.suffix else ".nc"
         if out is not None or not json_out:
-            written.append(str(save_history(sim, folder / (stem + suffix))))
+            written.append(str(sim.save_history(folder / (stem + suffix))))
         if plot is not None:
             folder, stem = output_target(plot, "simulate", f"simulation_{model}")
-        written += [str(p) for p in plot_simulation(sim, folder / f"{stem}.png")]
+        written += [str(p) for p in sim.plot(folder / f"{stem}.png")]
     summary = sim.summary()
     if json_out:
         emit_json(summary)
@@ -196,3 +208,33 @@ def simulate_command(
     console.print(f"steps: {res.accepted} accepted, {res.rejected} rejected", highlight=False)
     for w in written:
         console.print(f"wrote {w}", highlight=False)
+
+
+def _user_outputs(sim, model: str, out: Path | None, json_out: bool) -> None:
+    """A user model's run: its history as CSV (with --out), the JSON or the text."""
+    written = []
+    if out is not None:
+        folder, stem = output_target(out, "simulate", f"simulation_{sim.model}")
+        path = folder / f"{stem}.csv"
+        t, x = sim.history()
+        header = ",".join(["t", *sim.state_names])
+        from maglev_match.core.io import atomic_write
+
+        atomic_write(path, lambda tmp: np.savetxt(tmp, np.column_stack([t, x]),
+                                                  delimiter=",", header=header, comments=""))
+        written.append(str(path))
+    summary = sim.summary() | {"model_file": str(model), "files": written}
+    if json_out:
+        emit_json(summary)
+        print_warnings(sim.warnings)
+        return
+    res = sim.result
+    console.print(f"Model {sim.model} ({model}): {res.outcome} at t = {res.final_time:.6g} s",
+                  highlight=False)
+    console.print("final state: " + ", ".join(
+        f"{n} = {v:.6g}" for n, v in zip(sim.state_names, res.final_state, strict=True)),
+        highlight=False)
+    console.print(f"steps: {res.accepted} accepted, {res.rejected} rejected", highlight=False)
+    for w in written:
+        console.print(f"wrote {w}", highlight=False)
+    print_warnings(sim.warnings)

@@ -4,7 +4,6 @@ behind `map --x v=...`. Speeds on the command line are in km/h; JSON and files a
 
 from __future__ import annotations
 
-import math
 import shutil
 import time
 from pathlib import Path
@@ -15,7 +14,7 @@ import typer
 from rich import box
 from rich.table import Table
 
-from maglev_match.analyses.speed.grid import KMH, SPEED_MAX, speeds_kmh
+from maglev_match.analyses.speed.grid import KMH, speeds_kmh
 from maglev_match.cli import app
 from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,
@@ -23,6 +22,7 @@ from maglev_match.cli.common import (
     JsonOpt,
     PresetOpt,
     SetOpt,
+    api_options,
     check_output_path,
     console,
     emit_json,
@@ -37,7 +37,11 @@ from maglev_match.cli.common import (
 from maglev_match.core.params import ParameterError
 
 SPEED_MODELS = ("unit", "vehicle", "force")
-KMH_MAX = SPEED_MAX / KMH  # km/h (900): the sweep's bound, for one run at speed too
+#: API keyword -> option, for `speed`, `simulate --speed` and `map --x v=...`
+SPEED_OPTIONS = {"model": "--model", "speeds": "--from/--to/--step", "critical": "--critical",
+                 "spans": "--spans", "workers": "--workers", "scheduler": "--scheduler",
+                 "resume": "--resume", "config": "--config", "kmh": "--speed",
+                 "x": "--x", "y": "--y"}
 
 SpeedModelOpt = Annotated[str, typer.Option(
     "--model", help="'unit' (model A's unit, the vehicle's k units spread over its length), "
@@ -75,7 +79,7 @@ def _table(sweep) -> Table:
 
 
 def _summary_lines(sweep) -> list[str]:
-    from maglev_match.analyses.speed.ride import sperling_reading
+    from maglev_match.api.speed import ride_reading as sperling_reading
 
     out = []
     daf, v_daf = sweep.largest("daf")
@@ -142,27 +146,21 @@ def speed_command(
     check_output_path(out)
     params = params_from_options(preset, config, set_)
     kmh = speeds_kmh(from_, to, step)
-    # the numerics (and JAX) once the options are good
-    from maglev_match.analyses.speed.sweep import (
-        SpeedOptions,
-        check_speed_setup,
-        speed_sweep,
-    )
+    from maglev_match import api  # (the numerics, and JAX, once the options are good)
 
-    opts = SpeedOptions(critical=critical, spans=spans)
-    check_speed_setup(params, model, list(kmh * KMH), spans)
     folder, stem = output_target(out, "speed", f"speed_{model}")
     nc = folder / f"{stem}.nc"
     tiles = nc.with_name(nc.name + ".tiles")
     if out is not None or not json_out:
         preload("xarray", "matplotlib.pyplot", "h5netcdf")
-    with progress_report("speed") as prog:
+    with progress_report("speed") as prog, api_options(SPEED_OPTIONS):
         prog.stage(f"{len(kmh)} speeds, model {model}, {'with' if critical else 'without'} "
                    "the critical disturbance ...")
         started = time.perf_counter()
-        sweep = speed_sweep(params, model, list(kmh * KMH), opts, checkpoint=tiles,
-                            resume=resume, scheduler=scheduler, workers=workers,
-                            progress=lambda d, t: prog.tiles(d, t, "speeds"))
+        sweep = api.speed_sweep(params, model=model, speeds=list(kmh * KMH),
+                                critical=critical, spans=spans, checkpoint=tiles,
+                                resume=resume, scheduler=scheduler, workers=workers,
+                                progress=lambda d, t: prog.tiles(d, t, "speeds"))
         elapsed = time.perf_counter() - started
         prog.stage(f"sweep done in {elapsed:.1f} s; writing files ...")
         files = _write_sweep(sweep, folder, stem)
@@ -189,14 +187,11 @@ def speed_command(
 
 def _write_sweep(sweep, folder: Path, stem: str) -> list[Path]:
     from maglev_match.core.io import atomic_write_netcdf
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.speed import speed_figure
 
     folder.mkdir(parents=True, exist_ok=True)
     nc = folder / f"{stem}.nc"
-    ds = sweep.to_xarray()
-    atomic_write_netcdf(nc, ds)
-    return [nc, *save_figure(speed_figure(sweep), folder / f"{stem}.png")]
+    atomic_write_netcdf(nc, sweep.to_xarray())
+    return [nc, *sweep.plot(folder / f"{stem}.png")]
 
 
 # ---------------------------------------------------------------------------------------
@@ -206,38 +201,27 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
                       out: Path | None, plot: Path | None, json_out: bool) -> None:
     """`simulate --speed V --spans N`: the run over N spans from rigid ground and off again,
     with the periodic response overlaid (called by the simulate command)."""
-    from maglev_match.analyses.speed.spans import simulate_over_spans
-    from maglev_match.analyses.speed.sweep import SpeedOptions, check_speed_setup
-
     _check_model(model)
     n = 10 if spans is None else spans
-    if not (math.isfinite(speed_kmh) and 0 < speed_kmh <= KMH_MAX):
-        raise ParameterError("--speed", speed_kmh, f"must lie in (0, {KMH_MAX:g}] km/h for a "
-                             "run over spans")
-    check_speed_setup(params, model, [speed_kmh * KMH], n)
-    if n > 1000:
-        raise ParameterError("--spans", n, "must be at most 1000 for a run over spans")
     check_output_path(out, suffixes=(".nc",))
     check_output_path(plot, "--plot")
-    with progress_report("simulate") as prog:
+    from maglev_match import api
+
+    with progress_report("simulate") as prog, api_options(SPEED_OPTIONS):
         prog.stage(f"running model {model} over {n} spans at {speed_kmh:g} km/h ...")
-        run = simulate_over_spans(params, model, speed_kmh * KMH, n, limited=limits,
-                                  options=SpeedOptions(critical=False))
+        run = api.simulate_over_spans(params, model=model, kmh=speed_kmh, spans=n,
+                                      limits=limits)
         prog.stage(f"run done: {run.outcome}")
         folder, stem = output_target(out, "simulate", f"simulation_{model}_speed")
         folder.mkdir(parents=True, exist_ok=True)
         from maglev_match.core.io import atomic_write_netcdf
 
         nc = folder / f"{stem}.nc"
-        ds = run.to_xarray()
-        atomic_write_netcdf(nc, ds)
+        atomic_write_netcdf(nc, run.to_xarray())
         written = [nc]
         pfolder, pstem = output_target(plot if plot is not None else out, "simulate",
                                        f"simulation_{model}_speed")
-        from maglev_match.plots import save_figure
-        from maglev_match.plots.speed import span_run_figure
-
-        written += save_figure(span_run_figure(run), pfolder / f"{pstem}.png")
+        written += run.plot(pfolder / f"{pstem}.png")
     summary: dict[str, Any] = run.summary() | {"files": [str(w) for w in written]}
     if json_out:
         emit_json(summary)
@@ -273,21 +257,19 @@ def speed_map_command(x: str, y: str, preset: str, config, set_, out: Path | Non
                       json_out: bool, model: str | None) -> None:
     """`map` with the speed v (km/h) on one axis: every grid point a periodic response at
     speed with its read-outs (netCDF + figure)."""
-    from maglev_match.analyses.speed.maps import parse_speed_axes, run_speed_map
-    from maglev_match.analyses.speed.sweep import SpeedOptions
-
     kind = _check_model(model or "unit")
     check_output_path(out)
     params = params_from_options(preset, config, set_)
-    spec = parse_speed_axes(params, kind, x, y, SpeedOptions())
-    folder, stem = output_target(out, "map", f"map_{spec.x.name}_{spec.y.name}")
+    names = [a.split("=", 1)[0].strip() for a in (x, y)]
+    folder, stem = output_target(out, "map", f"map_{names[0]}_{names[1]}")
     nc = folder / f"{stem}.nc"
     tiles = nc.with_name(nc.name + ".tiles")
-    with progress_report("map") as prog:
-        prog.stage(f"map {spec.x.name} x {spec.y.name} at speed, model {kind}: "
-                   f"{len(spec.tiles)} rows ...")
-        ds = run_speed_map(spec, tiles, resume=resume, scheduler=scheduler, workers=workers,
-                           progress=prog.tiles)
+    from maglev_match import api
+
+    with progress_report("map") as prog, api_options(SPEED_OPTIONS):
+        prog.stage(f"map {names[0]} x {names[1]} at speed, model {kind} ...")
+        ds = api.speed_map(params, x, y, model=kind, checkpoint=tiles, resume=resume,
+                           scheduler=scheduler, workers=workers, progress=prog.tiles)
         from maglev_match.core.io import atomic_write_netcdf
         from maglev_match.plots import save_figure
         from maglev_match.plots.speed import speed_map_figure
@@ -297,8 +279,8 @@ def speed_map_command(x: str, y: str, preset: str, config, set_, out: Path | Non
         files = [nc, *save_figure(speed_map_figure(ds), folder / f"{stem}.png")]
     shutil.rmtree(tiles, ignore_errors=True)
     stable = ds["stable"].values
-    summary = {"netcdf": str(nc), "figures": [str(f) for f in files[1:]], "x": spec.x.name,
-               "y": spec.y.name, "model": kind, "shape": list(stable.shape),
+    summary = {"netcdf": str(nc), "figures": [str(f) for f in files[1:]], "x": names[0],
+               "y": names[1], "model": kind, "shape": list(stable.shape),
                "stable_fraction": float(np.mean(stable == 1)),
                "chi_min": float(np.nanmin(ds["chi"].values))
                if np.isfinite(ds["chi"].values).any() else None,

@@ -1,8 +1,10 @@
-"""`maglev-match stability`, `root-locus` and `presets`."""
+"""`maglev-match stability`, `root-locus` and `presets`: options parsed here, the
+computation in :mod:`maglev_match.api.linear`, the answer printed and saved here."""
 
 from __future__ import annotations
 
 import csv
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -20,19 +22,19 @@ from maglev_match.cli.common import (
     PresetOpt,
     SetOpt,
     UserError,
+    api_options,
     check_output_path,
-    check_param,
     console,
     emit_json,
     finite,
+    model_inputs,
     output_target,
     print_warnings,
     progress_report,
     scan_option,
     unit_of,
-    validate_value,
 )
-from maglev_match.core.params import ParameterError, available_presets, load_preset, preset_info
+from maglev_match.core.params import ParameterError
 from maglev_match.core.units import header, shown
 from maglev_match.core.units import label as unit_label
 from maglev_match.maglev.catalog import model_info
@@ -40,19 +42,16 @@ from maglev_match.maglev.catalog import model_info
 # The numerical modules (and JAX with them) are imported inside the commands, so that
 # `presets`, `--help` and a usage error answer without loading them.
 
-
-def stability(system):
-    """:func:`maglev_match.dynamics.equilibria.stability`, imported when first called."""
-    from maglev_match.dynamics.equilibria import stability as _stability
-
-    return _stability(system)
+#: API keyword -> option, for `stability` and `root-locus`
+STABILITY_OPTIONS = {"model": "--model", "config": "--config"}
+ROOT_LOCUS_OPTIONS = {"param": "--param", "values": "--from/--to", "model": "--model",
+                      "config": "--config"}
 
 
-def root_locus(system, param, values):
-    """:func:`maglev_match.dynamics.equilibria.root_locus`, imported when first called."""
-    from maglev_match.dynamics.equilibria import root_locus as _root_locus
+def _label(model: str) -> str:
+    """'unit', 'vehicle' or a model file's name (its stem)."""
+    return Path(model).stem if str(model).endswith(".py") else model
 
-    return _root_locus(system, param, values)
 
 #: Relative size below which an imaginary part is rounding noise: eigenvalues of a real
 #: matrix computed in float64 (LAPACK dgeev, backward error ~ 1e-16 ||J||) can split a real
@@ -90,17 +89,21 @@ def stability_command(
 
     Writes the eigenvalues (CSV) into --out (default maglev-match-out/stability/); with
     --json and no --out, nothing is written."""
-    from maglev_match.cli.models import resolve_model
+    import numpy as np
 
     check_output_path(out)
-    rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
-    params, system = rm.params, rm.system
-    import numpy as np
-    res = stability(system)
-    files = [] if json_out and out is None else [_write_eigenvalues(out, rm.label, res)]
+    params, overrides = model_inputs(model, preset, config, set_)
+    from maglev_match import api
+
+    with api_options(STABILITY_OPTIONS):
+        studied = api.resolve_model(params, model, **overrides)  # --model unit|vehicle|FILE.py
+        res = api.stability(params, model=model, **overrides)
+    system = res.system
+    label = _label(model)
+    files = [] if json_out and out is None else [_write_eigenvalues(out, label, res)]
     if json_out:
         out = {
-            "model": rm.label,
+            "model": label,
             "stable": res.stable,
             "max_real_part": res.max_real_part,
             "margin": res.margin,
@@ -112,15 +115,15 @@ def stability_command(
             "warnings": list(res.warnings),
             "files": [str(f) for f in files],
         }
-        if rm.is_user:
+        if studied.is_user:
             out["parameters"] = dict(zip(system.param_names, system.p.tolist(), strict=True))
-        if rm.is_user or model_info(model).points > 1:
+        if studied.is_user or model_info(model).points > 1:
             out["equilibrium"] = res.equilibrium.x.tolist()
             out["state_names"] = list(system.state_names)
         emit_json(out)
         return
+    console.print(studied.description, highlight=False)
     verdict = "[bold green]STABLE[/]" if res.stable else "[bold red]UNSTABLE[/]"
-    console.print(rm.description, highlight=False)
     console.print(f"Equilibrium: {verdict}  max Re(lambda) = {res.max_real_part:.6g} 1/s "
                   f"(margin {res.margin:.6g} 1/s)")
     table = Table("#", "Re (1/s)", "Im (rad/s)", "f (Hz)", "damping ratio")
@@ -172,7 +175,6 @@ def root_locus_command(
     """Eigenvalues along one parameter: writes CSV and a PNG/SVG figure."""
     import numpy as np
 
-    from maglev_match.cli.models import resolve_model
     from maglev_match.core.io import atomic_open
 
     check_output_path(out)
@@ -180,27 +182,15 @@ def root_locus_command(
         raise ParameterError("--steps", steps, "must be at least 2")
     if not start < stop:
         raise UserError(f"--from {start:g} --to {stop:g}: the range must be increasing")
-    rm = resolve_model(model, set_, preset, config)  # --model unit|vehicle|FILE.py
-    params, system, model = rm.params, rm.system, rm.label
-    from maglev_match.analyses.engineering import is_engineering
+    params, overrides = model_inputs(model, preset, config, set_)
+    model = str(model)
+    from maglev_match import api
 
-    engineering = params is not None and is_engineering(param)
-    if not engineering:
-        check_param(system, model, param, "--param")
-    for v in (start, stop):
-        if params is not None:
-            validate_value(params, param, v)
     values = np.linspace(start, stop, steps)
-    with progress_report("root-locus") as prog:
+    with progress_report("root-locus") as prog, api_options(ROOT_LOCUS_OPTIONS):
         prog.stage(f"eigenvalues at {steps} values of {param} ...")
-        if engineering:  # the path through the model parameters at each value: t = k exact
-            from maglev_match.analyses.engineering import engineering_nodes
-            from maglev_match.dynamics.paths import PATH_PARAM, path_system
-
-            path = path_system(system, engineering_nodes(params, model, param, values))
-            res = root_locus(path, PATH_PARAM, np.arange(steps, dtype=float))
-        else:
-            res = root_locus(system, param, values)
+        res = api.root_locus(params, param, values, model=model, **overrides)
+    model = _label(model)
     folder, stem = output_target(out, "root-locus", f"root_locus_{model}_{param}")
     csv_path = folder / f"{stem}.csv"
     with atomic_open(csv_path, "w", newline="") as fh:
@@ -213,20 +203,10 @@ def root_locus_command(
             for k, z in enumerate(eig):
                 w.writerow([f"{v:.10g}", k, f"{z.real:.12g}", f"{z.imag:.12g}", f"{mr:.12g}",
                             bool(ok)])
-    from maglev_match.plots import save_figure
-    from maglev_match.plots.rootlocus import root_locus_figure
-
     unit = unit_of(param)
-    design_value = getattr(params, param) if engineering else system.param(param)
-    design = (float(design_value), stability(system).eigenvalues)
-    figs = save_figure(root_locus_figure(values, res.eigenvalues, param, f"({unit})",
-                                         design=design), folder / stem)
-    crossings = []
+    figs = res.plot(folder / stem)
+    crossings = res.stability_changes
     mr = res.max_real_part
-    for k in range(len(values) - 1):
-        if np.sign(mr[k]) != np.sign(mr[k + 1]):
-            t = mr[k] / (mr[k] - mr[k + 1])
-            crossings.append(float(values[k] + t * (values[k + 1] - values[k])))
     summary = {
         "param": param,
         "model": model,
@@ -261,15 +241,9 @@ def presets_command(out: OutOpt = None, json_out: JsonOpt = False) -> None:
     Writes the table (CSV, SI units) into --out (default maglev-match-out/presets/); with
     --json and no --out, nothing is written."""
     check_output_path(out)
-    rows = []
-    for name in available_presets():
-        p = load_preset(name)
-        info = preset_info(name)
-        rows.append({"name": name, "omega1": p.omega1, "sigma": p.sigma, "w0": p.w0,
-                     "EI": p.EI, "L": p.L, "mbar": p.mbar, "description": info.description,
-                     "base": info.base,
-                     "changes": {k: {"base": a, "value": b}
-                                 for k, (a, b) in info.changes.items()}})
+    from maglev_match.api.linear import presets
+
+    rows = [r.as_json() for r in presets()]
     files = [] if json_out and out is None else [_write_presets(out, rows)]
     if json_out:
         emit_json({"presets": rows, "files": [str(f) for f in files]})

@@ -90,6 +90,8 @@ class StabilityResult:
     condition_numbers: np.ndarray  # of each eigenvalue (same order)
     equilibrium: EquilibriumResult
     warnings: tuple[str, ...] = ()
+    #: the system whose equilibrium this is (names of its states and parameters)
+    system: Any = field(default=None, repr=False, compare=False)
 
     @property
     def margin(self) -> float:
@@ -111,6 +113,21 @@ class RootLocusResult(Plottable):
     equilibria: np.ndarray  # (n_values, dim)
     warnings: tuple[str, ...] = field(default=())
     param_unit: str = ""  # the unit of ``param`` (from the system's param_units)
+    #: the design point (the parameter's current value) and its eigenvalues, when known
+    design_value: float | None = None
+    design_eigenvalues: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def stability_changes(self) -> list[float]:
+        """Where max Re(lambda) changes sign between two values (linear interpolation; the
+        Hopf search refines them)."""
+        mr, v = np.asarray(self.max_real_part), np.asarray(self.values)
+        out = []
+        for k in range(len(v) - 1):
+            if np.sign(mr[k]) != np.sign(mr[k + 1]):
+                t = mr[k] / (mr[k] - mr[k + 1])
+                out.append(float(v[k] + t * (v[k + 1] - v[k])))
+        return out
 
     def to_xarray(self, params: Any = None, state_names: tuple[str, ...] | None = None):
         """The locus as an :class:`xarray.Dataset` over (parameter value, eigenvalue index):
@@ -247,6 +264,7 @@ def stability(
         condition_numbers=cond,
         equilibrium=eq,
         warnings=tuple(warnings),
+        system=system,
     )
 
 

@@ -21,8 +21,9 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -93,6 +94,30 @@ class HopfScan(Plottable):
     max_real_part: np.ndarray  # max Re(lambda) there (1/s)
     warnings: tuple[str, ...] = ()
     special_points: tuple = ()  # LP, BP, H of the equilibrium branch (EquilibriumSpecialPoint)
+    #: the parameters read off each point in its table row (:meth:`records`); the system
+    #: the points belong to; how a delay system was discretised ({..., "text": ...})
+    columns: tuple[str, ...] = ()
+    system: Any = field(default=None, repr=False, compare=False)
+    delay: dict | None = None
+
+    def records(self) -> list[dict[str, Any]]:
+        """One row per Hopf point: the :attr:`columns` (read off the point's parameter
+        vector; the scanned parameter itself where the system does not have it, as a
+        beam quantity), frequency, crossing speed, l1, kind, whether the other eigenvalues
+        are stable, convergence, residual, warnings and AUTO's label H1, H2, ..."""
+        rows = []
+        for k, hp in enumerate(self.points):
+            rec: dict[str, Any] = {}
+            for n in self.columns:
+                rec[n] = (hp.value if n == self.param and (
+                    self.system is None or n not in self.system.param_names)
+                    else self.system.param(n, hp.p))
+            rec.update({"frequency": hp.frequency, "crossing_speed": hp.crossing_speed,
+                        "l1": hp.l1, "kind": hp.kind, "others_stable": hp.others_stable,
+                        "converged": hp.converged, "residual": hp.residual,
+                        "warnings": list(hp.warnings), "label": f"H{k + 1}"})
+            rows.append(rec)
+        return rows
 
 
 

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.lines import Line2D
 
+from maglev_match.api.cycles import CycleStudy, restart_point_extrema, saved_part
 from maglev_match.core.results import figure, figure_of_many
 from maglev_match.dynamics.cycles import CycleBranch
 from maglev_match.plots.base import new_figure
@@ -175,3 +176,53 @@ def _cycle_branch(branch: CycleBranch, **kw):
 @figure_of_many.register(CycleBranch)
 def _cycle_branches(first: CycleBranch, branches, **kw):
     return cycle_diagram(list(branches), first.param, **kw)[0]
+
+
+@figure.register(CycleStudy)
+def _cycle_study(st: CycleStudy, **kw):
+    """The command's figure: the branches' max/min gap deviation (a user model: its first
+    observable) with the equilibrium's stability along the searched range, the gap limits,
+    the design value and, for a restart, the saved part of the branch and the restart
+    point."""
+    import numpy as np
+
+    at_text = ", ".join(f"{k}={v:g}" for k, v in st.at.items())
+    params = st.params
+    if st.restart is None:
+        scan = st.scan
+        vals = [float(np.min(b.values)) for b in st.branches if b.points]
+        lo = min([scan.scan_values[0]] + vals)
+        hi = max([scan.scan_values[-1]] + [float(np.max(b.values)) for b in st.branches
+                                           if b.points])
+        sel = (scan.scan_values >= lo) & (scan.scan_values <= hi)
+        kw.setdefault("title", f"Cycles along {st.param}" + (f" ({at_text})" if at_text
+                                                              else ""))
+        if params is not None:
+            kw.setdefault("limits", (params.gap_min - params.c0, params.gap_max - params.c0))
+            kw.setdefault("design_value", getattr(params, st.param, None))
+        fig, _ = cycle_diagram(st.branches, st.param, scan.scan_values[sel],
+                               scan.max_real_part[sel] < 0, **kw)
+        return fig
+    from pathlib import Path
+
+    from maglev_match.plots.restart import draw_saved_part
+
+    rs = st.restart
+    kw.setdefault("title", f"Cycles along {st.param}, restarted from {rs.label}"
+                  + (f" ({at_text})" if at_text else ""))
+    if params is not None:
+        kw.setdefault("limits", (params.gap_min - params.c0, params.gap_max - params.c0))
+        kw.setdefault("design_value", getattr(params, st.param, None))
+    fig, ax = cycle_diagram(st.branches, st.param, **kw)
+    observable = "gap_deviation"
+    if st.param == rs.param:
+        vals, hi, lo, stable = saved_part(rs, st.system, observable)
+        rv = rs.value
+    else:  # the saved branch lies along another parameter: only the restart point
+        vals = hi = lo = np.zeros(0)
+        stable = np.zeros(0, bool)
+        rv = float(rs.p[list(rs.parameter_names).index(st.param)])
+    draw_saved_part(ax, vals, hi, lo, stable, rv, restart_point_extrema(rs, st.system, observable),
+                    label=rs.label, source=Path(rs.path).name, scale=1e3,
+                    new_branch_text=f"b1: continued from {rs.label} of {Path(rs.path).name}")
+    return fig

@@ -11,6 +11,7 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 from scipy import ndimage
 
+from maglev_match.api.hopf import HopfCurveStudy
 from maglev_match.core.results import figure, figure_of_many
 from maglev_match.dynamics.hopf import HopfScan
 from maglev_match.dynamics.hopf_curve import HopfCurve
@@ -242,3 +243,20 @@ def _hopf_curves(first: HopfCurve, curves, **kw):
 
     names = tuple(first.params)
     return hopf_curve_figure(list(curves), names, tuple(param_unit(n) for n in names), **kw)
+
+
+@figure.register(HopfCurveStudy)
+def _hopf_curve_study(st: HopfCurveStudy, **kw):
+    """The command's figure: the curves with l1 along them, the stability grid shaded, the
+    design point and, for a restart, the saved point it was continued from."""
+    kw.setdefault("title", st.title)
+    fig = hopf_curve_figure(st.curves, st.names, st.units, st.grid,
+                            design_point=st.design_point, **kw)
+    if st.restart is not None:
+        from pathlib import Path
+
+        from maglev_match.plots.restart import mark_restart_point
+
+        mark_restart_point(fig.axes[0], *st.restart.values, label=st.restart.label,
+                           source=Path(st.restart.path).name)
+    return fig

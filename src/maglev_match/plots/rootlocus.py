@@ -154,5 +154,7 @@ def root_locus_figure(values: np.ndarray, eigenvalues: np.ndarray, param: str, u
 def _root_locus(result: RootLocusResult, **kw):
     from maglev_match.plots.base import param_unit
 
+    if result.design_value is not None and result.design_eigenvalues is not None:
+        kw.setdefault("design", (result.design_value, result.design_eigenvalues))
     return root_locus_figure(result.values, result.eigenvalues, result.param,
-                             param_unit(result.param), **kw)
+                             result.param_unit or param_unit(result.param), **kw)

@@ -1,0 +1,224 @@
+"""The headline matching index (`maglev-match index`), its sensitivities (`sensitivity`)
+and the spread of chi from parameter scatter (`index --scatter`, `--monte-carlo`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from maglev_match.api.inputs import resolve_params
+from maglev_match.core.params import ParameterError, Params
+from maglev_match.maglev.catalog import model_info
+
+if TYPE_CHECKING:  # pragma: no cover
+    from maglev_match.analyses.matching import MatchingIndex
+    from maglev_match.analyses.sensitivity import IndexSensitivity
+
+__all__ = ["matching_index", "index_sensitivity", "index_spread", "IndexSpread",
+           "check_scatter", "scatter_rows"]
+
+
+def _index_params(params: Params | str | None, config: str | Path | None,
+                  overrides: Mapping[str, Any]) -> Params:
+    """The parameter set of an index: chi = h / w0 needs a beam deflection w0 > 0."""
+    base = resolve_params(params, config=config, **overrides)
+    if not base.w0 > 0:
+        raise ParameterError("sigma", base.sigma, "must be > 0 for the index: chi = h / w0 "
+                             f"needs a beam deflection w0 > 0 (w0 = {base.w0:g} m)")
+    return base
+
+
+def matching_index(params: Params | str | None = None, *, model: str = "unit",
+                   simulate: bool = True, config: str | Path | None = None,
+                   **overrides: Any) -> MatchingIndex:
+    """The headline matching index chi = min(chi_paper, chi_simulation) of model A or the
+    full vehicle (`maglev-match index [--model vehicle]`).
+
+    The paper's chi = h / w0: h = 0 if the equilibrium is unstable; the largest gap
+    deviation of the unstable cycle around the stable equilibrium (model B: over all six
+    levitation points); or gap_max - c0 when no such cycle lies within the gap range. w0 is
+    the static beam deflection (model A: sigma (m + M) g / omega1^2; model B: at mid-span
+    under the vehicle). chi_simulation = h_simulation / w0 with h_simulation the critical
+    disturbance simulated with the physical limits (solved where a grazing contact or a
+    basin boundary decides it).
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.inputs.resolve_params]).
+    model : str
+        `"unit"` (model A) or `"vehicle"` (model B, 40 states).
+    simulate : bool
+        Also compute h_simulation (default; the headline is then the smaller of the two
+        parts); False: the paper's chi only.
+    config : str or Path, optional
+        A TOML file applied on top of the preset.
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    MatchingIndex
+        chi, h, w0, the case that decided h and its diagnostics; see
+        [`MatchingIndex`][maglev_match.analyses.matching.MatchingIndex].
+    """
+    from maglev_match.analyses.matching import matching_index as _matching_index
+
+    return _matching_index(resolve_params(params, config=config, **overrides),
+                           model=model_info(model).name, simulate=simulate)
+
+
+def index_sensitivity(params: Params | str | None = None, *, model: str = "unit",
+                      boundaries: bool = True, simulate: bool = True,
+                      index: MatchingIndex | None = None, config: str | Path | None = None,
+                      **overrides: Any) -> IndexSensitivity:
+    """Exact d chi / d p of the headline index for every parameter (`maglev-match
+    sensitivity`): implicit differentiation of the converged cycle that decides h, or of
+    the solved critical disturbance where chi_simulation is the headline, the elasticities
+    (p / chi) d chi / d p, the stability margin's sensitivities and, with `boundaries`,
+    each parameter's value at the nearest stability boundary.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.inputs.resolve_params]).
+    model : str
+        `"unit"` (model A) or `"vehicle"` (model B).
+    boundaries : bool
+        Also solve each parameter's value at the stability boundary.
+    simulate : bool
+        Differentiate the headline index (default); False: the paper's chi only
+        (`--no-simulation`).
+    index : MatchingIndex, optional
+        The index at these parameters, already computed (it is then not computed again).
+    config : str or Path, optional
+        A TOML file applied on top of the preset.
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    IndexSensitivity
+        See `maglev_match.analyses.sensitivity.IndexSensitivity`; `.plot()` draws the
+        tornado figure.
+    """
+    from maglev_match.analyses.sensitivity import index_sensitivity as _index_sensitivity
+
+    base = _index_params(params, config, overrides)
+    return _index_sensitivity(base, index, boundaries=boundaries,
+                              model=model_info(model).name, simulate=simulate)
+
+
+def scatter_rows(params: Params | str | None = None, *, model: str = "unit",
+                 **overrides: Any) -> tuple[str, ...]:
+    """The parameters that can scatter: those with a row in the model's sensitivity table
+    (its own parameters, with the beam data in place of the derived modal values)."""
+    from maglev_match.maglev.models import maglev_model
+
+    return maglev_model(resolve_params(params, **overrides), model).engineering_names()
+
+
+def check_scatter(params: Params | str | None = None, scatter: Mapping[str, float] = (), *,
+                  model: str = "unit", **overrides: Any) -> None:
+    """Every scattered name must have a row in the sensitivity table of ``model`` (checked
+    before any computation, so a typo costs no index)."""
+    if not scatter:
+        return
+    rows = scatter_rows(params, model=model, **overrides)
+    for name in scatter:
+        if name not in rows:
+            raise ParameterError("scatter", name, "has no row in the sensitivity table of "
+                                 "this model (a derived or unused value; rows: "
+                                 f"{', '.join(rows)})")
+
+
+@dataclass(frozen=True)
+class IndexSpread:
+    """The spread of chi from parameter scatter: ``linearised`` ({chi, sd, contributions})
+    from the exact sensitivities, and ``sampled`` (a
+    :class:`~maglev_match.analyses.sensitivity.SampledSpread`) when a Monte Carlo study
+    ran, else None."""
+
+    linearised: dict[str, Any] | None
+    sampled: Any = None
+
+    def as_json(self) -> dict[str, Any]:
+        return {"spread": self.linearised,
+                "monte_carlo": None if self.sampled is None else self.sampled.as_json()}
+
+
+def index_spread(params: Params | str | None = None, scatter: Mapping[str, float] = (), *,
+                 model: str = "unit", index: MatchingIndex | None = None,
+                 sensitivity: IndexSensitivity | None = None,
+                 monte_carlo: int | None = None, checkpoint: str | Path | None = None,
+                 seed: int = 0, resume: bool = False, workers: int | None = None,
+                 scheduler: str | None = None,
+                 stage: Callable[[str], None] | None = None,
+                 progress: Callable[[int, int], None] | None = None,
+                 config: str | Path | None = None, **overrides: Any) -> IndexSpread:
+    """The spread of the headline chi when parameters scatter (`index --scatter NAME=PCT
+    [--monte-carlo N]`): to first order from the exact sensitivities (independent
+    parameters with relative standard deviations ``scatter``, name -> percent), and with
+    `monte_carlo` the distribution of chi over N sampled parameter sets (chunk by chunk on
+    Dask, each chunk saved in `checkpoint`; `resume` reuses finished chunks).
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.inputs.resolve_params]).
+    scatter : mapping
+        {name: relative standard deviation in percent}.
+    model : str
+        `"unit"` or `"vehicle"`.
+    index, sensitivity : optional
+        The index, or its sensitivities (without boundaries), already computed.
+    monte_carlo : int, optional
+        Samples of the Monte Carlo study.
+    checkpoint : str or Path
+        The study's folder (required with `monte_carlo`).
+    seed, resume, workers, scheduler : as for the Monte Carlo study
+        (:func:`maglev_match.analyses.sensitivity.sampled_spread`).
+    stage, progress : callables, optional
+        A line of text per stage; `progress(done, total)` per chunk.
+    config : str or Path, optional
+        A TOML file applied on top of the preset.
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    IndexSpread
+    """
+    from maglev_match.analyses.sensitivity import linearised_spread, sampled_spread
+
+    if monte_carlo is not None and not scatter:
+        raise ParameterError("monte_carlo", monte_carlo, "needs at least one scattered "
+                             "parameter (scatter NAME=PCT)")
+    if not scatter:
+        return IndexSpread(None, None)
+    base = _index_params(params, config, overrides)
+    check_scatter(base, scatter, model=model)
+    say = stage or (lambda text: None)
+    if sensitivity is None:
+        say("sensitivities for the linearised spread ...")
+        sensitivity = index_sensitivity(base, model=model, boundaries=False, index=index)
+    for name in scatter:
+        try:
+            sensitivity.row(name)
+        except KeyError:
+            raise ParameterError("scatter", name, "has no row in the sensitivity table "
+                                 "(a derived value: scatter its beam parameters)") from None
+    spread = linearised_spread(sensitivity, scatter)
+    sampled = None
+    if monte_carlo is not None:
+        if checkpoint is None:
+            raise ParameterError("checkpoint", None, "a Monte Carlo study needs a folder for "
+                                 "its chunks")
+        say(f"Monte Carlo, {monte_carlo} samples ...")
+        sampled = sampled_spread(base, scatter, monte_carlo, Path(checkpoint), seed=seed,
+                                 resume=resume, workers=workers, scheduler=scheduler,
+                                 linearised=spread, model=model_info(model).name,
+                                 progress=progress)
+    return IndexSpread(spread, sampled)

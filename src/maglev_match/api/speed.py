@@ -1,0 +1,128 @@
+"""The vehicle at speed over identical spans, swept over speed (`maglev-match speed`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from maglev_match.api.inputs import resolve_params
+from maglev_match.core.params import Params
+
+if TYPE_CHECKING:  # pragma: no cover
+    from maglev_match.analyses.speed.sweep import SpeedSweep
+
+__all__ = ['speed_sweep', 'speed_map', 'ride_reading']
+
+
+def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
+                speeds: Sequence[float] | None = None,
+                kmh: tuple[float, float, float] = (0.0, 150.0, 5.0), critical: bool = True,
+                spans: int = 40, workers: int | None = 0, scheduler: str | None = None,
+                checkpoint: str | Path | None = None, resume: bool = False,
+                progress: Callable[[int, int], None] | None = None,
+                config: str | Path | None = None, **overrides: Any) -> SpeedSweep:
+    """The vehicle at speed over identical spans, swept over speed (`maglev-match speed`).
+
+    At every speed the periodic response (one span passage, found as the fixed point of
+    the span map), its multipliers and verdict, the gap deviation and current per
+    levitation point, the mid-span deflection and DAF, the car body's peak acceleration and
+    Sperling's Wz, the critical initial deflection of the span being entered and
+    chi(v) = h(v) / w0; then the resonance speeds in the range and the speeds where the
+    periodic response changes stability, located by solving.
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.inputs.resolve_params]).
+    model : str
+        `'unit'`, `'vehicle'` or `'force'` (a constant moving force).
+    speeds : sequence of float, optional
+        The speeds in m/s; without them, `kmh` = (from, to, step) in km/h as on the
+        command line (from 0 to 150 by 5 by default; v = 0 gives the standstill values).
+    critical : bool
+        Compute the critical disturbance at speed (slower).
+    spans : int
+        Spans a disturbed run may take to return to the periodic response.
+    workers, scheduler, checkpoint, resume, progress
+        As for [`design_map`][maglev_match.api.design_map]: 0 computes here, n > 0 on a
+        local Dask cluster, None one worker per core; `checkpoint` keeps a tile per speed
+        (then `resume` reuses them).
+    config : str or Path, optional
+        A TOML file applied on top of the preset.
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    SpeedSweep
+        One [`SpeedPoint`][maglev_match.analyses.speed.sweep.SpeedPoint] per speed, the resonance
+        speeds
+        and the stability changes; `.to_xarray()` and `.plot()` give the netCDF dataset and
+        the figure of the command line.
+    """
+    from maglev_match.analyses.speed.grid import KMH, speeds_kmh
+    from maglev_match.analyses.speed.sweep import SpeedOptions, check_speed_setup
+    from maglev_match.analyses.speed.sweep import speed_sweep as _speed_sweep
+
+    p = resolve_params(params, config=config, **overrides)
+    if speeds is None:
+        speeds = list(speeds_kmh(*kmh) * KMH)
+    opts = SpeedOptions(critical=critical, spans=spans)
+    check_speed_setup(p, model, list(speeds), spans)
+    return _speed_sweep(p, model, list(speeds), opts,
+                        checkpoint=None if checkpoint is None else Path(checkpoint),
+                        resume=resume, scheduler=scheduler, workers=workers,
+                        progress=progress)
+
+
+def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
+              y: str = "L=15:25:5", *, model: str = "unit", workers: int | None = 0,
+              scheduler: str | None = None, checkpoint: str | Path | None = None,
+              resume: bool = False, progress: Callable[[int, int], None] | None = None,
+              config: str | Path | None = None, **overrides: Any) -> Any:
+    """The read-outs at speed over a grid of the speed v (km/h) and another parameter
+    (`maglev-match map --x v=START:STOP:COUNT --y NAME=...`): at every grid point the
+    periodic response with its stability, DAF, ride index and chi(v).
+
+    Parameters
+    ----------
+    params : Params | str | None
+        The parameter set (see [`resolve_params`][maglev_match.api.inputs.resolve_params]).
+    x, y : str
+        The axes as `NAME=START:STOP:COUNT`, one of them the speed `v` in km/h.
+    model : str
+        `'unit'`, `'vehicle'` or `'force'`.
+    workers, scheduler, checkpoint, resume, progress
+        As for [`speed_sweep`][maglev_match.api.speed.speed_sweep] (a tile per row).
+    config : str or Path, optional
+        A TOML file applied on top of the preset.
+    **overrides : float
+        Parameter values applied on top.
+
+    Returns
+    -------
+    xarray.Dataset
+        The map (speeds in m/s in the file); `maglev_match.plots.plot(ds)` draws it.
+    """
+    import tempfile
+
+    from maglev_match.analyses.speed.maps import parse_speed_axes, run_speed_map
+    from maglev_match.analyses.speed.sweep import SpeedOptions
+
+    p = resolve_params(params, config=config, **overrides)
+    spec = parse_speed_axes(p, model, x, y, SpeedOptions())
+    if checkpoint is None:
+        with tempfile.TemporaryDirectory(prefix="maglev-match-speed-map-") as tmp:
+            return run_speed_map(spec, Path(tmp) / "tiles", resume=False,
+                                 scheduler=scheduler, workers=workers, progress=progress)
+    return run_speed_map(spec, Path(checkpoint), resume=resume, scheduler=scheduler,
+                         workers=workers, progress=progress)
+
+
+def ride_reading(wz: float) -> str:
+    """Sperling's words for a ride index Wz ("just noticeable", ...;
+    :func:`maglev_match.analyses.speed.ride.sperling_reading`)."""
+    from maglev_match.analyses.speed.ride import sperling_reading
+
+    return sperling_reading(wz)
