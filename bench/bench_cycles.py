@@ -159,7 +159,7 @@ def main() -> None:
     # and one chord iteration (residual, solve with the kept factorisation)
     from maglev_match.dynamics.collocation import (
         CollocationProblem,
-        _factor,
+        factor_jacobian,
     )
     c = br.points[len(br.points) // 2]
     o = c.orbit
@@ -182,10 +182,10 @@ def main() -> None:
 
     def newton_iteration(solver):
         pa = prob.parts(Y, phase, o.states, row, c.value / 5.0)
-        lu = _factor(prob, pa, solver, -pa.resid)
+        lu = factor_jacobian(prob, pa, solver, -pa.resid)
         lu.solve(-pa.resid)
 
-    kept = _factor(prob, prob.parts(Y, phase, o.states, row, c.value / 5.0), "condensed")
+    kept = factor_jacobian(prob, prob.parts(Y, phase, o.states, row, c.value / 5.0), "condensed")
 
     def chord_iteration():
         r = prob.residual(Y, phase, o.states, row, c.value / 5.0)

@@ -87,14 +87,14 @@ def main() -> None:
           f"branch in omega1 ({len(br0.points)} cycles) {t_br0:.3f} s ({CPU['branch0']:.3f} s "
           f"CPU): ratio {t_br / t_br0:.2f}")
 
-    from maglev_match.dynamics.cycles import CollocationBVP, _blocks_at
+    from maglev_match.dynamics.cycles import CollocationBVP, blocks_at
     from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 
     c = br.points[len(br.points) // 2]
     prob = CollocationBVP(system=system, ipar=system.param_index("tau"), p0=c.orbit.p,
                     mesh=c.orbit.mesh, m=c.orbit.ncol, scale=system.state_scale,
                     T_scale=c.period, lam_scale=1.0)
-    J, Tb, h = _blocks_at(prob, prob.pack(c.orbit.states, c.period, c.value), prob.mesh)
+    J, Tb, h = blocks_at(prob, prob.pack(c.orbit.states, c.period, c.value), prob.mesh)
     t_dom, mu_d = timed(lambda: floquet_multipliers_from_blocks(J, Tb, h, 4, method="dominant"),
                         args.repeat, "dominant")
     t_qz, mu_q = timed(lambda: floquet_multipliers_from_blocks(J, Tb, h, 4, method="auto"),

@@ -14,9 +14,9 @@ from maglev_match.dynamics.collocation import (
     CollocationProblem,
     CondensedLU,
     LinearSolver,
-    _sparse_matrix,
     collocation_newton,
     factorize,
+    sparse_matrix,
 )
 from maglev_match.dynamics.cycles import cycle_branch, hopf_start
 
@@ -50,9 +50,9 @@ def test_condensed_solve_equals_the_sparse_lu_of_the_whole_system(m, blocks, mon
     right-hand side: the condensed solver and SuperLU on the whole matrix agree to 1e-12
     relative, and the condensed solution satisfies the full system to rounding; with the
     interval blocks inverted (small blocks) or LU-factorised (large blocks, forced here)."""
-    from maglev_match.dynamics import collocation
+    from maglev_match.dynamics.collocation import linalg
 
-    monkeypatch.setattr(collocation, "LU_BLOCKS_FROM", 10**9 if blocks == "inverse" else 1)
+    monkeypatch.setattr(linalg, "LU_BLOCKS_FROM", 10**9 if blocks == "inverse" else 1)
     br = _branch("sparse_lu")
     c = br.points[len(br.points) // 2]
     # re-discretise with NCOL m on the same mesh (the profile is only a starting guess)
@@ -70,7 +70,7 @@ def test_condensed_solve_equals_the_sparse_lu_of_the_whole_system(m, blocks, mon
         Y = prob.pack(U, o.period, c.value) * (1.0 + 1e-3 * rng.standard_normal(prob.size))
         row = prob.W() * rng.standard_normal(prob.size)
         pa = prob.parts(Y, prob.phase_row(U), U, row, float(row @ Y))
-    A = _sparse_matrix(prob, pa)
+    A = sparse_matrix(prob, pa)
     lu = factorize(A)
     b0 = -pa.resid
     cl = CondensedLU(prob, pa, b0)
@@ -94,7 +94,7 @@ def test_condensed_solve_on_the_lorenz_cycle_near_its_homoclinic_end():
                       ntst=40, ncol=4, max_steps=300)
     c = br.points[-1]
     prob, Y, pa = _problem_near(c, sys_, sys_.param_index("rho"), 4, seed=3)
-    lu = factorize(_sparse_matrix(prob, pa))
+    lu = factorize(sparse_matrix(prob, pa))
     x_ref = lu.solve(-pa.resid)
     x = CondensedLU(prob, pa, -pa.resid).solve(-pa.resid)
     assert np.max(np.abs(x - x_ref)) <= 1e-12 * np.max(np.abs(x_ref))
@@ -166,13 +166,13 @@ def test_transfer_matrices_from_the_condensation_equal_the_interval_solves(block
     relative, and give the same multipliers (closed form for the normal form: 1 (double,
     the trivial one and the radial direction's exp(-2 mu T)... checked against the
     interval-solve route to 1e-10)."""
-    from maglev_match.dynamics import collocation
+    from maglev_match.dynamics.collocation import linalg
     from maglev_match.dynamics.floquet import (
         floquet_multipliers_from_blocks,
         transfer_matrices,
     )
 
-    monkeypatch.setattr(collocation, "LU_BLOCKS_FROM", 10**9 if blocks == "inverse" else 1)
+    monkeypatch.setattr(linalg, "LU_BLOCKS_FROM", 10**9 if blocks == "inverse" else 1)
     br = _branch("condensed")
     c = br.points[-1]
     o = c.orbit

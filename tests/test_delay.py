@@ -163,7 +163,7 @@ def test_hutchinson_cycle_amplitude_matches_a_long_simulation(hutchinson_branch)
 def test_dominant_multipliers_equal_the_periodic_qz(hutchinson_branch):
     """The Floquet method of the discretised system against the periodic QZ on the same
     transfer matrices (a stiff product: the past decays like exp(-N^2 t / tau))."""
-    from maglev_match.dynamics.cycles import CollocationBVP, _blocks_at
+    from maglev_match.dynamics.cycles import CollocationBVP, blocks_at
     from maglev_match.dynamics.floquet import transfer_matrices
 
     _, S, _, br = hutchinson_branch
@@ -171,7 +171,7 @@ def test_dominant_multipliers_equal_the_periodic_qz(hutchinson_branch):
     prob = CollocationBVP(system=S, ipar=S.param_index("tau"), p0=np.array(c.orbit.p),
                     mesh=np.array(c.orbit.mesh), m=c.orbit.ncol,
                     scale=np.asarray(S.state_scale), T_scale=c.period, lam_scale=1.0)
-    J, Tb, h = _blocks_at(prob, prob.pack(c.orbit.states, c.period, c.value), prob.mesh)
+    J, Tb, h = blocks_at(prob, prob.pack(c.orbit.states, c.period, c.value), prob.mesh)
     P = transfer_matrices(np.asarray(J), Tb, h, c.orbit.ncol)
     mu, p, ok = dominant_multipliers(P, 4)
     pe = periodic_eigenvalues(P)

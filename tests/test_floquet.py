@@ -134,7 +134,7 @@ def test_collocated_hopf_cycle_times_oscillators_has_closed_form_multipliers(nts
     mu = res.multipliers
     assert np.allclose(np.sort_complex(mu), np.sort_complex(np.conj(mu)), rtol=0, atol=0)
     assert len(res.nontrivial) == 5 and not np.any(np.isclose(res.nontrivial, 1.0))
-    # the function cycles.py calls returns the same n multipliers
+    # the function the cycles package calls returns the same n multipliers
     assert rel_match(fq.floquet_multipliers_from_blocks(J, T_HOPF, h, ncol, method=method),
                      SPREAD_EXACT) < 1e-8
     # the old explicit product loses the 1e-30 pair
