@@ -14,9 +14,9 @@ the equilibria do not depend on the delays.
 Linearised at an equilibrium, x' = A_0 x(t) + sum_k A_k x(t - tau_k), with A_0 = df/dx and
 A_k = (df/dy_k)(dg_k/dx) (:func:`delay_jacobians`), from the *argument function*
 F(x(t), x(t - tau_1), ..., x(t - tau_K)) of the right-hand side
-(:attr:`DelayDifferentialSystem.argument_function`; the form of the linearisation used by
-DDE-BIFTOOL, Engelborghs, Luzyanina & Roose 2002, ACM TOMS 28:1, and by Michiels &
-Niculescu 2014, *Stability, Control and Computation for Time-Delay Systems*, ch. 1).
+(:attr:`DelayDifferentialSystem.argument_function`). The setting is that of Bellen &
+Zennaro 2003, *Numerical Methods for Delay Differential Equations*, and Michiels &
+Niculescu 2014, *Stability, Control and Computation for Time-Delay Systems*.
 """
 
 from __future__ import annotations
