@@ -1,4 +1,4 @@
-"""Delay-differential systems (dynamics/delay.py): the discretisation, characteristic roots,
+"""Delay-differential systems (dynamics/delay/): the discretisation, characteristic roots,
 Hopf points in a delay, l1, cycles and simulation, against closed forms and independent
 methods."""
 

@@ -1,4 +1,4 @@
-"""Piecewise-smooth flows and periodic orbits (dynamics/hybrid.py): a planar oscillator with
+"""Piecewise-smooth flows and periodic orbits (dynamics/hybrid/): a planar oscillator with
 saturated feedback against an independent shooting solve and Liouville's formula; the flow
 with a current clamp against the simulator's limited vector field and its sensitivities
 (saltation matrices included) against central differences."""

@@ -1,4 +1,5 @@
-"""Tests of the time simulation with limit events (dynamics/simulate.py, simulation.py)."""
+"""Tests of the time simulation with limit events (dynamics/integrate/simulate.py and
+kernel.py, simulation.py)."""
 
 from __future__ import annotations
 
@@ -447,7 +448,7 @@ _C0 = build_system(load_preset("alpha1"), "unit", limited=True).param_names.inde
 def test_gap_limits_are_traced_arguments():
     """Gap limits are arguments of the compiled kernel: a new limit value compiles nothing,
     and the run with it is the run with the limits written into the event function."""
-    from maglev_match.dynamics import simulate as sim_mod
+    from maglev_match.dynamics.integrate import kernel
 
     P = load_preset("alpha1")
     assert P.gap_min == 0.0 and P.gap_max > 10.2e-3  # the control below uses these
@@ -456,10 +457,10 @@ def test_gap_limits_are_traced_arguments():
     opts = SimulationOptions(stop_on_converged=True)
     wide = simulate(sys_, x0, 5.0, event_fn=gap_limit_events(unit_gap, P.gap_min, P.gap_max),
                     options=opts, n_save=11)
-    misses = sim_mod._compiled_kernel.cache_info().misses
+    misses = kernel.compiled_kernel.cache_info().misses
     tight = simulate(sys_, x0, 5.0, event_fn=gap_limit_events(unit_gap, 0.0, 10.2e-3),
                      options=opts, n_save=11)
-    assert sim_mod._compiled_kernel.cache_info().misses == misses  # no new kernel
+    assert kernel.compiled_kernel.cache_info().misses == misses  # no new kernel
     assert wide.outcome == "converged" and tight.outcome == "collision"
     ref = simulate(sys_, x0, 5.0, event_fn=_unit_gap_events_tight, options=opts, n_save=11)
     assert ref.outcome == "collision" and ref.event_index == tight.event_index == 1
