@@ -277,8 +277,9 @@ def test_lost_scheduler_stops_with_resume_hint(tmp_path):
 # ---------------------------------------------------------------------------------------
 def _fake_chunks(monkeypatch, calls):
     """A stand-in for the index of each sample, a pure function of its values, so that the
-    checkpoint (not the index) is what these tests exercise; counts the samples computed."""
-    import maglev_match.analyses.sensitivity as S
+    checkpoint (not the index) is what these tests exercise; counts the samples computed.
+    Patched where sampled_spread looks it up: the module that defines both."""
+    import maglev_match.analyses.sensitivity.uncertainty as S
 
     def chunk(base_values, names, rows, model="unit"):
         calls.append(len(rows))
