@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import inspect
 import json
 import logging
 import math
@@ -602,19 +601,20 @@ _SETTINGS: list = []
 def simulation_settings():
     """The search settings of the map's critical disturbances
     (:class:`~maglev_match.dynamics.integrate.threshold.ThresholdOptions`): those of the point-wise
-    search :func:`maglev_match.analyses.simulation.critical_disturbance` (its tolerance, first
+    search :func:`maglev_match.analyses.simulation.critical_disturbance` on model A (its
+    :attr:`~maglev_match.maglev.models.UnitModel.critical_search`: the tolerance, first
     horizon, horizon doublings and sizes per round, hence the largest size it tries), so
     that the map and the point-wise index agree within the tolerance."""
     if not _SETTINGS:
-        from maglev_match.analyses.simulation import critical_disturbance
         from maglev_match.dynamics.integrate.threshold import ThresholdOptions
+        from maglev_match.maglev.models import UnitModel
 
-        d = {k: v.default for k, v in
-             inspect.signature(critical_disturbance).parameters.items()}
-        batch = int(d["batch"])
+        search = UnitModel.critical_search
+        batch = int(search.batch)
         _SETTINGS.append(ThresholdOptions(
-            tol=float(d["tol"]), t_max=float(d["t_max"]), max_extend=int(d["max_extend"]),
-            cold_sizes=batch, top_fraction=batch / (batch + 1), chunk=SIM_CHUNK))
+            tol=float(search.tol), t_max=float(search.t_max),
+            max_extend=int(search.max_extend), cold_sizes=batch,
+            top_fraction=batch / (batch + 1), chunk=SIM_CHUNK))
     return _SETTINGS[0]
 
 
