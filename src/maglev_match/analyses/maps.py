@@ -25,22 +25,19 @@ path, and from each one the cycle branch is followed across the adjacent stable 
 h at every grid point of the stretch is read off that one branch. The critical disturbances
 are *followed* too (:func:`critical_sizes_batch`, warm-started from the neighbouring points:
 the row below within a tile, else a coarse-to-fine order along the row), a few batched
-simulations per point instead of a cold search of ~60. Tiles run on a Dask cluster (a local
-one by default, or an existing scheduler), are written to a checkpoint folder as they
-finish, and a resumed map skips the tiles already there. Tile results do not depend on
+simulations per point instead of a cold search of ~60. Tiles run through the package's job
+runner (:mod:`maglev_match.core.jobs`: here, or on a Dask cluster, a local one by default
+or an existing scheduler), are written to a checkpoint folder as they finish, and a resumed
+map skips the tiles already there. Tile results do not depend on
 which worker ran them, so a resumed map equals a map computed in one go bit for bit.
 """
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import json
-import logging
 import math
-import os
-import warnings as warnings_mod
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,14 +45,24 @@ from typing import Any
 import numpy as np
 
 from maglev_match.core import checkpoint as checkpoint_mod
-from maglev_match.core.interrupts import on_interrupt
+from maglev_match.core.jobs import (  # the runner's names are imported from here too
+    SINGLE_THREADED_ENV,
+    Job,
+    TileCount,
+    dask_log_capture,
+    local_cluster,
+    remove_checkpoint,
+    run_job,
+    run_pieces_on_dask,
+)
 from maglev_match.core.options import CollocationMesh
 from maglev_match.core.params import FIELD_NAMES, ParameterError, Params, make_params
 
 __all__ = ["Axis", "MapSpec", "parse_axis", "compute_row", "compute_tile", "run_map",
            "map_dataset", "spot_check", "map_warnings", "critical_sizes_batch",
            "simulation_settings", "remove_checkpoint", "dask_log_capture", "MAP_VARIABLES",
-           "REASON_CODES", "CASE_CODES", "BASIS_CODES"]
+           "REASON_CODES", "CASE_CODES", "BASIS_CODES", "TileCount", "run_pieces_on_dask",
+           "local_cluster", "SINGLE_THREADED_ENV"]
 
 CASE_CODES = {"unstable_equilibrium": 0, "unstable_cycle": 1, "no_cycle_within_limits": 2}
 # which part decided the headline index chi (variable ``chi_basis``)
@@ -90,22 +97,9 @@ REASON_CODES = {
 SPOT_CHECK_FRACTION = 0.01
 SPOT_CHECK_MAX = 12
 SPOT_CHECK_TOL = 0.03
-# One worker process per core, each single-threaded: on 2 cores a row of 100 points ran in
-# 1.6 s single-threaded against 2.3 s with XLA's and BLAS's own thread pools (measured before
-# the row scan of issue 14; a warm single-threaded row now takes ~0.8 s).
 #: the maglev models whose map rows this module computes (model A: its rows are written on
 #: model A's parameter vector and its limited system)
 MAP_MODELS = ("unit",)
-
-SINGLE_THREADED_ENV = {
-    "OMP_NUM_THREADS": "1",
-    "OPENBLAS_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "XLA_FLAGS": "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1",
-}
-MALLOC_TRIM_THRESHOLD = 256 * 2**20
-MALLOC_MMAP_THRESHOLD = 64 * 2**20  # a fixed trim threshold disables glibc's adaptive one
-SCHEDULER_TIMEOUT = "10s"  # waiting for an existing scheduler to answer
 # Largest grid accepted (points); beyond it the result arrays alone would not fit.
 MAX_POINTS = 4_000_000
 # the checkpoint's format: part of every tile's fingerprint, so that tiles written before a
@@ -966,17 +960,6 @@ def _combine(pr: dict[str, np.ndarray], sr: dict[str, np.ndarray], simulate: boo
     }
 
 
-def _tile_path(folder: Path, rows: tuple[int, int]) -> Path:
-    return checkpoint_mod.tile_path(folder, rows)
-
-
-def _save_tile(folder: Path, rows: tuple[int, int], data: dict[str, np.ndarray],
-               spec: MapSpec) -> None:
-    """Atomically write a tile with its map's fingerprint (see
-    :mod:`maglev_match.core.checkpoint`)."""
-    checkpoint_mod.save_tile(folder, rows, data, spec.key())
-
-
 def run_map(
     spec: MapSpec,
     checkpoint: Path,
@@ -989,7 +972,8 @@ def run_map(
     log: Path | None = None,
     echo_dask: bool = False,
 ) -> dict[str, np.ndarray]:
-    """Compute the map tile by tile on Dask, checkpointing every finished tile.
+    """Compute the map tile by tile, here or on Dask (the package's job runner,
+    :func:`maglev_match.core.jobs.run_job`), checkpointing every finished tile.
 
     Parameters
     ----------
@@ -1010,332 +994,12 @@ def run_map(
     """
     spec.validate()
     CollocationMesh(spec.ntst, spec.ncol, spec.max_steps)  # raises ParameterError
-    if workers is not None and workers < 0:
-        raise ParameterError("--workers", workers, "must be >= 0 (0: compute in this process)")
-    checkpoint = Path(checkpoint)
-    key = spec.key()
-    with checkpoint_mod.lock_folder(checkpoint):
-        try:
-            checkpoint_mod.prepare_folder(checkpoint, key, resume)
-        except ValueError as exc:
-            raise ParameterError("--resume", str(checkpoint), str(exc)) from None
-        missing, _ = checkpoint_mod.usable_tiles(checkpoint, spec.tiles, key, MAP_VARIABLES,
-                                                 spec.x.count)
-        done = len(spec.tiles) - len(missing)
-        todo = missing if max_tiles is None else missing[:max_tiles]
-        total = len(spec.tiles)
-        count = TileCount(done, total, checkpoint)
-        if progress:
-            progress(done, total)
-        if todo:
-            with count.stoppable():
-                if workers == 0 and scheduler is None:
-                    for t in todo:
-                        _save_tile(checkpoint, t, compute_tile(spec, t), spec)
-                        count.done += 1
-                        if progress:
-                            progress(count.done, total)
-                else:
-                    with dask_log_capture(log, echo=echo_dask):
-                        _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress,
-                                     count)
-        return assemble(spec, checkpoint)
-
-
-def _stopped_text(what: str, done: int, total: int, checkpoint: Path,
-                  noun: str = "tiles") -> str:
-    return (f"{what}: {done} of {total} {noun} are saved in {checkpoint}; run the same "
-            "command with --resume to continue")
-
-
-@dataclass
-class TileCount:
-    """The finished pieces of a tiled job that keeps them in ``folder``: what an interrupt
-    or a lost scheduler says (the count at that moment and how to resume)."""
-
-    done: int
-    total: int
-    folder: Path
-    noun: str = "tiles"
-
-    def text(self, what: str = "interrupted") -> str:
-        return _stopped_text(what, self.done, self.total, self.folder, self.noun)
-
-    @contextlib.contextmanager
-    def stoppable(self) -> Iterator[None]:
-        """The job's ``with`` block: its stop note is this count (for the command line's
-        interrupt guard), and a Ctrl-C anywhere inside (an import, the start of a cluster,
-        a piece) becomes :class:`~maglev_match.core.checkpoint.MapStopped` with exit code 130
-        and the resume hint."""
-        with on_interrupt(self.text):
-            try:
-                yield
-            except KeyboardInterrupt:
-                raise checkpoint_mod.MapStopped(self.text(), 130) from None
-
-
-def _python_ignoring_sigint() -> str | None:
-    """The path of a tiny launcher that starts this Python with SIGINT ignored (a POSIX shell
-    script: ``trap '' INT`` then ``exec python "$@"``), kept in a per-user temporary folder;
-    None where there is no POSIX shell or the file cannot be written."""
-    import hashlib
-    import shlex
-    import sys
-    import tempfile
-
-    if os.name != "posix" or not os.path.exists("/bin/sh"):
-        return None
-    text = f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(sys.executable)} \"$@\"\n"
-    tag = hashlib.sha256(text.encode()).hexdigest()[:16]
-    folder = Path(tempfile.gettempdir()) / f"maglev-match-{os.getuid()}"
-    exe = folder / f"python-{tag}"
-    try:
-        if exe.is_file() and exe.read_text() == text and os.access(exe, os.X_OK):
-            return str(exe)
-        folder.mkdir(mode=0o700, exist_ok=True)
-        if folder.stat().st_uid != os.getuid():
-            return None  # someone else's folder: do not run what it holds
-        tmp = folder / f".{exe.name}.{os.getpid()}.tmp"
-        tmp.write_text(text)
-        tmp.chmod(0o755)
-        os.replace(tmp, exe)
-        return str(exe)
-    except OSError:
-        return None
-
-
-@contextlib.contextmanager
-def workers_ignore_sigint() -> Iterator[None]:
-    """Start the worker processes created in the ``with`` block with SIGINT ignored.
-
-    Ctrl-C in a terminal reaches the whole process group; only this (the client) process
-    should react, and the workers are shut down by it. The workers are spawned (a fresh
-    Python) by Dask's nannies, from a thread of their own, at a moment the client does not
-    choose; so instead of ignoring SIGINT in this process while they start (a Ctrl-C in
-    that window was lost, and a map went on computing), the spawned Python itself starts
-    through a launcher that ignores SIGINT (:func:`multiprocessing.set_executable`). Where
-    there is no launcher (no POSIX shell) SIGINT is ignored here during the start, as before.
-    """
-    import multiprocessing
-    import multiprocessing.spawn
-    import signal
-
-    exe = _python_ignoring_sigint()
-    if exe is not None:
-        old = multiprocessing.spawn.get_executable()
-        multiprocessing.set_executable(exe)
-        try:
-            yield
-        finally:
-            multiprocessing.set_executable(old)
-        return
-    try:  # pragma: no cover - not POSIX
-        old_handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:  # pragma: no cover - not the main thread
-        yield
-        return
-    try:  # pragma: no cover
-        yield
-    finally:  # pragma: no cover
-        signal.signal(signal.SIGINT, old_handler)
-
-
-def local_cluster(workers: int | None) -> Any:
-    """A local Dask cluster for the package's tiled jobs: ``workers`` single-threaded worker
-    processes (None or 0: one per core), no dashboard, one-thread BLAS and XLA in the
-    workers (:data:`SINGLE_THREADED_ENV`), glibc's own malloc thresholds, and workers that
-    ignore Ctrl-C (:func:`workers_ignore_sigint`): the client stops them."""
-    import dask
-    from dask.distributed import LocalCluster
-
-    # Dask's nannies set MALLOC_TRIM_THRESHOLD_=65536 so that workers hand memory back
-    # to the OS; for this workload that turns every large temporary array into an
-    # mmap/munmap pair (measured: ~1200 per second, a third of the worker's CPU time in
-    # the kernel). The tiles are small, so keep glibc's default behaviour.
-    with dask.config.set({
-        "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": MALLOC_TRIM_THRESHOLD,
-        "distributed.nanny.pre-spawn-environ.MALLOC_MMAP_THRESHOLD_": MALLOC_MMAP_THRESHOLD,
-    }), workers_ignore_sigint():
-        return LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                            processes=True, dashboard_address=None, env=SINGLE_THREADED_ENV)
-
-
-def _run_on_dask(spec, todo, checkpoint, scheduler, workers, progress, count: TileCount,
-                 compute: Callable | None = None) -> None:
-    """Compute the tiles ``todo`` on Dask and save each into ``checkpoint`` as it finishes,
-    counting them in ``count`` (call inside its :meth:`TileCount.stoppable` block).
-    ``compute(spec, rows)`` makes a tile (default :func:`compute_tile`); other tiled jobs
-    (the speed sweeps of :mod:`maglev_match.analyses.speed.sweep`) pass their own, with a ``spec``
-    that
-    has ``key()``."""
-    compute = compute or compute_tile
-    run_pieces_on_dask({t: (compute, (spec, t)) for t in todo},
-                       lambda t, data: _save_tile(checkpoint, t, data, spec),
-                       scheduler, workers, progress, count)
-
-
-def run_pieces_on_dask(tasks: dict, save: Callable[[Any, Any], None], scheduler: str | None,
-                       workers: int | None, progress: Callable[[int, int], None] | None,
-                       count: TileCount) -> None:
-    """Run ``tasks`` ({key: (function, args)}) on Dask (a local cluster of ``workers``
-    processes, :func:`local_cluster`, or an existing ``scheduler``) and ``save(key,
-    result)`` each as it finishes, counting them in ``count`` (call inside its
-    :meth:`TileCount.stoppable` block: an interrupt is re-raised here once the workers are
-    quietened; a lost scheduler raises :class:`~maglev_match.core.checkpoint.MapStopped`)."""
-    from dask.distributed import Client, as_completed
-
-    cluster = client = None
-    futures: dict = {}
-    try:
-        if scheduler is None:
-            cluster = local_cluster(workers)
-            client = Client(cluster)
-        else:
-            try:
-                client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
-            except (OSError, TimeoutError, ValueError, TypeError) as exc:
-                raise ParameterError("--scheduler", scheduler,
-                                     f"no Dask scheduler answered there ({exc})") from None
-        futures = {client.submit(fn, *args, pure=False, retries=2): key
-                   for key, (fn, args) in tasks.items()}
-        for fut in as_completed(futures):
-            key = futures[fut]
-            try:
-                data = fut.result()
-            except KeyboardInterrupt:
-                raise
-            except Exception as exc:
-                if _is_lost_connection(exc):
-                    _quiet_logging()  # the client's reconnect attempts end in tracebacks
-                    raise checkpoint_mod.MapStopped(count.text(
-                        f"lost the Dask scheduler ({type(exc).__name__})")) from None
-                raise
-            save(key, data)
-            count.done += 1
-            if progress:
-                progress(count.done, count.total)
-    except KeyboardInterrupt:
-        # stop quietly: the shutdown of interrupted workers is expected, not news
-        _quiet_logging()
-        if cluster is not None and client is not None:  # the local workers (our stderr)
-            with contextlib.suppress(Exception):
-                client.run(_quiet_logging)
-        if cluster is None and client is not None:  # an existing scheduler: drop our tasks
-            with contextlib.suppress(Exception):
-                client.cancel(list(futures))
-        raise
-    except (OSError, TimeoutError) as exc:
-        _quiet_logging()
-        raise checkpoint_mod.MapStopped(count.text(
-            f"lost the Dask scheduler ({type(exc).__name__}: {exc})")) from None
-    finally:
-        if client is not None:
-            with contextlib.suppress(Exception):
-                client.close(timeout=10)
-        if cluster is not None:
-            with contextlib.suppress(Exception):
-                cluster.close(timeout=10)
-
-
-DASK_LOGGERS = ("distributed", "tornado", "asyncio", "bokeh")
-# source folders of the packages whose warnings are Dask's (the port in use, ...)
-_DASK_PACKAGES = ("distributed", "tornado", "dask", "bokeh")
-
-
-@contextlib.contextmanager
-def dask_log_capture(log: Path | None, echo: bool = False) -> Iterator[None]:
-    """Send Dask's own messages to the file ``log`` instead of the terminal while the
-    block runs: the records of the ``distributed``/``tornado``/``asyncio``/``bokeh``
-    loggers (Dask's configuration prints them on stderr, e.g. "Worker process still alive
-    after 4.0 seconds, killing") and Python warnings raised from those packages' files
-    (e.g. "Port 8787 is already in use"). The file is created on the first message only.
-    With ``echo`` they are shown as before as well. The handlers, levels and warning hook
-    are restored afterwards. Messages of worker processes of an external cluster stay
-    with that cluster."""
-    with contextlib.suppress(ImportError):
-        import distributed  # noqa: F401  (its import installs Dask's own log handlers)
-
-    handler: logging.Handler
-    if log is not None:
-        handler = logging.FileHandler(log, mode="a", encoding="utf-8", delay=True)
-        handler.setFormatter(logging.Formatter(
-            "%(asctime)s %(name)s %(levelname)s: %(message)s"))
-    else:
-        handler = logging.NullHandler()
-    saved = []
-    for name in DASK_LOGGERS:
-        lg = logging.getLogger(name)
-        saved.append((lg, list(lg.handlers), lg.propagate))
-        if not echo:
-            for h in list(lg.handlers):
-                lg.removeHandler(h)
-            lg.propagate = False
-        lg.addHandler(handler)
-    # the warnings go to the file alone (shown on the terminal by the hook when echoing)
-    warn_log = logging.getLogger("maglev_match.dask_warnings")
-    warn_log.propagate = False
-    warn_log.addHandler(handler)
-    shown = warnings_mod.showwarning
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        parts = Path(str(filename)).parts
-        if any(p in parts for p in _DASK_PACKAGES):
-            if log is not None:
-                text = " ".join(str(message).split())
-                warn_log.warning("%s: %s (%s:%s)", category.__name__, text, filename, lineno)
-            if not echo:
-                return
-        shown(message, category, filename, lineno, file, line)
-
-    warnings_mod.showwarning = show
-    try:
-        yield
-    finally:
-        warnings_mod.showwarning = shown
-        warn_log.removeHandler(handler)
-        for lg, handlers, propagate in saved:
-            lg.removeHandler(handler)
-            for h in handlers:
-                if h not in lg.handlers:
-                    lg.addHandler(h)
-            lg.propagate = propagate
-        handler.close()
-
-
-def remove_checkpoint(folder: Path) -> bool:
-    """Delete a map's checkpoint folder after the map was saved: its tiles (also rejected
-    and temporary ones), ``spec.json`` and the lock file, then the folder if nothing else
-    is in it. Returns whether the folder is gone (False: other files were left there)."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        return True
-    for pattern in ("tile_*", ".tile_*", checkpoint_mod.SPEC_NAME, checkpoint_mod.LOCK_NAME):
-        for f in folder.glob(pattern):
-            with contextlib.suppress(OSError):
-                f.unlink()
-    try:
-        folder.rmdir()
-    except OSError:
-        return False
-    return True
-
-
-def _quiet_logging() -> None:
-    """Silence Dask's shutdown chatter (cancelled tasks, heartbeats to a closing scheduler)
-    after an interrupt: the shutdown is expected, not news."""
-    prefixes = ("distributed", "tornado", "asyncio")
-    names = [n for n in list(logging.root.manager.loggerDict) if n.startswith(prefixes)]
-    for name in (*prefixes, *names):  # Dask's config gives some loggers their own levels
-        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
-
-
-def _is_lost_connection(exc: BaseException) -> bool:
-    """Whether a task's exception means the cluster went away (not an error in the task)."""
-    from concurrent.futures import CancelledError
-
-    name = type(exc).__name__
-    return isinstance(exc, CancelledError | OSError | TimeoutError) or name in (
-        "FutureCancelledError", "CommClosedError", "CancelledError")
+    job = Job(pieces=spec.tiles, compute=compute_tile, args_of=lambda rows: (spec, rows),
+              store=lambda folder: checkpoint_mod.tile_checkpoint(
+                  folder, spec.key(), MAP_VARIABLES, spec.x.count))
+    return run_job(job, Path(checkpoint), resume=resume, scheduler=scheduler, workers=workers,
+                   progress=progress, limit=max_tiles, log=log, echo_dask=echo_dask,
+                   finish=lambda store: assemble(spec, store.folder))
 
 
 def assemble(spec: MapSpec, checkpoint: Path) -> dict[str, np.ndarray]:

@@ -50,7 +50,6 @@ maps over the speed and another parameter in :mod:`maglev_match.analyses.speed.m
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
 import math
@@ -68,6 +67,8 @@ import numpy as np
 from maglev_match.analyses.speed.grid import KMH, SPEED_MAX, speeds_kmh
 from maglev_match.analyses.speed.ride import sperling_of_periodic
 from maglev_match.core.aot import cached_kernel
+from maglev_match.core.checkpoint import tile_checkpoint
+from maglev_match.core.jobs import Job, run_job
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.reprs import compact_repr
 from maglev_match.core.results import Plottable
@@ -1151,60 +1152,18 @@ def run_tiles(spec, compute: Callable, checkpoint: Path | None, variables: tuple
                nx: int, *, resume: bool, scheduler: str | None, workers: int | None,
                progress: Callable[[int, int], None] | None) -> list[dict[str, np.ndarray]]:
     """Every tile of ``spec`` (which has ``tiles`` and ``key()``), made by
-    ``compute(spec, rows)``: in this process (``workers == 0`` and no scheduler) or on Dask
-    (a local cluster of ``workers`` processes, None: one per core, or an existing
-    ``scheduler``; :func:`maglev_match.analyses.maps._run_on_dask`), each tile written to the
-    checkpoint folder as it finishes (:mod:`maglev_match.core.checkpoint`: locked, fingerprinted;
-    ``resume`` reuses them). A Dask run without a folder uses a temporary one."""
-    import tempfile
-
-    from maglev_match.analyses import maps
-    from maglev_match.core import checkpoint as ck
-
-    if workers is not None and workers < 0:
-        raise ParameterError("--workers", workers, "must be >= 0 (0: compute in this process)")
-    key = spec.key()
-    total = len(spec.tiles)
-    if checkpoint is None and workers == 0 and scheduler is None:
-        out = []
-        if progress:
-            progress(0, total)
-        for t in spec.tiles:
-            out.append(compute(spec, t))
-            if progress:
-                progress(len(out), total)
-        return out
-    holder = (contextlib.nullcontext() if checkpoint is not None
-              else tempfile.TemporaryDirectory(prefix="maglev-match-speed-"))
-    with holder as tmp:
-        folder = Path(checkpoint) if checkpoint is not None else Path(tmp)
-        with ck.lock_folder(folder):
-            try:
-                ck.prepare_folder(folder, key, resume)
-            except ValueError as exc:
-                raise ParameterError("--resume", str(folder), str(exc)) from None
-            todo, _ = ck.usable_tiles(folder, spec.tiles, key, variables, nx)
-            count = maps.TileCount(total - len(todo), total, folder)
-            if progress:
-                progress(count.done, total)
-            if todo:
-                with count.stoppable():
-                    if workers == 0 and scheduler is None:
-                        for t in todo:
-                            ck.save_tile(folder, t, compute(spec, t), key)
-                            count.done += 1
-                            if progress:
-                                progress(count.done, total)
-                    else:
-                        maps._run_on_dask(spec, todo, folder, scheduler, workers, progress,
-                                          count, compute=compute)
-            out = []
-            for t in spec.tiles:
-                if not ck.check_tile(folder, t, key, variables, nx).ok:
-                    raise RuntimeError(f"tile {t} is missing from {folder}; run again with "
-                                       "--resume")
-                out.append(ck.load_tile(folder, t))
-            return out
+    ``compute(spec, rows)``, through the package's job runner
+    (:func:`maglev_match.core.jobs.run_job`): in this process (``workers == 0`` and no
+    scheduler) or on Dask (a local cluster of ``workers`` processes, None: one per core, or
+    an existing ``scheduler``), each tile written to the checkpoint folder as it finishes
+    (:mod:`maglev_match.core.checkpoint`: locked, fingerprinted; ``resume`` reuses them).
+    Without a folder the tiles are kept in memory here, and a Dask run uses a temporary
+    folder. Dask's own messages are left where Dask puts them."""
+    job = Job(pieces=spec.tiles, compute=compute, args_of=lambda rows: (spec, rows),
+              store=lambda folder: tile_checkpoint(folder, spec.key(), variables, nx))
+    return run_job(job, checkpoint, resume=resume, scheduler=scheduler, workers=workers,
+                   progress=progress, capture_dask=False,
+                   scratch_prefix="maglev-match-speed-")
 
 
 def run_speed_sweep(spec: SweepSpec, checkpoint: Path | None = None, *, resume: bool = False,
