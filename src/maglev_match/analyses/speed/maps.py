@@ -75,7 +75,7 @@ def parse_speed_axes(params: Params, model: str, x: str, y: str,
     """Both axes of a map with the speed on one of them: ``v=START:STOP:COUNT`` in km/h (0 <=
     START < STOP), the other ``NAME=START:STOP:COUNT`` as for ``map``; every grid point is
     validated (parameters and speed) before any work."""
-    from maglev_match.analyses.maps import Axis, parse_axis
+    from maglev_match.analyses.maps.spec import Axis, parse_axis
 
     axes = []
     for text, option in ((x, "--x"), (y, "--y")):
