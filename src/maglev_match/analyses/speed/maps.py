@@ -14,14 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from maglev_match.analyses.speed.sweep import (
-    KMH,
-    SWEEP_NAMES,
-    SpeedOptions,
-    check_speed_setup,
-    run_tiles,
-    speed_point,
-)
+from maglev_match.analyses.speed.grid import KMH
+from maglev_match.analyses.speed.options import SpeedOptions, check_speed_setup
+from maglev_match.analyses.speed.point import speed_point
+from maglev_match.analyses.speed.sweep import SWEEP_NAMES, run_tiles
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.maglev.moving import MovingModel
 
