@@ -352,7 +352,7 @@ def test_dask_messages_go_to_the_log_not_the_terminal(tmp_path):
 
     import distributed
 
-    from maglev_match.analyses.maps import dask_log_capture
+    from maglev_match.core.jobs import dask_log_capture
 
     node = str(Path(distributed.__file__).parent / "node.py")
     log = tmp_path / "map.log"
