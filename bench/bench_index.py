@@ -105,6 +105,7 @@ def headline_against_paper(base, n: int, workers_list, rows_per_tile: int) -> No
     import dataclasses
 
     import maglev_match.analyses.maps as maps
+    import maglev_match.analyses.maps.simulated as simulated  # where the rows look it up
 
     paper = MapSpec(base=base.as_input_dict(), x=Axis("omega1", 40, 190, n),
                     y=Axis("sigma", 2e-4, 6e-4, n), rows_per_tile=rows_per_tile,
@@ -135,7 +136,7 @@ def headline_against_paper(base, n: int, workers_list, rows_per_tile: int) -> No
     a = (n // 2 // rows_per_tile) * rows_per_tile
     rows = (a, min(a + rows_per_tile, n))
     stats = {"calls": 0, "runs": 0, "lines": 0, "lane_steps": 0, "run_steps": 0, "cpu": 0.0}
-    inner = maps.critical_sizes_batch
+    inner = simulated.critical_sizes_batch
 
     def counted(*args, **kw):
         c = time.process_time()
@@ -149,7 +150,7 @@ def headline_against_paper(base, n: int, workers_list, rows_per_tile: int) -> No
         return res
 
     maps.compute_tile(headline, rows)  # warm
-    maps.critical_sizes_batch = counted
+    simulated.critical_sizes_batch = counted
     try:
         c = time.process_time()
         maps.compute_tile(paper, rows)
@@ -158,7 +159,7 @@ def headline_against_paper(base, n: int, workers_list, rows_per_tile: int) -> No
         maps.compute_tile(headline, rows)
         c_head = time.process_time() - c
     finally:
-        maps.critical_sizes_batch = inner
+        simulated.critical_sizes_batch = inner
     print(f"tile rows {rows[0]}-{rows[1] - 1} in this process (CPU): paper-only {c_paper:.2f} s; "
           f"headline {c_head:.2f} s, of which simulations {stats['cpu']:.2f} s: "
           f"{stats['lines']} critical disturbances (point x direction), {stats['runs']} runs "

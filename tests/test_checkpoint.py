@@ -356,3 +356,57 @@ def test_monte_carlo_counts_are_checked_by_the_library(tmp_path):
             S.sampled_spread(BASE, {"EI": 3.0}, args.pop("n"), tmp_path / "x", **args)
         assert err.value.field == field
     assert not (tmp_path / "x").exists()  # refused before the folder is touched
+
+
+# ---------------------------------------------------------------------------------------
+# the job runner itself (maglev_match.core.jobs), on a job that is not a map
+# ---------------------------------------------------------------------------------------
+def _toy_piece(a, b, calls):
+    calls.append((a, b))
+    return {"x": np.arange(3 * a, 3 * b, dtype=float).reshape(b - a, 3)}
+
+
+def _toy_job(calls, compute=_toy_piece):
+    from maglev_match.core.checkpoint import tile_checkpoint
+    from maglev_match.core.jobs import Job
+
+    return Job(pieces=[(0, 2), (2, 3)], compute=compute, args_of=lambda p: (*p, calls),
+               store=lambda folder: tile_checkpoint(folder, '{"toy": 1}', ("x",), 3))
+
+
+def test_job_runner_in_memory_checkpointed_resumed_and_interrupted(tmp_path):
+    """The runner knows nothing about maps: in memory it returns the pieces' results; with a
+    folder it saves them, a limited run leaves the rest to a resume that computes only the
+    missing pieces (the same results), and a Ctrl-C inside a piece is MapStopped with exit
+    code 130 and the resume hint, the stop note counting the pieces saved by then."""
+    from maglev_match.core.checkpoint import MapStopped
+    from maglev_match.core.interrupts import stop_note
+    from maglev_match.core.jobs import run_job
+
+    calls: list = []
+    seen: list = []
+    memory = run_job(_toy_job(calls), None, workers=0, progress=lambda d, t: seen.append((d, t)))
+    assert calls == [(0, 2), (2, 3)] and seen == [(0, 2), (1, 2), (2, 2)]
+    calls.clear()
+    with pytest.raises(RuntimeError, match="run again with --resume"):
+        run_job(_toy_job(calls), tmp_path / "ck", workers=0, limit=1)
+    assert calls == [(0, 2)] and len(list((tmp_path / "ck").glob("tile_*.npz"))) == 1
+    calls.clear()
+    resumed = run_job(_toy_job(calls), tmp_path / "ck", workers=0, resume=True)
+    assert calls == [(2, 3)]
+    for m, r in zip(memory, resumed, strict=True):
+        np.testing.assert_array_equal(m["x"], r["x"])
+    notes: list = []
+
+    def interrupted(a, b, calls):
+        if (a, b) == (2, 3):
+            notes.append(stop_note())
+            raise KeyboardInterrupt
+        return _toy_piece(a, b, calls)
+
+    with pytest.raises(MapStopped) as err:
+        run_job(_toy_job(calls, interrupted), tmp_path / "ck2", workers=0)
+    assert err.value.exit_code == 130
+    assert "1 of 2 tiles are saved in" in notes[0] and "--resume" in notes[0]
+    assert str(err.value) == notes[0]
+    assert stop_note() == "interrupted"  # the note is gone with the job

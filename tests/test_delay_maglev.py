@@ -195,6 +195,7 @@ def test_a_delayed_map_row_simulates_the_delay_system(monkeypatch):
     and the search's outcome becomes the size by the index's rule (bracketed: the critical
     size; every size returned: the gap range; still open: no number, a reason code)."""
     import maglev_match.analyses.maps as maps
+    import maglev_match.analyses.maps.simulated as simulated
     import maglev_match.analyses.simulation as simulation
 
     calls = []
@@ -211,12 +212,12 @@ def test_a_delayed_map_row_simulates_the_delay_system(monkeypatch):
 
     maps.simulation_settings()  # (read from the real search's signature, before the fake)
     monkeypatch.setattr(simulation, "critical_disturbance", fake)
-    monkeypatch.setattr(maps, "critical_sizes_batch", no_batch)
+    monkeypatch.setattr(simulated, "critical_sizes_batch", no_batch)
     base = load_preset("turnout-soft")
     spec = maps.MapSpec(base=base.as_input_dict(), x=maps.Axis("tau", 0.5e-3, 2e-3, 4),
                         y=maps.Axis("kD", base.kD, base.kD, 1))
     stable = np.array([True, True, True, False])  # the last point: no search at all
-    row, _ = maps._simulate_row(spec, 0, {"stable": stable, "max_real_part": -np.ones(4)}, [])
+    row, _ = maps.simulate_row(spec, 0, {"stable": stable, "max_real_part": -np.ones(4)}, [])
     assert sorted(calls) == sorted((t, d) for t in (0.5e-3, 1e-3, 1.5e-3) for d in (-1, 1))
     np.testing.assert_array_equal(row["h_down"][:2], [2.5e-3, 8e-3])
     assert np.isnan(row["h_down"][2]) and np.isnan(row["h_down"][3])

@@ -136,9 +136,9 @@ def test_ctrl_c_during_the_work(tmp_path, args, trigger, resume):
 # ----- a phase that never looks for signals ---------------------------------------------
 STALLED_MAP = """
 import hashlib, sys
-import maglev_match.analyses.maps as maps
+import maglev_match.analyses.maps.tiles as tiles  # where run_map looks compute_tile up
 
-compute = maps.compute_tile
+compute = tiles.compute_tile
 
 def stalled(spec, rows):
     sys.stderr.write("entering a phase that ignores signals\\n")
@@ -147,7 +147,7 @@ def stalled(spec, rows):
     hashlib.pbkdf2_hmac("sha256", b"x", b"y", 2**31 - 1)
     return compute(spec, rows)
 
-maps.compute_tile = stalled
+tiles.compute_tile = stalled
 from maglev_match.cli import main
 sys.exit(main())
 """

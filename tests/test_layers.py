@@ -10,9 +10,11 @@ from pathlib import Path
 import maglev_match
 
 ROOT = Path(maglev_match.__file__).parent
-# what the numerics layer may import from the package besides itself
+# what the numerics layer may import from the package besides itself: the compilation
+# helpers, and the results protocol its branch and point results derive from (Plottable:
+# standard library only, it knows no model)
 NUMERICS_ALLOWED = {"maglev_match.core.aot", "maglev_match.core.jax_setup",
-"maglev_match.core.reprs"}
+                    "maglev_match.core.reprs", "maglev_match.core.results"}
 
 
 def _modules() -> dict[str, Path]:

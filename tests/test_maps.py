@@ -222,10 +222,10 @@ def test_unmatched_sign_change_is_unresolved_with_its_reason(monkeypatch):
         return hopf.HopfScan(param, start, stop, [], np.linspace(start, stop, 2),
                              np.zeros(2), ())
 
-    import maglev_match.analyses.maps as maps_mod
+    import maglev_match.analyses.maps.rows as rows_mod
 
     monkeypatch.setattr(hopf, "locate_hopf_points", nothing)  # the fine re-scan
-    monkeypatch.setattr(maps_mod, "_scan_hopf_points", lambda *args: [])  # the row scan
+    monkeypatch.setattr(rows_mod, "scan_hopf_points", lambda *args: [])  # the row scan
     spec = small_spec()
     row = compute_row(spec, 1)  # sigma = 4e-4: stable below the Hopf point, unstable above
     stable = row["stable"]
@@ -317,7 +317,7 @@ def test_unresolved_critical_disturbance_is_marked_with_its_reason(monkeypatch, 
                                                                    code):
     """A critical disturbance the search cannot resolve leaves the point unresolved with
     its reason code; the headline is NaN there, never filled in; the paper's part stays."""
-    import maglev_match.analyses.maps as maps_mod
+    import maglev_match.analyses.maps.simulated as simulated_mod
     from maglev_match.analyses.maps import REASON_CODES, compute_tile
     from maglev_match.dynamics.integrate.threshold import ThresholdBatch, ThresholdStatus
 
@@ -330,7 +330,7 @@ def test_unresolved_critical_disturbance_is_marked_with_its_reason(monkeypatch, 
             runs=np.full(n, 4), unresolved=np.full(n, 2 if undecided else 0),
             nonmonotone=np.zeros(n, bool), steps=np.zeros(n, int), tol=1e-5, rounds=3)
 
-    monkeypatch.setattr(maps_mod, "critical_sizes_batch", nothing)
+    monkeypatch.setattr(simulated_mod, "critical_sizes_batch", nothing)
     data = compute_tile(small_spec(simulate=True), (1, 2))
     stable = data["stable"].astype(bool)
     assert stable.any()
@@ -352,7 +352,7 @@ def test_dask_messages_go_to_the_log_not_the_terminal(tmp_path):
 
     import distributed
 
-    from maglev_match.analyses.maps import dask_log_capture
+    from maglev_match.core.jobs import dask_log_capture
 
     node = str(Path(distributed.__file__).parent / "node.py")
     log = tmp_path / "map.log"
@@ -414,7 +414,7 @@ def test_delay_axis_extension_stays_within_the_discretisation_bound():
     """A row along tau is extended beyond the grid only as far as the discretisation
     resolves a delay (else a valid axis near the bound, tau = 0..0.05 s, failed in every row
     when its extension reached 0.075 s); the grid's own bound is refused up front."""
-    from maglev_match.analyses.maps import _extension
+    from maglev_match.analyses.maps import row_extension
     from maglev_match.core.params import ParameterError
     from maglev_match.dynamics.delay import max_delay_for
     from maglev_match.maglev.unit import unit_dde
@@ -423,7 +423,7 @@ def test_delay_axis_extension_stays_within_the_discretisation_bound():
     for stop in (0.004, 0.05):
         spec = MapSpec(base=base, x=Axis("tau", 0.0, stop, 3), y=Axis("kD", 100.0, 150.0, 2))
         bound = max_delay_for(unit_dde(spec.point(stop, 100.0)).rate_bound())
-        lo, hi = _extension(spec, spec.x.values, 100.0)
+        lo, hi = row_extension(spec, spec.x.values, 100.0)
         assert lo == []  # a negative delay is not a parameter set
         assert all(x <= bound for x, _ in hi)
         assert len(hi) == min(2, int((bound - stop) // (stop / 2)))

@@ -9,10 +9,10 @@ from maglev_match.analyses.maps import (
     SCAN_PER_NODE,
     Axis,
     MapSpec,
-    _extension,
-    _hopf_test_sign,
-    _path_eigenvalues,
-    _scan_hopf_points,
+    hopf_test_sign,
+    path_eigenvalues,
+    row_extension,
+    scan_hopf_points,
 )
 from maglev_match.core.params import load_preset
 
@@ -25,7 +25,7 @@ def _row_path(spec, row):
     from maglev_match.maglev.unit import param_vector, unit_system
 
     yv = spec.y.values[row]
-    lo, hi = _extension(spec, spec.x.values, yv)
+    lo, hi = row_extension(spec, spec.x.values, yv)
     pts = [q for _, q in lo[::-1]] + [spec.point(x, yv) for x in spec.x.values] + [
         q for _, q in hi]
     system = unit_system(pts[0])
@@ -40,14 +40,14 @@ def test_eigenvalue_scan_finds_the_hopf_points_of_the_continuation_scan(row):
 
     system, nodes, path = _row_path(SPEC, row)
     t_end = len(nodes) - 1.0
-    w = _path_eigenvalues(system, nodes)
+    w = path_eigenvalues(system, nodes)
     assert w.shape == (SCAN_PER_NODE * (len(nodes) - 1) + 1, system.dim)
     # the node samples are the Jacobians' eigenvalues at the nodes themselves
     for k in (0, len(nodes) // 2, len(nodes) - 1):
         ref = np.linalg.eigvals(np.asarray(system.jacobian(np.zeros(system.dim), nodes[k])))
         assert np.sort_complex(w[SCAN_PER_NODE * k]) == pytest.approx(np.sort_complex(ref),
                                                                        rel=1e-12, abs=1e-12)
-    mine = _scan_hopf_points(path, w, t_end, system, nodes)
+    mine = scan_hopf_points(path, w, t_end, system, nodes)
     ref = [hp for hp in locate_hopf_points(path, PATH_PARAM, 0.0, t_end,
                                            n_scan=3 * len(nodes)).points if hp.converged]
     assert len(mine) >= 1  # each row of this grid crosses the Hopf curve
@@ -55,7 +55,7 @@ def test_eigenvalue_scan_finds_the_hopf_points_of_the_continuation_scan(row):
     assert [hp.frequency for hp in mine] == pytest.approx([hp.frequency for hp in ref],
                                                           rel=1e-10)
     # every Hopf point lies where the test's sign flips between neighbouring samples
-    sign = _hopf_test_sign(w)
+    sign = hopf_test_sign(w)
     for hp in mine:
         i = int(hp.value * SCAN_PER_NODE)
         assert sign[i] != sign[min(i + 1, len(sign) - 1)]
@@ -69,7 +69,7 @@ def test_hopf_test_sign_is_the_sign_of_the_bialternate_product():
         i, j = np.triu_indices(5, 1)
         prod = np.prod(w[i] + w[j])
         assert abs(prod.imag) <= 1e-9 * abs(prod)
-        assert _hopf_test_sign(w[None, :])[0] == np.sign(prod.real)
+        assert hopf_test_sign(w[None, :])[0] == np.sign(prod.real)
 
 
 def test_intervals_that_are_not_one_simple_crossing_are_rescanned_by_continuation(
@@ -94,8 +94,8 @@ def test_intervals_that_are_not_one_simple_crossing_are_rescanned_by_continuatio
         [0.1 + 5j, 0.1 - 5j, -0.2 + 9j, -0.2 - 9j, *stay],  # both pairs cross here
         [0.1 + 5j, 0.1 - 5j, -0.2 + 9j, -0.2 - 9j, *stay],
     ])
-    sign = _hopf_test_sign(w)
+    sign = hopf_test_sign(w)
     assert sign[1] == sign[2]  # the two crossings cancel in the test
-    out = _scan_hopf_points(None, w, 1.0, None, None)
+    out = scan_hopf_points(None, w, 1.0, None, None)
     assert out == []
     assert calls == [(1 / SCAN_PER_NODE, 2 / SCAN_PER_NODE, 17)]

@@ -48,8 +48,8 @@ from maglev_match.core.io import atomic_write, atomic_write_text
 __all__ = ["CheckpointWarning", "CheckpointLocked", "MapStopped", "TileStatus", "TileCheck",
            "Checkpoint", "fingerprint", "lock_folder", "piece_path", "save_piece",
            "check_piece", "load_piece", "usable_pieces", "tile_path", "save_tile",
-           "check_tile", "load_tile", "usable_tiles", "prepare_folder", "FINGERPRINT_KEY",
-           "ROWS_KEY"]
+           "check_tile", "load_tile", "usable_tiles", "prepare_folder", "tile_shapes",
+           "tile_checkpoint", "FINGERPRINT_KEY", "ROWS_KEY"]
 
 FINGERPRINT_KEY = "__fingerprint__"
 ROWS_KEY = "__rows__"
@@ -240,7 +240,8 @@ def check_piece(path: Path, rows: tuple[int, int], spec_key: str,
     return TileCheck(path, TileStatus.OK)
 
 
-def _tile_shapes(variables: Iterable[str], nx: int) -> ShapesFn:
+def tile_shapes(variables: Iterable[str], nx: int) -> ShapesFn:
+    """The shapes of a tile's variables: every one (rows, ``nx``)."""
     names = tuple(variables)
     return lambda rows: {v: (rows[1] - rows[0], nx) for v in names}
 
@@ -249,7 +250,7 @@ def check_tile(folder: Path, rows: tuple[int, int], spec_key: str,
                variables: Iterable[str], nx: int) -> TileCheck:
     """Whether the tile of ``rows`` exists, is readable and belongs to this map."""
     return check_piece(tile_path(folder, rows), rows, spec_key,
-                       _tile_shapes(variables, nx)(rows))
+                       tile_shapes(variables, nx)(rows))
 
 
 def load_piece(path: Path) -> dict[str, np.ndarray]:
@@ -292,7 +293,7 @@ def usable_tiles(folder: Path, tiles: Iterable[tuple[int, int]], spec_key: str,
     """The map tiles still to compute, and the rejected ones (see :func:`usable_pieces`)."""
     folder = Path(folder)
     return usable_pieces(tiles, lambda t: tile_path(folder, t), spec_key,
-                         _tile_shapes(variables, nx))
+                         tile_shapes(variables, nx))
 
 
 # ----- the bundle ------------------------------------------------------------------------
@@ -356,3 +357,10 @@ class Checkpoint:
 
     def load(self, rows: tuple[int, int]) -> dict[str, np.ndarray]:
         return load_piece(self.path(rows))
+
+
+def tile_checkpoint(folder: Path, spec_key: str, variables: Iterable[str], nx: int
+                    ) -> Checkpoint:
+    """The checkpoint of a tiled job in ``folder`` with the map's layout (``tile_*.npz``,
+    ``spec.json``): every variable of ``variables`` of shape (rows, ``nx``)."""
+    return Checkpoint(Path(folder), spec_key, tile_shapes(variables, nx))

@@ -14,14 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from maglev_match.analyses.speed.sweep import (
-    KMH,
-    SWEEP_NAMES,
-    SpeedOptions,
-    check_speed_setup,
-    run_tiles,
-    speed_point,
-)
+from maglev_match.analyses.speed.grid import KMH
+from maglev_match.analyses.speed.options import SpeedOptions, check_speed_setup
+from maglev_match.analyses.speed.point import speed_point
+from maglev_match.analyses.speed.sweep import SWEEP_NAMES, run_tiles
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.maglev.moving import MovingModel
 
@@ -75,7 +71,7 @@ def parse_speed_axes(params: Params, model: str, x: str, y: str,
     """Both axes of a map with the speed on one of them: ``v=START:STOP:COUNT`` in km/h (0 <=
     START < STOP), the other ``NAME=START:STOP:COUNT`` as for ``map``; every grid point is
     validated (parameters and speed) before any work."""
-    from maglev_match.analyses.maps import Axis, parse_axis
+    from maglev_match.analyses.maps.spec import Axis, parse_axis
 
     axes = []
     for text, option in ((x, "--x"), (y, "--y")):

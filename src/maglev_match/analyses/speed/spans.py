@@ -1,6 +1,6 @@
 """The vehicle at speed over a guideway of N spans: one run from rigid ground (the
 abutment) over the spans and off them again, with the physical limits, the periodic response
-of :mod:`maglev_match.analyses.speed.sweep` overlaid (behind ``maglev-match simulate --speed V
+of :mod:`maglev_match.analyses.speed.point` overlaid (behind ``maglev-match simulate --speed V
 --spans
 N``)."""
 
@@ -12,19 +12,18 @@ from typing import Any
 
 import numpy as np
 
-from maglev_match.analyses.speed.sweep import (
+from maglev_match.analyses.speed.options import SpeedOptions, check_speed_setup
+from maglev_match.analyses.speed.passage import (
     CHUNK,
     PassageSamples,
-    SpeedOptions,
-    check_speed_setup,
     integrate_saving,
     observe_all,
     observe_samples,
     passage_problem,
-    periodic_response,
     sample_passage,
     sample_times,
 )
+from maglev_match.analyses.speed.point import periodic_response
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.reprs import compact_repr
 from maglev_match.core.results import Plottable
