@@ -139,11 +139,11 @@ def test_failing_section_renders_not_available_box(tmp_path):
 
 
 def test_numeric_claim_verdict_rule():
-    from maglev_match.present.reproduce import _numeric
+    from maglev_match.present.reproduce import numeric_claim
 
-    assert _numeric("k", "s", "c", 100.0, 100.5, "x").verdict == "agree"
-    assert _numeric("k", "s", "c", 100.0, 97.0, "x").verdict == "close"
-    c = _numeric("k", "s", "c", 100.0, 131.0, "x")
+    assert numeric_claim("k", "s", "c", 100.0, 100.5, "x").verdict == "agree"
+    assert numeric_claim("k", "s", "c", 100.0, 97.0, "x").verdict == "close"
+    c = numeric_claim("k", "s", "c", 100.0, 131.0, "x")
     assert c.verdict == "differ" and "+31" in c.difference and "+31.00 %" in c.difference
 
 
