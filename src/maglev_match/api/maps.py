@@ -7,8 +7,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from maglev_match.api.compat import deprecated
 from maglev_match.api.inputs import resolve_params
 from maglev_match.core.params import DEFAULT_PRESET, ParameterError, Params, load_params
@@ -19,7 +17,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ['design_map', 'map_warnings', 'remove_tiles']
 
 
-def _map_axis(axis: Any, field: str) -> str:
+def map_axis(axis: Any, field: str) -> str:
     """A map axis as the command line writes it (NAME=START:STOP:COUNT), from that text or
     from the keyword form (name, start, stop, count). Validation (names, counts, order) is
     :func:`maglev_match.analyses.maps.parse_axis`'s."""
@@ -50,7 +48,7 @@ def design_map(params: Params | str | None = None,
                simulate: bool = True, preset: str | None = None,
                log: str | Path | None = None, echo_dask: bool = False,
                check_fraction: float | None = None,
-               stage: Callable[[str], None] | None = None,
+               stage: Callable[[str], None] | None = None, model: str = "unit",
                **overrides: Any) -> xr.Dataset:
     """The headline index chi = min(chi_paper, chi_simulation), its parts and stability
     over a grid of two parameters (`maglev-match map`).
@@ -97,6 +95,9 @@ def design_map(params: Params | str | None = None,
         (default: the check's own default budget).
     stage : callable, optional
         Called with a line of text when a stage starts (the tiles, the self-check).
+    model : str
+        The maglev model; maps of the standstill index are computed for model A ("unit")
+        and any other model is refused (ParameterError naming ``model``), never ignored.
     **overrides : float
         Parameter values applied on top of the base point (`--set`).
 
@@ -125,12 +126,18 @@ def design_map(params: Params | str | None = None,
         else:
             deprecated("design_map(..., preset=NAME)", "design_map(NAME, ...)")
             params = preset
-    x, y = _map_axis(x, "x"), _map_axis(y, "y")
+    from maglev_match.analyses.maps.spec import MAP_MODELS
+
+    if model not in MAP_MODELS:
+        raise ParameterError("model", model, "maps of the standstill index are computed for "
+                             f"{', '.join(MAP_MODELS)} only (a map with a speed axis "
+                             "v=... takes the vehicle)")
+    x, y = map_axis(x, "x"), map_axis(y, "y")
     if params is None or isinstance(params, str):
         base = load_params(params or DEFAULT_PRESET, config, dict(overrides))
     else:
         base = resolve_params(params, **overrides)
-    from maglev_match.analyses.maps import MapSpec, compute_tile, map_dataset, parse_axis, run_map
+    from maglev_match.analyses.maps import MapSpec, map_dataset, parse_axis, run_map
     from maglev_match.core.datasets import annotate_map
 
     ax, ay = parse_axis(x, "x"), parse_axis(y, "y")
@@ -143,14 +150,9 @@ def design_map(params: Params | str | None = None,
         what = "headline index" if simulate else "paper's index only (--no-simulation)"
         stage(f"map {ax.name} x {ay.name}, {what}: {len(spec.tiles)} tiles ...")
     started = time.perf_counter()
-    if checkpoint is not None:
-        data = run_map(spec, Path(checkpoint), resume=resume, scheduler=scheduler,
-                       workers=workers, progress=progress,
-                       log=None if log is None else Path(log), echo_dask=echo_dask)
-    else:
-        tiles = _compute_tiles(spec, compute_tile, workers, scheduler, progress)
-        data = {k: np.concatenate([tiles[t][k] for t in spec.tiles], axis=0)
-                for k in tiles[spec.tiles[0]]}
+    data = run_map(spec, None if checkpoint is None else Path(checkpoint), resume=resume,
+                   scheduler=scheduler, workers=workers, progress=progress,
+                   log=None if log is None else Path(log), echo_dask=echo_dask)
     elapsed = time.perf_counter() - started
     if stage is not None:
         stage("spot check: recomputing sample points one by one ...")
@@ -174,40 +176,3 @@ def remove_tiles(checkpoint: str | Path) -> bool:
     from maglev_match.analyses.maps import remove_checkpoint
 
     return remove_checkpoint(Path(checkpoint))
-
-
-def _compute_tiles(spec, compute_tile, workers, scheduler, progress) -> dict:
-    """Every tile of ``spec`` in memory: here (workers == 0) or on Dask."""
-    total = len(spec.tiles)
-    out: dict = {}
-    if progress:
-        progress(0, total)
-    if workers == 0 and scheduler is None:
-        for t in spec.tiles:
-            out[t] = compute_tile(spec, t)
-            if progress:
-                progress(len(out), total)
-        return out
-    from dask.distributed import Client, as_completed
-
-    from maglev_match.analyses.maps import local_cluster
-
-    cluster = None
-    if scheduler is None:
-        cluster = local_cluster(workers)
-        client = Client(cluster)
-    else:
-        client = Client(scheduler)
-    try:
-        futures = {client.submit(compute_tile, spec, t, pure=False, retries=2): t
-                   for t in spec.tiles}
-        for fut in as_completed(futures):
-            out[futures[fut]] = fut.result()
-            if progress:
-                progress(len(out), total)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-    return out
-

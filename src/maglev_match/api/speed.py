@@ -6,13 +6,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from maglev_match.analyses.speed.grid import KMH, speeds_kmh
 from maglev_match.api.inputs import resolve_params
 from maglev_match.core.params import Params
 
 if TYPE_CHECKING:  # pragma: no cover
     from maglev_match.analyses.speed.sweep import SpeedSweep
 
-__all__ = ['speed_sweep', 'speed_map', 'ride_reading']
+__all__ = ['speed_sweep', 'speed_map', 'ride_reading', 'speeds_kmh', 'KMH']
 
 
 def speed_sweep(params: Params | str | None = None, *, model: str = "unit",

@@ -38,7 +38,7 @@ from maglev_match.maglev.catalog import model_info
 #: API keyword -> option, for `map`
 MAP_OPTIONS = {"x": "--x", "y": "--y", "workers": "--workers", "scheduler": "--scheduler",
                "resume": "--resume", "rows_per_tile": "--rows-per-tile", "ntst": "--ntst",
-               "simulate": "--no-simulation", "config": "--config"}
+               "simulate": "--no-simulation", "config": "--config", "model": "--model"}
 #: API keyword -> option, for `index`
 INDEX_OPTIONS = {"model": "--model", "simulate": "--no-simulation", "scatter": "--scatter",
                  "monte_carlo": "--monte-carlo", "workers": "--workers", "resume": "--resume",
@@ -290,7 +290,8 @@ def map_command(
         ds = api.design_map(base, x, y, checkpoint=checkpoint, resume=resume,
                             scheduler=scheduler, workers=workers, rows_per_tile=rows_per_tile,
                             ntst=ntst, progress=prog.tiles, simulate=not no_simulation,
-                            log=log, echo_dask=debug, check_fraction=0.1, stage=prog.stage)
+                            log=log, echo_dask=debug, check_fraction=0.1, stage=prog.stage,
+                            model=model or "unit")
     warns = api.map_warnings(ds)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_netcdf(out, ds)

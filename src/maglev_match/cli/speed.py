@@ -14,7 +14,7 @@ import typer
 from rich import box
 from rich.table import Table
 
-from maglev_match.analyses.speed.grid import KMH, speeds_kmh
+from maglev_match.api.speed import KMH, speeds_kmh
 from maglev_match.cli import app
 from maglev_match.cli.common import (
     DEFAULT_PRESET_NAME,

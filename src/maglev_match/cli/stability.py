@@ -44,7 +44,7 @@ from maglev_match.maglev.catalog import model_info
 
 #: API keyword -> option, for `stability` and `root-locus`
 STABILITY_OPTIONS = {"model": "--model", "config": "--config"}
-ROOT_LOCUS_OPTIONS = {"param": "--param", "values": "--from/--to", "model": "--model",
+ROOT_LOCUS_OPTIONS = {"param": "--param", "values": "--from/--to/--steps", "model": "--model",
                       "config": "--config"}
 
 

@@ -85,7 +85,7 @@ def _combine(pr: dict[str, np.ndarray], sr: dict[str, np.ndarray], simulate: boo
 
 def run_map(
     spec: MapSpec,
-    checkpoint: Path,
+    checkpoint: Path | None,
     *,
     resume: bool = False,
     scheduler: str | None = None,
@@ -101,6 +101,8 @@ def run_map(
     Parameters
     ----------
     checkpoint : folder for the tiles (created); with ``resume`` its tiles are reused.
+        None: nothing is kept (the tiles are computed in memory here, or through a
+        temporary folder on Dask).
         The folder is locked for the duration of the run (a second run on it raises
         :class:`~maglev_match.core.checkpoint.CheckpointLocked`); tiles of another map or
         unreadable tiles are named in a warning and recomputed.
@@ -120,9 +122,13 @@ def run_map(
     job = Job(pieces=spec.tiles, compute=compute_tile, args_of=lambda rows: (spec, rows),
               store=lambda folder: checkpoint_mod.tile_checkpoint(
                   folder, spec.key(), MAP_VARIABLES, spec.x.count))
-    return run_job(job, Path(checkpoint), resume=resume, scheduler=scheduler, workers=workers,
-                   progress=progress, limit=max_tiles, log=log, echo_dask=echo_dask,
-                   finish=lambda store: assemble(spec, store.folder))
+    out = run_job(job, None if checkpoint is None else Path(checkpoint), resume=resume,
+                  scheduler=scheduler, workers=workers, progress=progress, limit=max_tiles,
+                  log=log, echo_dask=echo_dask,
+                  finish=lambda store: assemble(spec, store.folder))
+    if isinstance(out, list):  # computed in memory: the tiles in order
+        return {k: np.concatenate([p[k] for p in out], axis=0) for k in out[0]}
+    return out
 
 
 def assemble(spec: MapSpec, checkpoint: Path) -> dict[str, np.ndarray]:
