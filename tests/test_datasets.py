@@ -38,8 +38,7 @@ def test_the_writers_are_the_ones_checked_here():
                      if re.search(r"\.to_netcdf\(|atomic_write_netcdf\(", p.read_text())
                      and p.name != "io.py")  # (io.py: the one atomic writer they all call)
     assert writers == ["analyses/restart/equilibria.py", "analyses/simulation.py",
-                       "cli/cycles.py", "cli/hopf.py", "cli/index.py", "cli/models.py",
-                       "cli/restart.py", "cli/speed.py"], writers
+                       "cli/cycles.py", "cli/hopf.py", "cli/index.py", "cli/speed.py"], writers
 
 
 def test_saved_cycle_branch_and_hopf_curve_are_self_describing(tmp_path):

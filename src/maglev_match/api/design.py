@@ -31,7 +31,7 @@ def design_search(params: Params | str | None = None, *,
     Parameters
     ----------
     params : Params | str | None
-        The base parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+        The base parameter set (see [`resolve_params`][maglev_match.api.inputs.resolve_params]).
     vary : mapping or sequence of str
         `{name: (low, high)}` of the varied parameters, e.g. `{"EI": (5e9, 4e10)}`, or
         their command-line form `["EI=5e9:4e10"]`.

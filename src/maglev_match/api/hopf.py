@@ -63,7 +63,7 @@ def delay_description(system: Any, param: str, crossings: bool = True) -> dict |
 def hopf_points(params: Params | str | None = None, param: str = "omega1",
                 start: float = 30.0, stop: float = 300.0, *, model: str = "unit",
                 n_scan: int = 200, config: str | Path | None = None,
-                **overrides: Any) -> Any:
+                stage: Callable[[str], None] | None = None, **overrides: Any) -> Any:
     """Hopf points of the equilibrium along one parameter (`maglev-match hopf`).
 
     A scan of `n_scan` eigenvalue computations brackets each crossing of a complex pair
@@ -87,6 +87,8 @@ def hopf_points(params: Params | str | None = None, param: str = "omega1",
         Values of the bracketing scan (steps at most 1/n_scan of the range).
     config : str or Path, optional
         A TOML file applied on top of the preset.
+    stage : callable, optional
+        Called with a line of text once the inputs are checked and the search starts.
     **overrides : float
         Parameter values applied on top.
 
@@ -116,9 +118,14 @@ def hopf_points(params: Params | str | None = None, param: str = "omega1",
         raise ParameterError("start", start, f"must be smaller than stop = {stop:g}")
     studied = resolve_model(params, model, config=config, **overrides)
     engineering = studied.params is not None and is_engineering(param)
-    studied.check_param(param, "param", delays=False, engineering=True)
+    studied.check_param(param, "param", delays=True, engineering=True)
     for v in (start, stop):
         studied.validate_value(param, v)
+    if param in studied.delays and start < 0:
+        raise ParameterError("start", start, f"{param} is a delay: the range must start at "
+                             "or above 0 (>= 0)")
+    if stage is not None:
+        stage(f"searching Hopf points along {param} in [{start:g}, {stop:g}] ...")
     plane = default_plane(studied)
     # along a delay: the discretised delay system (delays up to stop)
     system = studied.system_along(param, stop)
@@ -430,17 +437,17 @@ def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
         if not ok.all():
             warnings.append(f"equilibrium not found at {int((~ok).sum())} grid points")
         grid_data = (g1, g2, mr)
+    preset = params if isinstance(params, str) and restarted is None else None
     return _study(studied, system, params_used, names, lims, curves, grid_data,
-                  delay_notes, warnings, restarted)
+                  delay_notes, warnings, restarted, preset)
 
 
 def _study(studied, system, params_used, names, lims, curves, grid_data, delay_notes,
-           warnings, restarted) -> HopfCurveStudy:
+           warnings, restarted, preset: str | None) -> HopfCurveStudy:
     from maglev_match.core.units import unit
     from maglev_match.maglev.catalog import model_info
 
     which = f"model {studied.label}" if studied.is_user else model_info(studied.label).short
-    preset = None if params_used is None else params_used.preset
     title = f"Hopf curve, {which}" + ("" if studied.is_user or preset is None
                                       else f" ({preset})")
     rp = None

@@ -28,7 +28,7 @@ from maglev_match.core.params import (
     load_params,
     warn_overridden,
 )
-from maglev_match.maglev.catalog import model_info
+from maglev_match.maglev.catalog import MODEL_NAMES, model_info, names_text
 
 if TYPE_CHECKING:  # pragma: no cover
     from maglev_match.dynamics.system import System
@@ -262,6 +262,9 @@ def resolve_model(params: Params | str | None = None, model: Any = "unit", *,
         _user_system(user, values, field=field)  # refuses values it cannot analyse
         return StudiedModel(label=user.name, description=_user_description(user, values),
                             user=user, values=values)
+    if str(model) not in MODEL_NAMES:
+        raise ParameterError("model", model, f"must be {names_text().replace(' or ', ', ')} "
+                             "or a model file ending in .py")
     info = model_info(model)
     p = resolve_params(params, config=config, **overrides)
     from maglev_match.maglev.models import maglev_model

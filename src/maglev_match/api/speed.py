@@ -22,7 +22,8 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
                 spans: int = 40, workers: int | None = 0, scheduler: str | None = None,
                 checkpoint: str | Path | None = None, resume: bool = False,
                 progress: Callable[[int, int], None] | None = None,
-                config: str | Path | None = None, **overrides: Any) -> SpeedSweep:
+                config: str | Path | None = None,
+                stage: Callable[[str], None] | None = None, **overrides: Any) -> SpeedSweep:
     """The vehicle at speed over identical spans, swept over speed (`maglev-match speed`).
 
     At every speed the periodic response (one span passage, found as the fixed point of
@@ -46,11 +47,13 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     spans : int
         Spans a disturbed run may take to return to the periodic response.
     workers, scheduler, checkpoint, resume, progress
-        As for [`design_map`][maglev_match.api.design_map]: 0 computes here, n > 0 on a
+        As for [`design_map`][maglev_match.api.maps.design_map]: 0 computes here, n > 0 on a
         local Dask cluster, None one worker per core; `checkpoint` keeps a tile per speed
         (then `resume` reuses them).
     config : str or Path, optional
         A TOML file applied on top of the preset.
+    stage : callable, optional
+        Called with a line of text once the inputs are checked and the work starts.
     **overrides : float
         Parameter values applied on top.
 
@@ -71,6 +74,9 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         speeds = list(speeds_kmh(*kmh) * KMH)
     opts = SpeedOptions(critical=critical, spans=spans)
     check_speed_setup(p, model, list(speeds), spans)
+    if stage is not None:
+        stage(f"{len(speeds)} speeds, model {model}, "
+              f"{'with' if critical else 'without'} the critical disturbance ...")
     return _speed_sweep(p, model, list(speeds), opts,
                         checkpoint=None if checkpoint is None else Path(checkpoint),
                         resume=resume, scheduler=scheduler, workers=workers,
@@ -81,7 +87,8 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
               y: str = "L=15:25:5", *, model: str = "unit", workers: int | None = 0,
               scheduler: str | None = None, checkpoint: str | Path | None = None,
               resume: bool = False, progress: Callable[[int, int], None] | None = None,
-              config: str | Path | None = None, **overrides: Any) -> Any:
+              config: str | Path | None = None, stage: Callable[[str], None] | None = None,
+              **overrides: Any) -> Any:
     """The read-outs at speed over a grid of the speed v (km/h) and another parameter
     (`maglev-match map --x v=START:STOP:COUNT --y NAME=...`): at every grid point the
     periodic response with its stability, DAF, ride index and chi(v).
@@ -98,6 +105,8 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
         As for [`speed_sweep`][maglev_match.api.speed.speed_sweep] (a tile per row).
     config : str or Path, optional
         A TOML file applied on top of the preset.
+    stage : callable, optional
+        Called with a line of text once the axes are checked and the work starts.
     **overrides : float
         Parameter values applied on top.
 
@@ -113,6 +122,9 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
 
     p = resolve_params(params, config=config, **overrides)
     spec = parse_speed_axes(p, model, x, y, SpeedOptions())
+    if stage is not None:
+        nx, ny = (a.split("=", 1)[0].strip() for a in (x, y))
+        stage(f"map {nx} x {ny} at speed, model {model} ...")
     if checkpoint is None:
         with tempfile.TemporaryDirectory(prefix="maglev-match-speed-map-") as tmp:
             return run_speed_map(spec, Path(tmp) / "tiles", resume=False,

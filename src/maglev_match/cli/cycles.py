@@ -37,6 +37,7 @@ from maglev_match.cli.common import (
     print_error,
     progress_report,
     refuse_given,
+    set_items,
     steps_option,
 )
 from maglev_match.cli.cycle_tables import at_values, print_summary, print_user_branch, write_csv
@@ -123,10 +124,17 @@ def cycles_command(
                      "saved branch from --label; leave this option out")
         if not given("model") and not user:  # the model the file was saved for
             from maglev_match import api
+            from maglev_match.cli.restart import restart_error_context
 
-            model = api.saved_model(restart) or model
+            with restart_error_context():
+                model = api.saved_model(restart) or model
     params, overrides = model_inputs(model, preset, config, set_,
                                      default_params=not restarting)
+    if restarting and params is not None and set_:
+        # (checked above) the --set values go as overrides, so that the API can tell a
+        # value given for the parameter the saved branch is continued in
+        overrides = {n: float(v) for n, v in set_items(set_).items()}
+        params, _ = model_inputs(model, preset, config, None, default_params=False)
     at_vals = at_values(at)
     if not user and (out is not None or not json_out):  # files at the end: load writers now
         preload("maglev_match.plots.cycles", "maglev_match.core.datasets", "xarray",

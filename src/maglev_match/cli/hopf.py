@@ -82,9 +82,8 @@ def hopf_command(
     from maglev_match import api
 
     with progress_report("hopf") as prog, api_options(HOPF_OPTIONS):
-        prog.stage(f"searching Hopf points along {param} in [{start:g}, {stop:g}] ...")
         scan = api.hopf_points(params, param, start, stop, model=model, n_scan=steps,
-                               **overrides)
+                               stage=prog.stage, **overrides)
     user = str(model).endswith(".py")
     model = Path(model).stem if user else model  # (a model file is named by its stem)
     names = scan.columns
@@ -219,6 +218,8 @@ def hopf_curve_command(
     # a restart takes the saved values unless --preset/--config/--set are given
     params, overrides = model_inputs(model, preset, config, set_,
                                      default_params=not restarting)
+    if params is not None and config is None and not set_:
+        params = preset  # the preset by name: the figure's title names it
     from maglev_match import api
 
     with progress_report("hopf-curve") as prog, api_options(HOPF_CURVE_OPTIONS), \
@@ -297,7 +298,7 @@ def _runs(l1) -> list[float]:
     """The signs of l1 along a branch, one per run of equal signs."""
     out: list[float] = []
     for v in l1:
-        s = (v > 0) - (v < 0)
+        s = int(v > 0) - int(v < 0)
         if not out or s != out[-1]:
             out.append(float(s))
     return out

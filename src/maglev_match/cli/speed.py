@@ -154,13 +154,12 @@ def speed_command(
     if out is not None or not json_out:
         preload("xarray", "matplotlib.pyplot", "h5netcdf")
     with progress_report("speed") as prog, api_options(SPEED_OPTIONS):
-        prog.stage(f"{len(kmh)} speeds, model {model}, {'with' if critical else 'without'} "
-                   "the critical disturbance ...")
         started = time.perf_counter()
         sweep = api.speed_sweep(params, model=model, speeds=list(kmh * KMH),
                                 critical=critical, spans=spans, checkpoint=tiles,
                                 resume=resume, scheduler=scheduler, workers=workers,
-                                progress=lambda d, t: prog.tiles(d, t, "speeds"))
+                                progress=lambda d, t: prog.tiles(d, t, "speeds"),
+                                stage=prog.stage)
         elapsed = time.perf_counter() - started
         prog.stage(f"sweep done in {elapsed:.1f} s; writing files ...")
         files = _write_sweep(sweep, folder, stem)
@@ -208,9 +207,8 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
     from maglev_match import api
 
     with progress_report("simulate") as prog, api_options(SPEED_OPTIONS):
-        prog.stage(f"running model {model} over {n} spans at {speed_kmh:g} km/h ...")
         run = api.simulate_over_spans(params, model=model, kmh=speed_kmh, spans=n,
-                                      limits=limits)
+                                      limits=limits, stage=prog.stage)
         prog.stage(f"run done: {run.outcome}")
         folder, stem = output_target(out, "simulate", f"simulation_{model}_speed")
         folder.mkdir(parents=True, exist_ok=True)
@@ -267,9 +265,9 @@ def speed_map_command(x: str, y: str, preset: str, config, set_, out: Path | Non
     from maglev_match import api
 
     with progress_report("map") as prog, api_options(SPEED_OPTIONS):
-        prog.stage(f"map {names[0]} x {names[1]} at speed, model {kind} ...")
         ds = api.speed_map(params, x, y, model=kind, checkpoint=tiles, resume=resume,
-                           scheduler=scheduler, workers=workers, progress=prog.tiles)
+                           scheduler=scheduler, workers=workers, progress=prog.tiles,
+                           stage=prog.stage)
         from maglev_match.core.io import atomic_write_netcdf
         from maglev_match.plots import save_figure
         from maglev_match.plots.speed import speed_map_figure

@@ -30,7 +30,7 @@ def study_report(params: Params | str | None = None, out: str | Path = "report.h
     Parameters
     ----------
     params : Params | str | None
-        The parameter set (see [`resolve_params`][maglev_match.api.resolve_params]).
+        The parameter set (see [`resolve_params`][maglev_match.api.inputs.resolve_params]).
     out : str or Path
         The HTML file.
     quick : bool
