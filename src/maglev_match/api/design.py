@@ -7,6 +7,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from maglev_match.api.compat import deprecated
 from maglev_match.api.inputs import resolve_params
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.maglev.catalog import model_info
@@ -22,8 +23,10 @@ def design_search(params: Params | str | None = None, *,
                   minimize: str | None = None, maximize: str | None = None,
                   require: Mapping[str, float] | Sequence[str] = (), model: str = "unit",
                   grid: int | None = None, starts: int = 2, simulate: bool = True,
+                  stage: Callable[[str], None] | None = None,
+                  config: str | Path | None = None,
                   progress: Callable[[str], None] | None = None,
-                  config: str | Path | None = None, **overrides: Any) -> DesignResult:
+                  **overrides: Any) -> DesignResult:
     """The cheapest design, or the one with the largest chi, meeting requirements
     (`maglev-match design`): SLSQP on exact gradients from several grid starts (Nocedal &
     Wright 2006, ch. 18), every candidate re-checked by the full index.
@@ -48,8 +51,9 @@ def design_search(params: Params | str | None = None, *,
     simulate : bool
         Constrain the headline index (default: both chi_paper and chi_simulation meet a
         requirement on chi); False: the paper's chi only (`--no-simulation`).
-    progress : callable, optional
-        Called with a line of text at each stage.
+    stage : callable, optional
+        Called with a line of text at each stage (as in every API function; the earlier
+        name ``progress`` still works and warns).
     config : str or Path, optional
         A TOML file applied on top of the preset.
     **overrides : float
@@ -62,12 +66,15 @@ def design_search(params: Params | str | None = None, *,
     """
     from maglev_match.analyses.design import MaglevEvaluator, optimise_design
 
+    if progress is not None:
+        deprecated("design_search(progress=...)", "design_search(stage=...)")
+        stage = stage or progress
     problem, base = design_problem(params, vary=vary, minimize=minimize, maximize=maximize,
                                    require=require, simulate=simulate, starts=starts,
                                    grid=grid, config=config, **overrides)
     evaluator = MaglevEvaluator(base, problem.names, model=model_info(model).name,
                                 simulate=simulate)
-    return optimise_design(problem, evaluator, grid=grid, starts=starts, progress=progress)
+    return optimise_design(problem, evaluator, grid=grid, starts=starts, progress=stage)
 
 
 def check_requirements(require: Mapping[str, float] | Sequence[str] = (), *,

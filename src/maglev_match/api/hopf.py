@@ -302,11 +302,12 @@ def _default_bounds(studied: StudiedModel, system: Any, names: tuple[str, str],
 def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
                y: str | tuple | None = None, *, model: str = "unit", n_scan: int = 100,
                max_step: float = 1e-2, grid: int = 0,
-               progress: Callable[[str], None] | None = None,
+               stage: Callable[[str], None] | None = None,
                config: str | Path | None = None, restart: str | Path | None = None,
                label: str | None = None, names: tuple[str, str] | None = None,
                bounds: dict[str, tuple[float, float]] | None = None,
-               study: bool = False, **overrides: Any) -> Any:
+               study: bool = False, progress: Callable[[str], None] | None = None,
+               **overrides: Any) -> Any:
     """Every branch of the Hopf curve in a plane of two parameters (`maglev-match
     hopf-curve`).
 
@@ -336,8 +337,9 @@ def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
         Largest continuation step, as a fraction of the ranges.
     grid : int
         Stability grid points per axis (shading of the figure; 0: none).
-    progress : callable, optional
-        Called with a line of text when a stage starts.
+    stage : callable, optional
+        Called with a line of text when a stage starts (the earlier name ``progress``
+        still works and warns).
     config : str or Path, optional
         A TOML file applied on top of the preset.
     restart, label : optional
@@ -364,7 +366,10 @@ def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
     if names is not None or bounds is not None:
         deprecated("hopf_curve(params, names=(P1, P2), bounds={...})",
                    "hopf_curve(params, x=(P1, lo, hi), y=(P2, lo, hi))")
-    say = progress or (lambda text: None)
+    if progress is not None:
+        deprecated("hopf_curve(progress=...)", "hopf_curve(stage=...)")
+        stage = stage or progress
+    say = stage or (lambda text: None)
     own_values = params is not None or config is not None or bool(overrides)
     studied = resolve_model(params, model, config=config, **overrides)
     given: dict[str, tuple[float, float]] = dict(bounds or {})
@@ -425,7 +430,7 @@ def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
         say(f"scanning {names[0]} at {len(scan_values)} values of {names[1]} ...")
         curves, warnings = hopf_curves_from_scans(system, names, lims, scan_values,
                                                   n_scan=n_scan, max_step=max_step,
-                                                  progress=progress)
+                                                  progress=stage)
     if not study:
         return curves
     grid_data = None

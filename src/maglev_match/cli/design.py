@@ -382,7 +382,7 @@ def design_command(
         res = api.design_search(base, vary=list(vary), minimize=minimize, maximize=maximize,
                                 require=list(require or []), model=model, grid=grid,
                                 starts=starts, simulate=not no_simulation,
-                                progress=prog.stage)
+                                stage=prog.stage)
     design_params = base.replace(**{n: float(v) for n, v in res.values.items()})
     folder, stem = output_target(out, "design", "design-path")
     figs = res.plot(folder / stem)

@@ -226,7 +226,7 @@ def hopf_curve_command(
             _restart_errors():
         st = api.hopf_curve(params, model=model, names=names, bounds=bounds or None,
                             n_scan=scan_steps, max_step=max_step, grid=grid,
-                            progress=prog.stage, restart=restart, label=label, study=True,
+                            stage=prog.stage, restart=restart, label=label, study=True,
                             **overrides)
     names = st.names
     folder, stem = output_target(out, "hopf-curve",

@@ -11,7 +11,7 @@ fingerprint (base, scatter, n, seed, chunk size, model).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -110,6 +110,13 @@ def mc_chunk(base_values: dict[str, Any], names: tuple[str, ...], rows: np.ndarr
     return out
 
 
+def mc_piece(base_values: Mapping[str, float], names: Sequence[str], rows: np.ndarray,
+             model: str = "unit") -> dict[str, np.ndarray]:
+    """One chunk of a Monte Carlo study as the job runner saves it: {"chi": chi of the
+    rows} (:func:`mc_chunk`)."""
+    return {"chi": mc_chunk(base_values, names, rows, model)}
+
+
 def mc_checkpoint(folder: Any, key: str) -> Any:
     """The Monte Carlo study's checkpoint folder (:class:`maglev_match.core.checkpoint.Checkpoint`):
     ``study.json`` and one ``chunk_AAAAAAA_BBBBBBB.npz`` per chunk of samples [A, B), each
@@ -147,48 +154,25 @@ def sampled_spread(base: Params, scatter: Mapping[str, float], n: int, checkpoin
     damaged chunk is named in a :class:`~maglev_match.core.checkpoint.CheckpointWarning` and
     recomputed. ``workers == 0`` computes in this process; ``model`` 'unit' or 'vehicle'.
     """
-    import contextlib
+    from pathlib import Path
 
-    from maglev_match.analyses.maps import TileCount, dask_log_capture, run_pieces_on_dask
+    from maglev_match.core.jobs import Job, run_job
     from maglev_match.core.options import MonteCarloOptions
-    from maglev_match.core.params import ParameterError
 
     MonteCarloOptions(samples=n, seed=seed, workers=workers, chunk=chunk)  # checks them
     n = int(n)
     names = tuple(scatter)
     X = _sample(base, scatter, n, int(seed))
-    pieces = mc_chunks(n, chunk)
-    ck = mc_checkpoint(checkpoint, _chunk_key(base, scatter, n, seed, chunk, model))
+    key = _chunk_key(base, scatter, n, seed, chunk, model)
     base_values = base.as_input_dict()
-    with contextlib.ExitStack() as stack:
-        try:
-            stack.enter_context(ck.locked(resume, run="Monte Carlo run"))
-        except ValueError as exc:
-            raise ParameterError("--resume", str(ck.folder), str(exc)) from None
-        todo = ck.todo(pieces)
-        count = TileCount(len(pieces) - len(todo), len(pieces), ck.folder,
-                          noun="Monte Carlo chunks")
-        if progress:
-            progress(count.done, len(pieces))
-        with count.stoppable():
-            if todo and workers == 0 and scheduler is None:
-                for a, b in todo:
-                    ck.save((a, b), {"chi": mc_chunk(base_values, names, X[a:b], model)})
-                    count.done += 1
-                    if progress:
-                        progress(count.done, len(pieces))
-            elif todo:
-                with dask_log_capture(ck.folder / "dask.log"):
-                    run_pieces_on_dask(
-                        {(a, b): (mc_chunk, (base_values, names, X[a:b], model))
-                         for a, b in todo},
-                        lambda piece, chi: ck.save(piece, {"chi": chi}), scheduler, workers,
-                        progress, count)
-        bad = [t for t in pieces if not ck.check(t).ok]
-        if bad:
-            raise RuntimeError(f"{len(bad)} of {len(pieces)} Monte Carlo chunks are missing "
-                               f"or damaged in {ck.folder} after the run")
-        chi = np.concatenate([ck.load(t)["chi"] for t in pieces])
+    job = Job(pieces=mc_chunks(n, chunk), compute=mc_piece,
+              args_of=lambda ab: (base_values, names, X[ab[0]:ab[1]], model),
+              store=lambda folder: mc_checkpoint(folder, key), noun="Monte Carlo chunks",
+              run="Monte Carlo run")
+    folder = Path(checkpoint)
+    parts = run_job(job, folder, resume=resume, scheduler=scheduler, workers=workers,
+                    progress=progress, log=folder / "dask.log")
+    chi = np.concatenate([part["chi"] for part in parts])
     invalid = int(np.sum(chi == -np.inf))
     chi = np.where(chi == -np.inf, np.nan, chi)
     failed = int(np.sum(np.isnan(chi))) - invalid
