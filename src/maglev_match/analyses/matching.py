@@ -49,6 +49,7 @@ import numpy as np
 
 from maglev_match.core.params import Params
 from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
 from maglev_match.dynamics.basin import bounding_cycle
 from maglev_match.dynamics.cycles import CyclePoint
 from maglev_match.dynamics.equilibria import StabilityResult, stability
@@ -106,7 +107,7 @@ cycle_settings = CycleSettings()
 
 
 @dataclass(frozen=True)
-class MatchingIndex:
+class MatchingIndex(Plottable):
     """The matching index at one parameter point, with what decided it.
 
     Lengths in metres, rates in 1/s. ``chi`` is the HEADLINE index: min(chi_paper,
@@ -174,6 +175,91 @@ class MatchingIndex:
         for k in ("mechanism_up", "mechanism_down"):
             out[k] = None if out[k] is None else str(out[k])
         return out
+
+    def to_xarray(self) -> Any:
+        """The index as an :class:`xarray.Dataset` of 0-d variables (SI units, NaN where a
+        part was not computed): ``chi``, ``chi_paper``, ``chi_simulation``, ``h``,
+        ``h_simulation`` (``_up``, ``_down``), ``w0``, ``stable``, ``max_real_part``,
+        ``omega1``, ``sigma``, the Hopf point used (``hopf_value``, ``hopf_distance``,
+        ``l1``, ``gh_ratio``), the deciding cycle (``cycle_period``, ``cycle_gap_max``,
+        ``cycle_gap_min``, ``cycle_current_min``, ``cycle_unstable_multipliers``),
+        ``current_reverses``, ``converged`` and ``simulation_derivative``, each with
+        ``units`` and ``long_name``. The words are attributes: ``case``, ``reading``,
+        ``reading_basis``, ``headline``, ``model``, ``hopf_param``, ``mechanism_up`` /
+        ``mechanism_down``, ``message``, and as JSON ``warnings``, ``simulation`` and
+        ``critical_delay``. (The cycle's profile is left out, as in :meth:`as_json`.)"""
+        import json
+
+        import xarray as xr
+
+        from maglev_match.core.datasets import annotate
+        from maglev_match.core.params import PARAMETER_DOCS
+
+        def num(v: Any) -> float:
+            return float("nan") if v is None else float(v)
+
+        hopf_unit = PARAMETER_DOCS.get(self.hopf_param or "", ("1",))[0]
+        fields = {  # name: (value, units, long name)
+            "chi": (self.chi, "1", f"headline matching index ({self.reading_basis})"),
+            "chi_paper": (self.chi_paper, "1", "matching index by the paper's definition, "
+                          "h / w0"),
+            "chi_simulation": (self.chi_simulation, "1", "h_simulation / w0 (NaN: not "
+                               "simulated or inconclusive)"),
+            "h": (self.h, "m", "basin size by the paper's definition"),
+            "h_simulation": (self.h_simulation, "m", "simulated critical disturbance, the "
+                             "smaller of the two directions"),
+            "h_simulation_up": (self.h_simulation_up, "m", "simulated critical "
+                                "disturbance, beam up"),
+            "h_simulation_down": (self.h_simulation_down, "m", "simulated critical "
+                                  "disturbance, beam down"),
+            "w0": (self.w0, "m", "static beam deflection"),
+            "stable": (self.stable, "1", "equilibrium stable (1) or unstable (0)"),
+            "max_real_part": (self.max_real_part, "1/s", "largest real part of the "
+                              "eigenvalues of the equilibrium"),
+            "omega1": (self.omega1, "", ""),
+            "sigma": (self.sigma, "", ""),
+            "hopf_value": (self.hopf_value, hopf_unit, "value of hopf_param at the Hopf "
+                           "point used for h"),
+            "hopf_distance": (self.hopf_distance, "1", "relative distance to the Hopf point "
+                              "used"),
+            "l1": (self.l1, "1/s", "first Lyapunov coefficient at the Hopf point used"),
+            "gh_ratio": (self.gh_ratio, "1", "|l2| r^2 / |l1| at the gap range (near a "
+                         "generalised-Hopf point when large)"),
+            "cycle_period": (self.cycle_period, "s", "period of the deciding cycle"),
+            "cycle_gap_max": (self.cycle_gap_max, "m", "largest gap deviation on the "
+                              "deciding cycle"),
+            "cycle_gap_min": (self.cycle_gap_min, "m", "smallest gap deviation on the "
+                              "deciding cycle"),
+            "cycle_current_min": (self.cycle_current_min, "A", "smallest coil current on "
+                                  "the deciding cycle"),
+            "cycle_unstable_multipliers": (self.cycle_unstable_multipliers, "1", "Floquet "
+                                           "multipliers of the deciding cycle outside the "
+                                           "unit circle"),
+            "current_reverses": (self.current_reverses, "1", "coil current on the deciding "
+                                 "cycle would reverse (1) or not (0)"),
+            "converged": (self.converged, "1", "index computed (1) or a part failed (0)"),
+            "simulation_derivative": (self.simulation_derivative, "1", "chi_simulation has "
+                                      "a derivative here (1) or not (0)"),
+        }
+        flags = ("stable", "current_reverses", "converged", "simulation_derivative")
+        data = {k: ((), np.int8(bool(v)) if k in flags else num(v))
+                for k, (v, _, _) in fields.items()}
+
+        def text(v: Any) -> str:
+            return "" if v is None else str(v)
+
+        ds = xr.Dataset(data, attrs={
+            "title": "maglev-match matching index chi = h / w0",
+            "case": str(self.case), "reading": self.reading,
+            "reading_basis": str(self.reading_basis), "headline": self.headline,
+            "model": self.model, "hopf_param": text(self.hopf_param),
+            "mechanism_up": text(self.mechanism_up),
+            "mechanism_down": text(self.mechanism_down), "message": self.message,
+            "warnings": json.dumps(list(self.warnings)),
+            "simulation": json.dumps(self.simulation, default=str),
+            "critical_delay": json.dumps(self.critical_delay, default=str)})
+        return annotate(ds, units={k: u for k, (_, u, _) in fields.items() if u},
+                        long_names={k: n for k, (_, _, n) in fields.items() if n})
 
 
 def reading_rank(chi: float) -> int:

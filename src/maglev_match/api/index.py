@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from maglev_match.api.inputs import resolve_params
 from maglev_match.core.params import ParameterError, Params
+from maglev_match.core.results import Plottable
 from maglev_match.maglev.catalog import model_info
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -135,11 +136,12 @@ def check_scatter(params: Params | str | None = None, scatter: Mapping[str, floa
 
 
 @dataclass(frozen=True)
-class IndexSpread:
+class IndexSpread(Plottable):
     """The spread of chi from parameter scatter: ``linearised`` ({chi, sd, contributions})
     from the exact sensitivities, and ``sampled`` (a
     :class:`~maglev_match.analyses.sensitivity.SampledSpread`) when a Monte Carlo study
-    ran, else None."""
+    ran, else None. ``.plot()`` draws the histogram of the sampled chi (else the
+    linearised contributions), ``.to_xarray()`` gives both as a dataset."""
 
     linearised: dict[str, Any] | None
     sampled: Any = None
@@ -147,6 +149,77 @@ class IndexSpread:
     def as_json(self) -> dict[str, Any]:
         return {"spread": self.linearised,
                 "monte_carlo": None if self.sampled is None else self.sampled.as_json()}
+
+    def to_xarray(self) -> Any:
+        """The spread as an :class:`xarray.Dataset`. Linearised (when computed): the 0-d
+        ``chi`` at the base point and ``sd_linearised``, and ``contribution`` (each
+        scattered parameter's part of the standard deviation) over ``parameter``. Sampled
+        (when a Monte Carlo study ran): ``chi_sample`` over ``sample`` (NaN where the index
+        failed or the set was invalid), the drawn ``parameter_sample`` over (``sample``,
+        ``parameter``), and the 0-d ``chi_mean``, ``chi_sd``, ``chi_q05``, ``chi_q50``,
+        ``chi_q95``, ``samples``, ``failed`` and ``invalid``. Parameter values are in their
+        SI units (``parameter_unit``)."""
+        import numpy as np
+        import xarray as xr
+
+        from maglev_match.core.datasets import annotate
+        from maglev_match.core.params import PARAMETER_DOCS
+
+        lin, mc = self.linearised, self.sampled
+        names = list(mc.names if mc is not None else (lin or {}).get("contributions", {}))
+        data: dict[str, Any] = {}
+        units: dict[str, str] = {}
+        longs: dict[str, str] = {}
+        if lin is not None:
+            parts = lin.get("contributions", {})
+            data["chi"] = ((), float(lin["chi"]))
+            data["sd_linearised"] = ((), float(lin["sd"]))
+            data["contribution"] = ("parameter", np.array(
+                [float(parts.get(n, np.nan)) for n in names], float))
+            units.update(sd_linearised="1", contribution="1")
+            longs.update(chi="headline matching index at the base point",
+                         sd_linearised="standard deviation of chi to first order",
+                         contribution="part of the linearised standard deviation due to "
+                                      "the parameter, |d chi / d p| p s_p")
+        if mc is not None:
+            q = mc.quantiles
+            data.update({
+                "chi_sample": ("sample", np.asarray(mc.chi, float)),
+                "parameter_sample": (("sample", "parameter"), np.asarray(mc.samples, float)),
+                "chi_mean": ((), float(mc.mean)), "chi_sd": ((), float(mc.sd)),
+                "chi_q05": ((), float(q.get("5%", np.nan))),
+                "chi_q50": ((), float(q.get("50%", np.nan))),
+                "chi_q95": ((), float(q.get("95%", np.nan))),
+                "samples": ((), np.int64(mc.n)), "failed": ((), np.int64(mc.failed)),
+                "invalid": ((), np.int64(mc.invalid))})
+            units.update({k: "1" for k in ("chi_sample", "chi_mean", "chi_sd", "chi_q05",
+                                            "chi_q50", "chi_q95", "samples", "failed",
+                                            "invalid")})
+            units["parameter_sample"] = "SI (see parameter_unit)"
+            longs.update(
+                chi_sample="matching index chi (no simulation) of the sampled parameter set",
+                parameter_sample="sampled parameter value", chi_mean="mean of the sampled chi",
+                chi_sd="standard deviation of the sampled chi",
+                chi_q05="5 % quantile of the sampled chi", chi_q50="median of the sampled chi",
+                chi_q95="95 % quantile of the sampled chi", samples="samples drawn",
+                failed="samples whose index did not converge",
+                invalid="samples outside the parameter rules (not computed)")
+        coords: dict[str, Any] = {}
+        if names:
+            coords["parameter"] = ("parameter", names)
+            data["parameter_unit"] = ("parameter", np.array(
+                [PARAMETER_DOCS.get(n, ("",))[0] for n in names], dtype=str))
+            units.update(parameter="1", parameter_unit="1")
+            longs.update(parameter="scattered parameter",
+                         parameter_unit="SI unit of the parameter")
+        if mc is not None:
+            coords["sample"] = ("sample", np.arange(mc.n))
+            units["sample"] = "1"
+            longs["sample"] = "sample number"
+        ds = xr.Dataset(data, coords=coords, attrs={
+            "title": "maglev-match spread of chi under parameter scatter",
+            "linearised": int(lin is not None), "monte_carlo": int(mc is not None)})
+        return annotate(ds, units=units, long_names=longs)
 
 
 def index_spread(params: Params | str | None = None, scatter: Mapping[str, float] = (), *,

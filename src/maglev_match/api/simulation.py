@@ -4,13 +4,14 @@ vehicle at speed over N spans (`simulate --speed V --spans N`)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from maglev_match.api.inputs import resolve_model, resolve_params
 from maglev_match.core.params import ParameterError, Params
+from maglev_match.core.results import Plottable
 
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
@@ -25,9 +26,10 @@ SPANS_MAX = 1000
 
 
 @dataclass(frozen=True)
-class UserSimulation:
+class UserSimulation(Plottable):
     """One run of a user model file (no physical limits): the integrator's result, the
-    model's name and file, and its state names.
+    model's name and file, and its state names; ``.plot()`` draws the time history of
+    every state, ``.to_xarray()`` gives it as a dataset.
 
     outcome : 'converged' | 'running' | 'failed' (a user model has no collision).
     """
@@ -58,6 +60,44 @@ class UserSimulation:
     def history(self) -> tuple[Any, Any]:
         """(times, states): the saved history, one row per saved time."""
         return self.result.t, self.result.x
+
+    def to_xarray(self) -> Any:
+        """The history as an :class:`xarray.Dataset`: ``x`` (the states) over (``time``,
+        ``state``), the state names as the ``state`` coordinate (rows after the run ended
+        are NaN), the 0-d ``final_time``, ``final_state`` (over ``state``) and
+        ``converged_time`` (NaN when not converged). A user model states no units: times
+        are in seconds (or the model's time unit), the states in the model's own units.
+        The model, its file, the outcome, the step counts and the warnings (JSON list) are
+        attributes."""
+        import json
+
+        import numpy as np
+        import xarray as xr
+
+        from maglev_match.core.datasets import annotate
+
+        res = self.result
+        conv = float("nan") if res.converged_time is None else float(res.converged_time)
+        ds = xr.Dataset(
+            {"x": (("time", "state"), np.asarray(res.x, float)),
+             "final_time": ((), float(res.final_time)),
+             "final_state": (("state",), np.asarray(res.final_state, float)),
+             "converged_time": ((), conv)},
+            coords={"time": ("time", np.asarray(res.t, float)),
+                    "state": ("state", list(self.state_names))},
+            attrs={"title": f"maglev-match simulation, user model {self.model}",
+                   "model": self.model, "model_file": str(self.model_file),
+                   "outcome": str(res.outcome), "accepted": int(res.accepted),
+                   "rejected": int(res.rejected), "warnings": json.dumps(list(res.warnings))})
+        own = "the model's units (see state)"
+        return annotate(ds, units={"x": own, "final_state": own,
+                                   "final_time": "s", "converged_time": "s"},
+                        long_names={"x": "state of the user model",
+                                    "final_time": "time at which the run ended",
+                                    "final_state": "state at which the run ended",
+                                    "converged_time": "start of the final stretch within "
+                                                      "the convergence tolerance (NaN: "
+                                                      "not converged)"})
 
 
 def simulate(params: Params | str | None = None, *, model: str = "unit",
@@ -150,7 +190,9 @@ def _lifted(system: Any, x: Any) -> Any:
 
 def simulate_over_spans(params: Params | str | None = None, *, model: str = "unit",
                         kmh: float = 100.0, spans: int = 10, limits: bool = True,
-                        config: str | Path | None = None, **overrides: Any) -> SpanRun:
+                        config: str | Path | None = None,
+                        stage: Callable[[str], None] | None = None,
+                        **overrides: Any) -> SpanRun:
     """The vehicle at speed over `spans` identical spans, from rigid ground and off again,
     with the periodic response overlaid (`maglev-match simulate --speed V --spans N`).
 
@@ -168,6 +210,8 @@ def simulate_over_spans(params: Params | str | None = None, *, model: str = "uni
         The physical limits.
     config : str or Path, optional
         A TOML file applied on top of the preset.
+    stage : callable, optional
+        Called with a line of text once the inputs are checked and the run starts.
     **overrides : float
         Parameter values applied on top.
 
@@ -191,5 +235,7 @@ def simulate_over_spans(params: Params | str | None = None, *, model: str = "uni
     if spans > SPANS_MAX:
         raise ParameterError("spans", spans, f"must be at most {SPANS_MAX} for a run over "
                              "spans")
+    if stage is not None:
+        stage(f"running model {model} over {spans} spans at {kmh:g} km/h ...")
     return _over_spans(p, model, kmh * KMH, spans, limited=limits,
                        options=SpeedOptions(critical=False))

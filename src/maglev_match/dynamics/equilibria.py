@@ -79,8 +79,10 @@ class EquilibriumResult:
 
 
 @dataclass(frozen=True)
-class StabilityResult:
-    """Eigenvalues of the Jacobian at an equilibrium and the stability verdict."""
+class StabilityResult(Plottable):
+    """Eigenvalues of the Jacobian at an equilibrium and the stability verdict;
+    ``.plot()`` draws the eigenvalues in the complex plane, ``.to_xarray()`` gives them
+    with the equilibrium as a dataset."""
 
     __repr__ = compact_repr
 
@@ -97,6 +99,74 @@ class StabilityResult:
     def margin(self) -> float:
         """Stability margin -max Re(lambda) (1/s): positive when stable."""
         return -self.max_real_part
+
+    def to_xarray(self):
+        """The eigenvalues and the equilibrium as an :class:`xarray.Dataset`:
+        ``eigenvalue_real`` (1/s), ``eigenvalue_imag`` (rad/s) and ``condition_number``
+        over ``index`` (largest real part first), ``equilibrium`` over ``state`` (named
+        after the system's states when it is known), and the 0-d ``max_real_part``,
+        ``margin`` (1/s), ``stable``, ``equilibrium_converged``, ``iterations``,
+        ``residual`` and ``scaled_residual``; every variable with ``units`` and
+        ``long_name``. Attributes: the verdict, the system's name, its parameter vector
+        (``params``, JSON) and the warnings (JSON list)."""
+        import json
+
+        import xarray as xr
+
+        from maglev_match import __version__
+
+        eig = np.asarray(self.eigenvalues)
+        eq = self.equilibrium
+        x = np.asarray(eq.x, float)
+        system = self.system
+        names = (list(system.state_names) if system is not None
+                 and len(system.state_names) == x.size else [f"x{k}" for k in range(x.size)])
+
+        def scalar(value, units, long_name, dtype=float):
+            return ((), np.asarray(value, dtype), {"units": units, "long_name": long_name})
+
+        data: dict[str, Any] = {
+            "eigenvalue_real": ("index", eig.real, {
+                "units": "1/s", "long_name": "real part of the eigenvalue"}),
+            "eigenvalue_imag": ("index", eig.imag, {
+                "units": "rad/s", "long_name": "imaginary part of the eigenvalue"}),
+            "condition_number": ("index", np.asarray(self.condition_numbers, float), {
+                "units": "1", "long_name": "condition number of the eigenvalue"}),
+            "equilibrium": ("state", x, {"units": "SI (see state)",
+                                         "long_name": "equilibrium state (units per state)"}),
+            "max_real_part": scalar(self.max_real_part, "1/s", "largest real part of the "
+                                    "eigenvalues of the equilibrium"),
+            "margin": scalar(self.margin, "1/s", "stability margin -max Re(lambda) "
+                             "(positive when stable)"),
+            "stable": scalar(self.stable, "1", "equilibrium stable (1) or not (0)", np.int8),
+            "equilibrium_converged": scalar(eq.converged, "1", "Newton's method converged "
+                                            "at the equilibrium (1) or not (0)", np.int8),
+            "iterations": scalar(eq.iterations, "1", "Newton iterations", np.int64),
+            "residual": scalar(eq.residual, "SI (see state) per second",
+                               "max |f(x)| at the equilibrium"),
+            "scaled_residual": scalar(eq.scaled_residual, "1",
+                                      "scaled residual at the equilibrium"),
+        }
+        coords = {
+            "index": ("index", np.arange(eig.size), {
+                "units": "1", "long_name": "eigenvalue number, largest real part first"}),
+            "state": ("state", names, {"units": "1", "long_name": "state name"}),
+        }
+        attrs: dict[str, Any] = {
+            "title": "stability of the equilibrium",
+            "verdict": "stable" if self.stable else "unstable",
+            "warnings": json.dumps(list(self.warnings)),
+            "maglev_match_version": __version__,
+        }
+        if eq.message:
+            attrs["equilibrium_message"] = eq.message
+        if system is not None:
+            attrs["system"] = str(system.name)
+            p = np.asarray(eq.p, float)
+            if len(system.param_names) == p.size:
+                attrs["params"] = json.dumps(dict(zip(system.param_names, p.tolist(),
+                                                      strict=True)))
+        return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
 @dataclass(frozen=True)

@@ -79,6 +79,65 @@ class HopfPoint:
         """'subcritical' (l1 > 0), 'supercritical' (l1 < 0) or 'degenerate' (l1 = 0)."""
         return _criticality(self.l1)
 
+    def to_xarray(self, param_unit: str = "", state_names: tuple[str, ...] | None = None):
+        """The point as an :class:`xarray.Dataset`: the 0-d ``value`` (of :attr:`param`, in
+        ``param_unit``), ``frequency`` (rad/s), ``crossing_speed``, ``l1`` (1/s),
+        ``others_stable``, ``converged`` and ``residual``; over ``state`` the
+        ``equilibrium`` and the real and imaginary parts of the eigenvector ``q`` and of the
+        adjoint ``p_adj``; over ``parameter`` the parameter vector ``p``. Every variable
+        has ``units`` and ``long_name``; the parameter's name, the criticality (``kind``),
+        the message and the warnings (JSON list) are attributes. (No figure: a single
+        point is drawn by its :class:`HopfScan`.)"""
+        import json
+
+        import xarray as xr
+
+        from maglev_match import __version__
+
+        unit = param_unit or "1"
+        x = np.asarray(self.x, float)
+        q, padj = np.asarray(self.q), np.asarray(self.p_adj)
+        names = (list(state_names) if state_names is not None and len(state_names) == x.size
+                 else [f"x{k}" for k in range(x.size)])
+        n_q = q.size if q.size == x.size else None
+
+        def scalar(value, units, long_name, dtype=float):
+            return ((), np.asarray(value, dtype), {"units": units, "long_name": long_name})
+
+        data: dict[str, Any] = {
+            "value": scalar(self.value, unit, f"{self.param} at the Hopf point"),
+            "frequency": scalar(self.frequency, "rad/s", "Hopf frequency omega "
+                                "(eigenvalues +-i omega)"),
+            "crossing_speed": scalar(self.crossing_speed, f"1/s per {unit}",
+                                     f"d Re(lambda) / d {self.param} at the crossing"),
+            "l1": scalar(self.l1, "1/s", "first Lyapunov coefficient (<q,q> = 1, "
+                         "<p,q> = 1)"),
+            "others_stable": scalar(self.others_stable, "1", "1 if every other eigenvalue "
+                                    "has Re < 0", np.int8),
+            "converged": scalar(self.converged, "1", "Newton on the Hopf defining system "
+                                "converged and the point is valid (1) or not (0)", np.int8),
+            "residual": scalar(self.residual, "1", "scaled residual of the defining system"),
+            "equilibrium": ("state", x, {"units": "SI (see state)",
+                                         "long_name": "equilibrium state (units per state)"}),
+            "p": ("parameter", np.asarray(self.p, float), {
+                "units": "SI (see parameter)", "long_name": "parameter vector at the point"}),
+        }
+        if n_q is not None:
+            for key, vec, what in (("q", q, "eigenvector q, J q = i omega q"),
+                                   ("p_adj", padj, "adjoint eigenvector p, <p,q> = 1")):
+                for part, values in (("real", vec.real), ("imag", vec.imag)):
+                    long_name = f"{'real' if part == 'real' else 'imaginary'} part of the {what}"
+                    data[f"{key}_{part}"] = ("state", values, {"units": "1",
+                                                               "long_name": long_name})
+        coords = {"state": ("state", names, {"units": "1", "long_name": "state name"}),
+                  "parameter": ("parameter", np.arange(np.asarray(self.p).size),
+                                {"units": "1", "long_name": "entry of the parameter vector"})}
+        attrs = {"title": f"Hopf point along {self.param}", "param": self.param,
+                 "kind": self.kind, "message": self.message,
+                 "warnings": json.dumps(list(self.warnings)),
+                 "maglev_match_version": __version__}
+        return xr.Dataset(data, coords=coords, attrs=attrs)
+
 
 @dataclass(frozen=True)
 class HopfScan(Plottable):
@@ -118,6 +177,93 @@ class HopfScan(Plottable):
                         "warnings": list(hp.warnings), "label": f"H{k + 1}"})
             rows.append(rec)
         return rows
+
+    def to_xarray(self):
+        """The scan as an :class:`xarray.Dataset`: over ``scan`` the parameter along the
+        equilibrium branch and its ``max_real_part`` (1/s; over ``scan_path`` when the scan
+        ran on a parameter path of another length); over ``hopf`` (labels H1, H2, ...) the
+        Hopf points' ``value``, ``frequency`` (rad/s), ``crossing_speed``, ``l1`` (1/s),
+        ``others_stable``, ``converged``, ``residual`` and ``equilibrium`` (over ``state``);
+        over ``special`` the branch's special points (LP, BP, H: ``special_type``,
+        ``special_value``, ``special_frequency``). Units of the parameter from the system's
+        ``param_units`` when known; the parameter's name, the search interval and the
+        warnings (JSON list) are attributes."""
+        import json
+
+        import xarray as xr
+
+        from maglev_match import __version__
+
+        system = self.system
+        unit = (getattr(system, "param_units", {}) or {}).get(self.param, "") if system \
+            is not None else ""
+        unit = unit or "1"
+        vals = np.asarray(self.scan_values, float)
+        mr = np.asarray(self.max_real_part, float)
+        pts = self.points
+        n = max((np.asarray(hp.x).size for hp in pts), default=0)
+        state_names = getattr(system, "state_names", None)
+        names = (list(state_names) if state_names is not None and len(state_names) == n
+                 else [f"x{k}" for k in range(n)])
+        eq = np.full((len(pts), n), np.nan)
+        for k, hp in enumerate(pts):
+            x = np.asarray(hp.x, float)
+            eq[k, :x.size] = x
+
+        def per_point(name, dtype=float):
+            return np.array([getattr(hp, name) for hp in pts], dtype)
+
+        margin_dim = "scan" if vals.size == mr.size else "scan_path"
+        sps = self.special_points
+        data: dict[str, Any] = {
+            "max_real_part": (margin_dim, mr, {"units": "1/s", "long_name": "largest real "
+                                               "part of the eigenvalues of the equilibrium"}),
+            "value": ("hopf", per_point("value"), {"units": unit, "long_name":
+                                                   f"{self.param} at the Hopf point"}),
+            "frequency": ("hopf", per_point("frequency"), {"units": "rad/s", "long_name":
+                                                           "Hopf frequency omega"}),
+            "crossing_speed": ("hopf", per_point("crossing_speed"), {
+                "units": f"1/s per {unit}",
+                "long_name": f"d Re(lambda) / d {self.param} at the crossing"}),
+            "l1": ("hopf", per_point("l1"), {"units": "1/s", "long_name": "first Lyapunov "
+                                             "coefficient (<q,q> = 1, <p,q> = 1)"}),
+            "others_stable": ("hopf", per_point("others_stable", np.int8), {
+                "units": "1", "long_name": "1 if every other eigenvalue has Re < 0"}),
+            "converged": ("hopf", per_point("converged", np.int8), {
+                "units": "1", "long_name": "Hopf point converged and valid (1) or not (0)"}),
+            "residual": ("hopf", per_point("residual"), {
+                "units": "1", "long_name": "scaled residual of the defining system"}),
+            "equilibrium": (("hopf", "state"), eq, {
+                "units": "SI (see state)", "long_name": "equilibrium state at the Hopf "
+                "point (units per state)"}),
+            "special_type": ("special", np.array([str(sp.type) for sp in sps], dtype=str), {
+                "units": "1", "long_name": "special point of the equilibrium branch (LP, "
+                "BP or H)"}),
+            "special_value": ("special", np.array([sp.value for sp in sps], float), {
+                "units": unit, "long_name": f"{self.param} at the special point"}),
+            "special_frequency": ("special", np.array([sp.frequency for sp in sps], float), {
+                "units": "rad/s", "long_name": "frequency of the critical pair (H)"}),
+        }
+        coords = {
+            "scan": ("scan", vals, {"units": unit, "long_name": f"{self.param} along the "
+                                    "equilibrium branch (branch order)"}),
+            "hopf": ("hopf", [f"H{k + 1}" for k in range(len(pts))], {
+                "units": "1", "long_name": "Hopf point label"}),
+            "state": ("state", names, {"units": "1", "long_name": "state name"}),
+            "special": ("special", np.arange(len(sps)), {
+                "units": "1", "long_name": "special point number along the branch"}),
+        }
+        if margin_dim == "scan_path":
+            coords["scan_path"] = ("scan_path", np.arange(mr.size), {
+                "units": "1", "long_name": "point of the scanned parameter path"})
+        attrs = {"title": f"Hopf points along {self.param}", "param": self.param,
+                 "start": float(self.start), "stop": float(self.stop),
+                 "kind": json.dumps([hp.kind for hp in pts]),
+                 "warnings": json.dumps(list(self.warnings)),
+                 "maglev_match_version": __version__}
+        if self.delay is not None:
+            attrs["delay"] = json.dumps(self.delay, default=str)
+        return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
 

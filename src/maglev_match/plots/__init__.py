@@ -1,5 +1,5 @@
 """Figures. One module per analysis (``rootlocus``, ``hopf``, ``cycles``, ``simulate``,
-``maps``, ``design``, ``speed``); the shared style and the saving helper live in
+``index``, ``maps``, ``design``, ``speed``); the shared style and the saving helper live in
 ``plots.base``. Each module registers the drawer of its result types with
 :data:`maglev_match.core.results.figure` when it is imported (this package imports them
 all), so that every result's ``.plot()`` finds its figure; :func:`figure_of` and
@@ -17,6 +17,7 @@ from maglev_match.plots import (  # noqa: F401  (each registers its drawers)
     cycles,
     design,
     hopf,
+    index,
     maps,
     rootlocus,
     simulate,
@@ -30,6 +31,8 @@ __all__ = ["STYLE", "new_figure", "save_figure", "figure_of", "plot", "plt"]
 def figure_of(result, **kw):
     """The figure of an analysis result, the one the command line draws for it:
 
+    * :class:`~maglev_match.dynamics.equilibria.StabilityResult`: its eigenvalues in the
+      complex plane;
     * :class:`~maglev_match.dynamics.equilibria.RootLocusResult`: the root locus;
     * :class:`~maglev_match.dynamics.hopf.HopfScan`: the margin along the parameter with
       the Hopf points;
@@ -38,7 +41,11 @@ def figure_of(result, **kw):
     * :class:`~maglev_match.dynamics.cycles.CycleBranch` (or a list): the bifurcation
       diagram of the cycles (max/min gap deviation);
     * :class:`~maglev_match.analyses.simulation.MaglevSimulation` (or a list): the time
-      histories;
+      histories; :class:`~maglev_match.api.simulation.UserSimulation`: each state against
+      time;
+    * :class:`~maglev_match.analyses.matching.MatchingIndex`: chi_paper, chi_simulation and
+      the headline chi over the reading bands; :class:`~maglev_match.api.index.IndexSpread`:
+      the histogram of the sampled chi (else the linearised spread);
     * an :class:`xarray.Dataset` with ``chi``: the design map;
     * :class:`~maglev_match.analyses.sensitivity.IndexSensitivity`: the tornado figure;
     * :class:`~maglev_match.analyses.design.DesignResult`: the design search path;

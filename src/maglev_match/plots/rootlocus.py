@@ -1,14 +1,16 @@
-"""Root-locus figure: eigenvalues of the equilibrium as one parameter varies."""
+"""Root-locus figure: eigenvalues of the equilibrium as one parameter varies; and the
+eigenvalues of one equilibrium (a stability verdict) in the complex plane."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from maglev_match.core.results import figure
-from maglev_match.dynamics.equilibria import RootLocusResult
+from maglev_match.dynamics.equilibria import RootLocusResult, StabilityResult
 from maglev_match.plots.base import new_figure
 
-__all__ = ["root_locus_figure", "axis_crossings", "zoom_window", "NEAR_TRACKS"]
+__all__ = ["root_locus_figure", "stability_figure", "axis_crossings", "zoom_window",
+           "NEAR_TRACKS"]
 
 # The window shows the eigenvalue tracks nearest the imaginary axis: this many of them
 # (conjugate pairs count twice), i.e. the slowest three modes.
@@ -158,3 +160,44 @@ def _root_locus(result: RootLocusResult, **kw):
         kw.setdefault("design", (result.design_value, result.design_eigenvalues))
     return root_locus_figure(result.values, result.eigenvalues, result.param,
                              result.param_unit or param_unit(result.param), **kw)
+
+
+def stability_figure(result: StabilityResult, title: str | None = None):
+    """The eigenvalues of one equilibrium in the complex plane (``maglev-match
+    stability``): left, every eigenvalue; right, those nearest the imaginary axis
+    (:func:`zoom_window`). Eigenvalues with Re < 0 are blue dots, those with Re >= 0 red
+    crosses; the title gives the verdict and the margin -max Re(lambda).
+
+    Returns the figure."""
+    eig = np.asarray(result.eigenvalues)
+    fig, (ax1, ax2) = new_figure(1, 2, figsize=(11.0, 4.6))
+    left = eig.real < 0
+    (x0, x1), (y0, y1) = zoom_window(eig[None, :])
+    for ax in (ax1, ax2):
+        ax.scatter(eig.real[left], eig.imag[left], s=28, color="C0", zorder=4,
+                   label=f"Re < 0 ({int(left.sum())})")
+        if (~left).any():
+            ax.scatter(eig.real[~left], eig.imag[~left], s=50, marker="x", color="C3",
+                       linewidths=2, zorder=5, label=f"Re >= 0 ({int((~left).sum())})")
+        ax.axvline(0.0, color="k", lw=0.8)
+        ax.axhline(0.0, color="0.6", lw=0.5)
+        ax.set_xlabel("Re(lambda) (1/s)")
+        ax.set_ylabel("Im(lambda) (rad/s)")
+    ax1.set_title(f"All {eig.size} eigenvalues")
+    ax1.legend(loc="best", fontsize=8)
+    ax2.set_xlim(x0, x1)
+    ax2.set_ylim(y0, y1)
+    ax2.set_title("Near the imaginary axis")
+    if title is None:
+        name = getattr(result.system, "name", "") or "equilibrium"
+        verdict = "stable" if result.stable else "unstable"
+        if not result.equilibrium.converged:
+            verdict = "not stable: the equilibrium did not converge"
+        title = (f"{name}: {verdict}, margin -max Re(lambda) = {result.margin:.4g} 1/s")
+    fig.suptitle(title, fontsize=10)
+    return fig
+
+
+@figure.register(StabilityResult)
+def _stability(result: StabilityResult, **kw):
+    return stability_figure(result, **kw)

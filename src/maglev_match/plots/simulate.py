@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from maglev_match.analyses.simulation import MaglevSimulation, history_dataset
+from maglev_match.api.simulation import UserSimulation
 from maglev_match.core.results import figure, figure_of_many
 from maglev_match.core.units import label as unit_label
 from maglev_match.core.units import shown as shown_in
@@ -23,7 +24,7 @@ from maglev_match.maglev.catalog import model_info
 from maglev_match.plots.base import new_figure, save_figure
 
 __all__ = ["plot_simulation", "simulation_figure", "describe_initial", "describe_outcome",
-           "fitted_time_window", "transient_end"]
+           "fitted_time_window", "transient_end", "user_simulation_figure", "USER_PANELS"]
 
 _COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")
 _LIMIT_STYLE = {"color": "k", "ls": ":", "lw": 1.0}
@@ -206,3 +207,43 @@ def _simulation(sim: MaglevSimulation, **kw):
 @figure_of_many.register(MaglevSimulation)
 def _simulations(first: MaglevSimulation, sims, **kw):
     return simulation_figure(list(sims), **kw)[0]
+
+
+#: The most state panels of a user model's figure (a discretised delay system has many
+#: states: its first ones, the model's own, are drawn)
+USER_PANELS = 8
+
+
+def user_simulation_figure(sim: UserSimulation, title: str | None = None):
+    """A user model's run: one panel per state against time (the model's units), at most
+    :data:`USER_PANELS` (the rest named in a note); the title gives the model and the
+    outcome.
+
+    Returns the figure."""
+    t, x = sim.history()
+    t, x = np.asarray(t, float), np.asarray(x, float).reshape(len(t), -1)
+    names = list(sim.state_names)
+    shown = min(len(names), USER_PANELS)
+    fig, axes = new_figure(shown, 1, figsize=(8.0, 1.2 + 1.7 * shown), sharex=True,
+                           squeeze=False)
+    res = sim.result
+    for k in range(shown):
+        ax = axes[k, 0]
+        ax.plot(t, x[:, k], color=_COLOURS[k % len(_COLOURS)], lw=1.1)
+        ax.set_ylabel(names[k])
+    axes[-1, 0].set_xlabel("time t (s, or the model's time unit)")
+    if len(names) > shown:
+        axes[-1, 0].text(0.99, 0.02, f"first {shown} of {len(names)} states shown",
+                         transform=axes[-1, 0].transAxes, ha="right", fontsize=8)
+    if title is None:
+        title = (f"User model {sim.model}: {sim.outcome} at t = {res.final_time:.4g} s"
+                 + (f" (settled from t = {res.converged_time:.4g} s)"
+                    if res.converged_time is not None else ""))
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+@figure.register(UserSimulation)
+def _user_simulation(sim: UserSimulation, **kw):
+    return user_simulation_figure(sim, **kw)

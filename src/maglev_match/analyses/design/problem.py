@@ -361,6 +361,126 @@ class DesignResult(Plottable):
             "warnings": list(self.warnings),
         }
 
+    def to_xarray(self) -> Any:
+        """The search as an :class:`xarray.Dataset`. The best point: ``design`` (the varied
+        parameters' values) over ``variable``, with ``lower_bound``, ``upper_bound`` and
+        ``variable_unit``, the 0-d ``objective`` and the design's index ``chi``,
+        ``chi_paper``, ``chi_simulation``, ``h``, ``w0``, ``max_real_part``. The optimiser's
+        path: ``path`` over (``candidate``, ``iteration``, ``variable``) and ``path_chi``
+        over (``candidate``, ``iteration``), padded with NaN after each run's
+        ``path_length``; each run's ``start``, ``candidate_design``, ``candidate_chi``,
+        ``candidate_chi_paper``, ``candidate_chi_simulation``, ``candidate_margin``,
+        ``candidate_feasible``, ``candidate_violation``, ``candidate_iterations`` and
+        ``candidate_evaluations``. The coarse start grid: ``grid_value`` over
+        (``grid_point``, ``variable``) and ``grid_chi``. Status, goal, requirements, active
+        constraints, counts, messages and warnings are attributes (lists as JSON)."""
+        import json
+
+        import xarray as xr
+
+        from maglev_match.core.datasets import annotate
+        from maglev_match.core.params import PARAMETER_DOCS
+
+        names = list(self.problem.names)
+        cands = self.candidates
+        d = len(names)
+        k_max = max((len(c.path) for c in cands), default=0)
+        path = np.full((len(cands), k_max, d), np.nan)
+        path_chi = np.full((len(cands), k_max), np.nan)
+        for j, c in enumerate(cands):
+            k = len(c.path)
+            path[j, :k] = np.asarray(c.path, float).reshape(k, d)
+            path_chi[j, :k] = np.asarray(c.path_chi, float)
+
+        def num(v: Any) -> float:
+            return float("nan") if v is None else float(v)
+
+        def per_candidate(name: str, dtype: Any = float) -> np.ndarray:
+            if dtype is float:
+                return np.array([num(getattr(c, name)) for c in cands], float)
+            return np.array([getattr(c, name) for c in cands], dtype)
+
+        units = {n: PARAMETER_DOCS.get(n, ("",))[0] for n in names}
+        obj = self.problem.objective
+        ix = self.index
+        data: dict[str, Any] = {
+            "design": ("variable", np.array([self.values[n] for n in names], float)),
+            "lower_bound": ("variable", np.array([v.lo for v in self.problem.variables])),
+            "upper_bound": ("variable", np.array([v.hi for v in self.problem.variables])),
+            "variable_unit": ("variable", np.array([units[n] for n in names], dtype=str)),
+            "objective": ((), float(self.objective)),
+            "chi": ((), num(ix.chi)), "chi_paper": ((), num(ix.chi_paper)),
+            "chi_simulation": ((), num(ix.chi_simulation)), "h": ((), num(ix.h)),
+            "w0": ((), num(ix.w0)), "max_real_part": ((), num(ix.max_real_part)),
+            "path": (("candidate", "iteration", "variable"), path),
+            "path_chi": (("candidate", "iteration"), path_chi),
+            "path_length": ("candidate", np.array([len(c.path) for c in cands], np.int64)),
+            "start": (("candidate", "variable"),
+                      np.array([c.start for c in cands], float).reshape(len(cands), d)),
+            "candidate_design": (("candidate", "variable"),
+                                 np.array([c.values for c in cands], float).reshape(
+                                     len(cands), d)),
+            "candidate_chi": ("candidate", per_candidate("chi")),
+            "candidate_chi_paper": ("candidate", per_candidate("chi_paper")),
+            "candidate_chi_simulation": ("candidate", per_candidate("chi_simulation")),
+            "candidate_margin": ("candidate", per_candidate("margin")),
+            "candidate_feasible": ("candidate", per_candidate("feasible", np.int8)),
+            "candidate_violation": ("candidate", per_candidate("violation")),
+            "candidate_iterations": ("candidate", per_candidate("iterations", np.int64)),
+            "candidate_evaluations": ("candidate", per_candidate("evaluations", np.int64)),
+            "grid_value": (("grid_point", "variable"),
+                           np.asarray(self.grid_values, float).reshape(-1, d)),
+            "grid_chi": ("grid_point", np.asarray(self.grid_chi, float)),
+        }
+        coords = {"variable": ("variable", names),
+                  "candidate": ("candidate", np.arange(1, len(cands) + 1)),
+                  "iteration": ("iteration", np.arange(k_max)),
+                  "grid_point": ("grid_point", np.arange(len(self.grid_chi)))}
+        see = "SI (see variable_unit)"
+        docs = {  # name: (units, long name)
+            "design": (see, "the design: value of each varied parameter"),
+            "lower_bound": (see, "lower bound of the varied parameter"),
+            "upper_bound": (see, "upper bound of the varied parameter"),
+            "variable_unit": ("1", "SI unit of the varied parameter"),
+            "objective": ("1" if obj == "chi" else units.get(obj, ""),
+                          f"objective ({self.problem.goal} {obj}) at the design"),
+            "chi_paper": ("1", "the paper's chi at the design"),
+            "chi_simulation": ("1", "chi_simulation at the design (NaN: not simulated)"),
+            "path": (see, "optimiser iterates"),
+            "path_chi": ("1", "chi at the optimiser iterates"),
+            "path_length": ("1", "iterates of the run"),
+            "start": (see, "start of the run (from the coarse grid)"),
+            "candidate_design": (see, "the run's end point, re-checked"),
+            "candidate_chi": ("1", "headline chi of the run's end point"),
+            "candidate_chi_paper": ("1", "the paper's chi of the run's end point"),
+            "candidate_chi_simulation": ("1", "chi_simulation of the run's end point"),
+            "candidate_margin": ("1/s", "stability margin of the run's end point"),
+            "candidate_feasible": ("1", "the run's end point meets every requirement (1) "
+                                        "or not (0)"),
+            "candidate_violation": ("1", "largest relative shortfall of a requirement"),
+            "candidate_iterations": ("1", "optimiser iterations of the run"),
+            "candidate_evaluations": ("1", "index evaluations of the run"),
+            "grid_value": (see, "coarse start grid point"),
+            "grid_chi": ("1", "chi on the coarse start grid"),
+            "variable": ("1", "varied parameter"),
+            "candidate": ("1", "optimiser run (1-based)"),
+            "iteration": ("1", "iterate number"),
+            "grid_point": ("1", "coarse grid point number"),
+        }
+        ds = xr.Dataset(data, coords=coords, attrs={
+            "title": "maglev-match design search",
+            "status": str(self.status), "goal": str(self.problem.goal),
+            "objective_name": obj,
+            "requirements": json.dumps([str(r) for r in self.problem.requirements]),
+            "active": json.dumps(list(self.active)), "iterations": int(self.iterations),
+            "evaluations": int(self.evaluations), "seconds": float(self.seconds),
+            "grid_shape": json.dumps(list(self.grid_shape)), "message": self.message,
+            "candidate_messages": json.dumps([c.message for c in cands]),
+            "case": str(ix.case), "reading": ix.reading,
+            "warnings": json.dumps(list(self.warnings))})
+        return annotate(ds, units={k: u for k, (u, _) in docs.items()},
+                        long_names={k: n for k, (_, n) in docs.items()})
+
 
 # ---------------------------------------------------------------------------------------
 # parsing

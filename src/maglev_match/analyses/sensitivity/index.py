@@ -155,6 +155,74 @@ class IndexSensitivity(Plottable):
             "warnings": list(self.warnings),
         }
 
+    def to_xarray(self) -> Any:
+        """The derivative table as an :class:`xarray.Dataset` over ``parameter`` (the rows'
+        names, in the table's order): ``value`` and ``parameter_unit`` of each parameter,
+        ``dchi``, ``dchi_paper``, ``dchi_simulation``, ``dchi_left`` / ``dchi_right``
+        (per unit of the parameter), ``elasticity``, ``dmargin`` (1/s per unit),
+        ``dhopf_distance``, the stability ``boundary`` (and ``boundary_relative``), the
+        ``limit_boundary`` and the row's ``note`` (NaN or '' where not available); and the
+        0-d ``chi``, ``chi_paper``, ``chi_simulation``, ``h``, ``w0`` and
+        ``max_real_part`` of the index it differentiates. How the derivatives were
+        obtained (``status``, ``paper_status``, ``simulation_status``), the notes and the
+        warnings (JSON list) are attributes."""
+        import json
+
+        import xarray as xr
+
+        from maglev_match.core.datasets import annotate
+
+        rows = self.rows
+
+        def col(name: str) -> np.ndarray:
+            return np.array([float("nan") if getattr(r, name) is None
+                             else float(getattr(r, name)) for r in rows], float)
+
+        per = "1 per unit of the parameter (see parameter_unit)"
+        columns = {  # name: (units, long name)
+            "value": ("SI (see parameter_unit)", "parameter value"),
+            "dchi": (per, "d chi / d p of the headline index"),
+            "dchi_paper": (per, "d chi_paper / d p (the paper's definition)"),
+            "dchi_simulation": (per, "d chi_simulation / d p (NaN: not available)"),
+            "dchi_left": (per, "one-sided d chi / d p for a decrease of p (at a switch)"),
+            "dchi_right": (per, "one-sided d chi / d p for an increase of p (at a switch)"),
+            "elasticity": ("1", "elasticity of chi, (p / chi) d chi / d p"),
+            "dmargin": ("1/s per unit of the parameter", "d margin / d p, margin = "
+                        "-max Re(lambda)"),
+            "dhopf_distance": (per, "d (relative Hopf distance) / d p"),
+            "boundary": ("SI (see parameter_unit)", "value of p at the nearest stability "
+                         "boundary"),
+            "boundary_relative": ("1", "(boundary - p) / p"),
+            "limit_boundary": ("SI (see parameter_unit)", "first-order value of p where the "
+                               "bounding cycle reaches the gap limit"),
+        }
+        data: dict[str, Any] = {k: ("parameter", col(k)) for k in columns}
+        data["parameter_unit"] = ("parameter", np.array([r.unit for r in rows], dtype=str))
+        data["note"] = ("parameter", np.array([r.note for r in rows], dtype=str))
+        ix = self.index
+        head = {"chi": ix.chi, "chi_paper": ix.chi_paper, "chi_simulation": ix.chi_simulation,
+                "h": ix.h, "w0": ix.w0, "max_real_part": ix.max_real_part}
+        data.update({k: ((), float("nan") if v is None else float(v))
+                     for k, v in head.items()})
+        ds = xr.Dataset(data, coords={"parameter": ("parameter", [r.name for r in rows])},
+                        attrs={
+            "title": "maglev-match sensitivities of the matching index",
+            "status": str(self.status),
+            "paper_status": "" if self.paper_status is None else str(self.paper_status),
+            "simulation_status": self.simulation_status, "switch_note": self.switch_note,
+            "limit_boundary_note": self.limit_boundary_note, "case": str(ix.case),
+            "model": ix.model, "reading_basis": str(ix.reading_basis),
+            "warnings": json.dumps(list(self.warnings))})
+        return annotate(ds, units={k: u for k, (u, _) in columns.items()}
+                        | {"chi_simulation": "1", "parameter_unit": "1", "note": "1",
+                           "parameter": "1"},
+                        long_names={k: n for k, (_, n) in columns.items()}
+                        | {"chi_paper": "matching index by the paper's definition",
+                           "chi_simulation": "h_simulation / w0 (NaN: not simulated)",
+                           "parameter_unit": "SI unit of the parameter",
+                           "note": "how the row's derivative was obtained",
+                           "parameter": "parameter name"})
+
 
 # ---------------------------------------------------------------------------------------
 # beam and vehicle data -> model parameters, w0, h_max (the model's own map)
