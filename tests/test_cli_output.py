@@ -291,3 +291,17 @@ def test_map_out_folder_gets_the_default_name(capsys, tmp_path):
               if m and not m.group(2).startswith("still ")]
     assert stages[-2:] == ["1/1 tiles done",
                            "spot check: recomputing sample points one by one ..."]
+
+
+def test_default_file_names_carry_the_parameter_set(capsys, tmp_path, monkeypatch):
+    # a run with other values does not overwrite the standstill answer
+    monkeypatch.chdir(tmp_path)
+    assert run(capsys, "stability")[0] == 0
+    assert run(capsys, "stability", "--set", "kD=120", "--set", "tau=0.001")[0] == 0
+    assert run(capsys, "stability", "--preset", "turnout-stiff")[0] == 0
+    names = sorted(p.name for p in (tmp_path / OUTPUT_ROOT / "stability").iterdir())
+    assert names == ["stability_unit.csv", "stability_unit_kD-120_tau-0.001.csv",
+                     "stability_unit_turnout-stiff.csv"]
+    # an explicit --out keeps its own names
+    assert run(capsys, "stability", "--set", "kD=120", "--out", "res")[0] == 0
+    assert (tmp_path / "res" / "stability_unit.csv").is_file()

@@ -321,3 +321,19 @@ def test_complex_and_locally_undefined_fields_are_refused(tmp_path):
     ok = load_model(write(tmp_path, "s.py", head + "X0 = [1.0, 1.0]\ndef rhs(x, p):\n"
                           "    return 1.0 / (x - 0.999) - 1000.0\n"))
     assert ok.system().dim == 2
+
+
+def test_a_run_that_blows_up_is_a_failure_with_exit_code_1(capsys, tmp_path):
+    # x' = a x^3 from x = 1 reaches infinity at t = 1 / (2 a) = 0.01 s: the integrator
+    # cannot pass it, and the command says so (exit 1), text and JSON alike
+    path = tmp_path / "blow.py"
+    path.write_text('STATES = ["x"]\nPARAMS = {"a": 50.0}\nX0 = [1.0]\n\n\n'
+                    'def rhs(x, p):\n    return [p["a"] * x[0] ** 3]\n')
+    for extra in ((), ("--json",)):
+        code = main(["simulate", "--model", str(path), "--t", "1", *extra])
+        out = capsys.readouterr()
+        assert code == 1, out.err
+        assert "error: the simulation failed at t = 0.01" in out.err
+    doc = json.loads(out.out)
+    assert doc["outcome"] == "failed"
+    assert doc["final_time"] == pytest.approx(1 / (2 * 50.0), rel=1e-6)

@@ -246,12 +246,14 @@ def _search_range(studied: StudiedModel, system: Any, param: str, start: float |
         b = design * 4 if stop is None else stop
     if param in studied.delays:  # a delay axis: the discretised delay system up to its end
         a = 0.0 if start is None else start
+        unit = "" if studied.is_user else " s"
+        for field_, value in (("start", a), ("stop", b)):
+            if value < 0:
+                raise ParameterError(field_, value, f"{param} is a delay: the search range "
+                                     f"must lie at or above 0 (>= 0{unit})")
         if not studied.is_user and not b > 0:
-            raise ParameterError("stop", b, f"give the largest delay {param} to search (the "
-                                 f"design value is {design:g} s)")
-        if min(a, b) < 0:
-            raise ParameterError("start", min(a, b), f"{param} is a delay: >= 0"
-                                 + ("" if studied.is_user else " s"))
+            raise ParameterError("stop", b, f"give the largest delay {param} to search, > 0 "
+                                 f"s (the design value is {design:g} s)")
         system = studied.system(tau_max=max(a, b))
     if studied.params is not None and is_engineering(param):  # omega1, sigma follow it
         if start is None or stop is None:

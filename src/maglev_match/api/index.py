@@ -18,7 +18,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from maglev_match.analyses.sensitivity import IndexSensitivity
 
 __all__ = ["matching_index", "index_sensitivity", "index_spread", "IndexSpread",
-           "check_scatter", "scatter_rows"]
+           "check_scatter", "scatter_rows", "refuse_delay"]
 
 
 def _index_params(params: Params | str | None, config: str | Path | None,
@@ -74,6 +74,7 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
 def index_sensitivity(params: Params | str | None = None, *, model: str = "unit",
                       boundaries: bool = True, simulate: bool = True,
                       index: MatchingIndex | None = None, config: str | Path | None = None,
+                      stage: Callable[[str], None] | None = None,
                       **overrides: Any) -> IndexSensitivity:
     """Exact d chi / d p of the headline index for every parameter (`maglev-match
     sensitivity`): implicit differentiation of the converged cycle that decides h, or of
@@ -96,6 +97,8 @@ def index_sensitivity(params: Params | str | None = None, *, model: str = "unit"
         The index at these parameters, already computed (it is then not computed again).
     config : str or Path, optional
         A TOML file applied on top of the preset.
+    stage : callable, optional
+        Called with a line of text once the inputs are checked and the work starts.
     **overrides : float
         Parameter values applied on top.
 
@@ -108,8 +111,20 @@ def index_sensitivity(params: Params | str | None = None, *, model: str = "unit"
     from maglev_match.analyses.sensitivity import index_sensitivity as _index_sensitivity
 
     base = _index_params(params, config, overrides)
+    refuse_delay(base, "the sensitivities of the index")
+    if stage is not None:
+        stage("computing the index and its sensitivities ...")
     return _index_sensitivity(base, index, boundaries=boundaries,
                               model=model_info(model).name, simulate=simulate)
+
+
+def refuse_delay(params: Params, what: str) -> None:
+    """``what`` is computed for the delay-free models only: a parameter set with a delay
+    (tau > 0) is refused, naming tau, before any work."""
+    if params.tau > 0:
+        raise ParameterError("tau", params.tau, f"{what} are computed for the delay-free "
+                             "models only: set tau = 0 (the delay itself is studied with "
+                             "stability, hopf --param tau and index)")
 
 
 def scatter_rows(params: Params | str | None = None, *, model: str = "unit",
@@ -127,8 +142,14 @@ def check_scatter(params: Params | str | None = None, scatter: Mapping[str, floa
     before any computation, so a typo costs no index)."""
     if not scatter:
         return
+    refuse_delay(resolve_params(params, **overrides), "the spread of chi and the "
+                 "sensitivities it is built on")
     rows = scatter_rows(params, model=model, **overrides)
     for name in scatter:
+        if name == "tau":
+            raise ParameterError("scatter", name, "the delay has no row in the sensitivity "
+                                 "table (the sensitivities are those of the delay-free "
+                                 f"model); scatter one of {', '.join(rows)}")
         if name not in rows:
             raise ParameterError("scatter", name, "has no row in the sensitivity table of "
                                  "this model (a derived or unused value; rows: "

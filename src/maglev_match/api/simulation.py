@@ -222,14 +222,15 @@ def simulate_over_spans(params: Params | str | None = None, *, model: str = "uni
     """
     import math
 
-    from maglev_match.analyses.speed.grid import KMH, SPEED_MAX
+    from maglev_match.analyses.speed.grid import KMH, SPEED_MAX, SPEED_MIN
     from maglev_match.analyses.speed.spans import simulate_over_spans as _over_spans
     from maglev_match.analyses.speed.sweep import SpeedOptions, check_speed_setup
 
-    kmh_max = SPEED_MAX / KMH
-    if not (math.isfinite(kmh) and 0 < kmh <= kmh_max):
-        raise ParameterError("kmh", kmh, f"must lie in (0, {kmh_max:g}] km/h for a run over "
-                             "spans")
+    kmh_max, kmh_min = SPEED_MAX / KMH, SPEED_MIN / KMH
+    if not (math.isfinite(kmh) and kmh_min <= kmh <= kmh_max):
+        raise ParameterError("kmh", kmh, f"must lie in [{kmh_min:g}, {kmh_max:g}] km/h for a "
+                             "run over spans (slower, one span passage lasts longer than a "
+                             "run at speed can integrate)")
     p = resolve_params(params, config=config, **overrides)
     check_speed_setup(p, model, [kmh * KMH], spans)
     if spans > SPANS_MAX:

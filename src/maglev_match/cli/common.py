@@ -238,8 +238,31 @@ def output_target(out: Path | None, command: str, stem: str) -> tuple[Path, str]
     """
     path = output_path(out, str(default_output(command)))
     if not is_file_name(path):
-        return path, stem
+        return path, stem + (parameter_suffix() if out is None else "")
     return path.parent, path.stem
+
+
+def parameter_suffix() -> str:
+    """What a default file name adds for the parameter set of the running command: a
+    preset other than the default, a --config file's stem and every --set item, e.g.
+    ``_turnout-stiff_tau-0.001`` for ``--preset turnout-stiff --set tau=0.001``, so that a
+    run with other values does not overwrite the standstill answer in
+    ``maglev-match-out/``. Empty outside a command or without those options."""
+    ctx = _current_context()
+    if ctx is None:
+        return ""
+    parts = []
+    preset = ctx.params.get("preset")
+    if preset and given("preset") and preset != DEFAULT_PRESET_NAME:
+        parts.append(str(preset))
+    config = ctx.params.get("config")
+    if config:
+        parts.append(Path(str(config)).stem)
+    for item in ctx.params.get("set_") or []:
+        name, _, value = str(item).partition("=")
+        parts.append(f"{name.strip()}-{value.strip()}")
+    text = "".join(f"_{p}" for p in parts)
+    return re.sub(r"[^A-Za-z0-9._+-]", "_", text)[:120]
 
 
 def write_result_json(out: Path | None, command: str, stem: str, data: Any,

@@ -245,9 +245,8 @@ def sensitivity_command(
     from maglev_match import api  # (the numerics and JAX, once the options are good)
 
     with progress_report("sensitivity") as prog, api_options(SENSITIVITY_OPTIONS):
-        prog.stage("computing the index and its sensitivities ...")
         sens = api.index_sensitivity(params, model=model, boundaries=boundaries,
-                                     simulate=not no_simulation)
+                                     simulate=not no_simulation, stage=prog.stage)
     folder, stem = output_target(out, "sensitivity", "tornado")
     figs = sens.plot(folder / stem)
     sp = _spread(params, sc, monte_carlo, folder, workers, resume, seed, model,

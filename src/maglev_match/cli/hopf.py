@@ -5,6 +5,7 @@ computation in :mod:`maglev_match.api.hopf`, the answer printed and saved here."
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -151,8 +152,10 @@ def _parse_ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
             raise UserError(f"--range '{item}': expected NAME=FROM:TO, e.g. sigma=1e-4:8e-4")
         name, text = item.split("=", 1)
         a, b = parse_range(text, f"--range {name}")
+        if not (math.isfinite(a) and math.isfinite(b)):
+            raise UserError(f"--range {item}: FROM and TO must be finite numbers")
         if not a < b:
-            raise UserError(f"--range {item}: the range must be increasing")
+            raise UserError(f"--range {item}: the range must be increasing (FROM < TO)")
         out[name.strip()] = (a, b)
     return out
 

@@ -33,6 +33,7 @@ from maglev_match.cli.common import (
     n_save_option,
     output_target,
     params_from_options,
+    print_error,
     print_warnings,
     progress_report,
     refuse_given,
@@ -185,6 +186,7 @@ def simulate_command(
         for w in written:
             console_err.print(f"wrote {w}", highlight=False)
         print_warnings(sim.warnings)
+        _fail_if_failed(sim.result)
         return
     res = sim.result
     info = model_info(model)
@@ -208,6 +210,7 @@ def simulate_command(
     console.print(f"steps: {res.accepted} accepted, {res.rejected} rejected", highlight=False)
     for w in written:
         console.print(f"wrote {w}", highlight=False)
+    _fail_if_failed(res)
 
 
 def _user_outputs(sim, model: str, out: Path | None, json_out: bool) -> None:
@@ -227,6 +230,7 @@ def _user_outputs(sim, model: str, out: Path | None, json_out: bool) -> None:
     if json_out:
         emit_json(summary)
         print_warnings(sim.warnings)
+        _fail_if_failed(sim.result)
         return
     res = sim.result
     console.print(f"Model {sim.model} ({model}): {res.outcome} at t = {res.final_time:.6g} s",
@@ -238,3 +242,14 @@ def _user_outputs(sim, model: str, out: Path | None, json_out: bool) -> None:
     for w in written:
         console.print(f"wrote {w}", highlight=False)
     print_warnings(sim.warnings)
+    _fail_if_failed(res)
+
+
+def _fail_if_failed(res) -> None:
+    """A run that failed (a non-finite state, the step limit reached) is a numerical
+    failure: exit code 1 after the result was printed, never a silent exit 0."""
+    if str(res.outcome) == "failed":
+        print_error(f"the simulation failed at t = {res.final_time:.6g} s (a non-finite "
+                    "state, or the step limit was reached): the history up to there is all "
+                    "there is")
+        raise typer.Exit(1)

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from maglev_match.analyses.speed.grid import KMH, SPEED_MAX
+from maglev_match.analyses.speed.grid import KMH, SPEED_MAX, SPEED_MIN
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.dynamics.integrate.passage import PassageOptions
 from maglev_match.maglev import moving as mv
@@ -88,6 +88,11 @@ def check_speed_setup(params: Params, model: str, speeds: Sequence[float] = (),
     except ValueError:
         raise ParameterError("--model", model, "must be 'unit', 'vehicle' or 'force' at "
                              "speed") from None
+    if params.tau > 0:
+        raise ParameterError("tau", params.tau, "the models at speed have no delay of the "
+                             "outer loop yet: set tau = 0 for a computation at speed (the "
+                             "delay is analysed standing still: stability, hopf --param tau, "
+                             "index)")
     if kind is not MovingModel.VEHICLE and "sigma" in params.explicit:
         raise ParameterError(
             "sigma", params.sigma, "is set directly, but at speed the unit's coupling to the "
@@ -115,6 +120,11 @@ def check_speed_setup(params: Params, model: str, speeds: Sequence[float] = (),
         if v > SPEED_MAX:
             raise ParameterError("speed", v, f"must be at most {SPEED_MAX:g} m/s "
                                  f"({SPEED_MAX / KMH:g} km/h)")
+        if 0 < v < SPEED_MIN:
+            raise ParameterError("speed", float(v), f"must be 0 (standstill) or at least "
+                                 f"{SPEED_MIN:g} m/s ({SPEED_MIN / KMH:g} km/h): slower, one "
+                                 "span passage lasts longer than a run at speed can "
+                                 "integrate, and the answer is the standstill one")
     return kind
 
 
