@@ -347,3 +347,26 @@ def test_design_ranges_refuse_constants_derived_values_and_meaningless_chi():
     with pytest.raises(ParameterError, match="sigma = 1e-08") as err:
         check_vary_ranges(base, [parse_vary("sigma=1e-8:1e-3")])
     assert "has no physical meaning" in str(err.value)
+
+
+def test_an_edited_hopf_curve_file_is_refused(capsys, tmp_path):
+    """A saved Hopf curve whose model or number of states was edited is refused with the
+    attribute named, not continued as model A (issue 31)."""
+    import xarray as xr
+
+    code, _, err = _run(capsys, ["hopf-curve", "--preset", "alpha1", "--range",
+                                 "sigma=3e-4:5e-4", "--grid", "0", "--out", str(tmp_path),
+                                 "--json"])
+    assert code == 0, err
+    ds = xr.load_dataset(tmp_path / "hopf_curve_unit_omega1_sigma.nc", engine="h5netcdf")
+    for attr, value, words in (("model", "vehicle", "was saved for model 'vehicle', not for "
+                                "model 'unit'"),
+                               ("n_states", 13, "attribute n_states = 13 but 9 state names")):
+        edited = ds.copy()
+        edited.attrs[attr] = value
+        path = tmp_path / f"edited_{attr}.nc"
+        edited.to_netcdf(path, engine="h5netcdf")
+        code, out, err = _run(capsys, ["hopf-curve", "--restart", str(path), "--label", "P3",
+                                       "--grid", "0"])
+        assert code == 2 and out == "", err
+        assert words in err and err.count("\n") == 1, err

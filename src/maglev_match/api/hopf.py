@@ -345,8 +345,11 @@ def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
     restart, label : optional
         A curve file written by `hopf-curve --out` and the point to continue from (`P<k>`
         or a codimension-two label such as `GH1`).
-    names, bounds : deprecated
-        The earlier form of `x` and `y` (`names=(x, y)`, `bounds={name: (low, high)}`).
+    bounds : dict, optional
+        `{name: (low, high)}`: bounds of the plane's parameters (those not given in `x`,
+        `y`; e.g. of the default plane when `x` and `y` are left out).
+    names : deprecated
+        The earlier form of `x` and `y` (`names=(x, y)`).
     study : bool
         Return the :class:`HopfCurveStudy` (curves, grid, codimension-two table, restart,
         netCDF datasets, figure) instead of the list of curves.
@@ -363,7 +366,7 @@ def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
 
     from maglev_match.dynamics.hopf_curve import hopf_curves_from_scans, stability_grid
 
-    if names is not None or bounds is not None:
+    if names is not None:
         deprecated("hopf_curve(params, names=(P1, P2), bounds={...})",
                    "hopf_curve(params, x=(P1, lo, hi), y=(P2, lo, hi))")
     if progress is not None:
@@ -491,6 +494,12 @@ def _restart(studied: StudiedModel, restart, label, names, given, max_step, own_
                              "and the label of the point together")
     system, params = studied.system(), studied.params
     rs = load_hopf_curve_restart(restart, label, system)
+    if not studied.is_user and rs.model != studied.label:
+        from maglev_match.analyses.restart import RestartFileError
+
+        raise RestartFileError(rs.path, f"was saved for model '{rs.model}', not for model "
+                               f"'{studied.label}' (its attribute model); restart with the "
+                               "model that saved it")
     if names is not None and tuple(names) != rs.names:
         raise ParameterError("x/y", ",".join(names), f"the saved curve is in "
                              f"({', '.join(rs.names)}); a restart continues it there")

@@ -227,7 +227,9 @@ def hopf_curve_command(
 
     with progress_report("hopf-curve") as prog, api_options(HOPF_CURVE_OPTIONS), \
             _restart_errors():
-        st = api.hopf_curve(params, model=model, names=names, bounds=bounds or None,
+        x, y = ((None, None) if names is None else
+                (tuple((n, *bounds.pop(n)) if n in bounds else n for n in names)))
+        st = api.hopf_curve(params, x, y, model=model, bounds=bounds or None,
                             n_scan=scan_steps, max_step=max_step, grid=grid,
                             stage=prog.stage, restart=restart, label=label, study=True,
                             **overrides)

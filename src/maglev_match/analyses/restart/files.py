@@ -253,6 +253,10 @@ def attr_int(ds: Any, where: str, name: str) -> int | None:
 def check_saved_model(ds: Any, where: str, system: Any, states: list[str],
                       params: list[str]) -> None:
     """The saved model's state and parameter names must be the caller's."""
+    n_attr = attr_int(ds, where, "n_states")
+    if n_attr is not None and n_attr != len(states):
+        raise RestartFileError(where, f"attribute n_states = {n_attr} but {len(states)} state "
+                               "names: the file was edited or damaged")
     if system is None:
         return
     model = ds.attrs.get(MODEL_ATTR)
