@@ -54,6 +54,8 @@ def rhs(x, p):
 
 MODEL_FILES: dict[str, bytes] = {
     "good.py": (_HEAD + _RHS).encode(),
+    "dde_past_end.py": (b'STATES = ["x"]\nPARAMS = {"a": 2.0, "tau": 0.1}\nDELAYS = ("tau",)\n'
+                        b'\n\ndef rhs(x, xd, p):\n    return -p["a"] * xd[1]\n'),
     "lorenz.py": LORENZ.encode(),
     "exit0.py": (_HEAD + "import sys\nsys.exit(0)\n" + _RHS).encode(),
     "exit3.py": (_HEAD + "import sys\nsys.exit(3)\n" + _RHS).encode(),
@@ -238,6 +240,8 @@ CASES: tuple[Case, ...] = (
     _m("Latin-1 byte without a coding line", "latin1.py", (), 2,
        "is not UTF-8 text (byte 0xe9 at line 1)"),
     _m("nested X0", "nested_x0.py", (), 2, "nested list of shape (1, 3)"),
+    _m("delay model reading xd[1] with one delay", "dde_past_end.py", (), 2,
+       "rhs reads past the delayed states"),
     _m("a FIFO named .py", "fifo.py", (), 2, "is a FIFO"),
     _m("a link to /dev/zero", "zero.py", (), 2, "is a device"),
     _m("--set overflows the right-hand side", "lorenz.py", ("--set", "rho=1e308"), 2,

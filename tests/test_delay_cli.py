@@ -123,3 +123,17 @@ def test_negative_delay_set_on_a_model_file_exits_2(capsys, tmp_path):
     path = write(tmp_path, "dde.py", LINEAR_DDE)
     code, out, err = run(capsys, "stability", "--model", path, "--set", "tau=-0.5")
     assert code == 2 and "tau" in err and ">= 0" in err
+
+
+def test_simulating_a_delay_model_file_reports_the_models_own_states(capsys, tmp_path):
+    # x' = -a x(t - tau) from a constant past x = 1: by the method of steps
+    # x(t) = 1 - a t + a^2 (t - tau)^2 / 2 on [tau, 2 tau]; at t = 0.15 (a = 2, tau = 0.1)
+    # x = 0.705. The run integrates the discretised past, but reports the model's one state.
+    model = write(tmp_path, "dde1.py", 'STATES = ["x"]\nPARAMS = {"a": 2.0, "tau": 0.1}\n'
+                  'DELAYS = ("tau",)\nX0 = [1.0]\n\n\ndef rhs(x, xd, p):\n'
+                  '    return -p["a"] * xd[0]\n')
+    code, out, err = run(capsys, "simulate", "--model", model, "--t", "0.15", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert list(doc["final_state"]) == ["x"]
+    assert doc["final_state"]["x"] == pytest.approx(0.705, rel=1e-5)

@@ -171,7 +171,14 @@ def simulate(params: Params | str | None = None, *, model: str = "unit",
                                  f"{n} states ({', '.join(studied.user.states)})")
         res = _simulate(system, _lifted(system, state), t_end, options=options,
                         n_save=n_save)
-        return UserSimulation(studied.label, studied.file, tuple(system.state_names), res)
+        if res.x.shape[-1] != n:  # a delay model's discretised past: keep the model's states
+            import dataclasses
+
+            res = dataclasses.replace(
+                res, x=np.asarray(res.x)[:, :n], final_state=np.asarray(res.final_state)[:n],
+                event_state=None if res.event_state is None else
+                np.asarray(res.event_state)[:n])
+        return UserSimulation(studied.label, studied.file, tuple(studied.user.states), res)
     from maglev_match.analyses.simulation import simulate_maglev
 
     m = studied.maglev

@@ -594,6 +594,8 @@ def _vectorised_delayed(fn: Callable[..., Any], names: tuple[str, ...],
         return jnp.asarray(out, dtype=jnp.float64)
 
     g.__name__ = getattr(fn, "__name__", "user_function")
+    g.__wrapped_rhs__ = fn  # the file's own function (see _check_delay_indices)
+    g.__param_names__ = names
     return g
 
 
@@ -626,7 +628,32 @@ def _check_delayed_rhs(path: Path, vrhs: Callable, x0: np.ndarray, p0: np.ndarra
     _check_traceable(path, "rhs(x, xd, p) (in xd)", delayed, x0, p0, timeout)
     _, jac = _check_traceable(path, "rhs(x, xd, p) (constant past)",
                               _constant_past(vrhs, n_delays), x0, p0, timeout)
+    _check_delay_indices(path, vrhs, x0, p0, n_delays)
     return val, jac
+
+
+def _check_delay_indices(path: Path, vrhs: Callable, x0: np.ndarray, p0: np.ndarray,
+                         n_delays: int) -> None:
+    """``xd[k]`` must name a delay of the file: traced by JAX, an index past the end is
+    clamped silently (``xd[1]`` with one delay would read ``xd[0]``). One plain NumPy call
+    of ``rhs`` (after the traced checks, so no loop can hang here) shows such an index as
+    an IndexError; any other error of a NumPy call is left to the traced checks (a file
+    may use JAX-only operations)."""
+    fn = getattr(vrhs, "__wrapped_rhs__", None)
+    if fn is None:
+        return
+    names = vrhs.__param_names__
+    xd = np.tile(np.asarray(x0, dtype=float), (n_delays, 1))
+    try:
+        with _guarded(path, "rhs"):
+            fn(np.asarray(x0, dtype=float), xd, {n: float(p0[i]) for i, n in enumerate(names)})
+    except IndexError as exc:
+        rows = "xd[0]" if n_delays == 1 else f"xd[0] .. xd[{n_delays - 1}]"
+        raise ModelFileError(path, f"rhs reads past the delayed states ({exc}): xd has one "
+                             f"row per entry of DELAYS ({n_delays}), so only {rows} "
+                             "exist") from None
+    except Exception:  # noqa: BLE001 - the traced checks judge the file
+        return
 
 
 def _identity_signal(x, p):
