@@ -113,6 +113,12 @@ def test_kill_during_write_leaves_the_old_file(tmp_path, how):
     assert target.read_bytes() == old
     # the killed writer's partial data went to a temporary file beside it, never the target
     assert len(_leftovers(tmp_path)) == 1
+    # the next write of that file removes the dead writer's temporary file, not a live one
+    live = tmp_path / f".map.{os.getppid()}-abcd.tmp.nc"
+    live.write_bytes(b"")
+    atomic_write_text(target, "new")
+    assert target.read_text() == "new"
+    assert _leftovers(tmp_path) == [live.name]
 
 
 # ---------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ from maglev_match.cli.common import (
     write_result_json,
 )
 from maglev_match.cli.design import McOpt, ResumeOpt, ScatterOpt, SeedOpt, WorkersOpt
-from maglev_match.cli.models import MaglevOnlyModelOpt, is_model_file, refuse_model_file
+from maglev_match.cli.models import is_model_file, refuse_model_file
 from maglev_match.core.params import ParameterError
 from maglev_match.maglev.catalog import model_info
 
@@ -261,7 +261,9 @@ def map_command(
         "--keep-tiles", help="Keep the checkpoint folder <out>.tiles/ after a successful "
         "map (default: removed once the map is saved).")] = False,
     json_out: JsonOpt = False,
-    model: MaglevOnlyModelOpt = None,
+    model: Annotated[str | None, typer.Option(
+        "--model", help="unit (the default): a map of the standstill index is computed for "
+        "model A; with a speed axis v=... also vehicle or force (see `speed`).")] = None,
 ) -> None:
     """The headline matching index chi = min(chi_paper, chi_simulation), its two parts,
     h, the simulated critical disturbances and stability over a grid of two parameters
@@ -272,7 +274,8 @@ def map_command(
     if has_speed_axis(x, y):
         return speed_map_command(x, y, preset, config, set_, out, resume, scheduler, workers,
                                  json_out, model)
-    refuse_model_file(model, "map")
+    if model is not None and is_model_file(model):
+        refuse_model_file(model, "map")
     check_output_path(out)
     if rows_per_tile < 1:
         raise ParameterError("--rows-per-tile", rows_per_tile, "must be at least 1")

@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import re
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -81,10 +82,45 @@ def temp_path_for(path: str | Path) -> Path:
     """A fresh, unused temporary path beside ``path`` that keeps its suffix (writers such
     as matplotlib and numpy choose the format from the suffix)."""
     path = Path(path)
-    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}",
-                                dir=path.parent)
+    remove_orphans(path)
+    fd, name = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}-",
+                                suffix=f".tmp{path.suffix}", dir=path.parent)
     os.close(fd)
     return Path(name)
+
+
+def remove_orphans(path: str | Path) -> list[Path]:
+    """Remove the temporary files of ``path`` left by writers that no longer run (a run
+    killed with kill -9 cannot remove its own): ``.STEM.PID-RANDOM.tmpSUFFIX`` whose PID
+    is not a live process of this host. A live writer's file is left alone. Returns the
+    removed files."""
+    path = Path(path)
+    removed = []
+    pattern = re.compile(rf"^\.{re.escape(path.stem)}\.(\d+)-[^/]*\.tmp{re.escape(path.suffix)}$")
+    try:
+        names = os.listdir(path.parent)
+    except OSError:
+        return removed
+    for name in names:
+        m = pattern.match(name)
+        if m is None or _alive(int(m.group(1))):
+            continue
+        with contextlib.suppress(OSError):
+            (path.parent / name).unlink()
+            removed.append(path.parent / name)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True  # (another user's process, or not a pid: leave it)
+    return True
 
 
 def _fsync_file(path: Path) -> None:
