@@ -180,7 +180,11 @@ class ParameterError(ValueError):
         self.field = field_name
         self.value = value
         self.rule = rule
-        super().__init__(f"parameter '{field_name}' = {value!r}: {rule}")
+        name = str(field_name)
+        if not name.isprintable():  # invisible characters shown as escapes, and said
+            name = repr(name)[1:-1]
+            rule = f"{rule} (the name contains invisible characters, shown escaped)"
+        super().__init__(f"parameter '{name}' = {value!r}: {rule}")
 
 
 @dataclass(frozen=True)
