@@ -192,6 +192,9 @@ def test_reading_uses_the_smaller_index(h_cycle, d_crit):
     assert out.reading == reading(chi_used)
     assert out.chi_paper == h_cycle / W0  # the paper's index is never altered
     assert out.chi == chi_used  # the headline is the index the reading uses
+    # the headline's own h over w0 is the headline (h itself stays the paper's)
+    assert out.h_headline / W0 == pytest.approx(out.chi, rel=1e-12)
+    assert out.h / W0 == pytest.approx(out.chi_paper, rel=1e-12)
     ratio = max(out.chi_paper, out.chi_simulation) / min(out.chi_paper, out.chi_simulation)
     assert any("differ by more than" in w for w in out.warnings) == (ratio > 1.5)
 
@@ -326,6 +329,8 @@ def test_turnout_soft_headline_is_the_solved_chi_simulation():
     res = matching_index(load_preset("turnout-soft"))
     assert res.reading_basis == "simulation" and res.chi == res.chi_simulation
     assert res.chi_paper == pytest.approx(9.562, rel=1e-3)
+    assert res.h_headline == res.h_simulation and res.h_headline / res.w0 == pytest.approx(
+        res.chi, rel=1e-12)
     assert res.mechanism_up == res.mechanism_down == "grazing"
     assert res.h_simulation == res.h_simulation_down == res.critical_down.size
     assert res.simulation_derivative

@@ -165,6 +165,16 @@ class MatchingIndex(Plottable):
     critical_down: Any = field(default=None, repr=False, compare=False)
     critical_delay: dict[str, Any] | None = None  # see critical_delay_info
 
+    @property
+    def h_headline(self) -> float:
+        """The disturbance size (m) of the headline: ``h`` (the paper's, from the cycle or
+        the case rule) when the reading basis is the paper, the simulated critical
+        disturbance ``h_simulation`` when it is the simulation; ``h_headline / w0`` is
+        ``chi``. (``h`` alone is always the paper's: ``h / w0`` is ``chi_paper``.)"""
+        if self.reading_basis == Basis.SIMULATION and self.h_simulation is not None:
+            return float(self.h_simulation)
+        return float(self.h)
+
     def as_json(self) -> dict[str, Any]:
         """The machine-readable form (SI units); the cycle's profile is left out."""
         skip = ("cycle", "critical_up", "critical_down")
