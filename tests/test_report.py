@@ -305,3 +305,6 @@ def test_report_command_renders_every_section(tmp_path, capsys):
         assert Path(f).stat().st_size > 0
     dom = _assert_self_contained(out.read_text())
     assert len(dom.img_src) == len([f for f in summary["figures"] if f.endswith(".png")]) >= 5
+    # the top of a quick report says that its index is the paper's, not the headline
+    html = out.read_text()
+    assert html.index("Quick preview (--quick)") < html.index('<section id="matching"')

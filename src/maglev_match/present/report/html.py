@@ -187,7 +187,8 @@ def assemble_html(title: str, intro_html: str, sections: Sequence[SectionResult]
         f"{s.key} {s.seconds:.1f}" for s in sections)))
     footer = table_html(["item", "value"], footer_rows, "footer-table")
     return render("page.html.j2", title=title, intro=Markup(intro_html),
-                  sections=sections, footer=Markup(footer)) + "\n"
+                  sections=sections, footer=Markup(footer),
+                  quick=bool(settings.get("quick"))) + "\n"
 
 
 def write_report(path: Path, title: str, intro_html: str, sections: Sequence[SectionResult],
