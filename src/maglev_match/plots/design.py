@@ -60,17 +60,25 @@ def design_path_figure(result, title: str = ""):
         fig, ax = new_figure()
         x = result.grid_values[:, 0]
         order = np.argsort(x)
-        ax.plot(x[order], result.grid_chi[order], "o-", color="0.5", label="coarse grid")
+        # unstable points (chi = 0) are marked on the axis, not joined to the rest
+        gx, gchi = x[order], _stable_only(result.grid_chi[order])
+        ax.plot(gx, gchi, "o-", color="0.5",
+                label="coarse grid (starts only; cheaper index)")
+        _mark_unstable(ax, gx, result.grid_chi[order])
         for k, c in enumerate(result.candidates):
             xs = c.path[:, 0]
-            ax.plot(xs, c.path_chi, ".-", color=f"C{k % 9 + 1}", alpha=0.7,
-                    label=f"optimiser run {k + 1} ({c.iterations} it.)")
+            ax.plot(xs, _stable_only(c.path_chi), ".-", color=f"C{k % 9 + 1}", alpha=0.7,
+                    label=f"optimiser run {k + 1} ({c.iterations} it., the index "
+                    "searched)")
+            _mark_unstable(ax, xs, c.path_chi)
         for b in chi_req:
             ax.axhline(b, color="r", ls="--", label=f"chi >= {b:g}")
         ax.plot([result.values[names[0]]], [result.index.chi], "*", ms=16, color="gold",
                 markeredgecolor="k", label=f"design ({result.status})")
         ax.set_xlabel(_axis_label(names[0]))
-        ax.set_ylabel("chi = h / w0")
+        ax.set_ylabel("chi (the design's: " + ("headline" if result.index.reading_basis
+                                                 == "simulation" else "paper's h / w0")
+                      + ")")
     else:
         fig, ax = new_figure(figsize=(8, 5.5))
         n = result.grid_shape[0]
@@ -99,6 +107,23 @@ def design_path_figure(result, title: str = ""):
                  + ", ".join(str(r) for r in prob.requirements))
     ax.legend(fontsize=8, loc="best")
     return fig
+
+
+def _stable_only(chi) -> np.ndarray:
+    """chi with the unstable points (chi <= 0) and failures as NaN: lines break there."""
+    chi = np.asarray(chi, float).copy()
+    chi[~(chi > 0)] = np.nan
+    return chi
+
+
+def _mark_unstable(ax, x, chi) -> None:
+    """Crosses on the axis at the unstable points (chi = 0), labelled once per axes."""
+    chi = np.asarray(chi, float)
+    bad = np.isfinite(chi) & (chi <= 0)
+    if bad.any():
+        seen = any(t.get_label() == "unstable (chi = 0)" for t in ax.lines)
+        ax.plot(np.asarray(x)[bad], np.zeros(int(bad.sum())), "x", color="r",
+                label=None if seen else "unstable (chi = 0)")
 
 
 @figure.register(IndexSensitivity)
