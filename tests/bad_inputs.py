@@ -64,6 +64,12 @@ MODEL_FILES: dict[str, bytes] = {
     "exit_rhs.py": (_HEAD + "def rhs(x, p):\n    raise SystemExit(0)\n").encode(),
     "loop.py": (_HEAD + "while True:\n    pass\n" + _RHS).encode(),
     "loop_rhs.py": (_HEAD + "def rhs(x, p):\n    while True:\n        pass\n").encode(),
+    # an endless loop that spends half its time in a garbage-collection callback, where
+    # Python ignores an exception raised by a signal handler (as in JAX's callback)
+    "loop_gc.py": (_HEAD + "import gc\nimport time\n\n\ndef _cb(phase, info):\n"
+                   "    time.sleep(0.001)\n\n\ngc.callbacks.append(_cb)\n\n\n"
+                   "def rhs(x, p):\n    while True:\n        gc.collect(0)\n"
+                   "        sum(range(20000))\n").encode(),
     "prints.py": (_HEAD + "print('hello from the model file')\n"
                   + _RHS.replace("    r2 =", "    print('tracing rhs')\n    r2 =")).encode(),
     "complex.py": (_HEAD + "def rhs(x, p):\n    return (1 + 1j) * x\n").encode(),
@@ -230,6 +236,8 @@ CASES: tuple[Case, ...] = (
        env=TIMEOUT_ENV, fresh=True),
     _m("endless loop in rhs", "loop_rhs.py", (), 2, "rhs did not finish within 2 s",
        env=TIMEOUT_ENV, fresh=True),
+    _m("endless loop in rhs through a gc callback", "loop_gc.py", (), 2,
+       "rhs did not finish within 2 s", env=TIMEOUT_ENV, fresh=True),
     _m("print() at import and in rhs, --json", "prints.py", ("--json",), 0, "",
        json_stdout=True),
     _m("complex right-hand side", "complex.py", (), 2, "returns complex numbers"),

@@ -113,6 +113,10 @@ class _ExitRequested(BaseException):
         super().__init__(code)
 
 
+#: seconds between repeated alarms once a user model's time limit has passed
+ALARM_REPEAT = 0.25
+
+
 class _LoadTimeout(BaseException):
     """The load took longer than its timeout (raised by the SIGALRM handler)."""
 
@@ -142,12 +146,24 @@ def _guarded(path: Path, what: str, timeout: float | None = None) -> Iterator[No
              and threading.current_thread() is threading.main_thread())
     old_handler: Any = None
     old_timer = (0.0, 0.0)
+    armed = [alarm]
     if alarm:
         def on_alarm(signum, frame):
-            raise _LoadTimeout()
+            if armed[0]:
+                raise _LoadTimeout()
 
         old_handler = signal.signal(signal.SIGALRM, on_alarm)
-        old_timer = signal.setitimer(signal.ITIMER_REAL, float(timeout))
+        saved_hook = sys.unraisablehook
+
+        def quiet_timeout(unraisable):  # (the ignored copy is raised again: see below)
+            if not isinstance(unraisable.exc_value, _LoadTimeout):
+                saved_hook(unraisable)
+
+        sys.unraisablehook = quiet_timeout
+        # the timer repeats after it first fires: an exception raised where Python ignores
+        # it (a garbage-collection callback, e.g. JAX's, running inside the user's loop)
+        # is raised again a moment later, in the loop itself
+        old_timer = signal.setitimer(signal.ITIMER_REAL, float(timeout), ALARM_REPEAT)
     try:
         with contextlib.redirect_stdout(sys.stderr):
             yield
@@ -158,16 +174,19 @@ def _guarded(path: Path, what: str, timeout: float | None = None) -> Iterator[No
         raise ModelFileError(path, f"{what} called os._exit({exc.code!r}){_line_in(path, exc)};"
                              " a model file must not end the program") from None
     except _LoadTimeout as exc:
+        armed[0] = False
         if not alarm:  # an outer guard's timer: its guard reports it
             raise
         raise ModelFileError(path, f"{what} did not finish within {timeout:g} s"
                              f"{_line_in(path, exc)} (an endless loop?); the limit is "
                              "MAGLEV_MATCH_MODEL_TIMEOUT seconds") from None
     finally:
+        armed[0] = False
         os._exit = saved_exit  # type: ignore[assignment]
         if alarm:
             signal.setitimer(signal.ITIMER_REAL, *old_timer)
             signal.signal(signal.SIGALRM, old_handler)
+            sys.unraisablehook = saved_hook
 
 
 @dataclass(frozen=True, eq=False)
