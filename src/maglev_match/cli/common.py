@@ -598,8 +598,8 @@ class ProgressReport:
     def eta(self, done: int, total: int) -> float | None:
         """Estimated seconds left when ``done`` of ``total`` equal units are finished: the
         mean time per unit since the first one finished (the first unit also pays for
-        loading and compiling kernels), or since the start while only one is done; None
-        before the first unit."""
+        loading and compiling kernels, so it says nothing about the others); None until a
+        unit has finished after the first (no estimate beats a wrong one)."""
         import time
 
         now = time.perf_counter()
@@ -610,11 +610,9 @@ class ProgressReport:
         if self._first_done is None:
             self._first_done = (done, now)
         d0, t0 = self._first_done
-        if done > d0:
-            per = (now - t0) / (done - d0)
-        else:
-            per = (now - self._tiles_t0) / done
-        return per * (total - done)
+        if done <= d0:
+            return None
+        return (now - t0) / (done - d0) * (total - done)
 
     def tiles(self, done: int, total: int, what: str = "tiles") -> None:
         """``done`` of ``total`` units finished (one line per finished unit off a
