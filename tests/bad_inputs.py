@@ -167,6 +167,11 @@ def make_fixtures(folder: Path, branch: Path | None = None) -> None:
     if hasattr(os, "mkfifo"):
         os.mkfifo(folder / "rfifo.nc")
     (folder / "model.toml").write_text("kD = 120\n")
+    import h5py
+    import numpy as np
+
+    with h5py.File(folder / "plain.h5", "w") as fh:  # HDF5, but not netCDF
+        fh["a"] = np.arange(3.0)
     if branch is not None:
         damaged_branches(branch, folder)
 
@@ -301,6 +306,8 @@ CASES: tuple[Case, ...] = (
     _r("a truncated file", (), 2, "cannot be read as netCDF", file="truncated.nc"),
     _r("an empty file", (), 2, "not a netCDF file", file="empty.nc"),
     _r("a text file", (), 2, "not a netCDF file", file="text.nc"),
+    _r("an HDF5 file that is not netCDF", (), 2, "not a saved cycle branch",
+       file="plain.h5"),
     _r("a directory", (), 2, "is a directory", file="branch"),
     _r("a missing file", (), 2, "no such file", file="nowhere.nc"),
     _r("a FIFO", (), 2, "not a regular file", file="rfifo.nc"),

@@ -31,6 +31,7 @@ from __future__ import annotations
 import json
 import math
 import stat
+import warnings
 from collections.abc import Sequence
 from enum import StrEnum
 from pathlib import Path
@@ -156,7 +157,9 @@ def open_saved(source: Any) -> tuple[Any, str]:
         raise RestartFileError(path, "is not a netCDF file (a saved branch is the .nc file "
                                "written by --out)")
     try:
-        ds = xr.load_dataset(path, engine="h5netcdf")
+        with warnings.catch_warnings():  # (h5netcdf's note on an HDF5 file that is not
+            warnings.simplefilter("ignore", UserWarning)  # netCDF: judged below instead)
+            ds = xr.load_dataset(path, engine="h5netcdf", phony_dims="sort")
     except Exception as exc:  # h5py/h5netcdf/xarray raise many types for damaged files
         detail = " ".join(str(exc).split())[:120]
         raise RestartFileError(path, f"cannot be read as netCDF ({type(exc).__name__}: "
