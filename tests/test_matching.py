@@ -339,3 +339,26 @@ def test_turnout_soft_headline_is_the_solved_chi_simulation():
     lo, hi = res.critical_down.bracket
     assert lo <= res.h_simulation <= hi
     assert "here: simulation" in res.headline
+
+
+def test_one_headline_in_the_api_the_text_and_the_json(tmp_path, capsys):
+    """The headline chi, its basis and its reading are one answer: the API object, the
+    text of `index` and the JSON file it writes (issue 31)."""
+    import json
+    import re
+
+    import maglev_match as mm
+    from maglev_match.cli import main
+
+    res = mm.matching_index("turnout-soft")
+    assert main(["index", "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    doc = json.loads((tmp_path / "index_unit.json").read_text())
+    assert doc["chi"] == res.chi and doc["reading_basis"] == res.reading_basis
+    assert doc["reading"] == res.reading and doc["chi_paper"] == res.chi_paper
+    m = re.search(r"chi = ([\d.]+) \(headline: .*here: (\w+)\)", text)
+    assert m and float(m.group(1)) == pytest.approx(res.chi, abs=5e-4)
+    assert m.group(2) == res.reading_basis
+    assert f"reading (of the headline chi, from the {res.reading_basis}): {res.reading}" \
+        in text
+    assert res.h_headline / res.w0 == pytest.approx(res.chi, rel=1e-12)
