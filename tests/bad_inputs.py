@@ -405,6 +405,12 @@ CASES: tuple[Case, ...] = (
     Case("--set name with a zero-width space", "options", ("stability", "--set",
                                                            "k\u200bD=1"), 2,
          "'k\\u200bD'"),
+    Case("map over a model-B quantity", "options", ("map", "--x", "omega1=120:140:2", "--y",
+                                                    "s=0.5:1.5:2", "--workers", "0"), 2,
+         "changes no parameter of model 'unit' over the map"),
+    Case("map over L with omega1 and sigma set", "options", (
+        "map", "--preset", "alpha1", "--x", "L=15:20:2", "--y", "kD=100:150:2", "--workers",
+        "0"), 2, "set explicitly override it"),
     Case("map --model vehicle", "options", ("map", "--x", "omega1=120:140:2", "--y",
                                             "sigma=3e-4:4e-4:2", "--model", "vehicle",
                                             "--workers", "0"), 2,

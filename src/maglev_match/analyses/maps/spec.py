@@ -49,6 +49,8 @@ REASON_CODES = {
 #: the maglev models whose map rows this module computes (model A: its rows are written on
 #: model A's parameter vector and its limited system)
 MAP_MODELS = ("unit",)
+#: the beam and vehicle data from which model A's omega1 and sigma derive
+BEAM_QUANTITIES = ("L", "EI", "mbar", "l", "k")
 # Largest grid accepted (points); beyond it the result arrays alone would not fit.
 MAX_POINTS = 4_000_000
 # the checkpoint's format: part of every tile's fingerprint, so that tiles written before a
@@ -144,6 +146,7 @@ class MapSpec:
         for yv in self.y.values:
             for xv in self.x.values:
                 self.point(xv, yv)
+        self._check_axes_move_the_model()
         if "tau" in (self.x.name, self.y.name):  # the delay must be resolvable (its rule)
             from maglev_match.maglev.unit import unit_system
 
@@ -152,6 +155,33 @@ class MapSpec:
                     p = self.point(xv, yv)
                     if p.tau > 0:
                         unit_system(p)  # raises ParameterError naming tau and its bound
+
+    def _check_axes_move_the_model(self) -> None:
+        """Each axis must change the map model's parameters (a model-B quantity such as s
+        on a map of model A, or L while omega1 and sigma are set explicitly, would give a
+        flat map)."""
+        import numpy as np
+
+        from maglev_match.maglev.models import maglev_model
+
+        def vector(xv: float, yv: float) -> np.ndarray:
+            # the model's parameters, its delay and its gap limits (a map's simulated part)
+            p = self.point(xv, yv)
+            return np.concatenate([maglev_model(p, MAP_MODELS[0]).param_vector(),
+                                   [p.tau, p.gap_min, p.gap_max]]).astype(float)
+
+        v0 = vector(self.x.start, self.y.start)
+        for ax, option, other in ((self.x, "--x", vector(self.x.stop, self.y.start)),
+                                  (self.y, "--y", vector(self.x.start, self.y.stop))):
+            if np.array_equal(v0, other):
+                fixed = sorted(set(self.point(self.x.start, self.y.start).explicit)
+                               & {"omega1", "sigma"} - {self.x.name, self.y.name}
+                               ) if ax.name in BEAM_QUANTITIES else []
+                why = (f"{', '.join(fixed)} set explicitly override it; use a preset that "
+                       "derives them from the beam, e.g. turnout-soft" if fixed else
+                       "it does not enter this model")
+                raise ParameterError(option, ax.name, f"changes no parameter of model "
+                                     f"'{MAP_MODELS[0]}' over the map: {why}")
 
     @property
     def tiles(self) -> list[tuple[int, int]]:
