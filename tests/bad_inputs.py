@@ -375,7 +375,7 @@ CASES: tuple[Case, ...] = (
          "has no physical meaning"),
     # ---- the delay where it is not (yet) modelled, and its own rule (issue 31)
     Case("stability --set tau=1e-320", "delay", ("stability", "--set", "tau=1e-320"), 2,
-         "must be 0 (no delay) or at least 1e-06 s"),
+         "must be 0 (no delay) or at least 1e-09 s"),
     Case("speed --set tau=0.5", "delay", ("speed", "--set", "tau=0.5", "--workers", "0"), 2,
          "the models at speed have no delay"),
     Case("simulate --speed with a delay", "delay", ("simulate", "--speed", "100", "--spans",

@@ -107,7 +107,7 @@ POSITIVE = ("m", "M", "g", "ks", "mu0", "N", "A", "c0", "omega0", "xi0", "ke",
             "L", "EI", "mbar", "l", "k", "m_s", "j_s", "m_b", "j_b", "k2", "s")
 NONNEGATIVE = ("cs", "c2", "kP", "kD", "s0", "gap_min", "tau")
 #: the shortest delay of the outer loop other than 0 (s)
-TAU_MIN = 1e-6
+TAU_MIN = 1e-9
 # Ranges of the values that may also be set directly (omega1, sigma) or have a rule of their
 # own (xi1): the same rules as _validate_inputs states in words.
 _SPECIAL_RANGES: dict[str, tuple[float, float]] = {
@@ -382,7 +382,8 @@ def _validate_inputs(p: Params) -> None:
     if 0 < p.tau < TAU_MIN:
         raise ParameterError("tau", p.tau, f"must be 0 (no delay) or at least {TAU_MIN:g} s: a "
                              "shorter delay is far below the model's time scales, and its "
-                             "discretisation (entries ~ 1/tau) would overflow")
+                             "discretisation (entries ~ 1/tau) loses accuracy and, further "
+                             "down, overflows")
     if not 0 <= p.xi1 < 1:
         raise ParameterError("xi1", p.xi1, "a damping ratio must lie in [0, 1)")
     if p.omega1 is not None and not 0 < p.omega1 <= 1e5:
