@@ -187,3 +187,14 @@ def test_no_file_over_800_lines():
     long = {name: n for name, path in _modules().items()
             if (n := len(path.read_text().splitlines())) > 800}
     assert not long, long
+
+
+def test_no_public_api_name_is_also_an_api_module():
+    # api.stability was once both a function and the module defining it: importing the
+    # module replaced the function on the package, and `api.stability(...)` failed
+    # depending on the order of imports
+    from maglev_match import api
+
+    modules = {p.stem for p in (ROOT / "api").glob("*.py") if p.stem != "__init__"}
+    assert not modules & set(api.__all__), modules & set(api.__all__)
+    assert not modules & set(api._NAMES)
