@@ -362,3 +362,33 @@ def test_one_headline_in_the_api_the_text_and_the_json(tmp_path, capsys):
     assert f"reading (of the headline chi, from the {res.reading_basis}): {res.reading}" \
         in text
     assert res.h_headline / res.w0 == pytest.approx(res.chi, rel=1e-12)
+
+
+@pytest.mark.slow
+def test_one_headline_in_the_full_and_the_quick_report(tmp_path, capsys):
+    """The report states the same headline as the API and `index`: the full report the
+    simulated headline (chi, basis, reading), the quick one the paper's chi and says so,
+    in its text line, its JSON summary and its HTML (issue 31)."""
+    import json
+
+    import maglev_match as mm
+    from maglev_match.cli import main
+
+    res = mm.matching_index("turnout-soft")
+    quick = mm.matching_index("turnout-soft", simulate=False)
+    # the full report through its JSON summary, the quick one through its text (one run each)
+    for flag, expect in ((None, res), ("--quick", quick)):
+        out = tmp_path / f"r{flag or ''}.html"
+        args = ["report", "--no-vehicle", "--out", str(out)] + (["--quick"] if flag else
+                                                                 ["--json"])
+        assert main(args) == 0
+        printed = capsys.readouterr().out
+        assert f"chi = {expect.chi:.3f}: {expect.reading}" in out.read_text()
+        if flag is None:
+            assert json.loads(printed)["headline"] == {
+                "chi": expect.chi, "chi_paper": expect.chi_paper, "reading": expect.reading,
+                "reading_basis": expect.reading_basis}
+        else:
+            assert f"chi = {expect.chi:.4g} (the paper's chi: --quick skips the simulation): " \
+                f"{expect.reading}" in printed
+    assert res.reading_basis == "simulation" and quick.chi == res.chi_paper != res.chi

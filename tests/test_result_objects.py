@@ -339,3 +339,38 @@ def test_design_result(design, tmp_path):
     beam = ClosedFormBeam(design.index)
     assert float(ds["design"][0]) == pytest.approx(5.0 * beam.w0_times_ei / beam.h, rel=1e-6)
     assert ds["variable_unit"].values[0] == "N m^2"
+
+
+# ---------------------------------------------------------------------------------------
+# .plot(ax=...): into the user's own axes
+# ---------------------------------------------------------------------------------------
+def test_plot_into_given_axes_draws_the_same_panels(stability, user_run):
+    own = stability.plot()
+    fig, axes = plt.subplots(1, 2)
+    got = stability.plot(ax=axes)
+    assert got is fig  # the user's figure, no new one
+    for mine, theirs in zip(own.axes[:2], axes, strict=True):
+        assert len(theirs.collections) == len(mine.collections) > 0
+        for a, b in zip(mine.collections, theirs.collections, strict=True):
+            assert np.array_equal(a.get_offsets(), b.get_offsets())
+    close(own)
+    # a one-panel-per-state figure into a column of axes the user made
+    fig2, col = plt.subplots(2, 1)
+    assert user_run.plot(ax=col) is fig2
+    t, x = user_run.history()
+    assert [np.array_equal(ax.lines[0].get_ydata(), x[:, k]) for k, ax in enumerate(col)] \
+        == [True, True]
+    plt.close(fig2)
+    # the wrong number of axes is refused by name, and nothing is left half-drawn
+    fig3, one = plt.subplots()
+    with pytest.raises(ValueError, match=r"ax: 1 axes given; this figure has 2 panel"):
+        stability.plot(ax=one)
+    assert not one.has_data()
+    with pytest.raises(ValueError, match=r"^ax: "):
+        stability.plot(ax="not axes")
+    plt.close(fig3)
+    plt.close(fig)
+    # and the next plot without ax= makes its own figure again
+    again = stability.plot()
+    assert again is not fig and len(again.axes) >= 2
+    close(again)

@@ -85,6 +85,7 @@ def report_command(
         "report": str(res.path),
         "figures": [str(f) for f in res.figures],
         "seconds": res.seconds,
+        "headline": res.headline,
         "sections": {s.key: {"available": s.available, "reason": s.reason,
                              "seconds": s.seconds} for s in res.sections},
     }
@@ -92,6 +93,11 @@ def report_command(
         emit_json(summary)
         return
     console.print(f"wrote {res.path} ({len(res.figures)} figure files) in {res.seconds:.1f} s")
+    if res.headline is not None:
+        h = res.headline
+        what = "the paper's chi: --quick skips the simulation" if quick else \
+            f"headline, from the {h['reading_basis']}"
+        console.print(f"  chi = {h['chi']:.4g} ({what}): {h['reading']}")
     for key, reason in res.unavailable:
         console_err.print(f"[yellow]section '{key}' not available:[/] {reason}")
 

@@ -72,8 +72,20 @@ def figure_for(result: Any, **options: Any) -> Any:
 
 def draw(result: Any, path: str | Path | None = None, **options: Any) -> Any:
     """Draw ``result``; with ``path``, save the figure as PNG and SVG there (the suffix is
-    replaced) and return the written files, else return the figure."""
-    fig = figure_for(result, **options)
+    replaced) and return the written files, else return the figure.
+
+    ``ax=`` draws into existing matplotlib axes instead of a new figure: one ``Axes`` for a
+    one-panel figure, a sequence (or array) of as many axes as the figure has panels
+    otherwise; the figure holding them is returned (or saved)."""
+    ax = options.pop("ax", None)
+    if ax is not None:
+        if not _has_drawer(result):
+            importlib.import_module(FIGURES)
+        into = importlib.import_module(f"{FIGURES}.base").drawing_into
+        with into(ax):
+            fig = figure_for(result, **options)
+    else:
+        fig = figure_for(result, **options)
     if path is None:
         return fig
     save = importlib.import_module(f"{FIGURES}.base").save_figure
@@ -88,5 +100,6 @@ class Plottable:
     def plot(self, path: str | Path | None = None, **options: Any) -> Any:
         """This result's figure, as the command line draws it; saved as PNG and SVG at
         ``path`` when given (returns the written files), else returned (a matplotlib
-        Figure). ``options`` go to the figure function."""
+        Figure). ``ax=`` draws into your own axes (one per panel of the figure); the other
+        ``options`` go to the figure function."""
         return draw(self, path, **options)

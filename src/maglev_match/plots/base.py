@@ -3,9 +3,14 @@ so that the package module, which dispatches to them, is not imported back)."""
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import matplotlib
+import numpy as np
 
 # Files only, never a display: Agg, except inside a notebook whose inline backend shows
 # the figures under the cells (the tutorials are stored with those figures).
@@ -25,8 +30,44 @@ STYLE = {
 }
 
 
+#: the axes a ``.plot(ax=...)`` call draws into (None: a new figure)
+_INTO: contextvars.ContextVar[Any] = contextvars.ContextVar("maglev_match_plot_into", default=None)
+
+
+@contextlib.contextmanager
+def drawing_into(ax: Any) -> Iterator[None]:
+    """Within this block the next :func:`new_figure` returns ``ax`` (the user's axes: one
+    ``Axes`` or a sequence/array of them) instead of making a figure."""
+    token = _INTO.set(ax)
+    try:
+        yield
+    finally:
+        _INTO.reset(token)
+
+
+def _given_axes(nrows: int, ncols: int, squeeze: bool = True) -> tuple[Any, Any]:
+    given = _INTO.get()
+    _INTO.set(None)  # only the figure's own first new_figure takes the axes
+    flat = list(np.ravel(np.asarray(given, dtype=object)))
+    n = nrows * ncols
+    if len(flat) != n or not all(hasattr(a, "plot") and hasattr(a, "figure") for a in flat):
+        got = f"{len(flat)} axes" if all(hasattr(a, "figure") for a in flat) else repr(given)
+        raise ValueError(f"ax: {got} given; this figure has {n} panel(s) ({nrows} x {ncols}), "
+                         f"so pass {'one matplotlib Axes' if n == 1 else f'{n} matplotlib Axes'}")
+    if n == 1 and squeeze:
+        return flat[0].figure, flat[0]
+    axes = np.empty(n, dtype=object)
+    axes[:] = flat
+    if not squeeze or (nrows > 1 and ncols > 1):
+        axes = axes.reshape(nrows, ncols)  # as plt.subplots(squeeze=False) or a 2-D grid
+    return flat[0].figure, axes
+
+
 def new_figure(nrows: int = 1, ncols: int = 1, **kw):
-    """A figure in the package style: returns (fig, axes)."""
+    """A figure in the package style: returns (fig, axes) as ``plt.subplots`` does; inside
+    :func:`drawing_into` it returns the given axes and their figure instead."""
+    if _INTO.get() is not None:
+        return _given_axes(nrows, ncols, bool(kw.get("squeeze", True)))
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(nrows, ncols, **kw)
     return fig, ax

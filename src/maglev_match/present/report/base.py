@@ -95,6 +95,17 @@ class ReportResult:
     seconds: float
 
     @property
+    def headline(self) -> dict[str, Any] | None:
+        """The matching-index section's headline (model A): chi, its basis, its reading and
+        chi by the paper's definition, as the section shows them (None when that section
+        is missing or could not be computed)."""
+        for s in self.sections:
+            if s.key == "matching" and s.available and isinstance(s.data, dict):
+                d = s.data.get("unit", s.data)
+                return {k: d.get(k) for k in ("chi", "reading_basis", "reading", "chi_paper")}
+        return None
+
+    @property
     def unavailable(self) -> list[tuple[str, str]]:
         """(section key, reason) of the sections that could not be computed."""
         return [(s.key, s.reason) for s in self.sections if not s.available]
