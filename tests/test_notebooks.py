@@ -56,3 +56,18 @@ def test_notebook_executes(path, tmp_path, monkeypatch):
     errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
               if o.output_type == "error"]
     assert not errors
+
+
+def test_the_first_tutorial_shows_the_headline_index_of_index():
+    """The executed first tutorial prints the same headline chi, basis and reading as the
+    API (and so as `index`, tests/test_matching.py): the docs do not hand out the paper's
+    chi as the answer (issue 31)."""
+    import maglev_match as mm
+
+    nb = nbformat.read(ROOT / "examples" / "01-is-my-beam-a-match.ipynb", as_version=4)
+    printed = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code"
+                      for o in c.outputs)
+    res = mm.matching_index("turnout-soft")
+    assert f"chi = {res.chi:.3f} (headline, from the {res.reading_basis}): {res.reading}" \
+        in printed
+    assert f"chi_paper = {res.chi_paper:.3f}" in printed
