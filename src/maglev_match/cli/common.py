@@ -502,8 +502,7 @@ class ProgressReport:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: Any = None
-        self._tiles_t0: float | None = None
-        self._first_done: tuple[int, float] | None = None
+        self._finished: list[tuple[int, float]] = []  # (units done, when), as they grew
 
     def __enter__(self) -> ProgressReport:
         import threading
@@ -596,23 +595,14 @@ class ProgressReport:
             self._rich.update(self._task, description=message)
 
     def eta(self, done: int, total: int) -> float | None:
-        """Estimated seconds left when ``done`` of ``total`` equal units are finished: the
-        mean time per unit since the first one finished (the first unit also pays for
-        loading and compiling kernels, so it says nothing about the others); None until a
-        unit has finished after the first (no estimate beats a wrong one)."""
+        """Estimated seconds left when ``done`` of ``total`` equal units are finished
+        (:func:`time_left` of the finishing times seen so far)."""
         import time
 
         now = time.perf_counter()
-        if self._tiles_t0 is None:
-            self._tiles_t0 = now
-        if done <= 0 or total <= done:
-            return None if done <= 0 else 0.0
-        if self._first_done is None:
-            self._first_done = (done, now)
-        d0, t0 = self._first_done
-        if done <= d0:
-            return None
-        return (now - t0) / (done - d0) * (total - done)
+        if done > 0 and (not self._finished or done > self._finished[-1][0]):
+            self._finished.append((done, now))
+        return time_left(self._finished, done, total, now)
 
     def tiles(self, done: int, total: int, what: str = "tiles") -> None:
         """``done`` of ``total`` units finished (one line per finished unit off a
@@ -627,6 +617,32 @@ class ProgressReport:
             tail = f", about {_duration(left)} left" if left is not None and done < total else ""
             self._line(f"{done}/{total} {what} done{tail}")
         self._last_done = done
+
+
+def time_left(finished: list[tuple[int, float]], done: int, total: int,
+              now: float) -> float | None:
+    """Seconds left of ``total`` equal units, ``done`` finished, from ``finished`` (units
+    done and the time, each time the count grew). The first finishing times say nothing
+    of the rate: the first unit of every worker also loads and compiles kernels, so with
+    two workers the second unit ends almost as late as the first. The rate is therefore
+    that of the latest half of the units finished after the first, and there is no
+    estimate until two units have finished after the first (none beats a wrong one)."""
+    if done <= 0:
+        return None
+    if done >= total:
+        return 0.0
+    if not finished:
+        return None
+    d_first = finished[0][0]
+    after = done - d_first
+    if after < 2:
+        return None
+    k = max(1, after // 2)
+    ref = [(d, t) for d, t in finished if d_first <= d <= done - k]
+    d_ref, t_ref = ref[-1] if ref else finished[0]
+    if done <= d_ref or now <= t_ref:
+        return None
+    return (now - t_ref) / (done - d_ref) * (total - done)
 
 
 def progress_report(command: str, tty: bool | None = None) -> ProgressReport:
