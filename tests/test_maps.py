@@ -48,6 +48,27 @@ def test_invalid_grid_point_rejected_before_work():
         spec.validate()
 
 
+def test_a_large_grid_is_checked_on_its_edges_and_a_sub_grid_not_point_by_point():
+    """A 2000 x 2000 grid: the parameter sets checked before any tile are its four edges
+    and a 100 x 100 sub-grid (about 18k, not 4M: that took minutes, silently), and a rule
+    broken inside the grid is broken on an edge, where the check finds it."""
+    big = MapSpec(base=BASE.as_input_dict(), x=Axis("omega1", 40, 190, 2000),
+                  y=Axis("sigma", 2e-4, 6e-4, 2000))
+    pts = big._points_to_check()
+    assert len(pts) == 4 * 2000 + 100 * 100
+    on_edges = {(y, x) for y, x in pts if x in (40, 190) or y in (2e-4, 6e-4)}
+    assert len(on_edges) == 4 * 2000 - 4
+    big.validate()
+    bad = MapSpec(base=BASE.as_input_dict(), x=Axis("omega1", 40, 190, 2000),
+                  y=Axis("sigma", -1e-4, 6e-4, 2000))
+    with pytest.raises(ParameterError, match="'sigma'"):
+        bad.validate()
+    # a small grid: every point, as before
+    small = MapSpec(base=BASE.as_input_dict(), x=Axis("omega1", 40, 190, 50),
+                    y=Axis("sigma", 2e-4, 6e-4, 40))
+    assert len(small._points_to_check()) == 2000
+
+
 def test_grid_too_large_rejected():
     spec = MapSpec(base=BASE.as_input_dict(), x=Axis("omega1", 40, 190, 5000),
                    y=Axis("sigma", 2e-4, 6e-4, 5000))

@@ -145,6 +145,8 @@ def design_map(params: Params | str | None = None,
         raise ParameterError("rows_per_tile", rows_per_tile, "must be at least 1")
     spec = MapSpec(base=base.as_input_dict(), x=ax, y=ay, rows_per_tile=rows_per_tile,
                    ntst=ntst, simulate=simulate)
+    if stage is not None and ax.count * ay.count > 20_000:
+        stage(f"checking the parameter sets of the {ax.count} x {ay.count} grid ...")
     spec.validate()
     if stage is not None:
         what = "headline index" if simulate else "paper's index only (--no-simulation)"
