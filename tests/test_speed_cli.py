@@ -118,6 +118,17 @@ def test_simulate_over_spans_command(tmp_path):
         assert ds["midspan"].shape[1] == 3
         assert "periodic_gap_deviation" in ds
         assert ds["time"].attrs["units"] == "s"
+        current = ds["current"].values
+    # the figure shows what the docs promise: gap, coil current, body, spans
+    from maglev_match.analyses.speed.spans import simulate_over_spans
+    from maglev_match.plots.speed import span_run_figure
+
+    p = load_preset("turnout-soft").replace(n_modes=1)
+    fig = span_run_figure(simulate_over_spans(p, "unit", 60 * KMH, 3, limited=False))
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    assert labels == ["gap deviation (mm)", "coil current (A)",
+                      "car-body acceleration (m/s^2)", "mid-span deflection (mm, down)"]
+    assert np.array_equal(fig.axes[1].lines[0].get_ydata(), current[:, 0])
 
 
 def test_map_with_a_speed_axis(tmp_path):

@@ -75,10 +75,11 @@ def speed_figure(sweep):
 
 def span_run_figure(run):
     """Time histories of a run over spans (:class:`maglev_match.analyses.speed.sweep.SpanRun`): gap
-    deviation per levitation point, the car body's acceleration and the mid-span deflection
-    of every span, with the periodic response repeated span after span (dashed) and the span
-    boundaries (the front of the vehicle reaching a support) marked. Returns the figure."""
-    fig, axes = new_figure(3, 1, figsize=(8.0, 8.5), sharex=True)
+    deviation and coil current per levitation point (the current's clamp at zero drawn), the
+    car body's acceleration and the mid-span deflection of every span, with the periodic
+    response repeated span after span (dashed) and the span boundaries (the front of the
+    vehicle reaching a support) marked. Returns the figure."""
+    fig, axes = new_figure(4, 1, figsize=(8.0, 10.5), sharex=True)
     t = run.t
     ax = axes[0]
     for j in range(run.gap_deviation.shape[1]):
@@ -90,12 +91,23 @@ def span_run_figure(run):
     ax.set_ylabel("gap deviation (mm)")
     ax.legend(fontsize=7, ncol=4)
     ax = axes[1]
+    for j in range(run.current.shape[1]):
+        ax.plot(t, run.current[:, j], lw=0.9, label=f"point {j + 1}")
+    lo, hi = float(np.nanmin(run.current)), float(np.nanmax(run.current))
+    if run.limited and lo < 0.25 * hi:  # the clamp near the currents drawn: show it
+        ax.axhline(0.0, color="r", lw=0.8, ls=":", label="clamp: current >= 0")
+    elif run.limited:
+        ax.text(0.01, 0.04, f"clamp at 0 A not approached (smallest {lo:.3g} A)",
+                transform=ax.transAxes, fontsize=7, color="0.35")
+    ax.set_ylabel("coil current (A)")
+    ax.legend(fontsize=7, ncol=4)
+    ax = axes[2]
     ax.plot(t, run.body_acceleration, lw=0.9, label="run")
     if run.periodic_acceleration is not None:
         ax.plot(t, run.periodic_acceleration, "k--", lw=0.7, label="periodic response")
     ax.set_ylabel("car-body acceleration (m/s^2)")
     ax.legend(fontsize=7)
-    ax = axes[2]
+    ax = axes[3]
     for s in range(run.midspan.shape[1]):
         ax.plot(t, run.midspan[:, s] * 1e3, lw=0.9, label=f"span {s + 1}")
     ax.set_ylabel("mid-span deflection (mm, down)")
