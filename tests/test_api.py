@@ -237,7 +237,8 @@ def test_full_vehicle_index_sensitivities_and_figures_through_the_api(tmp_path,
 
     monkeypatch.setattr(matching, "matching_index", record)
     assert mm.matching_index(p, model="vehicle", simulate=False, kD=140.0) == "index"
-    assert calls == [(p.replace(kD=140.0), {"model": "vehicle", "simulate": False})]
+    assert calls == [(p.replace(kD=140.0), {"model": "vehicle", "simulate": False,
+                                            "stage": None})]
     monkeypatch.setattr(matching, "matching_index", lib_index)
     with pytest.raises(mm.ParameterError, match="model"):
         mm.matching_index(p, model="bus")

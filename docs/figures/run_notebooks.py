@@ -25,6 +25,7 @@ def run(path: Path) -> None:
     env_path = os.pathsep.join([str(ROOT / "src"), *filter(None, [os.environ.get("PYTHONPATH")])])
     os.environ["PYTHONPATH"] = env_path
     os.environ.pop("MPLBACKEND", None)  # the kernel's inline backend stores the figures
+    os.environ["MAGLEV_MATCH_PROGRESS"] = "0"  # no timings in the stored outputs
     with tempfile.TemporaryDirectory(prefix="maglev-nb-") as cwd:
         nbclient.NotebookClient(nb, timeout=900, kernel_name="python3",
                                 resources={"metadata": {"path": cwd}}).execute()

@@ -52,6 +52,7 @@ _LAZY: dict[str, str] = {
     "reproduce": "maglev_match.present.documents",
     "restart_branch": "maglev_match.api",
     "speed_sweep": "maglev_match.api",
+    "show_progress": "maglev_match.api",
     # figures: plot(result) draws any result; the figure functions themselves
     "plot": "maglev_match.plots",
     "figure_of": "maglev_match.plots",
@@ -84,6 +85,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; never executed
         matching_index,
         restart_branch,
         root_locus,
+        show_progress,
         simulate,
         speed_sweep,
         stability,

@@ -41,6 +41,7 @@ This module is maglev glue: the numerics live in :mod:`maglev_match.dynamics`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any
@@ -315,6 +316,7 @@ def matching_index(
     stability_result: StabilityResult | None = None,
     simulation_kwargs: dict[str, Any] | None = None,
     solve: bool = True,
+    stage: Callable[[str], None] | None = None,
 ) -> MatchingIndex:
     """The headline index chi at ``params`` (the smaller of the paper's chi = h / w0 and
     chi_simulation), with the case that decided h, the simulated critical disturbance in
@@ -337,10 +339,13 @@ def matching_index(
     solve : also solve the critical disturbance of each direction where a grazing contact or
         a basin boundary decides it (:mod:`maglev_match.analyses.critical`); False keeps the
         bisection's midpoints.
+    stage : called with a line of text as each stage starts.
     """
     from threadpoolctl import threadpool_limits
 
+    say = stage if stage is not None else (lambda text: None)
     m = maglev_model(params, model)
+    say(f"the paper's index of {m.info.short}: equilibrium, Hopf point, cycle branch ...")
     params = m.params
     system = m.system()
     with threadpool_limits(m.blas_threads):
@@ -352,6 +357,8 @@ def matching_index(
             omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
             newton=m.cycle_newton,
         )
+    if m.params.tau > 0:
+        say("the critical delay of the controller ...")
     res = replace(res, model=m.name, critical_delay=critical_delay_info(m))
     if not simulate:
         return replace(res, headline=headline_text(res))
@@ -362,12 +369,14 @@ def matching_index(
     from maglev_match.analyses.simulation import critical_disturbance
 
     kw = simulation_kwargs or {}
+    say("the critical disturbance: bracketing both directions with simulations ...")
     up = critical_disturbance(m, direction=-1, **kw)
     down = critical_disturbance(m, direction=1, **kw)
     solved = None
     if solve:
         from maglev_match.analyses.critical import critical_from_bisection
 
+        say("the critical disturbance: solving the grazing or basin-boundary condition ...")
         c_up = critical_from_bisection(m, up)
         # the saddle cycle of a basin boundary is the same set for both directions
         c_down = critical_from_bisection(m, down, orbit_hint=c_up.orbit)

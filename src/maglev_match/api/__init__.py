@@ -51,6 +51,7 @@ _NAMES: dict[str, str] = {
     "design_search": "design", "check_requirements": "design", "design_problem": "design",
     "design_map": "maps", "map_warnings": "maps", "remove_tiles": "maps",
     "speed_sweep": "speed", "speed_map": "speed", "ride_reading": "speed",
+    "show_progress": "progress",
 }
 
 __all__ = [
@@ -90,6 +91,7 @@ __all__ = [
     "ride_reading",
     "restart_branch",
     "speed_sweep",
+    "show_progress",
     "MODELS",
     "RestartFileError",
     "RestartLabelError",

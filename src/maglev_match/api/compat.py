@@ -19,5 +19,14 @@ REMOVED_IN = "0.4"
 
 
 def deprecated(old: str, new: str) -> None:
-    """Warn that the call form ``old`` is deprecated in favour of ``new``."""
-    warnings.warn(f"{old} is deprecated; write {new}", DeprecationWarning, stacklevel=3)
+    """Warn that the call form ``old`` is deprecated in favour of ``new``, at the user's
+    line (the first frame outside the API package, wrappers included)."""
+    import os
+    import sys
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    level, frame = 2, sys._getframe(1)  # stacklevel 2 is the caller of this function
+    while frame is not None and os.path.dirname(os.path.abspath(frame.f_code.co_filename)) \
+            == here:
+        level, frame = level + 1, frame.f_back
+    warnings.warn(f"{old} is deprecated; write {new}", DeprecationWarning, stacklevel=level)

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from maglev_match.api.compat import deprecated
 from maglev_match.api.inputs import StudiedModel, names_a_preset, resolve_model
+from maglev_match.api.progress import reported
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.results import Plottable
 
@@ -265,6 +266,7 @@ def _search_range(studied: StudiedModel, system: Any, param: str, start: float |
     return a, b, system
 
 
+@reported("cycles", units=False)
 def cycle_study(params: Params | str | None = None, param: str = "omega1", *,
                 model: str = "unit", at: Mapping[str, Any] | None = None,
                 start: float | None = None, stop: float | None = None,

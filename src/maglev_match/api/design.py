@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from maglev_match.api.compat import deprecated
 from maglev_match.api.inputs import resolve_params
+from maglev_match.api.progress import reported
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.maglev.catalog import model_info
 
@@ -18,6 +19,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ['design_search', 'check_requirements']
 
 
+@reported("design", units=False)
 def design_search(params: Params | str | None = None, *,
                   vary: Mapping[str, tuple[float, float]] | Sequence[str],
                   minimize: str | None = None, maximize: str | None = None,

@@ -20,6 +20,7 @@ from typing import Any
 
 from maglev_match.api.compat import deprecated
 from maglev_match.api.inputs import StudiedModel, names_a_preset, resolve_model
+from maglev_match.api.progress import reported
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.results import Plottable
 from maglev_match.maglev.catalog import CATALOG
@@ -299,6 +300,7 @@ def _default_bounds(studied: StudiedModel, system: Any, names: tuple[str, str],
     return bounds
 
 
+@reported("hopf-curve", units=False)
 def hopf_curve(params: Params | str | None = None, x: str | tuple | None = None,
                y: str | tuple | None = None, *, model: str = "unit", n_scan: int = 100,
                max_step: float = 1e-2, grid: int = 0,

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from maglev_match.api.inputs import resolve_params
+from maglev_match.api.progress import reported
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.results import Plottable
 from maglev_match.maglev.catalog import model_info
@@ -33,6 +34,7 @@ def _index_params(params: Params | str | None, config: str | Path | None,
 
 def matching_index(params: Params | str | None = None, *, model: str = "unit",
                    simulate: bool = True, config: str | Path | None = None,
+                   stage: Callable[[str], None] | bool | None = None,
                    **overrides: Any) -> MatchingIndex:
     """The headline matching index chi = min(chi_paper, chi_simulation) of model A or the
     full vehicle (`maglev-match index [--model vehicle]`).
@@ -56,6 +58,10 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
         parts); False: the paper's chi only.
     config : str or Path, optional
         A TOML file applied on top of the preset.
+    stage : callable or bool, optional
+        Called with a line of text as each stage starts; False: silent; default: lines on
+        standard error when progress is shown (see
+        [`show_progress`][maglev_match.api.progress.show_progress]).
     **overrides : float
         Parameter values applied on top.
 
@@ -66,11 +72,15 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
         [`MatchingIndex`][maglev_match.analyses.matching.MatchingIndex].
     """
     from maglev_match.analyses.matching import matching_index as _matching_index
+    from maglev_match.api.progress import reporting
 
-    return _matching_index(resolve_params(params, config=config, **overrides),
-                           model=model_info(model).name, simulate=simulate)
+    p = resolve_params(params, config=config, **overrides)
+    name = model_info(model).name
+    with reporting("index", stage, False) as (say, _):
+        return _matching_index(p, model=name, simulate=simulate, stage=say)
 
 
+@reported("sensitivity", units=False)
 def index_sensitivity(params: Params | str | None = None, *, model: str = "unit",
                       boundaries: bool = True, simulate: bool = True,
                       index: MatchingIndex | None = None, config: str | Path | None = None,
@@ -243,6 +253,7 @@ class IndexSpread(Plottable):
         return annotate(ds, units=units, long_names=longs)
 
 
+@reported("scatter")
 def index_spread(params: Params | str | None = None, scatter: Mapping[str, float] = (), *,
                  model: str = "unit", index: MatchingIndex | None = None,
                  sensitivity: IndexSensitivity | None = None,

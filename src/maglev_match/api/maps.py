@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from maglev_match.api.compat import deprecated
 from maglev_match.api.inputs import resolve_params
+from maglev_match.api.progress import reported
 from maglev_match.core.params import DEFAULT_PRESET, ParameterError, Params, load_params
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -38,6 +39,7 @@ def map_axis(axis: Any, field: str) -> str:
         raise ParameterError(field, axis, "start and stop must be numbers") from None
 
 
+@reported("map")
 def design_map(params: Params | str | None = None,
                x: tuple | str = ("omega1", 40.0, 190.0, 100),
                y: tuple | str = ("sigma", 2e-4, 6e-4, 100), *,

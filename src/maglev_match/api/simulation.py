@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from maglev_match.api.inputs import resolve_model, resolve_params
+from maglev_match.api.progress import reported
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.results import Plottable
 
@@ -195,6 +196,7 @@ def _lifted(system: Any, x: Any) -> Any:
     return x if lift is None else lift(x)
 
 
+@reported("simulate", units=False)
 def simulate_over_spans(params: Params | str | None = None, *, model: str = "unit",
                         kmh: float = 100.0, spans: int = 10, limits: bool = True,
                         config: str | Path | None = None,

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 from maglev_match.analyses.speed.grid import KMH, speeds_kmh
 from maglev_match.api.inputs import resolve_params
+from maglev_match.api.progress import reported
 from maglev_match.core.params import Params
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -16,6 +17,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ['speed_sweep', 'speed_map', 'ride_reading', 'speeds_kmh', 'KMH']
 
 
+@reported("speeds")
 def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
                 speeds: Sequence[float] | None = None,
                 kmh: tuple[float, float, float] = (0.0, 150.0, 5.0), critical: bool = True,
@@ -83,6 +85,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
                         progress=progress)
 
 
+@reported("map at speed")
 def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
               y: str = "L=15:25:5", *, model: str = "unit", workers: int | None = 0,
               scheduler: str | None = None, checkpoint: str | Path | None = None,

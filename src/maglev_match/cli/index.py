@@ -94,7 +94,8 @@ def index_command(
 
     with progress_report("index") as prog, api_options(INDEX_OPTIONS):
         prog.stage("computing the matching index ...")
-        res = api.matching_index(params, model=model, simulate=not no_simulation)
+        res = api.matching_index(params, model=model, simulate=not no_simulation,
+                                 stage=prog.stage)
     sp = scatter_report(params, res, sc, monte_carlo, out, workers, resume, seed, model)
     data = res.as_json()
     if sc:
