@@ -220,7 +220,7 @@ def hopf_scan_figure(scan, param: str, unit: str = ""):
     xl = f"{param} ({unit})" if unit else param
     ax.set_xlabel(xl)
     ax.set_ylabel("max Re(lambda) (1/s)")
-    ax.set_title(f"Equilibrium along {param}: unstable above 0")
+    ax.set_title(f"Equilibrium along {param}: unstable where max Re(lambda) > 0")
     ax.legend(loc="best", fontsize=8)
     return fig
 

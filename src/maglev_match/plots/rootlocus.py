@@ -121,7 +121,7 @@ def root_locus_figure(values: np.ndarray, eigenvalues: np.ndarray, param: str, u
     ax2.axhline(0.0, color="k", lw=0.8)
     ax2.set_xlabel(label)
     ax2.set_ylabel("max Re(lambda) (1/s)")
-    ax2.set_title("Stability margin (unstable above 0)")
+    ax2.set_title("Stability margin: unstable where max Re(lambda) > 0")
     if design is not None:
         dv, dev = float(design[0]), np.asarray(design[1])
         sel = (dev.real >= x0) & (dev.real <= x1) & (dev.imag >= y0) & (dev.imag <= y1)
