@@ -43,8 +43,11 @@ def render_notebook(path: Path) -> str:
         for out in cell.get("outputs", []):
             png = out.get("data", {}).get("image/png") if "data" in out else None
             if png:
+                # the full content width (the stored figures are about 1200 px wide; at
+                # the browser's default size their labels were too small to read)
                 parts.append(f'<figure class="nb-figure"><img alt="figure drawn by the cell '
-                             f'above" src="data:image/png;base64,{"".join(png.split())}">'
+                             f'above" style="width:100%;max-width:none;height:auto" '
+                             f'src="data:image/png;base64,{"".join(png.split())}">'
                              "</figure>")
                 continue
             text = _text(out).rstrip()
