@@ -219,3 +219,19 @@ def test_mackey_glass_period_doubling_is_located():
     below, above = alternation(MG_PD_REFERENCE - 0.1), alternation(MG_PD_REFERENCE + 0.03)
     assert below[-1] < 1e-5 and below[-1] < 1e-3 * below[10]  # period 1 below
     assert above[-1] > 0.04 and abs(above[-1] - above[-3]) < 2e-3  # period 2 above
+
+
+def test_a_delay_branch_stops_at_the_discretisations_bound_and_says_so():
+    """The cycles of the delayed logistic equation continued in tau without a stop value:
+    the branch ends at the longest delay the discretisation resolves, and says that the
+    delay equations go on beyond it (it said 'the model is not defined beyond it')."""
+    dde = hutchinson(r=1.0, K=1.0, tau=1.0)
+    S = discretise(dde, tau_max=1.7)
+    hi = S.param_ranges["tau"][1]
+    hp = delay_hopf_points(S, "tau", 0.0, 1.7).points[0]
+    br = cycle_branch(S, hp, "tau", ntst=30, ncol=4, max_steps=200)
+    assert br.stopped_reason.startswith("reached the end")
+    assert abs(br.points[-1].value - hi) < 0.05 * hi
+    said = " ".join(br.warnings)
+    assert "longest delay" in said and "discretisation" in said
+    assert "not defined" not in said

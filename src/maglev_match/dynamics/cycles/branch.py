@@ -318,8 +318,7 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
             if ub is None or min(abs(where - ub[0]), abs(where - ub[1])) > \
                     1e-9 * max(1.0, abs(where)):  # not a bound the caller gave
                 stopped = CycleStop.RANGE
-                message = (f"{param} reached the end of its valid range at {where:.8g}: the "
-                           "model is not defined beyond it")
+                message = range_end_message(system, param, where)
                 warnings.append(message)
             continue
         if ev.kind == "STOP":
@@ -403,6 +402,25 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
 #: A contact whose margin is within this of zero is reported solved (the location runs to
 #: CONTACT_TOL; this allows for the margin's rounding at the located orbit).
 CONTACT_SOLVED = 1e-9
+
+
+def range_end_message(system: System, param: str, where: float) -> str:
+    """Why a branch stopped at the end of ``param``'s range, at ``where``: for the delay of
+    a discretised delay system, the longest delay its intervals resolve (the equations go
+    on beyond it: a discretisation for a longer delay continues further) or a delay
+    shrinking to 0 (the delay-free system); else the model's own valid range."""
+    lo, hi = (system.param_ranges or {}).get(param, (-np.inf, np.inf))
+    dde = getattr(system, "dde", None)
+    if dde is not None and param in getattr(dde, "delays", ()):
+        if abs(where - hi) <= abs(where - lo):
+            return (f"{param} reached {where:.8g}, at the longest delay ({hi:.6g}) that the "
+                    f"discretisation of the delay ({getattr(system, 'nodes', '?')} Chebyshev "
+                    "intervals) resolves: the delay equations go on beyond it; a larger "
+                    "range of the delay (e.g. a larger --to) resolves longer delays")
+        return (f"{param} reached {where:.8g}, next to {param} = 0, where the delay vanishes "
+                "(the delay-free system); the continuation of the delay stops there")
+    return (f"{param} reached the end of its valid range [{lo:.6g}, {hi:.6g}] at "
+            f"{where:.8g}: the model is not defined beyond it")
 
 
 def _kind_words(kind: str) -> str:
