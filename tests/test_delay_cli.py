@@ -61,6 +61,28 @@ def test_index_states_the_critical_delay_and_loses_stability_beyond_it(capsys):
     assert "equilibrium: unstable" in out and "chi = 0" in out
 
 
+def test_index_gives_the_practical_margin_of_a_supercritical_delay(capsys, tmp_path):
+    """Supercritical at tau_c = 1.438 ms, but the stable cycles fold back at 1.016 tau_c:
+    `index` gives that fold as the practical margin (issue 32's edge: it read out
+    'supercritical' alone), and it is the LPC of an independent `cycles` run along tau on
+    a finer mesh (80 intervals against 40)."""
+    code, out, err = run(capsys, "index", "--set", "tau=0.001", "--no-simulation", "--json",
+                         "--out", str(tmp_path))
+    assert code == 0, err
+    pr = json.loads(out)["critical_delay"]["practical"]
+    cd_value = json.loads(out)["critical_delay"]["value"]
+    assert pr["basis"] == "fold" and pr["value"] == pr["fold"]
+    assert 1.01 < pr["value"] / cd_value < 1.02
+    code, out, err = run(capsys, "cycles", "--param", "tau", "--to", "0.0016",
+                         "--set", "tau=0.001", "--json", "--out", str(tmp_path / "c"))
+    assert code == 0, err
+    lpc = [sp for sp in json.loads(out)["special_points"] if sp["type"] == "LPC"]
+    assert len(lpc) == 1 and lpc[0]["tau"] == pytest.approx(pr["value"], rel=1e-6)
+    code, out, err = run(capsys, "index", "--set", "tau=0.001", "--no-simulation",
+                         "--out", str(tmp_path))
+    assert f"practical margin of the delay: tau = {pr['value'] * 1e3:.4g} ms" in out
+
+
 @pytest.mark.parametrize("args, words", [
     (("index", "--set", "tau=-0.001", "--no-simulation"), ["tau", ">= 0"]),
     (("stability", "--set", "tau=0.5"), ["'tau' = 0.5", "at most", "Chebyshev"]),

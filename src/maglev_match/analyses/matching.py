@@ -658,7 +658,9 @@ def critical_delay_info(params: Params | MaglevModel, model: str = "unit"
 
     Keys: value (s, None when stable for every delay in the range, 0 when unstable without
     delay), frequency, l1, kind, crossing_speed, tau (the set delay), stable_at_tau,
-    tau_max, warnings."""
+    tau_max, practical (with a delay set: the practical margin beyond the critical delay,
+    :func:`maglev_match.analyses.delay_margin.practical_delay_margin`; None otherwise),
+    warnings."""
     from maglev_match.core.params import RANGES
     from maglev_match.dynamics.delay import critical_delay
     from maglev_match.dynamics.equilibria import find_equilibrium
@@ -675,7 +677,14 @@ def critical_delay_info(params: Params | MaglevModel, model: str = "unit"
     tau = float(params.tau)
     stable_at_tau = None if cd.value is None and not cd.stable_without_delay else (
         cd.value is None or tau < cd.value)
+    practical = None
+    if tau > 0 and cd.value is not None and cd.value > 0:  # a study of the delay
+        from maglev_match.analyses.delay_margin import practical_delay_margin
+
+        practical = practical_delay_margin(m, cd.value, cd.kind)
+        if practical["value"] is None:
+            warnings.append(f"practical margin of the delay not found: {practical['reason']}")
     return {"value": cd.value, "frequency": cd.frequency, "l1": cd.l1, "kind": cd.kind,
             "crossing_speed": cd.crossing_speed, "tau": tau, "stable_at_tau": stable_at_tau,
             "stable_without_delay": cd.stable_without_delay, "tau_max": tau_max,
-            "warnings": warnings}
+            "practical": practical, "warnings": warnings}

@@ -174,6 +174,14 @@ def _print_critical_delay(res) -> None:
         text = (f"tau = {cd['value'] * ms:.4g} ms (omega = {cd['frequency']:.5g} rad/s, "
                 f"{cd['kind']}, l1 = {cd['l1']:.3g}){at}")
     console.print(f"  critical delay of the controller: {text}", highlight=False)
+    pr = cd.get("practical")
+    if pr:
+        if pr["value"] is None:
+            console.print(f"  practical margin of the delay: not found ({pr['reason']})",
+                          highlight=False)
+        else:
+            console.print(f"  practical margin of the delay: tau = {pr['value'] * ms:.4g} ms "
+                          f"({pr['reason']})", highlight=False)
 
 
 def print_index(res, preset: str, config, set_) -> None:
