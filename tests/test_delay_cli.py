@@ -51,6 +51,9 @@ def test_hopf_along_tau_from_zero_gives_the_critical_delay(capsys):
     assert pt["frequency"] == pytest.approx(cd.frequency, rel=1e-12)
     assert pt["l1"] == pytest.approx(cd.l1, rel=1e-12) and pt["kind"] == "supercritical"
     assert doc["delay"]["axis"] and doc["delay"]["dimension"] == 9 + doc["delay"]["nodes"]
+    # supercritical, but the stable cycles fold back just beyond: the practical margin
+    pr = doc["delay"]["practical"]
+    assert pr["basis"] == "fold" and 1.01 < pr["value"] / cd.value < 1.02
 
 
 def test_index_states_the_critical_delay_and_loses_stability_beyond_it(capsys):

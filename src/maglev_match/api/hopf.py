@@ -144,8 +144,28 @@ def hopf_points(params: Params | str | None = None, param: str = "omega1",
     else:
         scan = locate_hopf_points(system, param, start, stop, n_scan=n_scan)
         columns = tuple(dict.fromkeys((param,) + plane))
-    return dataclasses.replace(scan, columns=columns, system=system,
-                               delay=delay_description(system, param))
+    delay = delay_description(system, param)
+    if delay is not None and delay["axis"] and studied.maglev is not None:
+        delay = _with_practical_margin(delay, studied.maglev, scan, stage)
+    return dataclasses.replace(scan, columns=columns, system=system, delay=delay)
+
+
+def _with_practical_margin(delay: dict, model: Any, scan: Any, stage: Any) -> dict:
+    """The delay note of a scan along the maglev model's delay with the practical margin
+    beyond its first crossing (the critical delay; see
+    :func:`maglev_match.analyses.delay_margin.practical_delay_margin`)."""
+    from maglev_match.analyses.delay_margin import practical_delay_margin
+
+    first = min((h for h in scan.points if h.converged), key=lambda h: h.value, default=None)
+    if first is None:
+        return delay
+    if stage is not None:
+        stage("the practical margin beyond the critical delay: cycles along the delay ...")
+    pr = practical_delay_margin(model, first.value, first.kind)
+    words = (f"tau = {pr['value'] * 1e3:.4g} ms ({pr['reason']})" if pr["value"] is not None
+             else f"not found ({pr['reason']})")
+    return {**delay, "practical": pr,
+            "text": delay["text"] + f"\n  practical margin of the delay: {words}"}
 
 
 def _plane_axis(axis: Any, field_name: str) -> tuple[str, tuple[float, float] | None]:
