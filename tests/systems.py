@@ -281,7 +281,7 @@ PITCH_RC2 = 1.05  # r^2 at its centre
 PITCH_OMEGA = 2.0
 
 
-def pitchfork_cycles_system() -> System:
+def pitchfork_cycles_system(nu: float = PITCH_NU, rc2: float = PITCH_RC2) -> System:
     """A 3-D system with two branch points of cycles on one branch, near a fold of cycles:
 
         r' = r (mu + 2 r^2 - r^4),   theta' = OMEGA,   z' = (NU - (r^2 - RC2)^2) z - z^3,
@@ -298,7 +298,7 @@ def pitchfork_cycles_system() -> System:
         u = R.T @ x
         r2 = u[0] ** 2 + u[1] ** 2
         g = mu + 2.0 * r2 - r2 * r2
-        k = PITCH_NU - (r2 - PITCH_RC2) ** 2
+        k = nu - (r2 - rc2) ** 2
         du = jnp.stack([g * u[0] - PITCH_OMEGA * u[1], PITCH_OMEGA * u[0] + g * u[1],
                         k * u[2] - u[2] ** 3])
         return R @ du
@@ -310,10 +310,10 @@ def pitchfork_cycles_system() -> System:
                   name="pitchfork of cycles")
 
 
-def pitchfork_bp_values() -> tuple[float, float]:
+def pitchfork_bp_values(nu: float = PITCH_NU, rc2: float = PITCH_RC2) -> tuple[float, float]:
     """mu at the two branch points of :func:`pitchfork_cycles_system` (closed form)."""
     out = []
-    for r2 in (PITCH_RC2 - math.sqrt(PITCH_NU), PITCH_RC2 + math.sqrt(PITCH_NU)):
+    for r2 in (rc2 - math.sqrt(nu), rc2 + math.sqrt(nu)):
         out.append(r2 * r2 - 2.0 * r2)
     return out[0], out[1]
 
@@ -616,3 +616,17 @@ def mackey_glass(beta: float = 2.0, gamma: float = 1.0, n: float = 9.65,
                                    param_names=("beta", "gamma", "n", "tau"),
                                    state_names=("x",), x_guess=np.array([1.0]),
                                    observables={"x": _x}, name="mackey-glass")
+
+
+# ------------------------------------------------------------------- FitzHugh-Nagumo
+def fitzhugh_nagumo(eps: float = 0.08, b: float = 0.8) -> System:
+    """x' = x - x^3 / 3 - y, y' = eps (x + a - b y): symmetric under (x, y, a) -> (-x, -y,
+    -a), two subcritical Hopf points at a = +-a_H joined by one family of cycles that turns
+    back in a just beyond each Hopf point (a fold of cycles, then the canard explosion to
+    the relaxation oscillation, where the multipliers lose all accuracy)."""
+    def rhs(x, p):
+        a = p[0]
+        return jnp.array([x[0] - x[0] ** 3 / 3 - x[1], eps * (x[0] + a - b * x[1])])
+
+    return System(rhs=rhs, p=np.array([0.0]), param_names=("a",), state_names=("x", "y"),
+                  x_guess=np.array([0.0, 0.0]))

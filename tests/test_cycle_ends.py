@@ -16,6 +16,7 @@ from systems import (
     TWO_HOPF_K,
     bogdanov_takens_system,
     bt_homoclinic_beta1,
+    fitzhugh_nagumo,
     pitchfork_bp_values,
     pitchfork_cycles_system,
     two_hopf_system,
@@ -234,3 +235,27 @@ def test_a_branch_at_the_end_of_the_valid_range_says_so():
     assert br.points[-1].value == pytest.approx(0.2, abs=1e-9)
     assert all(c.value >= 0.2 - 1e-9 for c in br.points)
     assert "valid range" in br.message and any("valid range" in w for w in br.warnings)
+
+
+def test_folds_between_unreliable_multipliers_are_labelled_fitzhugh_nagumo():
+    """FitzHugh-Nagumo: the family from one subcritical Hopf point turns back in a just
+    beyond it (the unstable cycles become the stable relaxation oscillation through a
+    canard explosion, where the multipliers are unreliable) and closes at the other. Both
+    folds are labelled LPC (they were not: the fold test was skipped wherever the
+    multipliers were unreliable), at values symmetric under a -> -a, where the branch's
+    parameter is extremal and its stability changes."""
+    S = fitzhugh_nagumo()
+    scan = locate_hopf_points(S, "a", -2.0, 2.0, n_scan=200)
+    hp = min(scan.points, key=lambda h: h.value)
+    assert hp.kind == "subcritical"
+    br = cycle_branch(S, hp, "a", ntst=60, ncol=4, max_steps=400)
+    assert "closed at a Hopf point" in br.stopped_reason
+    lpc = sorted(sp.value for sp in br.special_points if str(sp.type) == "LPC")
+    assert len(lpc) == 2 and all(sp.located == "solved" for sp in br.special_points
+                                 if str(sp.type) == "LPC")
+    assert abs(lpc[0] + lpc[1]) < 1e-7 and abs(lpc[0]) > abs(hp.value)
+    vals = np.array([c.value for c in br.points])
+    assert vals.min() == pytest.approx(lpc[0], abs=1e-6)
+    assert vals.max() == pytest.approx(lpc[1], abs=1e-6)
+    stable = [c.stable for c in br.points]
+    assert stable[0] is False and any(stable)  # unstable small cycles, then stable ones

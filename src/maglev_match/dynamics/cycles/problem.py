@@ -355,8 +355,11 @@ class CycleProblem:
         pt.info["phys"] = self.physical_state(pt)
         out: dict[str, float] = {}
         if self.detect:
+            # the fold is where the branch turns back in the parameter: the parameter
+            # component of the tangent, which needs no multipliers (a fold between points
+            # whose multipliers are unreliable, e.g. in a canard explosion, was missed)
+            out["LPC"] = float(pt.t[-1])
             if c.reliable:
-                out["LPC"] = float(pt.t[-1])
                 out.update({k: v for k, v in multiplier_tests(np.asarray(c.multipliers))
                             .items() if k in MULTIPLIER_TESTS})
                 if self.bp_c is not None:
@@ -365,8 +368,8 @@ class CycleProblem:
                     out["BP"] = -1.0 / d if d != 0 and np.isfinite(d) else np.nan
                 else:
                     out["BP"] = -1.0  # the frame is set at the first accepted point
-            else:  # no special point from unreliable Floquet data
-                out.update({k: np.nan for k in BIFURCATION_TESTS})
+            else:  # no multiplier test from unreliable Floquet data
+                out.update({k: np.nan for k in BIFURCATION_TESTS if k != "LPC"})
         U, _, _ = self.prob.unpack(pt.u)
         c1 = first_harmonic(pt.correction.data[1], self.prob.m, U) / self.prob.scale
         pt.info["c1"] = c1
