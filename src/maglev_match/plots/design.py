@@ -62,23 +62,20 @@ def design_path_figure(result, title: str = ""):
         order = np.argsort(x)
         # unstable points (chi = 0) are marked on the axis, not joined to the rest
         gx, gchi = x[order], _stable_only(result.grid_chi[order])
-        ax.plot(gx, gchi, "o-", color="0.5",
-                label="coarse grid (starts only; cheaper index)")
+        ax.plot(gx, gchi, "o--", color="0.6",
+                label="coarse grid: chi_paper = h / w0 (cheap; only to choose the starts)")
         _mark_unstable(ax, gx, result.grid_chi[order])
         for k, c in enumerate(result.candidates):
             xs = c.path[:, 0]
             ax.plot(xs, _stable_only(c.path_chi), ".-", color=f"C{k % 9 + 1}", alpha=0.7,
-                    label=f"optimiser run {k + 1} ({c.iterations} it., the index "
-                    "searched)")
+                    label=f"optimiser run {k + 1} ({c.iterations} it.): headline chi")
             _mark_unstable(ax, xs, c.path_chi)
         for b in chi_req:
             ax.axhline(b, color="r", ls="--", label=f"chi >= {b:g}")
         ax.plot([result.values[names[0]]], [result.index.chi], "*", ms=16, color="gold",
                 markeredgecolor="k", label=f"design ({result.status})")
         ax.set_xlabel(_axis_label(names[0]))
-        ax.set_ylabel("chi (the design's: " + ("headline" if result.index.reading_basis
-                                                 == "simulation" else "paper's h / w0")
-                      + ")")
+        ax.set_ylabel("chi (grid: chi_paper; runs, design: headline)")
     else:
         fig, ax = new_figure(figsize=(8, 5.5))
         n = result.grid_shape[0]
@@ -90,11 +87,11 @@ def design_path_figure(result, title: str = ""):
         y = np.unique(gv[:, 1])
         mesh = ax.pcolormesh(x, y, np.ma.masked_invalid(chi.T), shading="nearest",
                              cmap="viridis")
-        fig.colorbar(mesh, ax=ax, label="chi (coarse grid)")
+        fig.colorbar(mesh, ax=ax, label="chi_paper = h / w0 on the coarse start grid")
         for b in chi_req:
             if np.nanmin(chi) < b < np.nanmax(chi):
                 ax.contour(x, y, chi.T, levels=[b], colors="r", linestyles="--")
-                ax.plot([], [], "r--", label=f"chi = {b:g} (grid)")
+                ax.plot([], [], "r--", label=f"chi_paper = {b:g} on the grid")
         for k, c in enumerate(result.candidates):
             ax.plot(c.path[:, 0], c.path[:, 1], ".-", color="w", alpha=0.9)
             ax.plot(c.path[0, 0], c.path[0, 1], "o", color="w", markeredgecolor="k",
@@ -103,8 +100,9 @@ def design_path_figure(result, title: str = ""):
                 color="gold", markeredgecolor="k", label=f"design ({result.status})")
         ax.set_xlabel(_axis_label(names[0]))
         ax.set_ylabel(_axis_label(names[1]))
-    ax.set_title(title or f"{prob.goal} {prob.objective}: "
-                 + ", ".join(str(r) for r in prob.requirements))
+    reqs = ", ".join(str(r) for r in prob.requirements)
+    ax.set_title(title or f"{prob.goal} {prob.objective}" + (f" subject to {reqs}" if reqs
+                                                              else ""))
     ax.legend(fontsize=8, loc="best")
     return fig
 
