@@ -176,3 +176,31 @@ def test_api_speed_sweep_plot_and_dataset():
     assert ds["daf"].values[1] == pytest.approx(sw.points[1].daf)
     fig = sw.plot()
     assert len(fig.axes) == 5
+
+
+def test_a_sweep_on_dask_keeps_dasks_messages_off_the_terminal(monkeypatch, capfd):
+    """`speed --workers 2` printed Dask's "Worker process still alive after 4.0 seconds,
+    killing" on every run: the sweep's pieces now run inside the capture of Dask's loggers
+    (here a stand-in for the cluster computes them and logs that line as the nanny does)."""
+    import logging
+
+    import maglev_match.core.jobs as jobs
+
+    def fake_dask(tasks, save, scheduler, workers, progress, count):
+        for key, (fn, args) in tasks.items():
+            save(key, fn(*args))
+            count.done += 1
+        logging.getLogger("distributed.nanny").warning(
+            "Worker process still alive after 4.0 seconds, killing")
+
+    monkeypatch.setattr(jobs, "run_pieces_on_dask", fake_dask)
+    logging.getLogger("distributed").addHandler(logging.StreamHandler())  # as Dask's own
+    try:
+        code, out, err = run(["speed", "--from", "60", "--to", "60", "--no-critical",
+                              *UNIT_SETS, "--workers", "2", "--json"])
+    finally:
+        for h in list(logging.getLogger("distributed").handlers):
+            if type(h) is logging.StreamHandler:
+                logging.getLogger("distributed").removeHandler(h)
+    assert code == 0, err
+    assert "still alive" not in err + capfd.readouterr().err

@@ -310,12 +310,13 @@ def run_tiles(spec, compute: Callable, checkpoint: Path | None, variables: tuple
     an existing ``scheduler``), each tile written to the checkpoint folder as it finishes
     (:mod:`maglev_match.core.checkpoint`: locked, fingerprinted; ``resume`` reuses them).
     Without a folder the tiles are kept in memory here, and a Dask run uses a temporary
-    folder. Dask's own messages are left where Dask puts them."""
+    folder. Dask's own messages (its workers' shutdown, "killing", port warnings) are kept
+    off the terminal (:func:`maglev_match.core.jobs.dask_log_capture`); a failing task
+    still ends the sweep with its own error."""
     job = Job(pieces=spec.tiles, compute=compute, args_of=lambda rows: (spec, rows),
               store=lambda folder: tile_checkpoint(folder, spec.key(), variables, nx))
     return run_job(job, checkpoint, resume=resume, scheduler=scheduler, workers=workers,
-                   progress=progress, capture_dask=False,
-                   scratch_prefix="maglev-match-speed-")
+                   progress=progress, scratch_prefix="maglev-match-speed-")
 
 
 def run_speed_sweep(spec: SweepSpec, checkpoint: Path | None = None, *, resume: bool = False,
