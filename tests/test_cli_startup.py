@@ -127,3 +127,29 @@ def test_a_command_runs_after_lazy_loading(capsys):
     assert main(["presets", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert any(p["name"] == "turnout-soft" for p in data["presets"])
+
+
+def test_preload_imports_jax_before_its_thread_starts():
+    """Two threads importing JAX at once can deadlock on JAX's circular imports, which
+    Python breaks with "partially initialized module 'jax'" (an internal error of
+    `cycles`, seen twice): the background preload starts only once JAX is imported in
+    the calling thread. Checked in a fresh process where nothing imported JAX yet."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, threading\n"
+        "import maglev_match.cli.common as c\n"
+        "assert 'jax' not in sys.modules\n"
+        "seen = []\n"
+        "start = threading.Thread.start\n"
+        "def spy(self):\n"
+        "    seen.append('jax' in sys.modules and 'jax.numpy' in sys.modules)\n"
+        "    return start(self)\n"
+        "threading.Thread.start = spy\n"
+        "c.preload('xarray')\n"
+        "print(seen)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[True]"

@@ -98,8 +98,17 @@ def preload(*modules: str) -> None:
     h5netcdf only at its end; importing them costs ~0.8 s of CPU (measured 2026-11-25).
     Started at the beginning, the imports run on the second core while the main thread is
     inside compiled code (XLA, LAPACK) and has released the GIL. An import that fails here
-    is left to fail again, with its message, where the module is really used."""
+    is left to fail again, with its message, where the module is really used.
+
+    JAX is imported here, in the calling thread, before the thread starts: JAX's own
+    modules import each other in circles, and two threads importing them at once can each
+    hold a module the other waits for, which Python breaks by handing one thread a
+    partially initialised module ("ImportError: ... partially initialized module 'jax'",
+    seen as an internal error of `cycles`). The command needs JAX next anyway."""
+    import importlib
     import threading
+
+    importlib.import_module("maglev_match.dynamics.system")  # JAX, configured
 
     def work() -> None:
         import importlib
