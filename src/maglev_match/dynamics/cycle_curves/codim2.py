@@ -84,9 +84,9 @@ def detect_codim2(kind: str, points: Sequence, params: tuple[str, str]
                                                                   strict=True))
             out.append(SpecialPoint(
                 type=name, value=vals[0], values=vals, step=ka,
-                located=f"bracketed between P{ka} and P{kb} (linear interpolation of the "
-                "test function, not solved)",
-                detail=f"test function {fa:.3g} at P{ka}, {fb:.3g} at P{kb}",
+                located="bracketed between two consecutive points of the curve (linear "
+                "interpolation of the test function, not solved)",
+                detail=f"test function {fa:.3g} and {fb:.3g} at the two points",
                 period=float(a.period + f * (b.period - a.period)), point=near))
     if CurveKind(kind) == CurveKind.LPC:
         out.extend(_cusps(points))
@@ -111,6 +111,6 @@ def _cusps(points: Sequence) -> list[SpecialPoint]:
         if float(d[k - 1] @ d[k]) < 0:
             out.append(SpecialPoint(
                 type="CPC", value=float(P[k, 0]), values=tuple(map(float, P[k])), step=k,
-                located=f"bracketed at P{k} (the curve turns back in the parameter plane "
-                "there; not solved)", period=c.period, point=c))
+                located="bracketed at a point of the curve (it turns back in the "
+                "parameter plane there; not solved)", period=c.period, point=c))
     return out

@@ -17,6 +17,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from maglev_match.dynamics.collocation import CollocationProblem, adapt_mesh, remesh
+from maglev_match.dynamics.continuation import label_points
 from maglev_match.dynamics.cycle_curves.augmented import (
     AugmentedCycleSystem,
     CurveKind,
@@ -97,6 +98,7 @@ def cycle_curve(
     trivial_tol: float = 1e-4,
     observables: Sequence[str] | None = None,
     detect: bool = True,
+    marks: Sequence[float] = (),
 ) -> CycleCurve:
     """Continue a fold (``kind="LPC"``) or period doubling (``"PD"``) of cycles in the two
     parameters ``params`` = (p1, p2), from a cycle ``orbit`` at (or near) the bifurcation
@@ -105,7 +107,8 @@ def cycle_curve(
 
     The start is first corrected onto the curve at the orbit's p2 (p1, the profile and the
     period free), then the curve is followed towards increasing p2 (``direction=-1``:
-    decreasing) with the arclength weights of the cycle branch (profile RMS in
+    decreasing; ``0``: both ways, one curve ordered from its decreasing end) with the
+    arclength weights of the cycle branch (profile RMS in
     ``system.state_scale``, period in units of the start period, p1 and p2 in ``scales``:
     default 5 % of their start values, 0.05 at zero).
 
@@ -119,6 +122,8 @@ def cycle_curve(
     trivial_tol : largest |mu_trivial - 1| at which the multipliers are reported (and the
         codimension-two test functions evaluated).
     observables : names whose max/min over each cycle are read out (default: all).
+    marks : values of p2 at which a point is solved exactly on the curve (kind "mark"),
+        e.g. to compare with one-parameter branches there.
     detect : locate the codimension-two points (:mod:`~maglev_match.dynamics.
         cycle_curves.codim2`).
 
@@ -127,6 +132,10 @@ def cycle_curve(
     :class:`CycleCurve`. A failure (the start not corrected, the step falling below
     ``ds_min``) ends the curve with its reason and a warning; it never raises.
     """
+    if direction == 0:
+        return _both_ways(system, orbit, kind, params, **{
+            k: v for k, v in locals().items() if k not in ("system", "orbit", "kind", "params",
+                                                           "direction")})
     kind = CurveKind(kind)
     p1n, p2n = params
     i1, i2 = system.param_index(p1n), system.param_index(p2n)
@@ -236,6 +245,18 @@ def cycle_curve(
             warnings.append(f"the point on the bound {bound:g} could not be solved; the "
                             "curve ends at the last point before it")
             return finish(points, CurveStop.BOUND)
+        for mark in _marks_inside(marks, float(z[-1]) * aug.scale2,
+                                  float(z_new[-1]) * aug.scale2):
+            frac = (mark / aug.scale2 - z[-1]) / (z_new[-1] - z[-1])
+            e = np.zeros(aug.size)
+            e[-1] = 1.0
+            om = newton(z + frac * (z_new - z), e, mark / aug.scale2, U_prev)
+            if om is None:
+                warnings.append(f"the point at {p2n} = {mark:.10g} (a value asked for) "
+                                "could not be solved")
+                continue
+            points.append(make_point(om[0], om[1], om[3], om[4], "mark"))
+            states.append((om[0], t, prob.mesh.copy()))
         aug.update_borders(ev)
         t = _tangent(J, W, t)
         z = z_new
@@ -249,6 +270,29 @@ def cycle_curve(
         if adapt_every and accepted % adapt_every == 0:
             z, t = _adapt(aug, z, t, W)
     return finish(points, CurveStop.MAX_STEPS)
+
+
+def _both_ways(system, orbit, kind, params, **kw) -> CycleCurve:
+    """Both halves of the curve from the start (decreasing p2, then increasing), as one
+    curve ordered by increasing p2 at its ends; the special points renumbered."""
+    down = cycle_curve(system, orbit, kind, params, direction=-1, **kw)
+    up = cycle_curve(system, orbit, kind, params, direction=1, **kw)
+    if not down.points or not up.points:
+        return up if up.points else down
+    nb = len(down.points)
+    points = list(reversed(down.points)) + list(up.points[1:])
+    sps = [dataclasses.replace(sp, step=nb - 2 - sp.step) for sp in down.special_points]
+    sps += [dataclasses.replace(sp, step=nb - 1 + sp.step) for sp in up.special_points]
+    sps.sort(key=lambda sp: sp.step)
+    reason = down.stopped_reason if not down.ok else up.stopped_reason  # a failure first
+    return dataclasses.replace(
+        up, points=tuple(points), special_points=tuple(label_points(sps)),
+        stopped_reason=reason,
+        message=f"decreasing {params[1]}: {down.stopped_reason}; increasing: "
+                f"{up.stopped_reason}",
+        warnings=down.warnings + up.warnings, steps=down.steps + up.steps,
+        rejected_steps=down.rejected_steps + up.rejected_steps,
+        newton_iterations=down.newton_iterations + up.newton_iterations)
 
 
 def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: Callable,
@@ -300,6 +344,12 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
     return dataclasses.replace(sp, value=best.values[0], values=best.values, located="solved",
                                detail=f"test function {f:.2e} there", period=best.period,
                                point=best)
+
+
+def _marks_inside(marks: Sequence[float], a: float, b: float) -> list[float]:
+    """The marks strictly between a and b, or at b, in the order a -> b."""
+    inside = [m for m in marks if (m - a) * (m - b) < 0 or m == b]
+    return sorted(inside, reverse=bool(b < a))
 
 
 def _sc(aug: AugmentedCycleSystem, idx: int) -> float:
