@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from maglev_match.api.cycle_curves import CycleCurveStudy
 from maglev_match.core.results import figure
 from maglev_match.dynamics.cycle_curves import CycleCurve
 from maglev_match.plots.base import new_figure
@@ -26,9 +27,15 @@ def cycle_curve_figure(curve: CycleCurve, title: str | None = None, ax=None, **_
     ok = curve.stopped_reason != "the start could not be corrected onto the curve"
     ax.plot(curve.p1, curve.p2, "-", color="tab:purple", lw=1.6, label=f"{curve.kind} curve")
     if curve.points:
-        ax.plot(curve.p1[:1], curve.p2[:1], "o", color="k", ms=5, label="start")
-        ax.plot(curve.p1[-1:], curve.p2[-1:], "x", color="k", ms=6,
+        k = [i for i, c in enumerate(curve.points) if c.kind == "start"] or [0]
+        ax.plot(curve.p1[k], curve.p2[k], "o", color="k", ms=5, label="start")
+        ends = [0, len(curve.points) - 1] if k[0] > 0 else [len(curve.points) - 1]
+        ax.plot(curve.p1[ends], curve.p2[ends], "x", color="k", ms=6,
                 label=f"end: {curve.stopped_reason}")
+        marks = [i for i, c in enumerate(curve.points) if c.kind == "mark"]
+        if marks:
+            ax.plot(curve.p1[marks], curve.p2[marks], "+", color="tab:blue", ms=8,
+                    label=f"solved at the given {b}")
     for sp in curve.special_points:
         m, c = _MARK.get(sp.type, ("*", "k"))
         ax.plot([sp.values[0]], [sp.values[1]], m, color=c, ms=7, label=sp.label)
@@ -52,3 +59,12 @@ def cycle_curve_figure(curve: CycleCurve, title: str | None = None, ax=None, **_
 @figure.register(CycleCurve)
 def _cycle_curve(curve: CycleCurve, **kw):
     return cycle_curve_figure(curve, **kw)
+
+
+@figure.register(CycleCurveStudy)
+def _cycle_curve_study(st: CycleCurveStudy, **kw):
+    at = ", ".join(f"{k}={v:g}" for k, v in st.at.items())
+    start = st.restart_of or st.start_label
+    kw.setdefault("title", f"{st.kind} curve of cycles in ({st.x}, {st.y}), model "
+                  f"{st.model}, from {start}" + (f" ({at})" if at else ""))
+    return cycle_curve_figure(st.curve, **kw)

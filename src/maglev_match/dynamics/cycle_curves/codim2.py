@@ -9,8 +9,10 @@ products of :func:`~maglev_match.dynamics.cycles.multiplier_tests`, not their ge
 means, so that they are smooth where they vanish):
 
 * on LPC: LPPD (fold-flip), prod (mu_i + 1) / (1 + |mu_i|): a real multiplier passes -1;
-  LPNS (fold-Neimark-Sacker), prod_{i<j} (mu_i mu_j - 1) / (1 + |mu_i mu_j|) with the
-  pair nearest mu_i mu_j = 1 complex (a real pair mu, 1/mu is no bifurcation);
+  LPNS (fold-Neimark-Sacker), prod_{i<j} (mu_i mu_j - 1) / (1 + |mu_i mu_j|), kept only
+  where a complex-conjugate pair lies on the unit circle (within 0.1 at the bracket,
+  1e-4 once solved): a neutral saddle mu_i mu_j = 1 of other multipliers is no
+  bifurcation;
   CPC (cusp of cycles): the projection of the curve's direction in the scaled parameter
   plane on its direction one step before, which changes sign where the curve turns back
   in the parameter plane (a cusp);
@@ -31,9 +33,8 @@ import numpy as np
 
 from maglev_match.dynamics.continuation import SpecialPoint, label_points
 from maglev_match.dynamics.cycle_curves.augmented import CurveKind
-from maglev_match.dynamics.cycles.stability import ns_pair_real
 
-__all__ = ["detect_codim2", "codim2_tests"]
+__all__ = ["detect_codim2", "codim2_rest", "codim2_tests", "torus_pair"]
 
 
 def codim2_tests(kind: str, mult: np.ndarray) -> dict[str, float]:
@@ -43,7 +44,7 @@ def codim2_tests(kind: str, mult: np.ndarray) -> dict[str, float]:
     mult = np.asarray(mult, complex)
     if mult.size == 0:
         return {}
-    rest = _critical_rest(kind, mult)
+    rest = codim2_rest(kind, mult)
     if rest.size == 0:
         return {}
     i, j = np.triu_indices(rest.size, 1)
@@ -56,7 +57,18 @@ def codim2_tests(kind: str, mult: np.ndarray) -> dict[str, float]:
     return {"LPPD": fold, "PDNS": ns}
 
 
-def _critical_rest(kind: str, mult: np.ndarray) -> np.ndarray:
+def torus_pair(mult: np.ndarray, tol: float) -> bool:
+    """Whether a complex-conjugate pair of multipliers lies within ``tol`` of the unit
+    circle (what a zero of the NS product must have to be a torus bifurcation, and not a
+    neutral saddle mu_i mu_j = 1 of two real or unrelated multipliers)."""
+    mult = np.asarray(mult, complex)
+    cplx = mult[np.abs(mult.imag) > 1e-8 * np.maximum(1.0, np.abs(mult))]
+    return bool(cplx.size and np.min(np.abs(np.abs(cplx) - 1.0)) <= tol)
+
+
+def codim2_rest(kind: str, mult: np.ndarray) -> np.ndarray:
+    """The nontrivial multipliers without the curve's critical one (+1 on LPC, -1 on
+    PD)."""
     crit = 1.0 if CurveKind(kind) == CurveKind.LPC else -1.0
     return np.delete(mult, int(np.argmin(np.abs(mult - crit))))
 
@@ -76,8 +88,8 @@ def detect_codim2(kind: str, points: Sequence, params: tuple[str, str]
             if not (np.isfinite(fa) and np.isfinite(fb)) or fa * fb >= 0:
                 continue
             near = a if abs(fa) <= abs(fb) else b
-            if name in ("LPNS", "PDNS") and ns_pair_real(_critical_rest(kind,
-                                                                        near.multipliers)):
+            if name in ("LPNS", "PDNS") and not torus_pair(codim2_rest(
+                    kind, near.multipliers), 0.1):
                 continue
             f = fa / (fa - fb)
             vals = tuple(float(x + f * (y - x)) for x, y in zip(a.values, b.values,

@@ -23,7 +23,12 @@ from maglev_match.dynamics.cycle_curves.augmented import (
     CurveKind,
     Evaluation,
 )
-from maglev_match.dynamics.cycle_curves.codim2 import codim2_tests, detect_codim2
+from maglev_match.dynamics.cycle_curves.codim2 import (
+    codim2_rest,
+    codim2_tests,
+    detect_codim2,
+    torus_pair,
+)
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit, orbit_extrema
 from maglev_match.dynamics.cycles.stability import split_trivial
@@ -168,7 +173,7 @@ def cycle_curve(
         reliable = bool(abs(triv - 1.0) <= trivial_tol)
         orb = PeriodicOrbit(mesh=prob.mesh.copy(), ncol=prob.m, states=U.copy(), period=T,
                             p=prob.params(v1))
-        amp = float(np.max(np.linalg.norm(U - U[:-1].mean(axis=0), axis=1)))
+        amp = float(np.max(np.linalg.norm((U - U[:-1].mean(axis=0)) / prob.scale, axis=1)))
         return CycleCurvePoint(values=(v1, v2), period=T, amplitude=amp, orbit=orb,
                                multipliers=rest if reliable else np.zeros(0, complex),
                                trivial_multiplier=triv, reliable=reliable, test=ev.g,
@@ -181,6 +186,7 @@ def cycle_curve(
         sps = detect_codim2(kind, points, params) if detect else []
         if sps and len(states) == len(points):
             sps = [_solve(sp, states, aug, newton, make_point, W, tol) for sp in sps]
+            sps = label_points([sp for sp in sps if sp is not None])
         return CycleCurve(kind=str(kind), params=(p1n, p2n), points=tuple(points),
                           special_points=tuple(sps), stopped_reason=str(reason),
                           warnings=tuple(warnings), message=message, ntst=prob.mesh.size - 1,
@@ -228,11 +234,27 @@ def cycle_curve(
             continue
         z_new, ev, J, its, res = out
         stats["iterations"] += its
-        # a bound crossed: solve the point exactly on it and end
+        # a bound crossed: the marks before it, the point exactly on it, and the end
         hit = _crossed(bounds, z, z_new, aug)
+        frac = 1.0
         if hit is not None:
             idx, bound = hit
             frac = (bound / _sc(aug, idx) - z[idx]) / (z_new[idx] - z[idx])
+        z2, dz2 = float(z[-1]), float(z_new[-1] - z[-1])
+        inside = _marks_inside(marks, z2 * aug.scale2, (z2 + frac * dz2) * aug.scale2) \
+            if dz2 else []
+        for mark in inside:
+            fm = (mark / aug.scale2 - z2) / dz2
+            e = np.zeros(aug.size)
+            e[-1] = 1.0
+            om = newton(z + fm * (z_new - z), e, mark / aug.scale2, U_prev)
+            if om is None:
+                warnings.append(f"the point at {p2n} = {mark:.10g} (a value asked for) "
+                                "could not be solved")
+                continue
+            points.append(make_point(om[0], om[1], om[3], om[4], "mark"))
+            states.append((om[0], t, prob.mesh.copy()))
+        if hit is not None:
             e = np.zeros(aug.size)
             e[idx] = 1.0
             ob = newton(z + frac * (z_new - z), e, bound / _sc(aug, idx), U_prev)
@@ -245,18 +267,6 @@ def cycle_curve(
             warnings.append(f"the point on the bound {bound:g} could not be solved; the "
                             "curve ends at the last point before it")
             return finish(points, CurveStop.BOUND)
-        for mark in _marks_inside(marks, float(z[-1]) * aug.scale2,
-                                  float(z_new[-1]) * aug.scale2):
-            frac = (mark / aug.scale2 - z[-1]) / (z_new[-1] - z[-1])
-            e = np.zeros(aug.size)
-            e[-1] = 1.0
-            om = newton(z + frac * (z_new - z), e, mark / aug.scale2, U_prev)
-            if om is None:
-                warnings.append(f"the point at {p2n} = {mark:.10g} (a value asked for) "
-                                "could not be solved")
-                continue
-            points.append(make_point(om[0], om[1], om[3], om[4], "mark"))
-            states.append((om[0], t, prob.mesh.copy()))
         aug.update_borders(ev)
         t = _tangent(J, W, t)
         z = z_new
@@ -296,11 +306,12 @@ def _both_ways(system, orbit, kind, params, **kw) -> CycleCurve:
 
 
 def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: Callable,
-           W: np.ndarray, tol: float):
+           W: np.ndarray, tol: float) -> Any:
     """Solve a bracketed codimension-two point of the multiplier tests on the curve: the
     zero of its test function along the step from point k (Illinois iterations on the
     arclength, each a point corrected onto the curve). Points of other kinds, and steps
-    over which the mesh was adapted, stay bracketed."""
+    over which the mesh was adapted, stay bracketed; None for an NS zero that turns out to
+    be a neutral saddle (no complex pair on the unit circle there)."""
     k = sp.step
     if sp.type not in ("LPPD", "LPNS", "PDNS") or k + 1 >= len(states):
         return sp
@@ -341,6 +352,9 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
             break
     else:
         return sp
+    if sp.type in ("LPNS", "PDNS") and not torus_pair(
+            codim2_rest(aug.kind, best.multipliers), 1e-4):
+        return None  # a neutral saddle, no torus bifurcation
     return dataclasses.replace(sp, value=best.values[0], values=best.values, located="solved",
                                detail=f"test function {f:.2e} there", period=best.period,
                                point=best)

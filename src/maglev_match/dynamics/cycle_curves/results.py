@@ -34,8 +34,8 @@ class CurveStop(StrEnum):
 class CycleCurvePoint:
     """One point of the curve: a cycle at its bifurcation (LPC or PD) at (p1, p2).
 
-    ``amplitude`` is the largest distance of the orbit's nodes from their mean (Euclidean,
-    the system's state units); ``multipliers`` the nontrivial Floquet multipliers (the one
+    ``amplitude`` is the largest distance of the orbit's nodes from their mean, each state
+    in units of ``system.state_scale`` (Euclidean norm, dimensionless); ``multipliers`` the nontrivial Floquet multipliers (the one
     nearest 1 removed; on an LPC curve a second one lies at 1, the critical one), reported
     only where ``reliable`` (|trivial - 1| <= trivial_tol), else empty; ``test`` the
     value of the bordered test function g at the solution (0 to the tolerance)."""
@@ -122,8 +122,9 @@ def curve_to_xarray(curve: CycleCurve, units: Mapping[str, str] | None = None) -
                                    f"{curve.kind} curve"}),
         "period": (("point",), curve.periods, {"units": "s", "long_name": "period of the "
                                                "cycle"}),
-        "amplitude": (("point",), curve.amplitudes, {"units": "state units", "long_name":
-                      "largest distance of the orbit from its mean"}),
+        "amplitude": (("point",), curve.amplitudes, {"units": "1", "long_name":
+                      "largest distance of the orbit from its mean (states in units of the "
+                      "system's state scale)"}),
         "test": (("point",), np.array([c.test for c in pts]), {"units": "1", "long_name":
                  "bordered test function g at the point"}),
         "reliable": (("point",), np.array([c.reliable for c in pts], np.int8),
