@@ -85,6 +85,25 @@ def test_command_answers_for_a_user_model(tmp_path, capsys):
     assert max(abs(p["l1"] ** 2 + 4 * p["mu"]) for p in pts) < 1e-8
 
 
+def test_restart_from_a_saved_branch(tmp_path, capsys):
+    model = tmp_path / "bautin.py"
+    model.write_text(BAUTIN_FILE)
+    saved = tmp_path / "branch"
+    assert main(["cycles", "--model", str(model), "--param", "mu", "--ntst", "20",
+                 "--max-steps", "60", "--out", str(saved)]) == 0
+    nc = next(saved.glob("*.nc"))
+    capsys.readouterr()
+    code = main(["cycle-curve", "--model", str(model), "--params", "mu,l1", "--restart",
+                 str(nc), "--label", "LPC1", "--range", "l1=0.9:1.1", "--json"])
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["ok"] and res["restart_of"].startswith("LPC1 of")
+    assert max(abs(p["l1"] ** 2 + 4 * p["mu"]) for p in res["points"]) < 1e-8
+    # a PD curve is not started from a fold
+    code = main(["cycle-curve", "--model", str(model), "--params", "mu,l1", "--restart",
+                 str(nc), "--label", "LPC1", "--kind", "PD"])
+    assert code == 2 and "LPC1 is a LPC" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("args, words", [
     (["--kind", "NS"], ["kind", "NS", "LPC, PD"]),
     (["--params", "omega1"], ["--params", "omega1", "P1,P2"]),

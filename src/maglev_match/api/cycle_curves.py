@@ -210,6 +210,11 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
         if label is None:
             raise ParameterError("restart/label", restart, "a restart needs the label of a "
                                  f"special point of the saved branch (e.g. {kind}1)")
+        saved_type = str(label).rstrip("0123456789")
+        if saved_type in ("LPC", "PD", "NS", "BP") and saved_type != kind:
+            raise ParameterError("label", label, f"{label} is a {saved_type}; a {kind} curve "
+                                 f"starts from a {kind} (e.g. {kind}1) or a branch point P<k> "
+                                 "at one")
         system, orbit, studied_label, is_user, prm, at_used = _from_file(
             params, model, restart, label, at, config, overrides)
         branch, restart_of, start_label = None, f"{label} of {restart}", label
