@@ -41,11 +41,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.sparse
-import scipy.sparse.linalg
 
 from maglev_match.core.aot import cached_kernel
 from maglev_match.dynamics.collocation import (
     CollocationProblem,
+    factorize,
     collocation_tables,
     interval_nodes,
     sparse_matrix,
@@ -162,7 +162,7 @@ class AugmentedCycleSystem:
         M = scipy.sparse.bmat([[A, scipy.sparse.csc_matrix(b.reshape(k, 1))],
                                [scipy.sparse.csc_matrix(c.reshape(1, k)), None]],
                               format="csc")
-        lu = scipy.sparse.linalg.splu(M)
+        lu = factorize(M)
         e = np.zeros(k + 1)
         e[-1] = 1.0
         x = lu.solve(e)

@@ -14,9 +14,13 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse
-import scipy.sparse.linalg
 
-from maglev_match.dynamics.collocation import CollocationProblem, adapt_mesh, remesh
+from maglev_match.dynamics.collocation import (
+    CollocationProblem,
+    adapt_mesh,
+    factorize,
+    remesh,
+)
 from maglev_match.dynamics.continuation import label_points
 from maglev_match.dynamics.cycle_curves.augmented import (
     AugmentedCycleSystem,
@@ -59,7 +63,7 @@ class _Newton:
                 ev = aug.evaluate(z, phase, Uref)
                 F = np.append(ev.resid, float(row @ z) - target)
                 J = scipy.sparse.vstack([ev.jac, rowm], format="csc")
-                dz = scipy.sparse.linalg.splu(J).solve(-F)
+                dz = factorize(J).solve(-F)
             except (RuntimeError, ValueError, np.linalg.LinAlgError):
                 return None
             if not np.all(np.isfinite(dz)):
@@ -77,7 +81,7 @@ def _tangent(J: scipy.sparse.csc_matrix, W: np.ndarray, orient: np.ndarray | Non
              ) -> np.ndarray:
     e = np.zeros(J.shape[0])
     e[-1] = 1.0
-    t = scipy.sparse.linalg.splu(J).solve(e)
+    t = factorize(J).solve(e)
     t /= math.sqrt(float(np.sum(W * t * t)))
     if orient is not None and float(np.sum(W * t * orient)) < 0:
         t = -t
