@@ -86,12 +86,12 @@ def _gradient_kernel(rhs: Callable, m: int) -> Callable:
 @dataclass(frozen=True)
 class Evaluation:
     """The augmented system at one point: residual (N n + 2: cycle rows, then g), its
-    Jacobian (sparse, N n + 2 rows by N n + 3 columns), the test function g, the kernel
+    Jacobian (sparse COO, N n + 2 rows by N n + 3 columns), the test function g, the kernel
     vector v and left kernel vector w of the bordered matrix, and the collocation blocks
     (J, T, h) for the Floquet multipliers."""
 
     resid: np.ndarray
-    jac: scipy.sparse.csr_matrix
+    jac: scipy.sparse.coo_matrix
     g: float
     v: np.ndarray
     w: np.ndarray
@@ -140,28 +140,44 @@ class AugmentedCycleSystem:
         return np.append(self.prob.W(), 1.0)
 
     # --- the bordered matrix ---
-    def test_matrix(self, full: scipy.sparse.spmatrix) -> scipy.sparse.csc_matrix:
-        """A(z) of the module docstring from the cycle Jacobian ``full`` (the rows and
-        columns of :func:`sparse_matrix`)."""
+    def test_entries(self, full: scipy.sparse.coo_matrix
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """The COO entries (rows, cols, values) and the order k of A(z) of the module
+        docstring, from the cycle Jacobian ``full`` (the rows and columns of
+        :func:`sparse_matrix`, as COO)."""
         p = self.prob
         Nn, n = p.N * p.n, p.n
+        r, c, v = full.row, full.col, full.data
         if self.kind == CurveKind.LPC:
-            return scipy.sparse.csc_matrix(full[:-1, :-1])
+            k = Nn + 1
+            keep = (r < k) & (c < k)
+            return r[keep], c[keep], v[keep], k
         nc = Nn - n
-        col = full[:nc, :Nn]
-        anti = scipy.sparse.lil_matrix((n, Nn))
-        for a in range(n):
-            anti[a, a] = 1.0
-            anti[a, Nn - n + a] = 1.0
-        return scipy.sparse.csc_matrix(scipy.sparse.vstack([col, anti.tocsr()]))
+        keep = (r < nc) & (c < Nn)
+        a = np.arange(n)
+        return (np.concatenate([r[keep], nc + a, nc + a]),
+                np.concatenate([c[keep], a, Nn - n + a]),
+                np.concatenate([v[keep], np.ones(2 * n)]), Nn)
 
-    def bordered_solve(self, A: scipy.sparse.spmatrix, b: np.ndarray, c: np.ndarray
+    def test_matrix(self, full: scipy.sparse.spmatrix) -> scipy.sparse.csc_matrix:
+        """A(z) as a sparse matrix (see :meth:`test_entries`)."""
+        r, c, v, k = self.test_entries(scipy.sparse.coo_matrix(full))
+        return scipy.sparse.csc_matrix((v, (r, c)), shape=(k, k))
+
+    def bordered_solve(self, A, b: np.ndarray, c: np.ndarray
                        ) -> tuple[np.ndarray, float, np.ndarray]:
-        """(v, g, w) of M [v; g] = [0; 1] and M^T [w; h] = [0; 1]."""
-        k = A.shape[0]
-        M = scipy.sparse.bmat([[A, scipy.sparse.csc_matrix(b.reshape(k, 1))],
-                               [scipy.sparse.csc_matrix(c.reshape(1, k)), None]],
-                              format="csc")
+        """(v, g, w) of M [v; g] = [0; 1] and M^T [w; h] = [0; 1]; ``A`` a sparse matrix
+        or the COO entries of :meth:`test_entries`."""
+        if isinstance(A, tuple):
+            r, cc, vals, k = A
+        else:
+            Ac = scipy.sparse.coo_matrix(A)
+            r, cc, vals, k = Ac.row, Ac.col, Ac.data, Ac.shape[0]
+        ar = np.arange(k)
+        M = scipy.sparse.csc_matrix(
+            (np.concatenate([vals, b, c]),
+             (np.concatenate([r, ar, np.full(k, k)]), np.concatenate([cc, np.full(k, k), ar]))),
+            shape=(k + 1, k + 1))
         lu = factorize(M)
         e = np.zeros(k + 1)
         e[-1] = 1.0
@@ -176,7 +192,7 @@ class AugmentedCycleSystem:
         rng = np.random.default_rng(0)
         b = rng.standard_normal(k)
         c = rng.standard_normal(k) if c0 is None else np.asarray(c0, float)
-        A = self.test_matrix(self._full(z)[0])
+        A = self.test_entries(self._full(z)[0])
         for _ in range(3):
             v, _, w = self.bordered_solve(A, b / np.linalg.norm(b), c / np.linalg.norm(c))
             b, c = w, v
@@ -198,20 +214,23 @@ class AugmentedCycleSystem:
         if phase is None:
             phase = prob.phase_row(Uref)
         pa = prob.parts(Y, phase, Uref, np.zeros(prob.size), 0.0)
-        return sparse_matrix(prob, pa), pa
+        return scipy.sparse.coo_matrix(sparse_matrix(prob, pa)), pa
 
     def evaluate(self, z: np.ndarray, phase: np.ndarray, Uref: np.ndarray) -> Evaluation:
         """Residual and Jacobian of (cycle rows, g) at z (module docstring)."""
         prob = self.prob
         full, pa = self._full(z, phase, Uref)
         Y, p2 = self.split(z)
-        A = self.test_matrix(full)
+        A = self.test_entries(full)
         v, g, w = self.bordered_solve(A, self.b, self.c)
         gz = self._g_gradient(Y, v, w)
         dp2 = prob.param_derivative(Y, prob.system.param_names[self.ipar2])[:-1] * self.scale2
-        top = scipy.sparse.hstack([full[:-1, :], scipy.sparse.csc_matrix(dp2.reshape(-1, 1))])
-        jac = scipy.sparse.vstack([top, scipy.sparse.csr_matrix(gz.reshape(1, -1))],
-                                  format="csr")
+        S = prob.size  # the cycle rows are 0..S-2, g is row S-1; columns 0..S-1, p2 is S
+        keep = full.row < S - 1
+        rows = np.concatenate([full.row[keep], np.arange(S - 1), np.full(S + 1, S - 1)])
+        cols = np.concatenate([full.col[keep], np.full(S - 1, S), np.arange(S + 1)])
+        vals = np.concatenate([full.data[keep], dp2, gz])
+        jac = scipy.sparse.coo_matrix((vals, (rows, cols)), shape=(S, S + 1))
         resid = np.append(pa.resid[:-1], g)
         return Evaluation(resid=resid, jac=jac, g=g, v=v, w=w, blocks=pa.blocks)
 

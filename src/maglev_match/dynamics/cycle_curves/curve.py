@@ -57,12 +57,11 @@ class _Newton:
     def __call__(self, z, row, target, Uref):
         aug = self.aug
         phase = aug.prob.phase_row(Uref)
-        rowm = scipy.sparse.csr_matrix(row.reshape(1, -1))
         for it in range(1, self.max_iter + 1):
             try:
                 ev = aug.evaluate(z, phase, Uref)
                 F = np.append(ev.resid, float(row @ z) - target)
-                J = scipy.sparse.vstack([ev.jac, rowm], format="csc")
+                J = _with_row(ev.jac, row)
                 dz = factorize(J).solve(-F)
             except (RuntimeError, ValueError, np.linalg.LinAlgError):
                 return None
@@ -71,10 +70,19 @@ class _Newton:
             z = z + dz
             if float(np.max(np.abs(dz))) < self.tol:
                 ev = aug.evaluate(z, phase, Uref)
-                J = scipy.sparse.vstack([ev.jac, rowm], format="csc")
+                J = _with_row(ev.jac, row)
                 res = float(np.max(np.abs(ev.resid)))
                 return z, ev, J, it, res
         return None
+
+
+def _with_row(jac: scipy.sparse.coo_matrix, row: np.ndarray) -> scipy.sparse.csc_matrix:
+    """The square Newton matrix: the augmented Jacobian with the linear row below."""
+    n = row.size
+    return scipy.sparse.csc_matrix(
+        (np.concatenate([jac.data, row]),
+         (np.concatenate([jac.row, np.full(n, jac.shape[0])]),
+          np.concatenate([jac.col, np.arange(n)]))), shape=(jac.shape[0] + 1, n))
 
 
 def _tangent(J: scipy.sparse.csc_matrix, W: np.ndarray, orient: np.ndarray | None
