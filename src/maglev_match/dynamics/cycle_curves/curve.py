@@ -61,18 +61,18 @@ class _Newton:
             try:
                 ev = aug.evaluate(z, phase, Uref)
                 F = np.append(ev.resid, float(row @ z) - target)
-                J = _with_row(ev.jac, row)
-                dz = factorize(J).solve(-F)
+                lu = factorize(_with_row(ev.jac, row))
+                dz = lu.solve(-F)
             except (RuntimeError, ValueError, np.linalg.LinAlgError):
                 return None
             if not np.all(np.isfinite(dz)):
                 return None
             z = z + dz
             if float(np.max(np.abs(dz))) < self.tol:
-                ev = aug.evaluate(z, phase, Uref)
-                J = _with_row(ev.jac, row)
-                res = float(np.max(np.abs(ev.resid)))
-                return z, ev, J, it, res
+                # converged: the last iterate's evaluation and factorisation serve the
+                # borders, the reported test value and residual, and the tangent (they are
+                # within the tolerance of the solution's)
+                return z, ev, lu, it, float(np.max(np.abs(F)))
         return None
 
 
@@ -85,11 +85,12 @@ def _with_row(jac: scipy.sparse.coo_matrix, row: np.ndarray) -> scipy.sparse.csc
           np.concatenate([jac.col, np.arange(n)]))), shape=(jac.shape[0] + 1, n))
 
 
-def _tangent(J: scipy.sparse.csc_matrix, W: np.ndarray, orient: np.ndarray | None
-             ) -> np.ndarray:
-    e = np.zeros(J.shape[0])
+def _tangent(lu: Any, W: np.ndarray, orient: np.ndarray | None) -> np.ndarray:
+    """The unit tangent from the factorised Newton matrix (its last row the linear
+    condition): the solution of [jac; row] t = e_last, oriented along ``orient``."""
+    e = np.zeros(W.size)
     e[-1] = 1.0
-    t = factorize(J).solve(e)
+    t = lu.solve(e)
     t /= math.sqrt(float(np.sum(W * t * t)))
     if orient is not None and float(np.sum(W * t * orient)) < 0:
         t = -t
@@ -178,7 +179,7 @@ def cycle_curve(
 
     def make_point(z, ev: Evaluation, its, res, kind_="step") -> CycleCurvePoint:
         U, T, v1, v2 = aug.unpack(z)
-        J, Tb, h = ev.blocks
+        J, Tb, h = prob.jacobian_blocks(z[:-1])
         mult = floquet_multipliers_from_blocks(
             J, Tb, h, prob.m, method=getattr(system, "floquet_method", "auto"))
         triv, rest = split_trivial(mult)

@@ -38,7 +38,8 @@ class CycleCurvePoint:
     in units of ``system.state_scale`` (Euclidean norm, dimensionless); ``multipliers`` the nontrivial Floquet multipliers (the one
     nearest 1 removed; on an LPC curve a second one lies at 1, the critical one), reported
     only where ``reliable`` (|trivial - 1| <= trivial_tol), else empty; ``test`` the
-    value of the bordered test function g at the solution (0 to the tolerance)."""
+    value of the bordered test function g at the last Newton iterate (0 to the tolerance);
+    ``residual`` the largest residual there."""
 
     __repr__ = compact_repr
 
