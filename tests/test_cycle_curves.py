@@ -72,6 +72,22 @@ def test_bautin_lpc_curve_is_the_closed_form(bautin_fold, direction, end):
         assert abs(c.test) < 1e-9
 
 
+def test_both_ways_with_mesh_adaptation(bautin_fold):
+    """direction=0 follows both halves from the start (one curve, from the decreasing
+    end); the mesh adapted every 3 steps (profile, tangent and borders remapped) keeps the
+    closed form."""
+    _, orbit = bautin_fold
+    cv = cycle_curve(BAUTIN_NF, orbit, "LPC", ("mu", "l1"), ranges={"l1": (0.4, 1.6)},
+                     direction=0, adapt_every=3, ds_max=1.0, max_steps=300)
+    assert cv.ok and not cv.warnings
+    assert [c.kind for c in cv.points].count("start") == 1
+    assert cv.points[0].kind == cv.points[-1].kind == "bound"
+    assert cv.p2[0] == pytest.approx(0.4, abs=1e-12) and cv.p2[-1] == pytest.approx(1.6)
+    assert np.all(np.diff(cv.p2) > 0)
+    assert np.max(np.abs(cv.p2 ** 2 + 4.0 * cv.p1)) < 1e-8
+    assert max(c.iterations for c in cv.points) <= 4
+
+
 def test_pd_curve_is_the_closed_form():
     S = pd_system_2p()
     p = S.params_with(nu=0.0)
