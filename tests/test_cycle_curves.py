@@ -88,6 +88,37 @@ def test_both_ways_with_mesh_adaptation(bautin_fold):
     assert max(c.iterations for c in cv.points) <= 4
 
 
+def test_lpc_curve_from_the_generalised_hopf_point():
+    """Branch switching at GH: the Hopf curve of the Bautin normal form (mu = 0) has its GH
+    point at l1 = 0 (with l2 = -1 in r' = r (mu + l1 r^2 - r^4), -2 in the package's
+    scaling <q, q> = 1); a step to l1 > 0 (l1 l2 < 0), the fold of the small cycles there
+    (mu = -l1^2 / 4), and its curve down towards GH and up: the closed form again."""
+    from maglev_match.dynamics.cycle_curves import lpc_from_generalised_hopf
+    from maglev_match.dynamics.hopf import locate_hopf_points
+    from maglev_match.dynamics.hopf_curve import hopf_curve
+
+    p = BAUTIN_NF.params_with(l1=-0.5)
+    hopf = locate_hopf_points(BAUTIN_NF, "mu", -1.0, 1.0, p=p, n_scan=20).points[0]
+    hc = hopf_curve(BAUTIN_NF, ("mu", "l1"), hopf, {"mu": (-1.0, 1.0), "l1": (-0.5, 0.5)},
+                    p=p)
+    gh = [sp for sp in hc.special_points if sp.type == "GH"]
+    assert len(gh) == 1 and gh[0].values[1] == pytest.approx(0.0, abs=1e-9)
+    assert gh[0].l2 < 0
+    g = gh[0]
+    x = min(hc.points, key=lambda c: abs(c.values[1] - g.values[1])).x
+    pg = BAUTIN_NF.params_with(p, mu=g.values[0], l1=g.values[1])
+    with pytest.raises(ValueError, match="no fold of cycles"):  # l1 l2 > 0 there
+        lpc_from_generalised_hopf(BAUTIN_NF, x, pg, g.frequency, ("mu", "l1"), offset=-0.02,
+                                  l2=g.l2)
+    cv, br = lpc_from_generalised_hopf(
+        BAUTIN_NF, x, pg, g.frequency, ("mu", "l1"), offset=0.02, l2=g.l2,
+        ranges={"l1": (0.002, 0.5)}, direction=0, ds_max=1.0, max_steps=300,
+        scales=(0.01, 0.05))
+    assert [s.type for s in br.special_points][:1] == ["LPC"]
+    assert cv.ok and cv.p2[0] == pytest.approx(0.002) and cv.p2[-1] == pytest.approx(0.5)
+    assert np.max(np.abs(cv.p2 ** 2 + 4.0 * cv.p1)) < 1e-8
+
+
 def test_pd_curve_is_the_closed_form():
     S = pd_system_2p()
     p = S.params_with(nu=0.0)

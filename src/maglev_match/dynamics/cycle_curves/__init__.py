@@ -20,6 +20,8 @@ conditioned along the curve.
   (pseudo-arclength in (p1, p2), Newton, step control, mesh adaptation, the multipliers);
 * :mod:`~maglev_match.dynamics.cycle_curves.codim2`: codimension-two points on the curve
   (CPC, LPPD, LPNS on LPC; LPPD, PDNS on PD);
+* :mod:`~maglev_match.dynamics.cycle_curves.gh`: the LPC curve born at a generalised Hopf
+  point of a Hopf curve (branch switching, :func:`lpc_from_generalised_hopf`);
 * :mod:`~maglev_match.dynamics.cycle_curves.results`: :class:`CycleCurve`,
   :class:`CycleCurvePoint`, :class:`CurveStop`.
 
@@ -30,6 +32,7 @@ system is not used), with the mesh (NTST, NCOL) of the start orbit.
 from maglev_match.dynamics.cycle_curves.augmented import AugmentedCycleSystem, CurveKind
 from maglev_match.dynamics.cycle_curves.codim2 import codim2_tests, detect_codim2
 from maglev_match.dynamics.cycle_curves.curve import cycle_curve, start_from
+from maglev_match.dynamics.cycle_curves.gh import lpc_from_generalised_hopf
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
 
 __all__ = [
@@ -41,5 +44,6 @@ __all__ = [
     "codim2_tests",
     "cycle_curve",
     "detect_codim2",
+    "lpc_from_generalised_hopf",
     "start_from",
 ]
