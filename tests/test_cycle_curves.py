@@ -169,6 +169,19 @@ def test_cusp_of_cycles_is_bracketed():
     assert cpc[0].values[1] == pytest.approx(-0.03, abs=5e-3)
 
 
+def test_a_stall_at_the_generalised_hopf_end_is_reported():
+    """Followed down towards GH (l1 -> 0) the fold's cycle shrinks to the equilibrium and
+    the collocation problem degenerates: the curve stops with the reason and the place in
+    its warning, and every point it kept is on the closed form."""
+    br, orbit = _fold_orbit(BAUTIN_NF, 0.2, ntst=20, ncol=4)
+    cv = cycle_curve(BAUTIN_NF, orbit, "LPC", ("mu", "l1"), ranges={"l1": (-0.5, 1.0)},
+                     direction=-1, ds_max=1.0, max_steps=300, scales=(0.01, 0.05))
+    assert cv.stopped_reason == CurveStop.STEP_TOO_SMALL and not cv.ok
+    assert len(cv.warnings) == 1 and "the LPC curve stopped at (mu, l1)" in cv.warnings[0]
+    assert 0 < cv.p2[-1] < 1e-3 and cv.amplitudes[-1] < 0.05
+    assert np.max(np.abs(cv.p2 ** 2 + 4.0 * cv.p1)) < 1e-8
+
+
 def test_no_fold_is_reported_not_raised():
     """A supercritical Hopf family (l1 < 0 in r' = r (mu + l1 r^2)) has no fold of cycles:
     the start cannot be corrected onto an LPC curve, and the curve says so."""
