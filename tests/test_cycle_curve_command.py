@@ -85,6 +85,28 @@ def test_command_answers_for_a_user_model(tmp_path, capsys):
     assert max(abs(p["l1"] ** 2 + 4 * p["mu"]) for p in pts) < 1e-8
 
 
+def test_lpc_curve_from_a_generalised_hopf_point_of_a_user_model(tmp_path, capsys):
+    """--label GH1: the LPC curve born at the GH point (mu, l1) = (0, 0) of the Hopf curve
+    mu = 0, on the side l1 > 0, ends a fifth of the switching step (1 % of the range)
+    before GH and on the range's other end; the closed form l1^2 + 4 mu = 0 along it. (The
+    range is not centred on GH: the Hopf curve's scans start at its middle, and a GH point
+    exactly there, l1 = 0 at the start, is not detected by the Hopf curve.)"""
+    model = tmp_path / "bautin.py"
+    model.write_text(BAUTIN_FILE)
+    code = main(["cycle-curve", "--model", str(model), "--params", "mu,l1", "--label", "GH1",
+                 "--from", "-1", "--to", "1", "--range", "l1=-0.4:0.5", "--json"])
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["ok"], res["warnings"]
+    assert res["start"] == "GH1 of the Hopf curve"
+    l1 = [p["l1"] for p in res["points"]]
+    # the step is 1 % of the range (0.009); the GH end a fifth of it from GH
+    assert min(l1) == pytest.approx(0.0018, abs=1e-12) and max(l1) == pytest.approx(0.5)
+    assert max(abs(p["l1"] ** 2 + 4 * p["mu"]) for p in res["points"]) < 1e-8
+    code = main(["cycle-curve", "--model", str(model), "--params", "mu,l1", "--label", "GH2",
+                 "--from", "-1", "--to", "1", "--range", "l1=-0.4:0.5"])
+    assert code == 2 and "GH1 to GH1" in capsys.readouterr().err
+
+
 def test_restart_from_a_saved_branch(tmp_path, capsys):
     model = tmp_path / "bautin.py"
     model.write_text(BAUTIN_FILE)

@@ -162,7 +162,9 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
         on the bound). Default: `y` within 0.5 to 2 times its start value.
     label : str, optional
         The special point to start from (default: the first of `kind` on the branch, e.g.
-        LPC1); with `restart`, required.
+        LPC1); with `restart`, required. `GH1`, `GH2`, ...: the LPC curve born at that
+        generalised Hopf point of the Hopf curve in (`x`, `y`) (branch switching; `x`
+        within `start`/`stop`, `y` within `bounds`, else `hopf-curve`'s default plane).
     restart : str or Path, optional
         A branch file written by `cycles --out`: start from its special point `label`
         (no Hopf search; the saved model, mesh and values).
@@ -218,6 +220,12 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
         system, orbit, studied_label, is_user, prm, at_used = _from_file(
             params, model, restart, label, at, config, overrides)
         branch, restart_of, start_label = None, f"{label} of {restart}", label
+    elif label is not None and str(label).startswith("GH"):
+        if kind != "LPC":
+            raise ParameterError("label", label, "a generalised Hopf point starts an LPC "
+                                 "curve (--kind LPC)")
+        return _from_gh(params, x, y, label, model, at, bnds, start, stop, ntst, ncol,
+                        max_steps, marks, config, say, overrides, t0)
     else:
         from maglev_match.api.cycles import cycle_study
 
@@ -255,6 +263,82 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
                            start_label=start_label, start_branch=branch,
                            restart_of=restart_of, elapsed=time.perf_counter() - t0,
                            is_user=is_user, params=prm)
+
+
+def _from_gh(params, x, y, label, model, at, bnds, start, stop, ntst, ncol, max_steps,
+             marks, config, say, overrides, t0) -> CycleCurveStudy:
+    """The LPC curve born at the generalised Hopf point ``label`` (GH1, GH2, ... in the
+    order of the Hopf curves of the plane): the Hopf curve in (x, y) (as `hopf-curve`
+    computes it; x within --from/--to, y within its --range, else that command's default
+    plane), then :func:`~maglev_match.dynamics.cycle_curves.lpc_from_generalised_hopf`
+    with a step of 1 % of y's range to the side where a fold is born; the curve's GH end is
+    a fifth of that step before GH (its cycles shrink to the equilibrium there)."""
+    import numpy as np
+
+    from maglev_match.api.hopf import hopf_curve
+    from maglev_match.api.inputs import resolve_model
+    from maglev_match.dynamics.cycle_curves import lpc_from_generalised_hopf
+
+    xa = (x, start, stop) if start is not None and stop is not None else x
+    ya = (y, *bnds[y]) if y in bnds else y
+    vals = {**overrides, **dict(at or {})}
+    say(f"the Hopf curve in ({x}, {y}) for its generalised Hopf points ...")
+    curves = hopf_curve(params, xa, ya, model=model, config=config, **vals)
+    ghs = [(sp, c) for c in curves for sp in c.special_points if sp.type == "GH"]
+    if not ghs:
+        raise ParameterError("label", label, f"the Hopf curve in ({x}, {y}) has no "
+                             "generalised Hopf point there")
+    try:
+        sp, c = ghs[int(str(label)[2:]) - 1]
+    except (ValueError, IndexError):
+        raise ParameterError("label", label, f"the Hopf curve has GH1 to GH{len(ghs)}") \
+            from None
+    studied = resolve_model(params, model, config=config, **vals)
+    system = studied.system()
+    near = min(c.points, key=lambda q: abs(q.values[0] - sp.values[0])
+               + abs(q.values[1] - sp.values[1]))
+    pg = system.params_with(**{x: sp.values[0], y: sp.values[1]})
+    lo, hi = bnds.get(y, (min(q.values[1] for q in c.points), max(q.values[1] for q in
+                                                                   c.points)))
+    step = 0.01 * (hi - lo) if hi > lo else 0.01
+    bnds = dict(bnds)
+    bnds.setdefault(y, (lo, hi))
+    last: Exception | None = None
+    say(f"branch switching at {label} ({x} = {sp.values[0]:.8g}, {y} = {sp.values[1]:.8g}) "
+        "...")
+    for offset in (step, -step):
+        # the GH side of the curve ends a fifth of the step before GH, where its cycles
+        # shrink to the equilibrium (and the collocation problem degenerates)
+        ylo, yhi = bnds[y]
+        edge = sp.values[1] + 0.2 * offset
+        ranges = {**bnds, y: (max(ylo, edge), yhi) if offset > 0 else (ylo, min(yhi, edge))}
+        try:
+            curve, branch = lpc_from_generalised_hopf(
+                system, near.x, pg, sp.frequency, (x, y), offset=offset, l2=sp.l2,
+                ntst=40 if ntst is None else ntst, ncol=4 if ncol is None else ncol,
+                ranges=ranges, direction=0, max_steps=max_steps,
+                marks=tuple(float(m) for m in marks),
+                scales=(0.05 * (stop - start) if start is not None and stop is not None
+                        and stop != start else None, abs(step) * 5.0))
+            break
+        except ValueError as exc:
+            last = exc
+    else:
+        raise ParameterError("label", label, f"no fold of cycles found near {label}: "
+                             f"{last}") from None
+    if not np.isfinite(sp.l2 if sp.l2 is not None else np.nan):
+        curve = _with_warning(curve, f"l2 at {label} is not known: the side of the fold "
+                              "was found by trying both")
+    return CycleCurveStudy(model=studied.label, kind="LPC", x=x, y=y, at=dict(at or {}),
+                           curve=curve, start_label=f"{label} of the Hopf curve",
+                           start_branch=branch, elapsed=time.perf_counter() - t0,
+                           is_user=studied.is_user, params=studied.params)
+
+
+def _with_warning(curve, text: str):
+    from dataclasses import replace
+
+    return replace(curve, warnings=tuple(curve.warnings) + (text,))
 
 
 def _from_file(params, model, restart, label, at, config, overrides):

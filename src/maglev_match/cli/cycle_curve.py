@@ -84,7 +84,8 @@ def cycle_curve_command(
         "(default: P2 from 0.5 to 2 times its start value).")] = None,
     label: Annotated[str | None, typer.Option(
         "--label", help="The special point to start from (default: the first of --kind on "
-        "the branch, e.g. LPC1); with --restart, required.")] = None,
+        "the branch, e.g. LPC1); with --restart, required; GH1, GH2, ...: the LPC curve born "
+        "at that generalised Hopf point of the Hopf curve in (P1, P2).")] = None,
     restart: Annotated[Path | None, typer.Option(
         "--restart", help="Start from the special point --label of a branch saved by "
         "`cycles --out` (netCDF): no Hopf search, the saved model, mesh and values.")] = None,
