@@ -20,8 +20,15 @@ import math
 import matplotlib
 import numpy as np
 import pytest
-from systems import BAUTIN_NF, CYCLE_OMEGA, PD_OMEGA, Q_CRIT, bautin_flip_system, embedded, \
-    pd_system_2p
+from systems import (
+    BAUTIN_NF,
+    CYCLE_OMEGA,
+    PD_OMEGA,
+    Q_CRIT,
+    bautin_flip_system,
+    embedded,
+    pd_system_2p,
+)
 
 from maglev_match.dynamics.cycle_curves import CurveStop, cycle_curve, start_from
 from maglev_match.dynamics.cycles import cycle_branch, hopf_start

@@ -32,10 +32,10 @@ after each accepted point, as MatCont does), so M stays well conditioned along t
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
 from functools import cache
-from typing import Callable
 
 import jax
 import jax.numpy as jnp
@@ -45,8 +45,8 @@ import scipy.sparse
 from maglev_match.core.aot import cached_kernel
 from maglev_match.dynamics.collocation import (
     CollocationProblem,
-    factorize,
     collocation_tables,
+    factorize,
     interval_nodes,
     sparse_matrix,
 )

@@ -35,10 +35,11 @@ class CycleCurvePoint:
     """One point of the curve: a cycle at its bifurcation (LPC or PD) at (p1, p2).
 
     ``amplitude`` is the largest distance of the orbit's nodes from their mean, each state
-    in units of ``system.state_scale`` (Euclidean norm, dimensionless); ``multipliers`` the nontrivial Floquet multipliers (the one
-    nearest 1 removed; on an LPC curve a second one lies at 1, the critical one), reported
-    only where ``reliable`` (|trivial - 1| <= trivial_tol), else empty; ``test`` the
-    value of the bordered test function g at the last Newton iterate (0 to the tolerance);
+    in units of ``system.state_scale`` (Euclidean norm, dimensionless); ``multipliers``
+    the nontrivial Floquet multipliers (the one nearest 1 removed; on an LPC curve a
+    second one lies at 1, the critical one), reported only where ``reliable`` (|trivial -
+    1| <= trivial_tol), else empty; ``test`` the value of the bordered test function g at
+    the last Newton iterate (0 to the tolerance);
     ``residual`` the largest residual there."""
 
     __repr__ = compact_repr
