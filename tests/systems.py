@@ -6,6 +6,11 @@
   theta' = omega, plus a stable linear 3-block, rotated (Hopf; fold of cycles at mu = -1).
 * :func:`pd_system` - a planar Hopf cycle with a transverse "Moebius" block whose
   Floquet multipliers are known in closed form: a period doubling at nu = (ALPHA/BETA)^2.
+* :func:`pd_system_2p` - the same with ALPHA a parameter: the PD curve nu = ALPHA^2.
+* :func:`bautin_flip_system` - the same fold of cycles with a transverse block whose
+  multiplier passes -1 on it: a fold-flip point (LPPD) in closed form.
+* :data:`BAUTIN_NF` - the radial Bautin normal form r' = r (mu + l1 r^2 - r^4): its fold of
+  cycles is the curve l1^2 + 4 mu = 0, l1 > 0.
 * :func:`planar_system` - a planar system (PD and NS impossible).
 * :func:`saddle_node`, :func:`pitchfork`, :func:`s_shaped_hopf` - equilibria with a fold,
   a symmetric pitchfork, and an S-shaped curve with a Hopf point on each outer branch.
@@ -127,6 +132,7 @@ def embedded(radial) -> System:
 
 HOPF_NF = embedded(lambda mu, l1, r2: mu + l1 * r2)
 FOLD_NF = embedded(lambda mu, l1, r2: mu + 2.0 * r2 - r2 * r2)
+BAUTIN_NF = embedded(lambda mu, l1, r2: mu + l1 * r2 - r2 * r2)
 Q_CRIT = Q5 @ np.array([1.0, -1.0j, 0, 0, 0]) / math.sqrt(2.0)
 
 
@@ -163,6 +169,57 @@ def pd_system() -> System:
                   state_names=("x1", "x2", "u", "v"),
                   observables={"radius": lambda x, p: jnp.sqrt(x[0] ** 2 + x[1] ** 2)},
                   name="period doubling")
+
+
+def pd_system_2p() -> System:
+    """:func:`pd_system` with the damping ALPHA of the transverse block a second parameter
+    ``alpha``: the period doubling is the curve nu = (alpha / BETA)^2 (alpha > 0) in the
+    (nu, alpha) plane, in closed form (same derivation)."""
+
+    def rhs(x, p):
+        nu, alpha = p[0], p[1]
+        x1, x2, u, v = x[0], x[1], x[2], x[3]
+        r2 = x1 * x1 + x2 * x2
+        w = PD_OMEGA
+        du = -0.5 * w * v - alpha * u + PD_BETA * (x1 * u + x2 * v)
+        dv = 0.5 * w * u - alpha * v + PD_BETA * (x2 * u - x1 * v)
+        return jnp.stack([nu * x1 - w * x2 - x1 * r2, w * x1 + nu * x2 - x2 * r2, du, dv])
+
+    return System(rhs=rhs, p=np.array([0.0, PD_ALPHA]), param_names=("nu", "alpha"),
+                  state_names=("x1", "x2", "u", "v"),
+                  observables={"radius": lambda x, p: jnp.sqrt(x[0] ** 2 + x[1] ** 2)},
+                  name="period doubling (2 parameters)")
+
+
+FLIP_BETA = 1.0
+
+
+def bautin_flip_system() -> System:
+    """The Bautin normal form r' = r (mu + l1 r^2 - r^4), theta' = PD_OMEGA (period 1) in
+    (x1, x2), with :func:`pd_system`'s transverse "Moebius" block of damping ``alpha``:
+
+        y' = (w/2) J y - alpha y + FLIP_BETA [[x1, x2], [x2, -x1]] y.
+
+    On a cycle of radius r the block's multipliers are -exp(-alpha +- FLIP_BETA r) (the
+    derivation of :func:`pd_system`), the planar part gives 1 and exp(T dg/dr r) (1 again
+    at the fold). The fold of cycles is l1^2 + 4 mu = 0 with r^2 = l1 / 2; on it a
+    multiplier passes -1 where FLIP_BETA r = alpha: a fold-flip point (LPPD) at
+    l1 = 2 (alpha / FLIP_BETA)^2, mu = -l1^2 / 4. Parameters (mu, l1, alpha)."""
+
+    def rhs(x, p):
+        mu, l1, alpha = p[0], p[1], p[2]
+        x1, x2, u, v = x[0], x[1], x[2], x[3]
+        r2 = x1 * x1 + x2 * x2
+        g = mu + l1 * r2 - r2 * r2
+        w = PD_OMEGA
+        du = -0.5 * w * v - alpha * u + FLIP_BETA * (x1 * u + x2 * v)
+        dv = 0.5 * w * u - alpha * v + FLIP_BETA * (x2 * u - x1 * v)
+        return jnp.stack([g * x1 - w * x2, w * x1 + g * x2, du, dv])
+
+    return System(rhs=rhs, p=np.array([0.0, 1.0, 0.5]), param_names=("mu", "l1", "alpha"),
+                  state_names=("x1", "x2", "u", "v"),
+                  observables={"radius": lambda x, p: jnp.sqrt(x[0] ** 2 + x[1] ** 2)},
+                  name="Bautin with a flip block")
 
 
 def pd_multipliers(nu: float) -> np.ndarray:

@@ -73,7 +73,7 @@ def test_answers_without_computing_do_not_import_jax(argv, code):
 SET_COMMANDS = {
     "stability": (), "root-locus": (), "hopf": (), "hopf-curve": (), "cycles": (),
     "simulate": (), "index": (), "report": (),
-    "sensitivity": (), "speed": (),
+    "sensitivity": (), "speed": (), "cycle-curve": (),
     "map": ("--x", "omega1=40:190:3", "--y", "sigma=2e-4:6e-4:3"),
     "design": ("--vary", "EI=5e9:4e10", "--maximize", "chi"),
 }

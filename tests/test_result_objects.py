@@ -24,6 +24,7 @@ from maglev_match.analyses.sensitivity import IndexSensitivity  # noqa: E402
 from maglev_match.analyses.simulation import MaglevSimulation  # noqa: E402
 from maglev_match.analyses.speed.spans import SpanRun  # noqa: E402
 from maglev_match.analyses.speed.sweep import SpeedSweep  # noqa: E402
+from maglev_match.api.cycle_curves import CycleCurveStudy  # noqa: E402
 from maglev_match.api.cycles import CycleStudy  # noqa: E402
 from maglev_match.api.hopf import HopfCurveStudy  # noqa: E402
 from maglev_match.api.index import IndexSpread  # noqa: E402
@@ -47,6 +48,7 @@ def rhs(x, p):
 '''
 
 RESULT_TYPES = [StabilityResult, RootLocusResult, HopfScan, HopfCurveStudy, CycleStudy,
+                CycleCurveStudy,
                 MaglevSimulation, UserSimulation, SpanRun, SpeedSweep, MatchingIndex,
                 IndexSensitivity, IndexSpread, DesignResult]
 

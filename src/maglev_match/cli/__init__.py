@@ -70,6 +70,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
                            "writes CSV and a Fig. 4-style figure."),
     "cycles": ("cycles", "Cycles born at Hopf points, continued in --param until a physical "
                          "limit (Fig. 5)."),
+    "cycle-curve": ("cycle_curve", "The fold of cycles (LPC) or period doubling (PD) "
+                                   "continued in two parameters, with its codimension-two "
+                                   "points; writes CSV, netCDF and a figure."),
     "simulate": ("simulate", "Simulate model A or B from a named or explicit initial state; "
                              "report collision (time, limit, levitation point), convergence "
                              "or neither by the horizon. With --speed V --spans N: the "

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from maglev_match.core.results import draw, figure_for
 from maglev_match.plots import (  # noqa: F401  (each registers its drawers)
+    cycle_curves,
     cycles,
     design,
     hopf,
