@@ -82,7 +82,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     check_speed_setup(p, model, list(speeds), spans)
     if stage is not None:
         stage(f"{len(speeds)} speeds, model {model}, "
-              f"{'with' if critical else 'without'} the critical disturbance ...")
+              f"{'with' if critical else 'without'} chi(v) and the entry disturbance ...")
     return _speed_sweep(p, model, list(speeds), opts,
                         checkpoint=None if checkpoint is None else Path(checkpoint),
                         resume=resume, scheduler=scheduler, workers=workers,

@@ -48,7 +48,7 @@ from maglev_match.maglev import moving as mv
 from maglev_match.maglev.moving import MovingModel
 
 __all__ = ["POSITIONS", "IndexDirection", "IndexPosition", "SpeedIndex", "index_at_speed",
-           "position_time", "check_positions"]
+           "position_time", "check_positions", "solve_grazing", "direction_text"]
 
 #: positions of the layout's centre in the span (fractions of L) where the index is taken
 POSITIONS = (0.25, 0.5, 0.75)
@@ -264,6 +264,66 @@ def _run_batch(problem: PassageProblem, sys_l, events, sim, X0: np.ndarray, t_fr
     return _Runs(state, t_hit, i_hit, gmin if gmin is not None else np.zeros((b, 0)))
 
 
+def solve_grazing(bracket, seen, run, tol: float, nb: int, rounds: int = 6,
+                  width: float = 1e-8) -> tuple[dict[int, float], dict[int, str]]:
+    """The grazing size of each bracketed direction, both directions in one batch per
+    round: the secant on the smallest margin (to the limit the smallest collision hits) of
+    the two largest returning runs below the bracket gives an estimate (the margin of a run
+    just below a tangency is a smooth function of d, zero at the critical size); ``nb``
+    sizes spaced by 1/50 of the bracket per size around it narrow the bracket, until it is
+    below ``width`` (m). Returns ({direction: size}, {direction: why not solved})."""
+    solving = {}
+    why: dict[int, str] = {}
+    for d in (+1, -1):
+        lo, hi = bracket(d)
+        if lo is not None and hi is not None and hi - lo <= tol * 1.0000001:
+            solving[d] = seen[d][hi][2]
+    done: dict[int, float] = {}
+    for _ in range(rounds):
+        trials = {+1: np.zeros(0), -1: np.zeros(0)}
+        for d, entry in list(solving.items()):
+            lo, hi = bracket(d)
+            w = hi - lo
+            if seen[d][hi][2] != entry:
+                why[d] = "a different limit decides near the bracket"
+            elif w <= width:
+                done[d] = 0.5 * (lo + hi)
+            else:
+                ret = sorted((s, float(o[3][entry])) for s, o in seen[d].items()
+                             if o[0] == "return" and s < hi)
+                if len(ret) < 2:
+                    why[d] = "fewer than two returning runs below the bracket"
+                else:
+                    (s1, g1), (s2, g2) = ret[-2], ret[-1]
+                    if not (g1 > g2 > 0):
+                        why[d] = "the smallest margin does not fall towards the bracket"
+                    elif g2 > TANGENCY * max(w, tol):
+                        why[d] = "the run below the bracket stayed far from the limit"
+                    else:
+                        est = s2 + g2 * (s2 - s1) / (g1 - g2)
+                        if not lo - w < est < hi + w:
+                            why[d] = "the secant left the bracket"
+                        else:
+                            step = w / (50.0 * nb)
+                            t = est + step * (np.arange(nb) - 0.5 * (nb - 1))
+                            t = t[(t > lo) & (t < hi)]
+                            if t.size == 0:
+                                t = np.array([lo + 0.5 * w])
+                            trials[d] = t
+                            continue
+            del solving[d]
+        if not solving:
+            break
+        run(trials)
+    for d in solving:
+        lo, hi = bracket(d)
+        if hi - lo <= width:
+            done[d] = 0.5 * (lo + hi)
+        else:
+            why[d] = f"the secant did not converge in {rounds} rounds"
+    return done, why
+
+
 def _position(params: Params, kind: MovingModel, v: float, sol, fraction: float,
               opts: SpeedOptions, problem_l: PassageProblem, events, sim) -> IndexPosition:
     """Both directions at one position (module docstring)."""
@@ -302,6 +362,8 @@ def _position(params: Params, kind: MovingModel, v: float, sol, fraction: float,
         batch = np.concatenate([np.full(sizes[d].size, d) for d in dirs])
         size = np.concatenate([sizes[d] for d in dirs])
         X0 = x_pos[None, :] + (batch * size)[:, None] * step[None, :]
+        pad = max(2 * nb - batch.size, 0)  # one batch size: one compiled integrator
+        X0 = np.concatenate([X0, np.repeat(x_pos[None, :], pad, axis=0)])
         r = _run_batch(problem_l, problem_l.system, events, sim, X0, t_pos, sol.x0,
                        opts.spans, opts.return_tol)
         for j, d in enumerate(batch):
@@ -343,36 +405,7 @@ def _position(params: Params, kind: MovingModel, v: float, sol, fraction: float,
         run(nxt)
         rounds += 1
 
-    def solve_grazing(d: int, lo: float, hi: float) -> tuple[float | None, str]:
-        """The secant on the smallest margin of returning runs towards zero, inside
-        [lo, hi] (the margin of a run just below a grazing contact is ~ linear in d)."""
-        entry = seen[d][hi][2]
-        for _ in range(8):
-            lo, hi = bracket(d)
-            if lo is None or hi is None:
-                return None, "the bracket was lost"
-            if seen[d][hi][2] != entry:
-                return None, "a different limit decides near the bracket"
-            if hi - lo <= 1e-8:
-                return 0.5 * (lo + hi), ""
-            ret = sorted((s, float(o[3][entry])) for s, o in seen[d].items()
-                         if o[0] == "return" and s < hi)
-            if len(ret) < 2:
-                return None, "fewer than two returning runs below the bracket"
-            (s1, g1), (s2, g2) = ret[-2], ret[-1]
-            if not (g1 > g2 > 0):
-                return None, "the smallest margin does not fall towards the bracket"
-            if g2 > TANGENCY * max(hi - lo, tol):
-                return None, "the run below the bracket stayed far from the limit"
-            est = s2 + g2 * (s2 - s1) / (g1 - g2)
-            w = hi - lo
-            if not lo - w < est < hi + w:
-                return None, "the secant left the bracket"
-            est = min(max(est, lo + 1e-3 * w), hi - 1e-3 * w)  # (the margin's curvature)
-            trial = np.array([max(est - 1e-9, lo + 1e-4 * w), min(est + 1e-9, hi - 1e-4 * w)])
-            run({d: trial, -d: np.zeros(0)})
-        return None, "the secant did not converge in 8 steps"
-
+    solved, why = solve_grazing(bracket, seen, run, tol, nb)
     out = {}
     for d in (+1, -1):
         lo, hi = bracket(d)
@@ -389,15 +422,11 @@ def _position(params: Params, kind: MovingModel, v: float, sol, fraction: float,
             size = 0.0 if status == "all_collide" else None
         elif hi - lo > tol * 1.0000001:
             status, size = "open", lo
+        elif d in solved:
+            status, size = "solved", solved[d]
         else:
             status, size = "bracketed", 0.5 * (lo + hi)
-            solved, why = solve_grazing(d, lo, hi)
-            lo, hi = bracket(d)
-            if solved is not None:
-                status, size = "solved", float(solved)
-            else:
-                size = 0.5 * (lo + hi)  # type: ignore[operator]
-                msg = f"grazing not solved: {why}"
+            msg = f"grazing not solved: {why.get(d, 'not tried')}"
         out[d] = IndexDirection(d, status, None if size is None else float(size), lo, hi,
                                 ranges[d], tol, t_hit, limit, runs[d], unresolved[d], msg)
     return IndexPosition(float(fraction), float(t_pos), slot, shape, out[+1], out[-1])
