@@ -57,6 +57,9 @@ def test_index_at_1_kmh_is_the_standstill_headline_index():
     assert ix.h == pytest.approx(st.h_headline, abs=tol)
     assert ix.chi == pytest.approx(st.chi, abs=tol / st.w0)
     mid = next(q for q in ix.positions if q.fraction == 0.5)
+    # both are the same grazing contact, solved: far inside the search tolerance
+    assert mid.down.status == "solved" and st.mechanism_down == "grazing"
+    assert mid.down.size == pytest.approx(st.h_simulation_down, abs=1e-7)
     assert mid.down.size == pytest.approx(st.h_simulation_down, abs=tol)
     assert mid.up.size == pytest.approx(st.h_simulation_up, abs=tol)
     assert mid.down.limit == "lower" and mid.up.limit == "upper"
@@ -169,3 +172,45 @@ def test_speed_point_carries_the_index_and_the_entry_readout():
     again = SpeedPoint.from_json(pt.to_json())
     assert again.index == pt.index and again.chi == pt.chi
     assert again.every_size_returned == pt.every_size_returned
+
+
+@pytest.mark.slow
+def test_speed_command_prints_chi_v_next_to_the_standstill_headline(tmp_path):
+    """`speed` with chi(v): the text gives the standstill headline, chi(v) with the position
+    and direction deciding it and every direction's outcome; the netCDF file (its JSON
+    attributes too) carries the same numbers."""
+    import contextlib
+    import io
+    import json
+
+    import xarray as xr
+
+    from maglev_match.cli import main
+
+    def run(argv):
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = main(argv)
+        return code, out.getvalue(), err.getvalue()
+
+    args = ["speed", "--from", "120", "--to", "120", "--step", "5", "--set", "n_modes=1",
+            "--workers", "0", "--out", str(tmp_path)]
+    code, out, err = run(args)
+    assert code == 0, err
+    with xr.open_dataset(tmp_path / "speed_unit.nc") as ds:
+        chi = float(ds["chi"].values[0])
+        frac = float(ds["index_fraction"].values[0])
+        direction = int(ds["index_direction"].values[0])
+        st = float(ds.attrs["chi_standstill"])
+        assert int(ds["every_size_returned"].values[0]) == 0
+        assert ds["chi"].attrs["units"] == "1" and ds["h_entry"].attrs["units"] == "m"
+        pts = json.loads(ds.attrs["points"])
+        standstill = ds.attrs["standstill"]
+    assert (tmp_path / "speed_unit.png").stat().st_size > 0
+    assert f"standstill headline index chi = {st:.3f}" in out
+    side = "beam down" if direction > 0 else "beam up"
+    assert (f"smallest chi(v) {chi:.3f} at 120 km/h" in out
+            and f"vehicle's centre at {frac:g} L, {side}" in out)
+    assert "centre at 0.5 L, beam up:" in out and ">=" not in out
+    assert pts[0]["index"]["h"] == pytest.approx(chi * pts[0]["w0"], rel=1e-12)
+    assert json.loads(standstill)["chi"] == pytest.approx(st, rel=1e-12)
