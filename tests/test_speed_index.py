@@ -207,6 +207,13 @@ def test_speed_command_prints_chi_v_next_to_the_standstill_headline(tmp_path):
         pts = json.loads(ds.attrs["points"])
         standstill = ds.attrs["standstill"]
     assert (tmp_path / "speed_unit.png").stat().st_size > 0
+    import csv
+
+    with open(tmp_path / "speed_unit.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 1 and float(rows[0]["chi"]) == pytest.approx(chi, rel=1e-12)
+    assert float(rows[0]["index_fraction"]) == frac
+    assert rows[0]["status_down"] in ("solved", "bracketed")
     assert f"standstill headline index chi = {st:.3f}" in out
     side = "beam down" if direction > 0 else "beam up"
     assert (f"smallest chi(v) {chi:.3f} at 120 km/h" in out

@@ -213,13 +213,51 @@ def speed_command(
         console.print(f"wrote {f}", highlight=False)
 
 
+#: the CSV table of a sweep: (header with unit, value of a point)
+_CSV_COLUMNS = (
+    ("speed (m/s)", lambda p, st: p.speed),
+    ("speed (km/h)", lambda p, st: p.speed_kmh),
+    ("stable", lambda p, st: "" if p.stable is None else int(p.stable)),
+    ("largest_multiplier", lambda p, st: p.largest_multiplier),
+    ("daf", lambda p, st: p.daf),
+    ("gap_dev_abs_max (m)", lambda p, st: p.gap_dev_abs_max),
+    ("wz", lambda p, st: p.wz),
+    ("h (m)", lambda p, st: p.h),
+    ("chi", lambda p, st: p.chi),
+    ("chi_standstill", lambda p, st: "" if not st else st["chi"]),
+    ("index_fraction", lambda p, st: "" if p.index is None else p.index.fraction),
+    ("index_direction", lambda p, st: "" if p.index is None else p.index.direction),
+    ("status_down", lambda p, st: _status_at(p, +1)),
+    ("status_up", lambda p, st: _status_at(p, -1)),
+    ("every_size_returned", lambda p, st: int(p.every_size_returned)),
+    ("h_entry (m)", lambda p, st: p.h_entry),
+    ("chi_entry", lambda p, st: p.chi_entry),
+)
+
+
+def _status_at(p, direction: int) -> str:
+    """How the index's search ended in one direction at the deciding position."""
+    ix = p.index
+    if ix is None or ix.fraction is None:
+        return ""
+    q = next(q for q in ix.positions if q.fraction == ix.fraction)
+    return (q.down if direction > 0 else q.up).status
+
+
 def _write_sweep(sweep, folder: Path, stem: str) -> list[Path]:
-    from maglev_match.core.io import atomic_write_netcdf
+    import csv
+
+    from maglev_match.core.io import atomic_open, atomic_write_netcdf
 
     folder.mkdir(parents=True, exist_ok=True)
     nc = folder / f"{stem}.nc"
     atomic_write_netcdf(nc, sweep.to_xarray())
-    return [nc, *sweep.plot(folder / f"{stem}.png")]
+    table = folder / f"{stem}.csv"
+    with atomic_open(table, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([h for h, _ in _CSV_COLUMNS])
+        w.writerows([[f(p, sweep.standstill) for _, f in _CSV_COLUMNS] for p in sweep.points])
+    return [nc, table, *sweep.plot(folder / f"{stem}.png")]
 
 
 # ---------------------------------------------------------------------------------------
