@@ -270,8 +270,8 @@ def test_critical_disturbance_bracket_holds_in_single_runs():
     assert pt.stable and up.status in ("bracketed", "open")
     assert up.smallest_collision is not None and up.largest_return is not None
     assert up.largest_return < up.smallest_collision <= up.gap_range
-    assert pt.h == pytest.approx(min(pt.down.supported(), up.supported()))
-    assert pt.chi == pytest.approx(pt.h / p.w0)
+    assert pt.h_entry == pytest.approx(min(pt.down.supported(), up.supported()))
+    assert pt.chi_entry == pytest.approx(pt.h_entry / p.w0)
     sol = periodic_response(p, "unit", v, SpeedOptions(critical=False))
     limited = passage_problem(p, "unit", v, limited=True)
     events = EventsWithArgs(mv.gap_events("unit", p.n_modes), (p.gap_min, p.gap_max))
@@ -297,22 +297,22 @@ def _critical(direction, status, size, gap_range):
     (("all_return", 8e-3), ("bracketed", 3e-3), False),  # h measured (up)
     (("all_collide", 0.0), ("all_return", 10e-3), False),  # h = 0, not a ceiling
 ])
-def test_h_at_ceiling_marks_a_saturated_search(down, up, ceiling):
-    """h(v) = min over the directions of the supported size; it is the search's ceiling
-    (chi(v) a lower bound) exactly when the direction that sets it returned at every size up
-    to its gap range. The flag survives the JSON round trip of the checkpoint tiles."""
+def test_entry_at_ceiling_marks_a_saturated_search(down, up, ceiling):
+    """The entry disturbance's h_entry = min over the directions of the supported size; it
+    is the search's ceiling exactly when the direction that sets it returned at every size
+    up to its gap range. The flag survives the JSON round trip of the checkpoint tiles."""
     import dataclasses
 
     pt = standstill_point(UNIT1, "unit")
     d = _critical(+1, down[0], down[1], 8e-3)
     u = _critical(-1, up[0], up[1], 10e-3)
     h = min(d.supported(), u.supported())
-    pt = dataclasses.replace(pt, speed=10.0, down=d, up=u, h=h, chi=h / pt.w0)
-    assert pt.h_at_ceiling is ceiling
+    pt = dataclasses.replace(pt, speed=10.0, down=d, up=u, h_entry=h, chi_entry=h / pt.w0)
+    assert pt.entry_at_ceiling is ceiling
     js = pt.to_json()
-    assert js["h_at_ceiling"] is ceiling
+    assert js["entry_at_ceiling"] is ceiling
     again = SpeedPoint.from_json(js)
-    assert again.h_at_ceiling is ceiling and again.h == pt.h
+    assert again.entry_at_ceiling is ceiling and again.h_entry == pt.h_entry
 
 
 def test_vehicle_at_standstill_is_model_b_up_to_the_suspension_preload():

@@ -31,9 +31,14 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     At every speed the periodic response (one span passage, found as the fixed point of
     the span map), its multipliers and verdict, the gap deviation and current per
     levitation point, the mid-span deflection and DAF, the car body's peak acceleration and
-    Sperling's Wz, the critical initial deflection of the span being entered and
-    chi(v) = h(v) / w0; then the resonance speeds in the range and the speeds where the
-    periodic response changes stability, located by solving.
+    Sperling's Wz, the index at speed chi(v) = h(v) / w0 (the span under the vehicle
+    suddenly displaced in its first mode, the mean deflection under the vehicle jumping by
+    h; the smaller direction at the worst position of the vehicle in the span; the
+    standstill index as v -> 0) and the entry disturbance (the span being entered deflected
+    before the vehicle reaches it, a second read-out); then the resonance speeds in the
+    range and the speeds where the periodic response changes stability, located by solving.
+    With `critical` the result also carries the standstill headline index of the same model
+    (`standstill`).
 
     Parameters
     ----------
@@ -45,7 +50,8 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         The speeds in m/s; without them, `kmh` = (from, to, step) in km/h as on the
         command line (from 0 to 150 by 5 by default; v = 0 gives the standstill values).
     critical : bool
-        Compute the critical disturbance at speed (slower).
+        Compute the index at speed, the entry disturbance and the standstill headline
+        (slower).
     spans : int
         Spans a disturbed run may take to return to the periodic response.
     workers, scheduler, checkpoint, resume, progress
@@ -78,7 +84,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     check_speed_setup(p, model, list(speeds), spans)
     if stage is not None:
         stage(f"{len(speeds)} speeds, model {model}, "
-              f"{'with' if critical else 'without'} the critical disturbance ...")
+              f"{'with' if critical else 'without'} chi(v) and the entry disturbance ...")
     return _speed_sweep(p, model, list(speeds), opts,
                         checkpoint=None if checkpoint is None else Path(checkpoint),
                         resume=resume, scheduler=scheduler, workers=workers,

@@ -61,10 +61,31 @@ def _fmt(v: float, fmt: str) -> str:
     return "-" if v is None or not np.isfinite(v) else format(v, fmt)
 
 
+def _side(p, direction: int) -> str:
+    """The index at speed in one direction, the smallest over the positions, with how the
+    search ended there."""
+    if p.index is None:
+        return "-"
+    cs = [q.down if direction > 0 else q.up for q in p.index.positions]
+    if any(c.size is None for c in cs):
+        return "open"
+    c = min(cs, key=lambda c: c.size)
+    word = {"solved": "", "bracketed": " br", "all_return": " all ret.",
+            "all_collide": " all coll.", "open": " open"}.get(c.status, "")
+    return f"{c.size * 1e3:.3f}{word}"
+
+
+def _decides(p) -> str:
+    ix = p.index
+    if ix is None or ix.fraction is None:
+        return "-"
+    return f"{ix.fraction:g} L {'down' if ix.direction > 0 else 'up'}"
+
+
 def _table(sweep) -> Table:
     t = Table(box=box.SIMPLE_HEAD, pad_edge=False)
     cols = ["km/h", "stable", "max|mu|", "DAF", "max|gap dev| mm", "min current A",
-            "Wz", "acc m/s^2", "h mm", "chi(v)"]
+            "Wz", "acc m/s^2", "down mm", "up mm", "chi(v)", "decided at", "chi entry"]
     for c in cols:
         t.add_column(c, justify="right")
     for p in sweep.points:
@@ -73,8 +94,8 @@ def _table(sweep) -> Table:
         t.add_row(f"{p.speed_kmh:g}", stable, _fmt(p.largest_multiplier, ".4f"),
                   _fmt(p.daf, ".4f"), _fmt(p.gap_dev_abs_max * 1e3, ".4f"),
                   _fmt(imin, ".2f"), _fmt(p.wz, ".3f"), _fmt(p.body_acc_peak, ".4f"),
-                  _fmt(p.h * 1e3, ".3f"),
-                  (">=" if p.h_at_ceiling else "") + _fmt(p.chi, ".3f"))
+                  _side(p, +1), _side(p, -1), _fmt(p.chi, ".3f"), _decides(p),
+                  _fmt(p.chi_entry, ".3f"))
     return t
 
 
@@ -101,13 +122,20 @@ def _summary_lines(sweep) -> list[str]:
             what = "loses" if c.becomes_unstable else "regains"
             out.append(f"  it {what} stability at {c.speed / KMH:.4f} km/h ({c.kind}, "
                        f"multiplier {complex(*c.multiplier):.4g})")
-    chis = [p for p in sweep.points if np.isfinite(p.chi)]
-    if chis:
-        worst = min(chis, key=lambda p: p.chi)
-        out.append(f"smallest chi(v) {worst.chi:.3f} at {worst.speed_kmh:g} km/h (h = "
-                   f"{worst.h * 1e3:.3f} mm, w0 = {worst.w0 * 1e3:.4f} mm)"
-                   + (": a lower bound, h(v) is the gap range (no deflection within it "
-                      "caused contact)" if worst.h_at_ceiling else ""))
+    st = sweep.standstill
+    if st:
+        out.append(f"standstill headline index chi = {st['chi']:.3f} (h = {st['h'] * 1e3:.4f} "
+                   f"mm, basis {st['basis']}): the value chi(v) tends to as v -> 0")
+    best = sweep.smallest_chi()
+    if best is not None:
+        worst = sweep.at(best["speed"])
+        side = "beam down" if best["direction"] == 1 else "beam up"
+        out.append(f"smallest chi(v) {best['value']:.3f} at {worst.speed_kmh:g} km/h (h = "
+                   f"{best['h'] * 1e3:.4f} mm, w0 = {worst.w0 * 1e3:.4f} mm), decided with the "
+                   f"vehicle's centre at {best['fraction']:g} L, {side}"
+                   + ("; every jump up to the gap range returned there (h = the gap range)"
+                      if best["every_size_returned"] else ""))
+        out.append(f"  at {worst.speed_kmh:g} km/h: {worst.index.status_text()}")
     return out
 
 
@@ -122,8 +150,8 @@ def speed_command(
     config: ConfigOpt = None,
     set_: SetOpt = None,
     critical: Annotated[bool, typer.Option(
-        "--critical/--no-critical", help="Compute the critical disturbance at speed "
-        "(h(v), chi(v)); off is faster.")] = True,
+        "--critical/--no-critical", help="Compute the index at speed chi(v), the entry "
+        "disturbance and the standstill headline; off is faster.")] = True,
     out: Annotated[Path | None, typer.Option(
         "--out", help="Folder for speed_MODEL.nc and .png/.svg, or a file name whose stem "
         "names them (default: maglev-match-out/speed/).")] = None,
@@ -139,9 +167,10 @@ def speed_command(
 ) -> None:
     """The vehicle at speed over identical simply supported spans: the periodic response at
     every speed from --from to --to (km/h), its stability (span-map multipliers), gap
-    deviation, current, DAF, car-body acceleration and Sperling's Wz, the critical
-    disturbance of the span being entered and chi(v) = h(v) / w0; resonance speeds and
-    stability changes marked. Writes a netCDF sweep and a figure."""
+    deviation, current, DAF, car-body acceleration and Sperling's Wz, the index at speed
+    chi(v) = h(v) / w0 (the span under the vehicle suddenly displaced; the standstill index
+    as v -> 0) next to the standstill headline, and the entry disturbance; resonance speeds
+    and stability changes marked. Writes a netCDF sweep and a figure."""
     _check_model(model)
     check_output_path(out)
     params = params_from_options(preset, config, set_)
@@ -184,13 +213,51 @@ def speed_command(
         console.print(f"wrote {f}", highlight=False)
 
 
+#: the CSV table of a sweep: (header with unit, value of a point)
+_CSV_COLUMNS = (
+    ("speed (m/s)", lambda p, st: p.speed),
+    ("speed (km/h)", lambda p, st: p.speed_kmh),
+    ("stable", lambda p, st: "" if p.stable is None else int(p.stable)),
+    ("largest_multiplier", lambda p, st: p.largest_multiplier),
+    ("daf", lambda p, st: p.daf),
+    ("gap_dev_abs_max (m)", lambda p, st: p.gap_dev_abs_max),
+    ("wz", lambda p, st: p.wz),
+    ("h (m)", lambda p, st: p.h),
+    ("chi", lambda p, st: p.chi),
+    ("chi_standstill", lambda p, st: "" if not st else st["chi"]),
+    ("index_fraction", lambda p, st: "" if p.index is None else p.index.fraction),
+    ("index_direction", lambda p, st: "" if p.index is None else p.index.direction),
+    ("status_down", lambda p, st: _status_at(p, +1)),
+    ("status_up", lambda p, st: _status_at(p, -1)),
+    ("every_size_returned", lambda p, st: int(p.every_size_returned)),
+    ("h_entry (m)", lambda p, st: p.h_entry),
+    ("chi_entry", lambda p, st: p.chi_entry),
+)
+
+
+def _status_at(p, direction: int) -> str:
+    """How the index's search ended in one direction at the deciding position."""
+    ix = p.index
+    if ix is None or ix.fraction is None:
+        return ""
+    q = next(q for q in ix.positions if q.fraction == ix.fraction)
+    return (q.down if direction > 0 else q.up).status
+
+
 def _write_sweep(sweep, folder: Path, stem: str) -> list[Path]:
-    from maglev_match.core.io import atomic_write_netcdf
+    import csv
+
+    from maglev_match.core.io import atomic_open, atomic_write_netcdf
 
     folder.mkdir(parents=True, exist_ok=True)
     nc = folder / f"{stem}.nc"
     atomic_write_netcdf(nc, sweep.to_xarray())
-    return [nc, *sweep.plot(folder / f"{stem}.png")]
+    table = folder / f"{stem}.csv"
+    with atomic_open(table, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([h for h, _ in _CSV_COLUMNS])
+        w.writerows([[f(p, sweep.standstill) for _, f in _CSV_COLUMNS] for p in sweep.points])
+    return [nc, table, *sweep.plot(folder / f"{stem}.png")]
 
 
 # ---------------------------------------------------------------------------------------

@@ -34,8 +34,9 @@ def speed_figure(sweep):
     """Five panels against speed (km/h): DAF, largest |gap deviation| (mm), Sperling's Wz,
     the largest |multiplier| of the span map (1 dashed: the stability limit) and
     chi(v) = h(v) / w0; resonance speeds and located stability changes marked. Unstable
-    speeds are drawn as crosses; open triangles mark chi(v) where it is a lower bound
-    (every deflection up to the gap range returned). Returns the figure."""
+    speeds are drawn as crosses; open triangles mark chi(v) where every jump up to the gap
+    range returned in the deciding direction (h(v) is that range); the standstill headline
+    index, chi(v)'s limit as v -> 0, is a dashed line. Returns the figure."""
     v = sweep.speeds * KMH
     stable = np.array([p.stable is not False for p in sweep.points])
     fig, axes = new_figure(5, 1, figsize=(7.5, 11.0), sharex=True)
@@ -56,11 +57,15 @@ def speed_figure(sweep):
         if name == "largest_multiplier":
             ax.axhline(1.0, color="k", ls="--", lw=0.8)
         extra = []
-        if name == "chi":  # a saturated search: chi(v) is a lower bound there
-            ceil = np.array([p.h_at_ceiling for p in sweep.points])
-            if ceil.any():
-                extra = [(ax.plot(v[ceil], y[ceil], "^", mfc="none", color="C1", ms=7)[0],
-                          "lower bound: h(v) = gap range (no contact found)")]
+        if name == "chi":
+            every = np.array([p.every_size_returned for p in sweep.points])
+            if every.any():
+                extra = [(ax.plot(v[every], y[every], "^", mfc="none", color="C1", ms=7)[0],
+                          "every jump up to the gap range returned (h(v) = gap range)")]
+            st = getattr(sweep, "standstill", None)
+            if st:
+                extra.append((ax.axhline(st["chi"], color="C2", ls="--", lw=1.0),
+                              f"standstill index {st['chi']:.3f} (the limit v -> 0)"))
         handles = _mark(ax, sweep, ax is axes[0]) + extra
         if handles:
             ax.legend([h for h, _ in handles], [t for _, t in handles], fontsize=7,
@@ -128,7 +133,8 @@ def span_run_figure(run):
 def speed_map_figure(ds):
     """A map at speed (:func:`maglev_match.analyses.speed.sweep.run_speed_map`): chi(v) as colour at
     stable
-    points, unstable points crossed, lower bounds (h(v) = the gap range) marked by open
+    points, unstable points crossed, points where every jump up to the gap range returned
+    (h(v) = the gap range) marked by open
     triangles, the speed axis in km/h. Returns the figure."""
     yname, xname = ds["chi"].dims
     x, y = ds[xname].values.astype(float), ds[yname].values.astype(float)
@@ -146,11 +152,11 @@ def speed_map_figure(ds):
     unstable = ds["stable"].values == 0
     if unstable.any():
         ax.plot(X[unstable], Y[unstable], "rx", ms=7, label="periodic response unstable")
-    ceiling = (ds["h_at_ceiling"].values == 1) if "h_at_ceiling" in ds else np.zeros_like(
-        unstable)
+    ceiling = ((ds["every_size_returned"].values == 1) if "every_size_returned" in ds
+               else np.zeros_like(unstable))
     if ceiling.any():
         ax.plot(X[ceiling], Y[ceiling], "^", mfc="none", color="w", ms=6,
-                label="lower bound: h(v) = gap range (no contact found)")
+                label="every jump up to the gap range returned (h(v) = gap range)")
     if unstable.any() or ceiling.any():
         ax.legend(fontsize=8)
     ax.set_xlabel(xl)

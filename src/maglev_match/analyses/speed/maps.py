@@ -27,7 +27,7 @@ __all__ = ["MAP_SPEED_VARIABLES", "SpeedMapSpec", "parse_speed_axes", "run_speed
 
 # ---------------------------------------------------------------------------------------
 MAP_SPEED_VARIABLES = ("converged", "stable", "largest_multiplier", "daf", "gap_dev_abs_max",
-                       "wz", "body_acc_peak", "h", "h_at_ceiling", "chi")
+                       "wz", "body_acc_peak", "h", "every_size_returned", "chi")
 
 
 @dataclass(frozen=True)
@@ -137,13 +137,14 @@ def run_speed_map(spec: SpeedMapSpec, checkpoint: Path | None = None, *, resume:
     dims = (spec.y.name, spec.x.name)
     units = {"converged": "1", "stable": "1", "largest_multiplier": "1", "daf": "1",
              "gap_dev_abs_max": "m", "wz": "1", "body_acc_peak": "m/s^2", "h": "m",
-             "h_at_ceiling": "1", "chi": "1", "v": "m/s"}
+             "every_size_returned": "1", "chi": "1", "v": "m/s"}
     names = {"converged": SWEEP_NAMES["converged"], "stable": SWEEP_NAMES["stable"],
              "largest_multiplier": SWEEP_NAMES["largest_multiplier"],
              "daf": SWEEP_NAMES["daf"],
              "gap_dev_abs_max": "largest |gap deviation| over the levitation points",
              "wz": SWEEP_NAMES["wz"], "body_acc_peak": SWEEP_NAMES["body_acc_peak"],
-             "h": SWEEP_NAMES["h"], "h_at_ceiling": SWEEP_NAMES["h_at_ceiling"],
+             "h": SWEEP_NAMES["h"],
+             "every_size_returned": SWEEP_NAMES["every_size_returned"],
              "chi": SWEEP_NAMES["chi"], "v": "vehicle speed"}
 
     def coord(ax):

@@ -21,8 +21,13 @@ Read-outs per speed, over one passage of the periodic response:
 * the car body's peak vertical acceleration and Sperling's ride index Wz of its spectrum
   (:mod:`maglev_match.analyses.speed.ride`; the lines of a periodic signal are exact);
 * the multipliers and the verdict;
-* the critical disturbance at speed (:mod:`maglev_match.analyses.speed.critical`): h(v) and
-  chi(v) = h(v) / w0.
+* the matching index at speed (:mod:`maglev_match.analyses.speed.index`): the span under
+  the vehicle suddenly displaced in its first mode, the mean deflection under the vehicle
+  jumping by d; h(v) the critical d (smaller direction, worst position of the vehicle in the
+  span) and chi(v) = h(v) / w0, the standstill index at v -> 0;
+* the entry disturbance, a second read-out (:mod:`maglev_match.analyses.speed.critical`):
+  the span being entered deflected before the vehicle reaches it; h_entry and
+  chi_entry = h_entry / w0.
 
 At v = 0 the values are those of the vehicle standing at mid-span
 (:func:`standstill_point`)."""
@@ -42,6 +47,7 @@ from maglev_match.analyses.speed.critical import (
     critical_disturbance_at_speed,
 )
 from maglev_match.analyses.speed.grid import KMH
+from maglev_match.analyses.speed.index import SpeedIndex, index_at_speed
 from maglev_match.analyses.speed.options import SpeedOptions, w0_of
 from maglev_match.analyses.speed.passage import (
     passage_problem,
@@ -72,7 +78,11 @@ class SpeedPoint:
     midspan_max : largest mid-span deflection of a span under the vehicle (m, downward);
     static_deflection : its static reference (m); daf : their ratio.
     body_acc_peak (m/s^2), wz (Sperling, vertical).
-    down, up : the critical disturbance at speed per direction; h (m), w0 (m), chi.
+    down, up : the entry disturbance per direction (the span being entered deflected
+    before the vehicle reaches it), a second read-out: h_entry (m) and chi_entry.
+    h (m), w0 (m), chi : the index at speed (``index``, :class:`SpeedIndex`): the critical
+    jump of the mean deflection under the vehicle, the smaller direction at the worst
+    position, and chi(v) = h / w0 with the standstill index's w0.
     integration_error, residual, passages, jacobians : diagnostics of the periodic solve.
     warnings : what the numbers cannot be trusted for, in words."""
 
@@ -108,6 +118,9 @@ class SpeedPoint:
     jacobians: int
     samples: int
     warnings: tuple[str, ...] = field(default=())
+    index: SpeedIndex | None = None
+    h_entry: float = math.nan
+    chi_entry: float = math.nan
 
     @property
     def speed_kmh(self) -> float:
@@ -120,28 +133,39 @@ class SpeedPoint:
         return max(vals) if vals else float("nan")
 
     @property
-    def h_at_ceiling(self) -> bool:
-        """h(v) is the search's ceiling, not a measured margin: in the direction that sets
-        it every initial deflection up to the gap range returned, so chi(v) is a lower
-        bound (no deflection within the gap range was seen to cause contact)."""
-        if not np.isfinite(self.h):
+    def every_size_returned(self) -> bool:
+        """The direction that decides chi(v) returned at every size up to its gap range (h
+        is that range, as the standstill index counts it; no jump within the range caused
+        contact)."""
+        return bool(self.index is not None and np.isfinite(self.h)
+                    and self.index.every_size_returned)
+
+    @property
+    def entry_at_ceiling(self) -> bool:
+        """The entry disturbance's h_entry is its search's ceiling: in the direction that
+        sets it every initial deflection up to the gap range returned."""
+        if not np.isfinite(self.h_entry):
             return False
-        setting = [c for c in (self.down, self.up)
-                   if c is not None and c.supported() is not None and c.supported() == self.h]
+        setting = [c for c in (self.down, self.up) if c is not None
+                   and c.supported() is not None and c.supported() == self.h_entry]
         return bool(setting) and all(c.status == CriticalStatus.ALL_RETURN for c in setting)
 
     def to_json(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
-        d["h_at_ceiling"] = self.h_at_ceiling
+        d["every_size_returned"] = self.every_size_returned
+        d["entry_at_ceiling"] = self.entry_at_ceiling
         return d
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> SpeedPoint:
         d = dict(d)
-        d.pop("h_at_ceiling", None)  # a property, recomputed
+        for k in ("every_size_returned", "entry_at_ceiling"):  # properties, recomputed
+            d.pop(k, None)
         for k in ("down", "up"):
             if d.get(k) is not None:
                 d[k] = SpeedCritical(**d[k])
+        if d.get("index") is not None:
+            d["index"] = SpeedIndex.from_json(d["index"])
         for k in ("gap_dev_max", "gap_dev_min", "current_max", "current_min", "warnings"):
             d[k] = tuple(d[k])
         d["critical_multiplier"] = tuple(d["critical_multiplier"])
@@ -263,8 +287,8 @@ def speed_point(params: Params, model: str, v: float,
     if not stable:
         warnings.append(f"the periodic response is unstable (largest |multiplier| "
                         f"{mult.largest:.4g})")
-    down = up = None
-    h = chi = float("nan")
+    down = up = index = None
+    h = chi = h_entry = chi_entry = float("nan")
     if kind is MovingModel.FORCE:
         pass
     elif not stable:
@@ -272,17 +296,32 @@ def speed_point(params: Params, model: str, v: float,
     elif out_of_range:
         h, chi = 0.0, 0.0
     elif opts.critical:
+        try:
+            index = index_at_speed(params, kind, v, sol, opts)
+        except FloatingPointError as exc:
+            warnings.append(f"the index at speed could not be computed: {exc}")
+        if index is not None:
+            h, chi = index.h, index.chi
+            for q in index.positions:
+                for c in (q.down, q.up):
+                    side = "beam down" if c.direction > 0 else "beam up"
+                    if c.status == "open":
+                        warnings.append(
+                            f"index at speed (centre at {q.fraction:g} L, {side}) not "
+                            f"resolved: {c.unresolved} run(s) neither returned within "
+                            f"{opts.spans} spans nor "
+                            "collided")
         down, up = critical_disturbance_at_speed(params, kind, v, sol.x0, opts)
         sizes = [c.supported() for c in (down, up)]
         for c in (down, up):
             if c.status == CriticalStatus.OPEN:
                 side = "beam down" if c.direction > 0 else "beam up"
-                warnings.append(f"critical disturbance ({side}) not resolved: {c.unresolved} "
+                warnings.append(f"entry disturbance ({side}) not resolved: {c.unresolved} "
                                 f"run(s) neither returned within {c.spans} spans nor "
                                 "collided")
         if all(s is not None for s in sizes):
-            h = float(min(sizes))  # type: ignore[type-var]
-            chi = h / w0 if w0 > 0 else float("nan")
+            h_entry = float(min(sizes))  # type: ignore[type-var]
+            chi_entry = h_entry / w0 if w0 > 0 else float("nan")
     crit = mult.critical
     return SpeedPoint(
         speed=float(v), period=float(params.L / v), converged=True, stable=bool(stable),
@@ -299,7 +338,8 @@ def speed_point(params: Params, model: str, v: float,
         body_acc_peak=float(ro.body_acc_peak), wz=float(ro.wz), down=down, up=up, h=h,
         w0=float(w0), chi=chi, integration_error=float(sol.integration_error),
         residual=float(sol.residual), passages=int(sol.passages), jacobians=int(sol.jacobians),
-        samples=int(ro.samples), warnings=tuple(warnings))
+        samples=int(ro.samples), warnings=tuple(warnings), index=index, h_entry=h_entry,
+        chi_entry=chi_entry)
 
 
 def standstill_point(params: Params, model: str) -> SpeedPoint:
@@ -307,7 +347,8 @@ def standstill_point(params: Params, model: str) -> SpeedPoint:
     centred), both spans elastic. Stability from the eigenvalues of the Jacobian there (no
     passage, no multipliers); DAF = the equilibrium's mid-span deflection over the static
     reference (1 up to the levitation's redistribution of the weights); Wz and the
-    acceleration 0; the critical disturbance at speed is undefined (no span is entered)."""
+    acceleration 0; the index at speed and the entry disturbance are not computed there (the
+    standstill index is `maglev-match index`)."""
     kind = MovingModel(model)
     lay = mv.layout_of(params, kind)
     n_pts = lay.n_loads if kind is not MovingModel.FORCE else 0
@@ -339,5 +380,5 @@ def standstill_point(params: Params, model: str) -> SpeedPoint:
         wz=0.0 if n_pts else nan, down=None, up=None, h=nan, w0=w0_of(params, kind), chi=nan,
         integration_error=nan, residual=0.0, passages=0, jacobians=0, samples=0,
         warnings=("v = 0: the vehicle standing at mid-span (no span is entered, so the "
-                  "critical disturbance at speed and chi(v) are not defined there; the "
-                  "standstill index is `maglev-match index`)",))
+                  "entry disturbance is not defined there; chi(v) tends to the standstill "
+                  "index, `maglev-match index`, as v -> 0)",))

@@ -344,6 +344,9 @@ class SpeedSweep(Plottable):
     stability_changes: tuple[StabilityChange, ...]
     options: SpeedOptions
     warnings: tuple[str, ...] = field(default=())
+    #: the standstill headline index of the same model, chi(v)'s limit as v -> 0 (keys chi,
+    #: h, w0, chi_paper, chi_simulation, basis, reading; None when not computed)
+    standstill: dict[str, Any] | None = None
 
     @property
     def speeds(self) -> np.ndarray:
@@ -392,8 +395,25 @@ class SpeedSweep(Plottable):
             "largest_wz": best("wz"),
             "largest_gap_deviation": best("gap_dev_abs_max"),
             "largest_multiplier": best("largest_multiplier"),
+            "smallest_chi": self.smallest_chi(),
+            "standstill": self.standstill,
             "warnings": list(self.warnings),
         }
+
+    def smallest_chi(self) -> dict[str, Any] | None:
+        """The smallest chi(v) of the sweep: value, speed (m/s), the position of the
+        vehicle's centre in the span that decides it (fraction of L), the direction (+1
+        beam down, -1 beam up), whether every size up to the gap range returned there; None
+        when no chi(v) was computed."""
+        pts = [p for p in self.points if np.isfinite(p.chi)]
+        if not pts:
+            return None
+        w = min(pts, key=lambda p: p.chi)
+        ix = w.index
+        return {"value": float(w.chi), "speed": float(w.speed), "h": float(w.h),
+                "fraction": None if ix is None else ix.fraction,
+                "direction": None if ix is None else ix.direction,
+                "every_size_returned": w.every_size_returned}
 
 
 def _check_speeds(speeds) -> tuple[float, ...]:
@@ -437,19 +457,33 @@ def speed_sweep(params: Params, model: str = "unit", speeds: Sequence[float] = (
                     warnings.append(f"a stability change between {a.speed / KMH:.4g} and "
                                     f"{b.speed / KMH:.4g} km/h could not be located: "
                                     f"{ch.message}")
-    ceiling = [p for p in pts if p.h_at_ceiling]
-    if ceiling:
+    every = [p for p in pts if p.every_size_returned]
+    if every:
         warnings.append(
-            f"at {len(ceiling)} of {len(pts)} speeds (" + ", ".join(
-                f"{p.speed / KMH:.4g}" for p in ceiling[:6]) + (", ..." if len(ceiling) > 6
-                                                                 else "")
-            + " km/h) every initial deflection up to the gap range returned: h(v) there is "
-            "the search's ceiling (the gap range), so chi(v) is a lower bound, not a "
-            "measured margin")
+            f"at {len(every)} of {len(pts)} speeds (" + ", ".join(
+                f"{p.speed / KMH:.4g}" for p in every[:6]) + (", ..." if len(every) > 6
+                                                               else "")
+            + " km/h) every jump up to the gap range returned in the direction that decides "
+            "chi(v): h(v) there is the gap range, as the standstill index counts it")
+    standstill = None
+    if opts.critical and kind is not MovingModel.FORCE:
+        standstill = standstill_headline(params, kind)
     res = resonance_speeds(params, kind, min(vals), max(vals)) if max(vals) > 0 else ()
     return SpeedSweep(params=params, model=kind.value, points=tuple(pts), resonances=res,
                       stability_changes=tuple(changes), options=opts,
-                      warnings=tuple(warnings))
+                      warnings=tuple(warnings), standstill=standstill)
+
+
+def standstill_headline(params: Params, kind: MovingModel) -> dict[str, Any]:
+    """The standstill headline index of the same model (:func:`maglev_match.analyses.
+    matching.matching_index`): the value chi(v) tends to as v -> 0."""
+    from maglev_match.analyses.matching import matching_index
+
+    res = matching_index(params, model=kind.value)
+    return {"chi": float(res.chi), "h": float(res.h_headline), "w0": float(res.w0),
+            "chi_paper": float(res.chi_paper),
+            "chi_simulation": None if res.chi_simulation is None else float(res.chi_simulation),
+            "basis": str(res.reading_basis), "reading": res.reading}
 
 
 # ---------------------------------------------------------------------------------------
@@ -461,8 +495,9 @@ SWEEP_UNITS = {
     "critical_multiplier_imag": "1", "max_real_part": "1/s", "gap_dev_max": "m",
     "gap_dev_min": "m", "current_max": "A", "current_min": "A", "current_reverses": "1",
     "midspan_max": "m", "static_deflection": "m", "daf": "1", "body_acc_peak": "m/s^2",
-    "wz": "1", "h": "m", "h_down": "m", "h_up": "m", "h_at_ceiling": "1", "w0": "m",
-    "chi": "1",
+    "wz": "1", "h": "m", "h_down": "m", "h_up": "m", "every_size_returned": "1", "w0": "m",
+    "chi": "1", "index_fraction": "1", "index_direction": "1", "h_entry": "m",
+    "h_entry_down": "m", "h_entry_up": "m", "entry_at_ceiling": "1", "chi_entry": "1",
     "integration_error": "1", "point": "1",
 }
 SWEEP_NAMES = {
@@ -485,13 +520,24 @@ SWEEP_NAMES = {
     "daf": "dynamic amplification factor midspan_max / static_deflection",
     "body_acc_peak": "peak vertical acceleration of the car body",
     "wz": "Sperling ride index Wz (vertical)",
-    "h": "critical initial deflection of the span being entered (smaller direction)",
-    "h_down": "critical initial deflection, beam down (gaps close)",
-    "h_up": "critical initial deflection, beam up (gaps open)",
-    "h_at_ceiling": "h is the search's ceiling (1: every deflection up to the gap range "
-                    "returned; chi is then a lower bound) or a measured margin (0)",
+    "h": "critical jump of the mean deflection under the vehicle, the span under it "
+         "displaced in its first mode (smaller direction, worst position in the span)",
+    "h_down": "critical jump, beam down (gaps close), smallest over the positions",
+    "h_up": "critical jump, beam up (gaps open), smallest over the positions",
+    "every_size_returned": "the direction deciding chi(v) returned at every jump up to the "
+                           "gap range (1; h is then that range) or h was measured (0)",
+    "index_fraction": "position of the vehicle's centre in the span that decides chi(v) "
+                      "(fraction of L)",
+    "index_direction": "direction that decides chi(v) (+1 beam down, -1 beam up)",
+    "h_entry": "entry disturbance: critical initial deflection of the span being entered "
+               "(smaller direction)",
+    "h_entry_down": "entry disturbance, beam down (gaps close)",
+    "h_entry_up": "entry disturbance, beam up (gaps open)",
+    "entry_at_ceiling": "h_entry is its search's ceiling (1: every deflection up to the gap "
+                        "range returned) or a measured margin (0)",
+    "chi_entry": "entry disturbance over w0, h_entry / w0",
     "w0": "static deflection of the standstill index (same model)",
-    "chi": "matching index at speed chi(v) = h(v) / w0",
+    "chi": "matching index at speed chi(v) = h(v) / w0 (the standstill index as v -> 0)",
     "integration_error": "variational solve against state run, scaled",
     "point": "levitation point number (1-based)",
 }
@@ -518,6 +564,12 @@ def sweep_dataset(sweep: SpeedSweep):
         s = c.supported() if c is not None else None
         return float("nan") if s is None else float(s)
 
+    def index_side(p, direction):
+        if p.index is None:
+            return float("nan")
+        sizes = [(q.down if direction > 0 else q.up).size for q in p.index.positions]
+        return float("nan") if any(v is None for v in sizes) else float(min(sizes))
+
     data = {
         "speed_kmh": (("speed",), sweep.speeds / KMH),
         "period": (("speed",), sweep.column("period")),
@@ -537,11 +589,24 @@ def sweep_dataset(sweep: SpeedSweep):
         "body_acc_peak": (("speed",), sweep.column("body_acc_peak")),
         "wz": (("speed",), sweep.column("wz")),
         "h": (("speed",), sweep.column("h")),
-        "h_down": (("speed",), np.array([crit(p, "down") for p in pts])),
-        "h_up": (("speed",), np.array([crit(p, "up") for p in pts])),
-        "h_at_ceiling": (("speed",), np.array([p.h_at_ceiling for p in pts], np.int8)),
+        "h_down": (("speed",), np.array([index_side(p, +1) for p in pts])),
+        "h_up": (("speed",), np.array([index_side(p, -1) for p in pts])),
+        "every_size_returned": (("speed",), np.array([p.every_size_returned for p in pts],
+                                                     np.int8)),
+        "index_fraction": (("speed",), np.array([
+            np.nan if p.index is None or p.index.fraction is None else p.index.fraction
+            for p in pts])),
+        "index_direction": (("speed",), np.array([
+            0 if p.index is None or p.index.direction is None else p.index.direction
+            for p in pts], np.int8)),
         "w0": (("speed",), sweep.column("w0")),
         "chi": (("speed",), sweep.column("chi")),
+        "h_entry": (("speed",), sweep.column("h_entry")),
+        "h_entry_down": (("speed",), np.array([crit(p, "down") for p in pts])),
+        "h_entry_up": (("speed",), np.array([crit(p, "up") for p in pts])),
+        "entry_at_ceiling": (("speed",), np.array([p.entry_at_ceiling for p in pts],
+                                                  np.int8)),
+        "chi_entry": (("speed",), sweep.column("chi_entry")),
         "integration_error": (("speed",), sweep.column("integration_error")),
     }
     if n_pts:
@@ -565,6 +630,9 @@ def sweep_dataset(sweep: SpeedSweep):
         "stability_changes": json.dumps([dataclasses.asdict(c)
                                          for c in sweep.stability_changes]),
         "warnings": json.dumps(list(sweep.warnings)),
+        "standstill": json.dumps(sweep.standstill),
+        "chi_standstill": (float("nan") if not sweep.standstill
+                           else float(sweep.standstill["chi"])),
         "options": json.dumps(sweep.options.key()),
         "points": json.dumps([p.to_json() for p in pts], default=float),
     })
