@@ -33,7 +33,7 @@ def _index_params(params: Params | str | None, config: str | Path | None,
 
 def matching_index(params: Params | str | None = None, *, model: str = "unit",
                    simulate: bool = True, config: str | Path | None = None,
-                   **overrides: Any) -> MatchingIndex:
+                   near: MatchingIndex | None = None, **overrides: Any) -> MatchingIndex:
     """The headline matching index chi = min(chi_paper, chi_simulation) of model A or the
     full vehicle (`maglev-match index [--model vehicle]`).
 
@@ -56,6 +56,14 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
         parts); False: the paper's chi only.
     config : str or Path, optional
         A TOML file applied on top of the preset.
+    near : MatchingIndex, optional
+        The index at a neighbouring design (same model): each critical disturbance it
+        solved is continued to this design (predicted from the neighbour, corrected by
+        Newton on the same grazing or basin-boundary condition, checked by two simulations
+        just below and above) instead of searched again; where that does not hold (the
+        mechanism changes), the full search runs. ``simulation["up"]["continuation"]``
+        (and ``"down"``) says which, and why. For designs visited one after another, as
+        in a parameter study in one process.
     **overrides : float
         Parameter values applied on top.
 
@@ -68,7 +76,7 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
     from maglev_match.analyses.matching import matching_index as _matching_index
 
     return _matching_index(resolve_params(params, config=config, **overrides),
-                           model=model_info(model).name, simulate=simulate)
+                           model=model_info(model).name, simulate=simulate, near=near)
 
 
 def index_sensitivity(params: Params | str | None = None, *, model: str = "unit",
