@@ -75,8 +75,9 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
     """
     from maglev_match.analyses.matching import matching_index as _matching_index
 
+    extra = {} if near is None else {"near": near}
     return _matching_index(resolve_params(params, config=config, **overrides),
-                           model=model_info(model).name, simulate=simulate, near=near)
+                           model=model_info(model).name, simulate=simulate, **extra)
 
 
 def index_sensitivity(params: Params | str | None = None, *, model: str = "unit",

@@ -307,14 +307,16 @@ def _curvature(hs: HybridSystem, x: np.ndarray, s: np.ndarray, p: np.ndarray,
 
 @functools.cache
 def _curvature_kernel(rhs: Callable) -> Callable:
-    """x, p, s -> f_x f of the vector field ``rhs`` (jitted)."""
+    """x, p, s -> f_x f of the vector field ``rhs`` (jitted, exported ahead of time)."""
     import jax
+
+    from maglev_match.core.aot import cached_kernel
 
     def fxf(x, p, s):
         f = rhs(x, p, s)
         return jax.jvp(lambda y: rhs(y, p, s), (x,), (f,))[1]
 
-    return jax.jit(fxf)
+    return cached_kernel(fxf, rhs, name="escape.curvature")
 
 
 def grazing_derivative(
