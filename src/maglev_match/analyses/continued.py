@@ -61,6 +61,10 @@ CHECK_STEP = 1e-4
 #: the corrector looks for the size within this fraction of the prediction (or four
 #: times the predicted step, if larger)
 BRACKET = 0.02
+#: steps per flow of the grazing corrector: a run to its extremum takes tens; a run that
+#: goes through a singular limit (gap 0, where the magnet force grows without bound) is
+#: cut here instead of at FLOW's 100 000 (it counts as "no extremum" either way)
+GRAZING_STEPS = 500
 
 
 @dataclass(frozen=True)
@@ -209,7 +213,7 @@ def _grazing(m: MaglevModel, line: Any, c: CriticalSize, d0: float) -> CriticalS
     half = max(BRACKET * d0, 4.0 * abs(d0 - float(c.size)))
     sol = solve_grazing(line.hs, line.x0_of, line.dx0_dd, line.W[j], L, side, d0, win[0],
                         win[1], p=line.hs.p, bracket=(d0 - half, d0 + half),
-                        options=FLOW)[0]
+                        options=replace(FLOW, max_steps=GRAZING_STEPS))[0]
     if not sol.converged:
         return f"grazing not continued: {sol.message}"
     if sol.singular:
