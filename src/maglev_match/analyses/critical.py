@@ -78,7 +78,7 @@ from maglev_match.maglev.models import maglev_model
 
 __all__ = ["Mechanism", "CriticalSize", "solve_critical", "solve_critical_batch",
            "critical_from_bisection", "critical_derivative", "MECHANISM_TEXT",
-           "GROWTH_BASIN", "disturbance_line"]
+           "GROWTH_BASIN", "disturbance_line", "saddle_landing", "FLOW"]
 
 
 class Mechanism(StrEnum):
@@ -145,6 +145,8 @@ class CriticalSize:
     cycle_period, multiplier : the saddle cycle of the clamped system (basin boundary):
         period (s) and unstable Floquet multiplier; cycle_gap : its (max, min) gap
         deviation (m); cycle_segments : its clamped/free segments.
+    at : the model parameter vector the size was solved at, where kept (the warm start of
+        a neighbouring design, :mod:`maglev_match.analyses.continued`).
     """
 
     __repr__ = compact_repr
@@ -174,6 +176,7 @@ class CriticalSize:
     cycle_segments: int | None = None
     orbit: Any = field(default=None, repr=False, compare=False)
     landing: dict[str, Any] | None = field(default=None, repr=False, compare=False)
+    at: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def solved(self) -> bool:
@@ -440,6 +443,37 @@ def _saddle_cycle(line: _Line, x: np.ndarray, s: np.ndarray, p: np.ndarray, t_fr
     return orbit, ""
 
 
+def saddle_landing(line: _Line, orbit: HybridOrbit) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Where a run lands on the saddle cycle ``orbit``'s local stable manifold: the cycle
+    point x* in the middle of its longest segment (``segment``, mesh ``node``), the section
+    through it (``normal``, the flow direction in state-scale units) and the left
+    eigenvector ``left`` of the monodromy matrix for the unstable multiplier (scaled to the
+    unstable direction); and the cycle's facts (period, multiplier, gap extrema, segments,
+    the orbit) as :class:`CriticalSize` fields."""
+    sc = np.asarray(line.hs.state_scale, float)
+    fq = hybrid_floquet(line.hs, orbit)
+    i = int(np.argmax([sg.duration for sg in orbit.segments]))
+    seg = orbit.segments[i]
+    j = (seg.mesh.size - 1) // 2
+    x_star = seg.states[j * orbit.ncol]
+    M = fq.monodromy(i, j)
+    mu, V = np.linalg.eig(M.T)
+    u = int(np.argmax(np.abs(mu)))
+    mu_u = float(np.real(mu[u]))
+    left = np.real(V[:, u])
+    mu_r, Vr = np.linalg.eig(M)
+    v_u = np.real(Vr[:, int(np.argmax(np.abs(mu_r)))])
+    v_u = v_u / np.max(np.abs(v_u / sc))
+    left = left / float(left @ v_u)  # G in units of the unstable direction (scaled)
+    f_star = line.hs.f(x_star, np.asarray(seg.mode, float), line.hs.p)
+    normal = f_star / sc**2
+    normal = normal / np.linalg.norm(normal * sc)
+    gap_hi, gap_lo = orbit.extrema(line.hs.observables["gap_deviation"])
+    info = dict(cycle_period=orbit.period, multiplier=mu_u, cycle_gap=(gap_hi, gap_lo),
+                cycle_segments=len(orbit.segments), orbit=orbit)
+    return dict(x_star=x_star, left=left, normal=normal, segment=i, node=j * orbit.ncol), info
+
+
 def _solve_basin_direction(m: MaglevModel, cd: Any, bisect: CriticalSize, *,
                            derivative: bool, orbit_hint: HybridOrbit | None = None
                            ) -> CriticalSize:
@@ -471,26 +505,9 @@ def _solve_basin_direction(m: MaglevModel, cd: Any, bisect: CriticalSize, *,
                 break
     if orbit is None:
         return _with_reason(bisect, f"{what}; not solved: {why}")
-    fq = hybrid_floquet(line.hs, orbit)
-    i = int(np.argmax([sg.duration for sg in orbit.segments]))
-    seg = orbit.segments[i]
-    j = (seg.mesh.size - 1) // 2
-    x_star = seg.states[j * orbit.ncol]
-    M = fq.monodromy(i, j)
-    mu, V = np.linalg.eig(M.T)
-    u = int(np.argmax(np.abs(mu)))
-    mu_u = float(np.real(mu[u]))
-    left = np.real(V[:, u])
-    mu_r, Vr = np.linalg.eig(M)
-    v_u = np.real(Vr[:, int(np.argmax(np.abs(mu_r)))])
-    v_u = v_u / np.max(np.abs(v_u / sc))
-    left = left / float(left @ v_u)  # G in units of the unstable direction (scaled)
-    f_star = line.hs.f(x_star, np.asarray(seg.mode, float), p)
-    normal = f_star / sc**2
-    normal = normal / np.linalg.norm(normal * sc)
-    gap_hi, gap_lo = orbit.extrema(line.hs.observables["gap_deviation"])
-    info = dict(cycle_period=orbit.period, multiplier=mu_u, cycle_gap=(gap_hi, gap_lo),
-                cycle_segments=len(orbit.segments), orbit=orbit)
+    geo, info = saddle_landing(line, orbit)
+    x_star, left, normal, mu_u = geo["x_star"], geo["left"], geo["normal"], info["multiplier"]
+    i, node = geo["segment"], geo["node"]
     # 2. where the run at the bracket's midpoint passes closest before it departs
     d_mid = 0.5 * (lo + hi)
     walk = section_walk(line.hs, line.x0_of(np.array([d_mid]))[0], normal, x_star,
@@ -521,7 +538,7 @@ def _solve_basin_direction(m: MaglevModel, cd: Any, bisect: CriticalSize, *,
         return replace(_with_reason(
             bisect, f"{what}; the solved size {sol.size * 1e3:.7g} mm lies outside the "
             f"bracket [{lo * 1e3:.7g}, {hi * 1e3:.7g}] mm"), **info)
-    landing = dict(x_star=x_star, left=left, normal=normal, segment=i, node=j * orbit.ncol,
+    landing = dict(x_star=x_star, left=left, normal=normal, segment=i, node=node,
                    distance=sol.distance, crossing=K + 1)
     res = replace(bisect, size=float(sol.size), mechanism=Mechanism.BASIN_BOUNDARY,
                   converged=cd.status == "bracketed",

@@ -317,6 +317,7 @@ def matching_index(
     simulation_kwargs: dict[str, Any] | None = None,
     solve: bool = True,
     stage: Callable[[str], None] | None = None,
+    near: MatchingIndex | None = None,
 ) -> MatchingIndex:
     """The headline index chi at ``params`` (the smaller of the paper's chi = h / w0 and
     chi_simulation), with the case that decided h, the simulated critical disturbance in
@@ -340,6 +341,11 @@ def matching_index(
         a basin boundary decides it (:mod:`maglev_match.analyses.critical`); False keeps the
         bisection's midpoints.
     stage : called with a line of text as each stage starts.
+    near : the index at a neighbouring design (of the same model): each direction it
+        solved is continued to this design
+        (:func:`maglev_match.analyses.continued.continue_critical`: predictor, Newton on the
+        same condition, two check runs) instead of searched again; where that does not
+        hold, the full search runs. ``simulation[key]["continuation"]`` says which, and why.
     """
     from threadpoolctl import threadpool_limits
 
@@ -369,20 +375,56 @@ def matching_index(
     from maglev_match.analyses.simulation import critical_disturbance
 
     kw = simulation_kwargs or {}
-    say("the critical disturbance: bracketing both directions with simulations ...")
-    up = critical_disturbance(m, direction=-1, **kw)
-    down = critical_disturbance(m, direction=1, **kw)
+    cont = _continued(m, near) if solve and near is not None else {}
+    up, c_up, _ = cont.get(-1, (None, None, ""))
+    down, c_down, _ = cont.get(1, (None, None, ""))
+    if up is None or down is None:
+        say("the critical disturbance: bracketing both directions with simulations ...")
+    up = up if up is not None else critical_disturbance(m, direction=-1, **kw)
+    down = down if down is not None else critical_disturbance(m, direction=1, **kw)
     solved = None
     if solve:
         from maglev_match.analyses.critical import critical_from_bisection
 
         say("the critical disturbance: solving the grazing or basin-boundary condition ...")
-        c_up = critical_from_bisection(m, up)
-        # the saddle cycle of a basin boundary is the same set for both directions
-        c_down = critical_from_bisection(m, down, orbit_hint=c_up.orbit)
+        at = np.asarray(m.param_vector(), float)
+        if c_up is None:
+            c_up = replace(critical_from_bisection(m, up), at=at)
+        if c_down is None:
+            # the saddle cycle of a basin boundary is the same set for both directions
+            c_down = replace(critical_from_bisection(m, down, orbit_hint=c_up.orbit), at=at)
         solved = (c_up, c_down)
-    return with_simulation(res, up, down, labels=m.info.disturbance_labels, rule=SIM_RULE,
-                           solved=solved)
+    out = with_simulation(res, up, down, labels=m.info.disturbance_labels, rule=SIM_RULE,
+                          solved=solved)
+    if near is None or not solve:
+        return out
+    info = dict(out.simulation)
+    for d, key in ((-1, "up"), (1, "down")):
+        how = cont.get(d, (None, None, "the neighbour's size was not solved"))
+        info[key] = {**info[key], "continuation": (
+            {"continued": True} if how[1] is not None
+            else {"continued": False, "reason": how[2]})}
+    return replace(out, simulation=info)
+
+
+def _continued(m: MaglevModel, near: MatchingIndex) -> dict[int, tuple[Any, Any, str]]:
+    """The critical sizes of ``near`` continued to the model ``m``, per direction:
+    (check search, size, '') where the continuation holds, (None, None, why) where not."""
+    from maglev_match.analyses.continued import CriticalStart, continue_critical
+
+    out: dict[int, tuple[Any, Any, str]] = {}
+    at = np.asarray(m.param_vector(), float)
+    for d, c in ((-1, near.critical_up), (1, near.critical_down)):
+        if c is None or not c.solved or c.at is None or c.window is None:
+            continue
+        if c.model != m.name or np.shape(c.at) != at.shape:
+            out[d] = (None, None, f"the neighbour is of model {c.model}")
+            continue
+        size, check, why = continue_critical(m, CriticalStart(np.asarray(c.at), c),
+                                             model=m.name)
+        out[d] = ((check, replace(size, at=at), "") if size is not None
+                  else (None, None, why.reason))
+    return out
 
 
 SIM_RULE = ("limits on: the coil current is clamped at zero (force from max(i, 0), di/dt held "

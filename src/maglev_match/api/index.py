@@ -35,7 +35,7 @@ def _index_params(params: Params | str | None, config: str | Path | None,
 def matching_index(params: Params | str | None = None, *, model: str = "unit",
                    simulate: bool = True, config: str | Path | None = None,
                    stage: Callable[[str], None] | bool | None = None,
-                   **overrides: Any) -> MatchingIndex:
+                   near: MatchingIndex | None = None, **overrides: Any) -> MatchingIndex:
     """The headline matching index chi = min(chi_paper, chi_simulation) of model A or the
     full vehicle (`maglev-match index [--model vehicle]`).
 
@@ -62,6 +62,14 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
         Called with a line of text as each stage starts; False: silent; default: lines on
         standard error when progress is shown (see
         [`show_progress`][maglev_match.api.progress.show_progress]).
+    near : MatchingIndex, optional
+        The index at a neighbouring design (same model): each critical disturbance it
+        solved is continued to this design (predicted from the neighbour, corrected by
+        Newton on the same grazing or basin-boundary condition, checked by two simulations
+        just below and above) instead of searched again; where that does not hold (the
+        mechanism changes), the full search runs. ``simulation["up"]["continuation"]``
+        (and ``"down"``) says which, and why. For designs visited one after another, as
+        in a parameter study in one process.
     **overrides : float
         Parameter values applied on top.
 
@@ -76,8 +84,9 @@ def matching_index(params: Params | str | None = None, *, model: str = "unit",
 
     p = resolve_params(params, config=config, **overrides)
     name = model_info(model).name
+    extra = {} if near is None else {"near": near}
     with reporting("index", stage, False) as (say, _):
-        return _matching_index(p, model=name, simulate=simulate, stage=say)
+        return _matching_index(p, model=name, simulate=simulate, stage=say, **extra)
 
 
 @reported("sensitivity", units=False)

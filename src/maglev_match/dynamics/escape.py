@@ -36,6 +36,7 @@ by Newton's method and its dependence on the parameters by the implicit function
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -295,14 +296,27 @@ def solve_grazing(
 
 def _curvature(hs: HybridSystem, x: np.ndarray, s: np.ndarray, p: np.ndarray,
                w: np.ndarray) -> float:
-    """d^2 (w . x)/dt^2 = w . f_x f at (x, s)."""
-    import jax
+    """d^2 (w . x)/dt^2 = w . f_x f at (x, s) (one compiled kernel per vector field, so
+    that it is not traced primitive by primitive at every call)."""
     import jax.numpy as jnp
 
-    xj, pj, sj = jnp.asarray(x), jnp.asarray(p), jnp.asarray(s, float)
-    f = hs.rhs(xj, pj, sj)
-    jf = jax.jvp(lambda y: hs.rhs(y, pj, sj), (xj,), (f,))[1]
+    jf = _curvature_kernel(hs.rhs)(jnp.asarray(x, float), jnp.asarray(p, float),
+                                   jnp.asarray(s, float))
     return float(np.asarray(w) @ np.asarray(jf))
+
+
+@functools.cache
+def _curvature_kernel(rhs: Callable) -> Callable:
+    """x, p, s -> f_x f of the vector field ``rhs`` (jitted, exported ahead of time)."""
+    import jax
+
+    from maglev_match.core.aot import cached_kernel
+
+    def fxf(x, p, s):
+        f = rhs(x, p, s)
+        return jax.jvp(lambda y: rhs(y, p, s), (x,), (f,))[1]
+
+    return cached_kernel(fxf, rhs, name="escape.curvature")
 
 
 def grazing_derivative(

@@ -204,7 +204,9 @@ def _argument_function(rhs: Callable, signals: tuple[Callable, ...], n: int) -> 
 
 @cache
 def _argument_jacobian(F: Callable) -> Callable:
-    return jax.jit(jax.jacfwd(F, argnums=0))
+    from maglev_match.core.aot import cached_kernel
+
+    return cached_kernel(jax.jacfwd(F, argnums=0), F, name="delay.argument_jacobian")
 
 
 def delay_jacobians(dde: DelayDifferentialSystem, x: np.ndarray, p: np.ndarray | None = None

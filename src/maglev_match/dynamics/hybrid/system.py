@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from functools import cache
 from typing import Any
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -115,7 +114,9 @@ def _mode_rhs(rhs: Callable, s: tuple[int, ...]) -> Callable:
 
 @cache
 def _jit_rhs(fn: Callable) -> Callable:
-    return jax.jit(fn)
+    from maglev_match.core.aot import cached_kernel
+
+    return cached_kernel(fn, fn, name="hybrid.pointwise")
 
 
 def identity_project(x, p, s):

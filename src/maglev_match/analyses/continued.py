@@ -1,0 +1,386 @@
+"""The solved critical disturbance followed from design to design (continuation).
+
+At a design next to one where the critical disturbance of a direction was solved
+(:mod:`maglev_match.analyses.critical`), the condition that decided it is the same smooth
+equation in the parameters, so it is not searched again:
+
+* **predictor**: the neighbour's size plus its derivative times the parameter step,
+  dd = dsize/dp . (p - p_prev), where the neighbour has the derivative; else the secant
+  of the two previous points of a sequence; else the neighbour's size;
+* **corrector**: Newton on the neighbour's condition at the new parameters: the grazing
+  condition at the same limit and levitation point in the neighbour's time window
+  (:func:`maglev_match.dynamics.escape.solve_grazing`, a few flows with sensitivities), or
+  for a basin boundary the saddle cycle of the clamped system corrected by collocation
+  from the neighbour's cycle and the landing on its stable manifold
+  (:func:`maglev_match.dynamics.escape.solve_basin_boundary`);
+* **check**: two simulations of the limited model at 1 -+ 1e-4 of the solved size: the
+  smaller must return to the equilibrium, the larger collide at the same gap limit of the
+  same levitation point. They are the continued size's bracket.
+
+Where the corrector fails or the check does not hold, the mechanism may have changed (a
+grazing contact turning into a basin boundary, a new contact at another extremum or
+limit, the deciding direction switching): the point gets the full search
+(:func:`maglev_match.analyses.critical.solve_critical`: bracketing by batched simulations,
+classification, solve), and the fall-back is recorded with why
+(:class:`Fallback`). :func:`follow_critical` follows a sequence of designs (a map row)
+this way and locates every change of what decides the size (mechanism, limit or point)
+between two neighbouring designs (:class:`MechanismChange`).
+
+Continued and point-wise solved sizes solve the same equation to the same Newton
+tolerance (relative 1e-12), so they agree to far better than 1e-9 m.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from maglev_match.analyses.critical import (
+    FLOW,
+    CriticalSize,
+    Mechanism,
+    critical_derivative,
+    disturbance_line,
+    saddle_landing,
+    solve_critical,
+)
+from maglev_match.core.params import Params
+from maglev_match.core.reprs import compact_repr
+from maglev_match.maglev.base import MaglevModel
+from maglev_match.maglev.models import maglev_model
+
+__all__ = ["CriticalStart", "Fallback", "MechanismChange", "FollowedCritical",
+           "continue_critical", "follow_critical", "follow_grid", "describe", "CHECK_STEP",
+           "BRACKET"]
+
+#: the relative offset of the two check runs below and above a continued size
+CHECK_STEP = 1e-4
+#: the corrector looks for the size within this fraction of the prediction (or four
+#: times the predicted step, if larger)
+BRACKET = 0.02
+#: steps per flow of the grazing corrector: a run to its extremum takes tens; a run that
+#: goes through a singular limit (gap 0, where the magnet force grows without bound) is
+#: cut here instead of at FLOW's 100 000 (it counts as "no extremum" either way)
+GRAZING_STEPS = 500
+
+
+@dataclass(frozen=True)
+class CriticalStart:
+    """A warm start: a solved :class:`CriticalSize` and the parameter vector (of the
+    model's clamped system, the model's parameter order) it was solved at; ``previous``
+    the start of the point before it on a sequence (for a secant predictor), or None."""
+
+    __repr__ = compact_repr
+
+    p: np.ndarray
+    critical: CriticalSize
+    previous: CriticalStart | None = None
+
+    @classmethod
+    def of(cls, params: Params | MaglevModel, critical: CriticalSize,
+           previous: CriticalStart | None = None) -> CriticalStart | None:
+        """The warm start of a solved size at ``params`` (None when it was not solved)."""
+        if not critical.solved or critical.size is None or critical.window is None:
+            return None
+        m = maglev_model(params, critical.model)
+        return cls(np.asarray(m.param_vector(), float).copy(), critical, previous)
+
+
+@dataclass(frozen=True)
+class Fallback:
+    """Why a continued solve was not taken (the point then got the full search)."""
+
+    direction: int
+    mechanism: str  # the neighbour's mechanism that was continued
+    reason: str
+
+
+@dataclass(frozen=True)
+class MechanismChange:
+    """What decides the critical size changes between points ``index - 1`` and ``index``
+    of a sequence (mechanism, gap limit or levitation point): located between those two
+    designs."""
+
+    index: int
+    direction: int
+    before: str  # e.g. 'grazing (upper limit, point 1)'
+    after: str
+    reason: str  # why the continuation from index - 1 did not hold (or '' if not tried)
+
+
+@dataclass(frozen=True)
+class FollowedCritical:
+    """:func:`follow_critical`'s result: ``sizes`` (one :class:`CriticalSize` per point),
+    ``how`` per point ('continued' or 'searched'), the ``fallbacks`` (index, Fallback) and
+    the located ``changes``."""
+
+    __repr__ = compact_repr
+
+    sizes: tuple[CriticalSize, ...]
+    how: tuple[str, ...]
+    fallbacks: tuple[tuple[int, Fallback], ...]
+    changes: tuple[MechanismChange, ...]
+
+    @property
+    def continued(self) -> int:
+        return sum(h == "continued" for h in self.how)
+
+
+def describe(c: CriticalSize) -> str:
+    """What decided a critical size, in a few words (mechanism, limit, point)."""
+    if not c.solved:
+        return str(c.mechanism)
+    return f"{c.mechanism} ({c.limit} limit, point {c.point or 1})"
+
+
+def _key(c: CriticalSize) -> tuple[str, str | None, int]:
+    return (str(c.mechanism), c.limit if c.solved else None, (c.point or 1) if c.solved else 1)
+
+
+def _predict(start: CriticalStart, p: np.ndarray) -> float:
+    c = start.critical
+    d = float(c.size)
+    if c.dsize_dp is not None and np.all(np.isfinite(c.dsize_dp)):
+        step = float(np.asarray(c.dsize_dp, float) @ (p - start.p))
+        return d + step
+    prev = start.previous
+    if prev is not None and prev.critical.size is not None:
+        dp = start.p - prev.p
+        nn = float(dp @ dp)
+        if nn > 0:
+            # the secant along the previous step, projected on the new step
+            t = float((p - start.p) @ dp) / nn
+            return d + t * (d - float(prev.critical.size))
+    return d
+
+
+def continue_critical(params: Params | MaglevModel, start: CriticalStart, *,
+                      model: str = "unit", derivative: bool = False
+                      ) -> tuple[CriticalSize | None, Any, Fallback | None]:
+    """The critical size of ``start``'s direction at ``params``, continued from the
+    neighbouring solved ``start`` (module docstring).
+
+    Returns (size, check, None) on success: ``check`` is the
+    :class:`~maglev_match.analyses.simulation.CriticalDisturbance` of the two check runs
+    (status 'bracketed', 2 runs); or (None, None, :class:`Fallback`) saying why the
+    continuation does not hold here (then the full search is due).
+    """
+    m = maglev_model(params, model)
+    c = start.critical
+
+    def fail(why: str) -> tuple[None, None, Fallback]:
+        return None, None, Fallback(c.direction, str(c.mechanism), why)
+
+    if m.params.tau > 0:
+        return fail("a delay (tau > 0): the solves are of the delay-free model")
+    if c.model != m.name:
+        return fail(f"the start is of model {c.model}")
+    line = disturbance_line(m, c.direction)
+    p = np.asarray(line.hs.p, float)
+    if p.shape != start.p.shape:
+        return fail("the parameter vectors differ in size")
+    d0 = _predict(start, p)
+    gap_range = float(m.disturbance(c.direction).gap_range)
+    if not (0.0 < d0 < gap_range):
+        return fail(f"the predicted size {d0 * 1e3:.6g} mm leaves the gap range")
+    if c.mechanism == Mechanism.GRAZING:
+        res = _grazing(m, line, c, d0)
+    else:
+        res = _basin(m, line, c, d0)
+    if isinstance(res, str):
+        return fail(res)
+    check = _check(m, res)
+    if isinstance(check, str):
+        return fail(check)
+    res = replace(res, bracket=(check.largest_return, check.smallest_collision))
+    if derivative:
+        res = critical_derivative(m, res)
+    return res, check, None
+
+
+def _grazing(m: MaglevModel, line: Any, c: CriticalSize, d0: float) -> CriticalSize | str:
+    from maglev_match.dynamics.escape import solve_grazing
+
+    j = (c.point or 1) - 1
+    side = 1 if c.limit == "upper" else -1
+    L = (line.upper if side > 0 else line.lower) - line.g0[j]
+    win = c.window
+    # a run through the limit has no extremum: the bracket turns such an iterate into its
+    # upper end (bisection) instead of a failure
+    half = max(BRACKET * d0, 4.0 * abs(d0 - float(c.size)))
+    sol = solve_grazing(line.hs, line.x0_of, line.dx0_dd, line.W[j], L, side, d0, win[0],
+                        win[1], p=line.hs.p, bracket=(d0 - half, d0 + half),
+                        options=replace(FLOW, max_steps=GRAZING_STEPS))[0]
+    if not sol.converged:
+        return f"grazing not continued: {sol.message}"
+    if sol.singular:
+        return "grazing not continued: a contact at the singular gap 0"
+    shift = float(sol.t_star) - float(c.t_star)
+    return replace(
+        c, size=float(sol.size), t_star=float(sol.t_star), iterations=sol.iterations,
+        residual=float(sol.residual), window=(win[0] + shift, win[1] + shift),
+        dsize_dp=None, dsize_dlimit=None, derivative_available=True, converged=True,
+        growth=None, margin_below=None, evidence=None,
+        reason=(f"grazing continued from a neighbouring design (predicted "
+                f"{d0 * 1e3:.7g} mm, Newton {sol.iterations} steps): tangency at the "
+                f"{c.limit} gap limit at t* = {sol.t_star:.5g} s; checked by simulation at "
+                f"1 -+ {CHECK_STEP:g} of the size"))
+
+
+def _basin(m: MaglevModel, line: Any, c: CriticalSize, d0: float) -> CriticalSize | str:
+    from maglev_match.dynamics.escape import section_walk, solve_basin_boundary
+    from maglev_match.dynamics.hybrid import hybrid_periodic_orbit
+
+    if c.orbit is None or c.window is None:
+        return "basin boundary not continued: the neighbour's saddle cycle is not kept"
+    orbit = hybrid_periodic_orbit(line.hs, c.orbit.segments, p=line.hs.p)
+    if not orbit.converged:
+        return f"the saddle cycle did not continue: {orbit.message}"
+    mu = np.asarray(orbit.multipliers)
+    outside = mu[np.abs(mu) > 1.0 + 1e-6]
+    if outside.size != 1 or abs(np.imag(outside[0])) > 1e-9 * abs(outside[0]):
+        return (f"the continued cycle has {outside.size} multiplier(s) outside the unit "
+                "circle: not a saddle with one unstable direction")
+    lnd, info = saddle_landing(line, orbit)
+    win = c.window
+
+    def solve(win: tuple[float, float]) -> Any:
+        return solve_basin_boundary(line.hs, line.x0_of, line.dx0_dd, lnd["x_star"],
+                                    lnd["left"], lnd["normal"], d0, win[0], win[1],
+                                    p=line.hs.p, options=FLOW)
+
+    sol = solve(win)
+    if not sol.converged:
+        # the landing time moves with the size (slowly, near the manifold): the window
+        # again from the predicted run's crossings of the new cycle's section, at the
+        # neighbour's crossing number
+        k = (c.landing or {}).get("crossing")
+        walk = section_walk(line.hs, line.x0_of(np.array([d0]))[0], lnd["normal"],
+                            lnd["x_star"], win[1] + orbit.period, p=line.hs.p,
+                            options=FLOW)
+        if k is not None and 0 < k <= len(walk):
+            t_k = walk[k - 1][0]
+            win = (t_k - 0.25 * orbit.period, t_k + 0.5 * orbit.period)
+            sol = solve(win)
+    if not sol.converged:
+        return f"basin boundary not continued: {sol.message}"
+    shift = float(sol.t_land) - float(c.t_star)
+    lnd = {**lnd, "distance": sol.distance, "crossing": (c.landing or {}).get("crossing")}
+    return replace(
+        c, size=float(sol.size), t_star=float(sol.t_land), iterations=sol.iterations,
+        residual=float(sol.residual), window=(win[0] + shift, win[1] + shift),
+        dsize_dp=None, dsize_dlimit=None, derivative_available=True, converged=True,
+        growth=None, margin_below=None, evidence=None, landing=lnd, **info,
+        reason=(f"basin boundary continued from a neighbouring design (predicted "
+                f"{d0 * 1e3:.7g} mm, Newton {sol.iterations} steps): the critical run lands "
+                f"on the stable manifold of the clamped system's saddle cycle (period "
+                f"{orbit.period:.4g} s, unstable multiplier {info['multiplier']:.4g}) at "
+                f"t = {sol.t_land:.4g} s; checked by simulation at 1 -+ {CHECK_STEP:g} of "
+                "the size"))
+
+
+def _check(m: MaglevModel, res: CriticalSize) -> Any:
+    """Two simulations of the limited model at 1 -+ CHECK_STEP of the size: the smaller
+    must return, the larger collide at the size's gap limit and point. Returns their
+    :class:`~maglev_match.analyses.simulation.CriticalDisturbance` or why not."""
+    from maglev_match.analyses.simulation import CriticalDisturbance, Run
+    from maglev_match.dynamics.integrate.simulate import (
+        COLLISION,
+        CONVERGED,
+        SimulationOptions,
+        simulate_batch,
+    )
+
+    dist = m.disturbance(res.direction)
+    d = float(res.size)
+    sizes = np.array([d * (1 - CHECK_STEP), d * (1 + CHECK_STEP)])
+    horizon = float(m.critical_search.as_kwargs()["t_max"])
+    b = simulate_batch(m.system(limited=True), dist.x0_of(sizes), horizon,
+                       event_fn=m.gap_events(), x_ref=m.equilibrium(),
+                       options=SimulationOptions(stop_on_converged=True))
+    entry = 2 * ((res.point or 1) - 1) + (1 if res.limit == "upper" else 0)
+    code = [int(v) for v in b.outcome_code]
+    if code[0] != CONVERGED:
+        what = ("collided at " + ("the upper" if int(b.event_index[0]) % 2 else "the lower")
+                + f" gap limit at {float(b.event_time[0]):.4g} s" if code[0] == COLLISION
+                else f"stayed undecided within {horizon:g} s")
+        return (f"the check run just below the continued size {d * 1e3:.7g} mm {what}: "
+                "another contact or set decides here")
+    if code[1] != COLLISION or int(b.event_index[1]) != entry:
+        return (f"the check run just above the continued size {d * 1e3:.7g} mm did not "
+                f"collide at the {res.limit} gap limit of point {res.point or 1}: the "
+                "condition no longer separates return from collision here")
+    runs = tuple(Run(size=float(s), outcome=o, time=t,
+                     margins=tuple(float(v) for v in b.min_event_value[k]),
+                     event=int(b.event_index[k]) if o == "collision" else -1)
+                 for k, (s, o, t) in enumerate(((sizes[0], "return",
+                                                 float(b.converged_time[0])),
+                                                (sizes[1], "collision",
+                                                 float(b.event_time[1])))))
+    return CriticalDisturbance(
+        direction=res.direction, largest_return=float(sizes[0]),
+        smallest_collision=float(sizes[1]), critical=float(sizes.mean()), status="bracketed",
+        gap_range=float(dist.gap_range), tol=float(sizes[1] - sizes[0]), runs=2,
+        unresolved=0, unresolved_sizes=(), horizon=horizon, rounds=1,
+        collision_time=float(b.event_time[1]), nonmonotone=False, samples=runs)
+
+
+def follow_critical(params_list: Sequence[Params | MaglevModel], direction: int, *,
+                    model: str = "unit", derivative: bool = False,
+                    start: CriticalStart | None = None,
+                    bisection_kwargs: dict[str, Any] | None = None) -> FollowedCritical:
+    """The critical size of ``direction`` along a sequence of neighbouring designs (a map
+    row, a path in a design search): the first point (unless ``start`` is given) by the
+    full search, every next one continued from its neighbour
+    (:func:`continue_critical`) where the neighbour was solved, else by the full search.
+    Every fall-back is recorded with why, and every change of what decides the size
+    (mechanism, gap limit, levitation point) between two neighbours is located
+    (:class:`MechanismChange`). The predictor is the derivative at a searched point (it
+    is computed there) and the secant of the last two points after a continued one;
+    ``derivative``: also dsize/dp at every continued point (then the predictor uses it)."""
+    sizes: list[CriticalSize] = []
+    how: list[str] = []
+    fallbacks: list[tuple[int, Fallback]] = []
+    changes: list[MechanismChange] = []
+    prev_c = None if start is None else start.critical
+    for k, params in enumerate(params_list):
+        m = maglev_model(params, model)
+        res, why = None, None
+        if start is not None:
+            res, _, why = continue_critical(m, start, model=model, derivative=derivative)
+        if res is None:
+            # (with its derivative: the predictor of the next point)
+            res = solve_critical(m, direction, model=model, derivative=True,
+                                 bisection_kwargs=bisection_kwargs)
+            how.append("searched")
+            if why is not None:
+                fallbacks.append((k, why))
+        else:
+            how.append("continued")
+        if prev_c is not None and _key(prev_c) != _key(res):
+            changes.append(MechanismChange(k, direction, describe(prev_c), describe(res),
+                                           "" if why is None else why.reason))
+        sizes.append(res)
+        same = start is not None and _key(start.critical) == _key(res)
+        start = CriticalStart.of(m, res, previous=start if same else None)
+        prev_c = res
+    return FollowedCritical(tuple(sizes), tuple(how), tuple(fallbacks), tuple(changes))
+
+
+def follow_grid(rows: Sequence[Sequence[Params | MaglevModel]], direction: int, *,
+                model: str = "unit", derivative: bool = False) -> list[FollowedCritical]:
+    """:func:`follow_critical` along every row of a grid of designs (rows of neighbouring
+    designs, each row next to the one before): the first point of a row is continued from
+    the first point of the row below (where that was solved), the rest along the row.
+    Changes are located within each row (their ``index``) and, for a row's first point,
+    against the first point of the row below."""
+    out: list[FollowedCritical] = []
+    below: CriticalStart | None = None
+    for row in rows:
+        f = follow_critical(row, direction, model=model, derivative=derivative, start=below)
+        out.append(f)
+        below = CriticalStart.of(row[0], f.sizes[0]) if len(row) else None
+    return out

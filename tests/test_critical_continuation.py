@@ -1,0 +1,142 @@
+"""The solved critical disturbance followed from design to design
+(analyses/continued.py): along a row and on a small 2-D grid, the continued sizes equal the
+point-wise solved ones to 1e-9 m wherever the mechanism does not change; a change of what
+decides the size is reported and located between two neighbours; reruns are bit-identical;
+the index at a neighbouring design (``near``) equals the point-wise index."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from maglev_match.analyses.continued import (
+    CriticalStart,
+    continue_critical,
+    follow_critical,
+    follow_grid,
+)
+from maglev_match.analyses.critical import Mechanism, solve_critical
+from maglev_match.core.params import load_preset
+
+TOL = 1e-9  # m: continued against point-wise solved sizes
+
+
+@pytest.fixture(scope="module")
+def soft():
+    return load_preset("turnout-soft")
+
+
+def _pointwise(points, direction):
+    return [solve_critical(p, direction) for p in points]
+
+
+def test_a_row_in_ei_is_continued_and_equals_the_pointwise_solves(soft):
+    """Beam down along EI (grazing at gap 0 all along): every point after the first is
+    continued (one corrector and two check runs, no bracketing), each equal to the full
+    search's solved size to 1e-9 m; the check runs bracket the continued size."""
+    pts = [soft.replace(EI=soft.EI * f) for f in (0.98, 0.99, 1.0, 1.01)]
+    f = follow_critical(pts, 1)
+    assert f.how == ("searched", "continued", "continued", "continued")
+    assert not f.changes and not f.fallbacks
+    for r, s in zip(f.sizes, _pointwise(pts, 1), strict=True):
+        assert r.mechanism == s.mechanism == Mechanism.GRAZING
+        assert abs(r.size - s.size) < TOL
+        lo, hi = r.bracket
+        assert lo < r.size < hi
+    assert "continued from a neighbouring design" in f.sizes[-1].reason
+    # the sizes move with EI (the continuation is not repeating the first point)
+    assert abs(f.sizes[-1].size - f.sizes[0].size) > 1e3 * TOL
+
+
+def test_a_change_of_mechanism_is_reported_and_located(soft):
+    """Beam up along omega1 from 110 to 114 rad/s: the run grazing the upper gap limit
+    decides up to 113; at 114 a run just below the continued size collides with the lower
+    limit (another contact decides): the fall-back search runs there and the change is
+    located between 113 and 114. Where both are solved the sizes agree to 1e-9 m; the
+    point-wise search cannot solve 113 (no gap extremum in its window), where the continued
+    size lies in its bisection bracket."""
+    pts = [soft.replace(omega1=om) for om in (110.0, 111.0, 112.0, 113.0, 114.0)]
+    f = follow_critical(pts, -1)
+    assert f.how == ("searched", "continued", "continued", "continued", "searched")
+    assert len(f.changes) == 1
+    ch = f.changes[0]
+    assert ch.index == 4 and ch.direction == -1
+    assert ch.before == "grazing (upper limit, point 1)" and ch.after != ch.before
+    assert "lower gap limit" in ch.reason
+    assert [k for k, _ in f.fallbacks] == [4] and f.fallbacks[0][1].reason == ch.reason
+    for r, s in zip(f.sizes, _pointwise(pts, -1), strict=True):
+        if r.solved and s.solved:
+            assert r.mechanism == s.mechanism and abs(r.size - s.size) < TOL
+        elif r.solved:
+            lo, hi = s.bracket
+            assert lo <= r.size <= hi
+    assert f.sizes[4].mechanism == solve_critical(pts[4], -1).mechanism
+
+
+def test_a_small_grid_equals_the_pointwise_solves_and_reruns_are_identical(soft):
+    """A 2 x 3 grid (kD across, EI up): each row's first point continued from the row
+    below, the rest along the row; all equal to the point-wise solves to 1e-9 m; a second
+    run gives the same bits."""
+    grid = [[soft.replace(EI=soft.EI * fy, kD=soft.kD * fx) for fx in (0.99, 1.0, 1.01)]
+            for fy in (0.995, 1.005)]
+    rows = follow_grid(grid, 1)
+    assert rows[0].how[0] == "searched" and rows[1].how == ("continued",) * 3
+    for row, f in zip(grid, rows, strict=True):
+        assert not f.changes
+        for r, s in zip(f.sizes, _pointwise(row, 1), strict=True):
+            assert r.mechanism == s.mechanism == Mechanism.GRAZING
+            assert abs(r.size - s.size) < TOL
+    again = follow_grid(grid, 1)
+    assert [[r.size for r in f.sizes] for f in again] == [[r.size for r in f.sizes]
+                                                         for f in rows]
+    assert [f.how for f in again] == [f.how for f in rows]
+
+
+def test_the_predictor_uses_the_derivative(soft):
+    """From a solved size with dsize/dp, the prediction at the next design is the first
+    order Taylor step (closer to the solved size there than the neighbour's size)."""
+    a, b = soft, soft.replace(EI=soft.EI * 1.02)
+    sa = solve_critical(a, 1, derivative=True)
+    start = CriticalStart.of(a, sa)
+    res, check, why = continue_critical(b, start)
+    assert why is None and check.runs == 2 and check.status == "bracketed"
+    predicted = float(res.reason.split("predicted ")[1].split(" mm")[0]) * 1e-3
+    assert abs(predicted - res.size) < 0.1 * abs(sa.size - res.size)
+
+
+def test_the_index_at_a_neighbouring_design_equals_the_pointwise_index(soft):
+    """``matching_index(..., near=previous)``: the critical sizes continued, the index equal
+    to the point-wise one (h_simulation to 1e-9 m); where the neighbour's mechanism does not
+    hold (omega1 112 -> 114 beam up) the full search runs and the result says why."""
+    from maglev_match.api import matching_index
+
+    first = matching_index(soft)
+    nxt = soft.replace(EI=soft.EI * 1.005)
+    r = matching_index(nxt, near=first)
+    full = matching_index(nxt)
+    assert r.simulation["up"]["continuation"] == {"continued": True}
+    assert r.simulation["down"]["continuation"] == {"continued": True}
+    for k in ("h_simulation_up", "h_simulation_down"):
+        assert abs(getattr(r, k) - getattr(full, k)) < TOL
+    assert r.chi == pytest.approx(full.chi, rel=1e-9, abs=0)
+    assert r.reading_basis == full.reading_basis and r.reading == full.reading
+    a = matching_index(soft.replace(omega1=112.0))
+    b = matching_index(soft.replace(omega1=114.0), near=a)
+    up = b.simulation["up"]["continuation"]
+    assert up["continued"] is False and "lower gap limit" in up["reason"]
+    assert b.simulation["down"]["continuation"] == {"continued": True}
+    assert b.h_simulation_up == matching_index(soft.replace(omega1=114.0)).h_simulation_up
+
+
+@pytest.mark.slow
+def test_a_basin_boundary_is_continued(soft):
+    """Beam up near the Hopf point (omega1 117 -> 118): the saddle cycle of the clamped
+    system corrected by collocation from the neighbour's, the landing on its stable
+    manifold solved again; equal to the point-wise basin-boundary solves to 1e-9 m."""
+    pts = [soft.replace(omega1=om) for om in (117.0, 117.5, 118.0)]
+    f = follow_critical(pts, -1)
+    assert f.how == ("searched", "continued", "continued") and not f.changes
+    for r, s in zip(f.sizes, _pointwise(pts, -1), strict=True):
+        assert r.mechanism == s.mechanism == Mechanism.BASIN_BOUNDARY
+        assert abs(r.size - s.size) < TOL
+        assert np.sum(np.abs(r.orbit.multipliers) > 1 + 1e-6) == 1
