@@ -38,7 +38,22 @@ def test_the_writers_are_the_ones_checked_here():
                      if re.search(r"\.to_netcdf\(|atomic_write_netcdf\(", p.read_text())
                      and p.name != "io.py")  # (io.py: the one atomic writer they all call)
     assert writers == ["analyses/restart/equilibria.py", "analyses/simulation.py",
-                       "cli/cycles.py", "cli/hopf.py", "cli/index.py", "cli/speed.py"], writers
+                       "cli/cycle_curve.py", "cli/cycles.py", "cli/hopf.py", "cli/index.py",
+                       "cli/speed.py"], writers
+
+
+def test_saved_cycle_curve_is_self_describing(tmp_path):
+    """The netCDF of `cycle-curve` (model A's fold of cycles, a few steps): units and long
+    names on every variable, the version and the parameter set it was computed at."""
+    params = mm.load_preset("alpha1").replace(xi0=0.7)
+    assert cli_main(["cycle-curve", "--preset", "alpha1", "--set", "xi0=0.7", "--params",
+                     "omega1,sigma", "--at", "sigma=4e-4", "--range", "sigma=3.9e-4:4.1e-4",
+                     "--max-steps", "5", "--ntst", "40", "--out", str(tmp_path / "c"),
+                     "--json"]) == 0
+    ncs = sorted((tmp_path / "c").glob("*.nc"))
+    assert len(ncs) == 1
+    ds = _check_self_describing(ncs[0], params.replace(sigma=4e-4))
+    assert ds.sizes["point"] >= 3
 
 
 def test_saved_cycle_branch_and_hopf_curve_are_self_describing(tmp_path):

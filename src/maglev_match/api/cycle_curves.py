@@ -98,12 +98,16 @@ class CycleCurveStudy(Plottable):
     def to_xarray(self) -> Any:
         """The curve as an annotated dataset (units of the maglev parameters)."""
         units = {}
-        if not self.is_user:
-            from maglev_match.core.units import unit
+        if not self.is_user:  # the files are in SI units, as every dataset of the package
+            from maglev_match.core.units import si_unit
 
-            units = {n: unit(n) for n in (self.x, self.y)}
-            units.update({"gap_deviation": "m", "current": "A"})
+            seen = {n for c in self.curve.points for n in c.extrema}
+            units = {n: si_unit(n) for n in (self.x, self.y, *seen)}
         ds = self.curve.to_xarray(units)
+        if not self.is_user and self.params is not None:  # the version and the parameters
+            from maglev_match.core.datasets import annotate
+
+            ds = annotate(ds, self.params)
         ds.attrs.update({"model": self.model, "start": self.start_label,
                          "restart_of": self.restart_of,
                          "at": ", ".join(f"{k}={v:g}" for k, v in self.at.items())})

@@ -104,9 +104,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "speed": ("speed", "The vehicle at speed over identical simply supported spans: the "
                        "periodic response at every speed from --from to --to (km/h), its "
                        "stability (span-map multipliers), gap deviation, current, DAF, "
-                       "car-body acceleration and Sperling's Wz, the critical disturbance of "
-                       "the span being entered and chi(v) = h(v) / w0; resonance speeds and "
-                       "stability changes marked. Writes a netCDF sweep and a figure."),
+                       "car-body acceleration and Sperling's Wz, the index at speed "
+                       "chi(v) = h(v) / w0 (the span under the vehicle suddenly displaced; "
+                       "the standstill index as v -> 0) next to the standstill headline, and "
+                       "the entry disturbance; resonance speeds and stability changes marked."
+                       " Writes a netCDF sweep and a figure."),
 }
 
 
