@@ -93,3 +93,12 @@ def test_on_by_itself_in_a_jupyter_kernel(tmp_path):
     out = "".join(o.get("text", "") for o in outs if o.get("name") == "stdout")
     assert "the paper's index of model A" in err and LINE in err
     assert out.strip() == "9.562"
+
+
+def test_an_imported_kernel_module_is_not_a_kernel(monkeypatch):
+    """Another test file (or a tool that starts kernels elsewhere) may have imported
+    ipykernel and IPython into this process: progress stays off without a running shell."""
+    pytest.importorskip("IPython")
+    import ipykernel  # noqa: F401
+
+    assert not api_progress.progress_shown()

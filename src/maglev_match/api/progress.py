@@ -42,8 +42,21 @@ def show_progress(on: bool | None = True) -> None:
     _SETTING = on
 
 
+def _shell() -> Any:
+    """The running IPython shell (a Jupyter kernel's or an IPython terminal's), or None.
+    (A module merely imported, as ``ipykernel`` by a tool that starts kernels elsewhere,
+    says nothing about this process.)"""
+    ipy = sys.modules.get("IPython")
+    if ipy is None:
+        return None
+    try:
+        return ipy.get_ipython()
+    except Exception:  # noqa: BLE001 - an IPython too old or half loaded: no shell
+        return None
+
+
 def _interactive() -> bool:
-    if "ipykernel" in sys.modules:  # a Jupyter kernel
+    if _shell() is not None:  # a Jupyter kernel or an IPython session
         return True
     return bool(getattr(sys, "ps1", None)) or bool(sys.flags.interactive)
 
@@ -96,7 +109,7 @@ def _bar(total: int, what: str, stream: Any) -> Any:
     from tqdm import std
 
     bar_cls = std.tqdm
-    if "ipykernel" in sys.modules:
+    if type(_shell()).__name__ == "ZMQInteractiveShell":  # a Jupyter kernel
         try:  # a widget when the notebook can show one
             import ipywidgets  # noqa: F401
             from tqdm import notebook
