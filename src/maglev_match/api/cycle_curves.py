@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from maglev_match.api.progress import reported
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.results import Plottable
 
@@ -135,6 +136,7 @@ def _check_bounds(bounds: Mapping[str, Any] | None, x: str, y: str
     return out
 
 
+@reported("cycle-curve", units=False)
 def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = "omega1",
                 y: str = "sigma", *, model: str = "unit", at: Mapping[str, Any] | None = None,
                 bounds: Mapping[str, tuple[float, float]] | None = None,
