@@ -40,6 +40,7 @@ from maglev_match.dynamics.collocation.bvp import (
     lagrange_basis,
     node_times,
     remesh,
+    scaled_collocation_rows,
     sparse_matrix,
 )
 from maglev_match.dynamics.collocation.linalg import (
@@ -78,5 +79,6 @@ __all__ = [
     "lagrange_basis",
     "node_times",
     "remesh",
+    "scaled_collocation_rows",
     "sparse_matrix",
 ]

@@ -61,6 +61,7 @@ __all__ = [
     "lagrange_basis",
     "node_times",
     "remesh",
+    "scaled_collocation_rows",
     "sparse_matrix",
 ]
 
@@ -169,21 +170,31 @@ def _parts_kernel(rhs: Callable, m: int) -> Callable:
     return cached_kernel(parts, rhs, m)
 
 
+def scaled_collocation_rows(rhs: Callable, m: int) -> Callable:
+    """The collocation rows (NTST, m, n) as :meth:`CollocationProblem.parts` scales them,
+    (U' - T f(U, p)) h / sc at the collocation points, as a pure JAX function
+    ``rows(Ui, h, T, p, sc)`` of the node values per interval (not jitted: for kernels
+    built on it, such as the chord iterations' residual and the test-function gradient of
+    the cycle curves)."""
+    _, _, _, L, D = collocation_tables(m)
+    Lj, Dj = jnp.asarray(L), jnp.asarray(D)
+    f2 = jax.vmap(jax.vmap(rhs, (0, None)), (0, None))
+
+    def rows(Ui, h, T, p, sc):
+        Uc = jnp.einsum("lk,jkn->jln", Lj, Ui)
+        dU = jnp.einsum("lk,jkn->jln", Dj, Ui) / h[:, None, None]
+        return (dU - T * f2(Uc, p)) * (h[:, None, None] / sc)
+
+    return rows
+
+
 @cache
 def _residual_kernel(rhs: Callable, m: int) -> Callable:
     """Jitted scaled residual of the collocation rows alone, (NTST, m, n), as
     :meth:`CollocationProblem.parts` scales it (for the chord iterations, which need no
     Jacobian)."""
-    _, _, _, L, D = collocation_tables(m)
-    Lj, Dj = jnp.asarray(L), jnp.asarray(D)
-    f2 = jax.vmap(jax.vmap(rhs, (0, None)), (0, None))
-
-    def res(Ui, h, T, p, sc):
-        Uc = jnp.einsum("lk,jkn->jln", Lj, Ui)
-        dU = jnp.einsum("lk,jkn->jln", Dj, Ui) / h[:, None, None]
-        return (dU - T * f2(Uc, p)) * (h[:, None, None] / sc)
-
-    return cached_kernel(res, rhs, m)
+    return cached_kernel(scaled_collocation_rows(rhs, m), rhs, m,
+                         name="collocation.bvp.scaled_rows")
 
 
 @lru_cache(maxsize=32)

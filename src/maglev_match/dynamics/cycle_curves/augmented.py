@@ -45,9 +45,9 @@ import scipy.sparse
 from maglev_match.core.aot import cached_kernel
 from maglev_match.dynamics.collocation import (
     CollocationProblem,
-    collocation_tables,
     factorize,
     interval_nodes,
+    scaled_collocation_rows,
     sparse_matrix,
 )
 
@@ -66,17 +66,10 @@ def _gradient_kernel(rhs: Callable, m: int) -> Callable:
     """Gradient with respect to (nodes per interval, T, p) of
     phi = sum Wc * (d/d eps) R(U + eps V, T + eps vT, p), R the scaled collocation rows
     (NTST, m, n), as :meth:`CollocationProblem.parts` scales them (physical unknowns)."""
-    _, _, _, L, D = collocation_tables(m)
-    Lj, Dj = jnp.asarray(L), jnp.asarray(D)
-    f2 = jax.vmap(jax.vmap(rhs, (0, None)), (0, None))
-
-    def rows(Ui, T, p, h, sc):
-        Uc = jnp.einsum("lk,jkn->jln", Lj, Ui)
-        dU = jnp.einsum("lk,jkn->jln", Dj, Ui) / h[:, None, None]
-        return (dU - T * f2(Uc, p)) * (h[:, None, None] / sc)
+    rows = scaled_collocation_rows(rhs, m)
 
     def phi(Ui, T, p, Vi, vT, Wc, h, sc):
-        _, jv = jax.jvp(lambda a, b: rows(a, b, p, h, sc), (Ui, T), (Vi, vT))
+        _, jv = jax.jvp(lambda a, b: rows(a, h, b, p, sc), (Ui, T), (Vi, vT))
         return jnp.sum(Wc * jv)
 
     return cached_kernel(jax.grad(phi, argnums=(0, 1, 2)), rhs, m,
