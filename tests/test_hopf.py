@@ -284,3 +284,22 @@ def test_hopf_curve_module_imports_first():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
+
+
+def test_hopf_curve_reports_a_generalised_hopf_point_at_its_start():
+    """A curve started exactly on the GH point (l1 = 0 there, as when a scan starts at the
+    middle of a symmetric range) reports it: the start point is the zero, and no step of
+    either direction sees a sign change inside it. Bautin normal form: l2 = -2 (<q, q> = 1)."""
+    from systems import BAUTIN_NF
+
+    p = BAUTIN_NF.params_with(l1=0.0)
+    start = locate_hopf_points(BAUTIN_NF, "mu", -1.0, 1.0, p=p, n_scan=20).points[0]
+    assert start.l1 == 0.0  # the case: exactly on the GH point
+    curve = hopf_curve(BAUTIN_NF, ("mu", "l1"), start, {"mu": (-1.0, 1.0), "l1": (-0.5, 0.5)},
+                       p=p)
+    assert curve.converged, curve.message
+    gh = [sp for sp in curve.special_points if sp.type == "GH"]
+    assert len(gh) == 1 and len(curve.special_points) == 1
+    assert gh[0].values[1] == 0.0 and abs(gh[0].values[0]) < 1e-12
+    assert gh[0].l2 == pytest.approx(-2.0, rel=1e-8)
+    assert gh[0].located == "solved"

@@ -29,6 +29,7 @@ from maglev_match.dynamics.continuation import (
     BranchPoint,
     ContinuationOptions,
     Correction,
+    Event,
     SpecialPoint,
     SpecialPointKind,
     StopReason,
@@ -562,6 +563,13 @@ def hopf_curve(
         info = b.info[:0:-1] + info
     special: list[SpecialPoint] = []
     events = (branches[1].events[::-1] if len(branches) > 1 else []) + branches[0].events
+    if detect_special_points and _gh_at_start(branches):
+        # l1 is exactly 0 at the start (a scan that starts on the GH point, e.g. at the middle
+        # of a symmetric range): the driver locates sign changes inside steps, and a step
+        # that starts on the zero has none, so the start point itself is the GH point
+        events.insert(len(branches[1].events) if len(branches) > 1 else 0, Event(
+            name="GH", kind=str(SpecialPointKind.GH), step=0, located=SOLVED, value=0.0,
+            point=BranchPoint(u=z0 / solver.S, t=t0, value=float(al0[0]), correction=None)))
     for ev in events:
         special.extend(_codim_two(solver, ev, warnings))
     for br in branches:
@@ -584,6 +592,15 @@ def hopf_curve(
     return HopfCurve(params=tuple(params), points=pts, special_points=special, converged=ok,
                      message=message, steps=len(pts) - 1,
                      closed=any(br.closed for br in branches), warnings=tuple(warnings))
+
+
+def _gh_at_start(branches) -> bool:
+    """Whether l1 is exactly 0 at the start point and changes sign through it (the first
+    points of the two directions have opposite signs)."""
+    if len(branches) < 2 or any(len(br.info) < 2 for br in branches):
+        return False
+    l1_start, l1_a, l1_b = branches[0].info[0][0], branches[0].info[1][0], branches[1].info[1][0]
+    return l1_start == 0.0 and l1_a * l1_b < 0.0
 
 
 def _codim_two(solver: _HopfCurveSolver, ev, warnings: list[str]) -> list[SpecialPoint]:
