@@ -21,29 +21,18 @@ from __future__ import annotations
 
 import argparse
 import platform
-import resource
 import statistics
+import sys
 import time
+from pathlib import Path
 
 from maglev_match.analyses.continued import follow_critical
 from maglev_match.analyses.critical import solve_critical
 from maglev_match.api import matching_index
 from maglev_match.core.params import load_preset
 
-
-def cpu() -> float:
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
-
-
-def timed(fn, repeat: int) -> tuple[float, float, object]:
-    walls, cpus, out = [], [], None
-    for _ in range(repeat):
-        t, c = time.perf_counter(), cpu()
-        out = fn()
-        walls.append(time.perf_counter() - t)
-        cpus.append(cpu() - c)
-    return statistics.median(walls), statistics.median(cpus), out
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/_timing.py
+from _timing import cpu, timed  # noqa: E402
 
 
 def row(points: list, direction: int, repeat: int, label: str) -> None:
