@@ -16,7 +16,8 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import time
+import sys
+from pathlib import Path
 
 from maglev_match import load_preset
 from maglev_match.analyses.speed.critical import critical_disturbance_at_speed
@@ -25,11 +26,8 @@ from maglev_match.analyses.speed.index import index_at_speed
 from maglev_match.analyses.speed.options import SpeedOptions
 from maglev_match.analyses.speed.point import periodic_response
 
-
-def timed(fn):
-    c0, w0 = time.process_time(), time.perf_counter()
-    out = fn()
-    return out, time.process_time() - c0, time.perf_counter() - w0
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/_timing.py
+from _timing import timed_once as timed  # noqa: E402
 
 
 def main() -> None:

@@ -140,3 +140,42 @@ def test_a_basin_boundary_is_continued(soft):
         assert r.mechanism == s.mechanism == Mechanism.BASIN_BOUNDARY
         assert abs(r.size - s.size) < TOL
         assert np.sum(np.abs(r.orbit.multipliers) > 1 + 1e-6) == 1
+
+
+def test_the_papers_cycle_at_a_neighbouring_design_is_continued_not_searched(soft,
+                                                                              monkeypatch):
+    """``near``: the paper's bounding cycle corrected by collocation Newton at the new
+    parameters from the neighbour's (no Hopf search, no branch from the Hopf point: the
+    search is switched off here), equal to the point-wise index's h to 1e-7 relative (the
+    point-wise branch ends on another adapted mesh) along three steps of EI; beyond the
+    stretch rules (a 10 % step) the full search runs and gives the point-wise index."""
+    import maglev_match.analyses.matching as matching
+    from maglev_match.analyses.continued import CYCLE_STEP, continue_cycle
+
+    designs = [soft.replace(EI=soft.EI * (1 + 2e-3 * k)) for k in range(4)]
+    full = [matching.matching_index(d, simulate=False) for d in designs]
+    assert all(f.case == "unstable_cycle" for f in full)
+    real = matching.index_of_system
+
+    def no_search(*a, **k):
+        raise AssertionError("the neighbouring design searched its cycle again")
+
+    monkeypatch.setattr(matching, "index_of_system", no_search)
+    prev = full[0]
+    for d, f in zip(designs[1:], full[1:], strict=True):
+        r = matching.matching_index(d, simulate=False, near=prev)
+        assert r.case == f.case and r.stable == f.stable
+        assert r.h == pytest.approx(f.h, rel=1e-7, abs=0)
+        assert r.cycle_unstable_multipliers == f.cycle_unstable_multipliers
+        assert r.cycle_period == pytest.approx(f.cycle_period, rel=1e-7)
+        assert r.current_reverses == f.current_reverses
+        prev = r
+    # beyond the stretch rules: the full search, the point-wise index itself
+    monkeypatch.setattr(matching, "index_of_system", real)
+    far = soft.replace(EI=soft.EI * (1 + 4 * CYCLE_STEP))  # omega1 moves ~ 2 CYCLE_STEP
+    why = continue_cycle(matching.maglev_model(far).system(),
+                         matching.maglev_model(far).system().p, full[0].cycle,
+                         full[0].hopf_param, full[0].hopf_value, np.zeros(9))
+    assert isinstance(why, str) and "moved by" in why
+    r = matching.matching_index(far, simulate=False, near=full[0])
+    assert r == matching.matching_index(far, simulate=False)

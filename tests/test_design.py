@@ -176,3 +176,24 @@ def test_cli_sensitivity_differentiates_the_headline(capsys, tmp_path):
     assert "grazing" in data["simulation_status"]
     for r in data["rows"]:
         assert r["dchi"] == r["dchi_simulation"] and np.isfinite(r["dchi_paper"])
+
+
+def test_an_evaluation_next_to_the_previous_one_continues_its_index():
+    """The evaluator passes the previous evaluation as ``near`` when every varied
+    parameter moved by at most NEAR_STEP: the critical disturbances are continued (said in
+    the index), and chi equals the point-wise index's to 1e-7 relative; a farther point is
+    searched in full (no continuation recorded)."""
+    from maglev_match.analyses.design.problem import NEAR_STEP
+
+    base = load_preset("turnout-soft")
+    ev = MaglevEvaluator(base, ["EI"])
+    ei = base.EI
+    ev.evaluate(np.array([ei]), gradient=False)
+    nxt = ev.evaluate(np.array([ei * (1 + NEAR_STEP / 5)]), gradient=False).index
+    for key in ("up", "down"):
+        assert nxt.simulation[key]["continuation"] == {"continued": True}
+    full = matching_index(base.replace(EI=ei * (1 + NEAR_STEP / 5)))
+    assert nxt.chi == pytest.approx(full.chi, rel=1e-7)
+    assert nxt.reading_basis == full.reading_basis
+    far = ev.evaluate(np.array([ei * (1 + 3 * NEAR_STEP)]), gradient=False).index
+    assert "continuation" not in far.simulation["up"]

@@ -54,7 +54,7 @@ from maglev_match.maglev.models import maglev_model
 
 __all__ = ["CriticalStart", "Fallback", "MechanismChange", "FollowedCritical",
            "continue_critical", "follow_critical", "follow_grid", "describe", "CHECK_STEP",
-           "BRACKET"]
+           "BRACKET", "continue_cycle", "CYCLE_STEP", "CYCLE_CHANGE"]
 
 #: the relative offset of the two check runs below and above a continued size
 CHECK_STEP = 1e-4
@@ -384,3 +384,80 @@ def follow_grid(rows: Sequence[Sequence[Params | MaglevModel]], direction: int, 
         out.append(f)
         below = CriticalStart.of(row[0], f.sizes[0]) if len(row) else None
     return out
+
+
+#: the paper's cycle is continued from a neighbouring design only when no model parameter
+#: moved by more than this fraction of its value ...
+CYCLE_STEP = 0.05
+#: ... and the continued cycle's period and largest gap deviation moved by at most this
+#: fraction of the neighbour's
+CYCLE_CHANGE = 0.1
+
+
+def continue_cycle(system: Any, p: np.ndarray, cycle: Any, hopf_param: str,
+                   hopf_value: float, x_eq: np.ndarray, *, limits: Any = None
+                   ) -> tuple[Any, Any] | str:
+    """The basin-bounding unstable cycle at the parameter vector ``p``, continued from
+    ``cycle`` (a :class:`~maglev_match.dynamics.cycles.CyclePoint`: the bounding cycle at a
+    neighbouring design, its orbit's parameter vector) instead of found again from a Hopf
+    point: the Hopf point of the neighbour (``hopf_param`` = ``hopf_value``) refined at the
+    new parameters (the frequency guess from the Jacobian there; ``x_eq`` the equilibrium),
+    then the periodic BVP solved by collocation Newton at the new parameters from the
+    neighbour's cycle (:func:`~maglev_match.dynamics.cycles.correct_cycle`, on its mesh).
+
+    The stretch rules that keep it the same cycle and the same reading: every model
+    parameter within :data:`CYCLE_STEP` of the neighbour's (relative); the Hopf point
+    converged and still on the same side of the design; Newton converged with reliable
+    multipliers and as many outside the unit circle as the neighbour's; the period and the
+    largest gap deviation within :data:`CYCLE_CHANGE` of the neighbour's; and the cycle
+    inside the limits (``limits(system, orbit)``: margins, positive inside). Returns
+    (cycle point, Hopf point), or why the continuation does not hold (then the full
+    search is due)."""
+    from dataclasses import replace as dc_replace
+
+    from maglev_match.dynamics.cycles import correct_cycle
+    from maglev_match.dynamics.hopf import refine_hopf_point
+
+    p = np.asarray(p, float)
+    prev = np.asarray(cycle.orbit.p, float)
+    if p.shape != prev.shape:
+        return "the parameter vectors differ in size"
+    moved = np.abs(p - prev)
+    rel = np.where(prev != 0, moved / np.where(prev != 0, np.abs(prev), 1.0),
+                   np.where(moved > 0, np.inf, 0.0))
+    if float(np.max(rel)) > CYCLE_STEP:
+        return (f"a parameter moved by {float(np.max(rel)):.3g} of its value (more than "
+                f"{CYCLE_STEP:g})")
+    ip = system.param_index(hopf_param)
+    v, v_prev = float(p[ip]), float(prev[ip])
+    ph = p.copy()
+    ph[ip] = hopf_value
+    x = np.asarray(x_eq, float)
+    J = np.asarray(system.derivatives.jacobian_batch(x[None], ph[None]))[0]
+    w = np.linalg.eigvals(J)
+    w = w[w.imag > 0]
+    if not w.size:
+        return "no complex eigenvalue pair at the neighbour's Hopf point"
+    om = float(w[int(np.argmin(np.abs(w.real)))].imag)
+    hp = refine_hopf_point(system, hopf_param, float(hopf_value), x, om, p=ph,
+                           value_scale=max(abs(hopf_value), abs(v)))
+    if not hp.converged:
+        return "the neighbour's Hopf point did not continue to the new parameters"
+    if (v - hp.value) * (v_prev - hopf_value) <= 0:
+        return "the design and the Hopf point changed sides"
+    res = correct_cycle(system, dc_replace(cycle.orbit, p=p.copy()), hopf_param, v)
+    if not res.converged or res.point is None:
+        return f"the cycle did not continue: {res.message}"
+    pt = res.point
+    if not pt.reliable or pt.n_unstable != cycle.n_unstable:
+        return (f"the continued cycle has {pt.n_unstable} unstable multiplier(s) "
+                f"(the neighbour's {cycle.n_unstable}) or unreliable multipliers")
+    if abs(pt.period - cycle.period) > CYCLE_CHANGE * cycle.period:
+        return f"the period moved from {cycle.period:.4g} s to {pt.period:.4g} s"
+    g_new = float(pt.extrema["gap_deviation"][0])
+    g_old = float(cycle.extrema["gap_deviation"][0])
+    if abs(g_new - g_old) > CYCLE_CHANGE * abs(g_old):
+        return f"the cycle's largest gap deviation moved from {g_old:.4g} m to {g_new:.4g} m"
+    if limits is not None and min(limits(system, pt.orbit).values()) <= 0:
+        return "the continued cycle reaches a limit"
+    return pt, hp

@@ -346,6 +346,12 @@ def matching_index(
         (:func:`maglev_match.analyses.continued.continue_critical`: predictor, Newton on the
         same condition, two check runs) instead of searched again; where that does not
         hold, the full search runs. ``simulation[key]["continuation"]`` says which, and why.
+        Where the neighbour's h was an unstable cycle, that cycle is continued too
+        (:func:`maglev_match.analyses.continued.continue_cycle`: its Hopf point refined and
+        the cycle corrected by collocation Newton at the new parameters, within stretch
+        rules), not found again from a Hopf point; h then agrees with the point-wise
+        index's to ~1e-8 relative (the point-wise branch ends on another adapted mesh).
+        Where the rules do not hold, the full search runs.
     """
     from threadpoolctl import threadpool_limits
 
@@ -355,7 +361,8 @@ def matching_index(
     params = m.params
     system = m.system()
     with threadpool_limits(m.blas_threads):
-        res = index_of_system(
+        res = None if near is None else _paper_near(m, system, near, stability_result)
+        res = res if res is not None else index_of_system(
             system, system.p, w0=m.w0, h_max=params.gap_max - params.c0,
             search=m.hopf_search(),
             limits=m.cycle_limits(include_current=False),
@@ -492,36 +499,10 @@ def index_of_system(
                            newton=newton)
     warnings.extend(bound.warnings)
     hp = bound.hopf
-    gh = _gh_ratio(system, hp, h_max) if hp is not None else None
-    hopf = dict(hopf_param=hp.param if hp else None, hopf_value=hp.value if hp else None,
-                hopf_distance=bound.hopf_distance, l1=hp.l1 if hp else None, gh_ratio=gh)
-    if bound.hopf_distance is not None and bound.hopf_distance < NEAR_HOPF:
-        warnings.append(
-            f"the design point is only {100 * bound.hopf_distance:.2g} % from the Hopf point at "
-            f"{hp.param} = {hp.value:.6g}: a small change of the parameters loses stability")
-    if gh is not None and gh > NEAR_GH:
-        warnings.append(
-            f"near a generalised-Hopf point: l1 = {hp.l1:.3g} is small (the quintic term of "
-            f"the normal form is {gh:.3g} times the cubic one within the gap range), so h "
-            "changes fast with the parameters here")
+    hopf = _hopf_info(system, hp, bound.hopf_distance, h_max, warnings)
     if bound.case == "unstable_cycle":
-        cyc = bound.cycle
-        assert cyc is not None
-        g_hi, g_lo = cyc.extrema["gap_deviation"]
-        i_lo = cyc.extrema["current"][1]
-        h = float(g_hi)
-        if i_lo < 0:
-            warnings.append(
-                f"the coil current on the cycle would reverse (min {i_lo:.3g} A): the cycle is "
-                "of the smooth model, the clamped system differs there")
-        return MatchingIndex(
-            chi=h / w0, chi_paper=h / w0, h=h, case=Case.UNSTABLE_CYCLE,
-            reading=reading(h / w0, Case.UNSTABLE_CYCLE),
-            cycle_period=cyc.period, cycle_gap_max=float(g_hi), cycle_gap_min=float(g_lo),
-            cycle_current_min=float(i_lo), cycle_unstable_multipliers=cyc.n_unstable,
-            current_reverses=bool(i_lo < 0), warnings=tuple(warnings), cycle=cyc,
-            **hopf, **base,
-        )
+        assert bound.cycle is not None
+        return _cycle_index(bound.cycle, w0, warnings, {**hopf, **base})
     if not bound.converged:
         warnings.append(bound.message)
         return MatchingIndex(
@@ -537,6 +518,73 @@ def index_of_system(
         reading=reading(h_max / w0, Case.NO_CYCLE_WITHIN_LIMITS),
         message=bound.message, warnings=tuple(warnings), **hopf, **base,
     )
+
+
+def _hopf_info(system: System, hp: Any, distance: float | None, h_max: float,
+               warnings: list[str]) -> dict[str, Any]:
+    """The index's Hopf fields of the Hopf point ``hp`` (None: none) at relative
+    ``distance`` from the design, and its warnings (near Hopf, near generalised Hopf)."""
+    gh = _gh_ratio(system, hp, h_max) if hp is not None else None
+    if distance is not None and distance < NEAR_HOPF:
+        warnings.append(
+            f"the design point is only {100 * distance:.2g} % from the Hopf point at "
+            f"{hp.param} = {hp.value:.6g}: a small change of the parameters loses stability")
+    if gh is not None and gh > NEAR_GH:
+        warnings.append(
+            f"near a generalised-Hopf point: l1 = {hp.l1:.3g} is small (the quintic term of "
+            f"the normal form is {gh:.3g} times the cubic one within the gap range), so h "
+            "changes fast with the parameters here")
+    return dict(hopf_param=hp.param if hp else None, hopf_value=hp.value if hp else None,
+                hopf_distance=distance, l1=hp.l1 if hp else None, gh_ratio=gh)
+
+
+def _cycle_index(cyc: CyclePoint, w0: float, warnings: list[str], fields: dict[str, Any]
+                 ) -> MatchingIndex:
+    """The paper's index where the unstable cycle ``cyc`` bounds the basin: h its largest
+    gap deviation (``fields``: the Hopf and equilibrium fields)."""
+    g_hi, g_lo = cyc.extrema["gap_deviation"]
+    i_lo = cyc.extrema["current"][1]
+    h = float(g_hi)
+    if i_lo < 0:
+        warnings.append(
+            f"the coil current on the cycle would reverse (min {i_lo:.3g} A): the cycle is "
+            "of the smooth model, the clamped system differs there")
+    return MatchingIndex(
+        chi=h / w0, chi_paper=h / w0, h=h, case=Case.UNSTABLE_CYCLE,
+        reading=reading(h / w0, Case.UNSTABLE_CYCLE),
+        cycle_period=cyc.period, cycle_gap_max=float(g_hi), cycle_gap_min=float(g_lo),
+        cycle_current_min=float(i_lo), cycle_unstable_multipliers=cyc.n_unstable,
+        current_reverses=bool(i_lo < 0), warnings=tuple(warnings), cycle=cyc, **fields,
+    )
+
+
+def _paper_near(m: MaglevModel, system: System, near: MatchingIndex,
+                stability_result: StabilityResult | None) -> MatchingIndex | None:
+    """The paper's index with the bounding cycle continued from the neighbouring design's
+    (:func:`maglev_match.analyses.continued.continue_cycle`), or None where that does not
+    hold (then :func:`index_of_system` searches it)."""
+    from maglev_match.analyses.continued import continue_cycle
+
+    if (near.case != Case.UNSTABLE_CYCLE or near.cycle is None or near.hopf_param is None
+            or near.hopf_value is None or near.model != m.name or m.params.tau > 0):
+        return None
+    stab = stability_result or stability(system, system.p)
+    if not stab.stable:
+        return None
+    params = m.params
+    out = continue_cycle(system, system.p, near.cycle, near.hopf_param, near.hopf_value,
+                         stab.equilibrium.x, limits=m.cycle_limits(include_current=False))
+    if isinstance(out, str):
+        return None
+    cyc, hp = out
+    v = float(np.asarray(system.p)[system.param_index(hp.param)])
+    warnings = list(stab.warnings)
+    h_max = params.gap_max - params.c0
+    hopf = _hopf_info(system, hp, abs(hp.value - v) / abs(v) if v else abs(hp.value), h_max,
+                      warnings)
+    base = dict(w0=m.w0, stable=stab.stable, max_real_part=stab.max_real_part,
+                omega1=float(params.omega1), sigma=float(params.sigma))
+    return _cycle_index(cyc, m.w0, warnings, {**hopf, **base})
 
 
 def supported_size(cd: Any, crit: Any = None) -> float | None:

@@ -177,11 +177,22 @@ class Evaluator(Protocol):
     def recheck(self, values: np.ndarray, simulate: bool) -> MatchingIndex: ...
 
 
+#: an evaluation continues the critical disturbances of the previous one when no varied
+#: parameter moved by more than this fraction of its previous value
+NEAR_STEP = 0.05
+
+
 class MaglevEvaluator:
     """Model A (``model`` 'unit') or the vehicle ('vehicle') at ``base`` with the parameters
     ``names`` set to the given values; ``simulate`` (default) makes every evaluation the
     full headline index (the simulated critical disturbance solved, with its derivative),
-    False the paper's chi alone (``--no-simulation``)."""
+    False the paper's chi alone (``--no-simulation``).
+
+    An evaluation within :data:`NEAR_STEP` of the previous one (every varied parameter)
+    continues that one's solved critical disturbances instead of searching them again
+    (``matching_index(..., near=previous)``: Newton on the same condition, two check runs;
+    the full search where that does not hold). The re-check (:meth:`recheck`) is always
+    the full point-wise index."""
 
     def __init__(self, base: Params, names: Sequence[str], model: str = "unit",
                  simulate: bool = True):
@@ -193,6 +204,15 @@ class MaglevEvaluator:
         self.names = tuple(names)
         self.model = self.info.name
         self.simulate = bool(simulate)
+        self._last: tuple[np.ndarray, MatchingIndex] | None = None
+
+    def _near(self, values: np.ndarray) -> MatchingIndex | None:
+        """The previous evaluation's index when it is a neighbouring design."""
+        if not self.simulate or self._last is None:
+            return None
+        prev, idx = self._last
+        step = np.abs(np.asarray(values, float) - prev)
+        return idx if np.all(step <= NEAR_STEP * np.abs(prev)) else None
 
     def params(self, values: np.ndarray) -> Params:
         return self.base.replace(**{n: float(v) for n, v in zip(self.names, values,
@@ -204,7 +224,10 @@ class MaglevEvaluator:
 
         t = time.perf_counter()
         p = self.params(values)
-        idx = matching_index(p, model=self.model, simulate=self.simulate)
+        idx = matching_index(p, model=self.model, simulate=self.simulate,
+                             near=self._near(values))
+        if self.simulate:
+            self._last = (np.array(values, float), idx)
         dchi = dmargin = dsim = None
         status = None
         if gradient:
