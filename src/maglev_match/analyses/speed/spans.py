@@ -163,13 +163,16 @@ def _integrate_events(system, x_start, t_rel, p, sim, events):
 
 def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
                         limited: bool = True, options: SpeedOptions | None = None,
-                        overlay: bool = True, max_samples: int = 400_000) -> SpanRun:
+                        overlay: bool = True, max_samples: int = 400_000,
+                        profile=None, seed: int = 0) -> SpanRun:
     """Run the vehicle from rigid ground over ``spans`` identical spans and off them at speed
     v (m/s > 0), from its equilibrium on rigid ground with every span at rest; the physical
     limits (current clamp, gap range: a collision ends the run) unless ``limited`` is False.
     With ``overlay`` the periodic response is computed and repeated passage after passage
     beside the run. At most ``max_samples`` saved times in all (each passage sampled as the
-    read-outs are, fewer if that would exceed it)."""
+    read-outs are, fewer if that would exceed it). ``profile``: a guideway irregularity
+    (:class:`~maglev_match.maglev.irregularity.Irregularity`, drawn with ``seed`` if
+    random) under every levitation point; then no overlay."""
     opts = options or SpeedOptions()
     kind = check_speed_setup(params, model, [v], spans)
     if not v > 0:
@@ -177,12 +180,17 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
     L = float(params.L)
     T = L / v
     problems = {
-        "first": passage_problem(params, kind, v, limited=limited, approach_rigid=True),
-        "mid": passage_problem(params, kind, v, limited=limited),
-        "last": passage_problem(params, kind, v, limited=limited, exit_rigid=True),
+        "first": passage_problem(params, kind, v, limited=limited, approach_rigid=True,
+                                 profile=profile),
+        "mid": passage_problem(params, kind, v, limited=limited, profile=profile),
+        "last": passage_problem(params, kind, v, limited=limited, exit_rigid=True,
+                                profile=profile),
     }
+    waves = None if profile is None else profile.n_waves
+    if profile is not None:
+        overlay = False
     sys_ = problems["mid"].system
-    events = (EventsWithArgs(mv.gap_events(kind, params.n_modes),
+    events = (EventsWithArgs(mv.gap_events(kind, params.n_modes, waves),
                              (float(params.gap_min), float(params.gap_max)))
               if limited and kind is not MovingModel.FORCE else None)
     sim = SimulationOptions(rtol=opts.rtol, atol=opts.atol, max_steps=1_000_000)
@@ -209,6 +217,10 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
             starts.append(xk.copy())
             idx = np.nonzero(seg_of == j)[0]
             t_rel = np.concatenate([grid[idx] - bounds[j], [seg.duration]])
+            if profile is not None:  # this passage's profile entries
+                n0 = seg.p.size - profile.zero_vector().size
+                seg = type(seg)(seg.duration, np.concatenate(
+                    [seg.p[:n0], profile.vector(k, spans, L, seed)]))
             Xs, te, ie, xe = _integrate_events(prob.system, xk, t_rel, seg.p, sim, events)
             kept = Xs[:-1] if te is None else Xs[Xs[:, -1] < bounds[j] + seg.duration - 1e-15]
             if kept.shape[0] > idx.size:
