@@ -158,3 +158,27 @@ def test_wavelength_below_the_sampling_is_refused(soft):
     with pytest.raises(ParameterError, match="wavelength.*resolves"):
         irregular_sweep(soft, "unit", [150 * KMH], "sine:wavelength=0.05,amplitude=1e-4",
                         spans=2)
+
+
+def test_api_sweep_carries_the_irregular_readouts_and_they_round_trip(tmp_path):
+    import xarray as xr
+
+    from maglev_match import api
+
+    sweep = api.speed_sweep("turnout-soft", model="unit", kmh=(0, 90, 90), critical=False,
+                            irregularity="joint:step=0.002", irregular_spans=4)
+    ir = sweep.irregular
+    assert list(ir.speeds) == [pytest.approx(90 * KMH)]  # v = 0 has no run
+    ds = ir.to_xarray()
+    path = tmp_path / "irr.nc"
+    ds.to_netcdf(path, engine="h5netcdf")
+    back = xr.open_dataset(path, engine="h5netcdf")
+    for k in ("gap_rms", "gap_max", "wz", "daf", "p_contact_high"):
+        assert float(back[k].values[0]) == pytest.approx(ir.column(k)[0], rel=1e-12)
+        assert back[k].attrs["units"]
+    assert back.attrs["irregularity"] == ir.profile.describe()
+    files = ir.plot(tmp_path / "irr.png")
+    assert all(f.exists() for f in files)
+    # a deterministic profile: one run, no standard error, no linear route
+    assert ir.column("runs")[0] == 1 and np.isnan(ir.column("gap_rms_linear")[0])
+    assert ir.column("gap_rms")[0] > 0

@@ -583,6 +583,42 @@ def rigid_equilibrium(params: Params, kind: MovingModel) -> np.ndarray:
     return x
 
 
+def follow_profile(params: Params, kind: MovingModel, x: np.ndarray, p: np.ndarray,
+                   waves: int) -> np.ndarray:
+    """The state ``x`` (the equilibrium on rigid ground, t = 0) moved onto the guideway
+    profile in ``p``: every levitation point raised with the profile under it and moving
+    with its rate, so that a run over an irregular guideway starts without the jump of a
+    profile that is not zero where it starts. The unit: z1, z2 by the profile's mean under
+    the footprint, their rates by its rate, the observer's velocity state v by minus it
+    (the steady following of a moving guideway). The vehicle: each frame's heave and pitch
+    through its two points, the car body's heave and pitch through the outer frames, the
+    observers' v_j by minus the points' rates. Gaps and currents are unchanged."""
+    kind = MovingModel(kind)
+    g = observables(kind, int(params.n_modes), int(waves))["gap_deviation"]
+    x = np.array(x, float)
+    e = np.zeros_like(x)
+    e[-1] = 1.0
+    gv, gdot = jax.jvp(lambda xx: g(xx, jnp.asarray(p)), (jnp.asarray(x),), (jnp.asarray(e),))
+    z, zd = -np.asarray(gv), -np.asarray(gdot)  # u = 0 and w = 0 at the start
+    if kind is MovingModel.UNIT:
+        x[0] += z[0]
+        x[2] += z[0]
+        x[1] += zd[0]
+        x[3] += zd[0]
+        x[6] -= zd[0]
+        return x
+    s, s0 = float(params.s), float(params.s0)
+    for off, val in ((0, z), (8, zd)):
+        zf = 0.5 * (val[0::2] + val[1::2])
+        thf = (val[1::2] - val[0::2]) / (2.0 * s)
+        x[off + 0:off + 6:2] += zf
+        x[off + 1:off + 6:2] += thf
+        x[off + 6] += float(np.mean(zf))
+        x[off + 7] += (zf[2] - zf[0]) / (2.0 * s0)
+    x[28:34] -= zd
+    return x
+
+
 def static_midspan_deflection(params: Params, kind: MovingModel, samples: int = 2001
                               ) -> tuple[float, float]:
     """The largest static mid-span deflection of one span under the layout's weights (m),

@@ -47,7 +47,7 @@ from maglev_match.maglev import unit as unit_model
 from maglev_match.maglev.irregularity import Irregularity, parse_irregularity
 from maglev_match.maglev.moving import MovingModel
 
-__all__ = ["IrregularSweep", "irregular_sweep", "rigid_gap_response", "wilson_interval",
+__all__ = ["IrregularSweep", "irregular_sweep", "check_irregular_setup", "rigid_gap_response", "wilson_interval",
            "linear_gap_rms", "resolved_wavelength", "READOUTS"]
 
 #: read-out name -> (unit, long name)
@@ -159,6 +159,11 @@ class IrregularSweep(Plottable):
         return [{"speed": float(v), **{k: float(self.values[k][i]) for k in READOUTS}}
                 for i, v in enumerate(self.speeds)]
 
+    def table(self) -> tuple[list[str], list[list[float]]]:
+        """The CSV table: headers with SI units, one row per speed."""
+        header = ["speed (m/s)", *(f"{k} ({u})" for k, (u, _) in READOUTS.items())]
+        return header, [[r["speed"], *(r[k] for k in READOUTS)] for r in self.rows()]
+
     def summary(self) -> dict[str, Any]:
         return {"model": self.model, "irregularity": self.profile.describe(),
                 "spans": self.spans, "warmup_spans": self.warmup, "distance": self.distance,
@@ -207,13 +212,12 @@ def _run_readouts(run, smooth, params: Params, warmup: int, static: float, i0: f
     return out
 
 
-def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | str, *,
-                    spans: int = 20, warmup: int = 1,
-                    options: SpeedOptions | None = None) -> IrregularSweep:
-    """The read-outs over an irregular guideway at every speed (m/s > 0) (module
-    docstring): one run per seed of ``spans`` spans with the limits on, and the smooth run."""
-    import time
-
+def check_irregular_setup(params: Params, model: str, speeds, profile, spans: int,
+                          warmup: int = 1, options: SpeedOptions | None = None
+                          ) -> Irregularity:
+    """Validate runs over an irregular guideway before any work (ParameterError naming the
+    field, the value and the rule); returns the parsed profile. Speeds of 0 are skipped by
+    the runs and not checked here."""
     prof = parse_irregularity(profile)
     if prof is None:
         raise ParameterError("--irregularity", profile, "must name a profile")
@@ -222,12 +226,28 @@ def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | 
         raise ParameterError("--model", model, "an irregular guideway needs a levitated "
                              "model ('unit' or 'vehicle')")
     if isinstance(warmup, bool) or not isinstance(warmup, int) or not 0 <= warmup < spans:
-        raise ParameterError("--warmup", warmup, f"must be a whole number from 0 to {spans - 1}")
+        raise ParameterError("--warmup", warmup,
+                             f"must be a whole number from 0 to {spans - 1}")
+    for v in speeds:
+        if v > 0:
+            prof.check(spans, resolved_wavelength(params, float(v), options))
+    return prof
+
+
+def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | str, *,
+                    spans: int = 20, warmup: int = 1,
+                    options: SpeedOptions | None = None) -> IrregularSweep:
+    """The read-outs over an irregular guideway at every speed (m/s > 0) (module
+    docstring): one run per seed of ``spans`` spans with the limits on, and the smooth run."""
+    import time
+
     speeds = np.asarray(list(speeds), float)
     for v in speeds:
         if not v > 0:
-            raise ParameterError("--speed", v * 3.6, "an irregular guideway needs speeds > 0 km/h")
-        prof.check(spans, resolved_wavelength(params, float(v), options))
+            raise ParameterError("--speed", v * 3.6, "an irregular guideway needs speeds > 0 "
+                                 "km/h")
+    prof = check_irregular_setup(params, model, speeds, profile, spans, warmup, options)
+    kind = MovingModel(model)
     static, _ = mv.static_midspan_deflection(params, kind)
     i0 = float(params.i0_vehicle) if kind is MovingModel.VEHICLE else float(
         unit_model.levitation_current(unit_model.param_vector(params)))

@@ -74,6 +74,8 @@ class SpanRun(Plottable):
     per_span_midspan_max: np.ndarray
     per_passage_gap_max: np.ndarray
     warnings: tuple[str, ...] = field(default=())
+    #: the guideway irregularity under the run (its description and seed), or None
+    irregularity: str | None = None
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -84,7 +86,7 @@ class SpanRun(Plottable):
             "span_midspan_max": [float(v) for v in self.per_span_midspan_max],
             "passage_gap_deviation_max": [float(v) for v in self.per_passage_gap_max],
             "warnings": list(self.warnings),
-        }
+        } | ({} if self.irregularity is None else {"irregularity": self.irregularity})
 
     def to_xarray(self):
         """The histories as an :class:`xarray.Dataset` over ``time`` (s), with units."""
@@ -109,6 +111,8 @@ class SpanRun(Plottable):
                          "outcome": self.outcome, "limits": int(self.limited),
                          "span_starts": json.dumps([float(v) for v in self.span_starts]),
                          "warnings": json.dumps(list(self.warnings))})
+        if self.irregularity is not None:
+            ds.attrs["irregularity"] = self.irregularity
         if self.collision_time is not None:
             ds.attrs.update({"collision_time": self.collision_time,
                              "collision_point": self.collision_point,
@@ -198,6 +202,11 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
     if (grid.size - 1) * (spans + 1) > max_samples:
         grid = np.linspace(0.0, T, max(64, max_samples // (spans + 1)) + 1)
     x = mv.rigid_equilibrium(params, kind)
+    if profile is not None:  # start on the profile, not on a jump to it
+        p1 = problems["first"].segments[0].p
+        n0 = p1.size - profile.zero_vector().size
+        x = mv.follow_profile(params, kind, x, np.concatenate(
+            [p1[:n0], profile.vector(1, spans, L, seed)]), profile.n_waves)
     n_pts = mv.layout_of(params, kind).n_loads if kind is not MovingModel.FORCE else 0
     t_all, gaps, curs, accs, mids = [], [], [], [], []
     starts_all: list[np.ndarray] = []
@@ -295,6 +304,9 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
                    collision_time=t_hit, collision_point=p_hit, collision_limit=lim_hit,
                    periodic_gap=pg, periodic_acceleration=pa,
                    passage_starts=tuple(starts_all), per_span_midspan_max=per_span,
-                   per_passage_gap_max=per_pass, warnings=tuple(warnings))
+                   per_passage_gap_max=per_pass, warnings=tuple(warnings),
+                   irregularity=None if profile is None else (
+                       profile.describe() + ("" if profile.kind != "random"
+                                             else f"; this run: seed {seed}")))
 
 
