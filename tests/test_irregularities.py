@@ -21,7 +21,7 @@ from maglev_match.analyses.speed.irregular import (
 from maglev_match.analyses.speed.spans import simulate_over_spans
 from maglev_match.api.inputs import resolve_params
 from maglev_match.core.params import ParameterError
-from maglev_match.maglev.irregularity import parse_irregularity, target_psd
+from maglev_match.maglev.irregularity import Irregularity, parse_irregularity, target_psd
 
 KMH = 1 / 3.6
 
@@ -182,3 +182,36 @@ def test_api_sweep_carries_the_irregular_readouts_and_they_round_trip(tmp_path):
     # a deterministic profile: one run, no standard error, no linear route
     assert ir.column("runs")[0] == 1 and np.isnan(ir.column("gap_rms_linear")[0])
     assert ir.column("gap_rms")[0] > 0
+
+
+class _Cosine(Irregularity):
+    """A sinusoid of phase 0 (A cos(2 pi x / W)): A where the run starts."""
+
+    def wave_vectors(self, seed):
+        return (np.array([self.amplitude]), np.array([2 * math.pi / self.wavelength]),
+                np.zeros(1))
+
+
+@pytest.mark.parametrize("model", ["unit", "vehicle"])
+def test_runs_start_on_the_profile(model):
+    """A cosine of 1 mm and wavelength 10 km is, over a few spans, a uniform offset of 1 mm
+    where the run starts: the vehicle starts on it (every point raised and moving with it),
+    so the gaps move by micrometres from the smooth run's; jumping onto it would move them
+    by 1 mm at the start."""
+    p = resolve_params("turnout-stiff", n_modes=1)
+    prof = _Cosine(kind="sine", amplitude=1e-3, wavelength=1e4)
+    assert prof.profile(np.array([0.0]), 2, p.L, 0)[0] == pytest.approx(1e-3)
+    smooth = simulate_over_spans(p, model, 100 * KMH, 2, overlay=False)
+    run = simulate_over_spans(p, model, 100 * KMH, 2, profile=prof)
+    assert run.outcome == "ok"
+    d = np.abs(run.gap_deviation - smooth.gap_deviation).max()
+    assert d < 5e-6, d
+
+
+def test_zero_amplitude_reproduces_the_smooth_vehicle_run_exactly():
+    p = resolve_params("turnout-soft")
+    smooth = simulate_over_spans(p, "vehicle", 120 * KMH, 2, overlay=False)
+    zero = simulate_over_spans(p, "vehicle", 120 * KMH, 2,
+                               profile=Irregularity(kind="camber", amplitude=0.0))
+    assert np.array_equal(smooth.gap_deviation, zero.gap_deviation)
+    assert np.array_equal(smooth.body_acceleration, zero.body_acceleration)
