@@ -215,3 +215,23 @@ def test_zero_amplitude_reproduces_the_smooth_vehicle_run_exactly():
                                profile=Irregularity(kind="camber", amplitude=0.0))
     assert np.array_equal(smooth.gap_deviation, zero.gap_deviation)
     assert np.array_equal(smooth.body_acceleration, zero.body_acceleration)
+
+
+def test_the_moving_models_linearisation_is_model_a_closed_form_for_the_unit(soft):
+    from maglev_match.analyses.speed.irregular import profile_gap_response
+
+    v = 100 * KMH
+    kap = np.array([0.05, 0.3, 1.0, 2.5])
+    H = profile_gap_response(soft, "unit", v, kap)[0]
+    ref = np.abs(rigid_gap_response(soft, kap * v)) * footprint_factor(soft, v, kap)
+    np.testing.assert_allclose(np.abs(H), ref, rtol=1e-9)
+
+
+def test_linear_route_of_the_vehicle_agrees_with_its_simulated_rms():
+    p = resolve_params("turnout-soft", n_modes=1)
+    prof = parse_irregularity("random:class=low,seeds=4,lmin=4,lmax=100,waves=32")
+    sweep = irregular_sweep(p, "vehicle", [120 * KMH], prof, spans=8, warmup=2)
+    sim = sweep.column("gap_rms_profile")[0]
+    se = sweep.column("gap_rms_profile_se")[0]
+    lin = sweep.column("gap_rms_linear")[0]
+    assert abs(sim - lin) < 3 * se + 0.02 * lin, (sim, se, lin)

@@ -19,10 +19,11 @@ run after the run-in (the approach and the first ``warmup`` spans), averaged ove
 * contact: the runs that hit a gap limit, over the runs, each run ``spans`` L long; the
   probability of contact over that distance with its 95 % Wilson score interval.
 
-The linear route (unit): the rms gap deviation of the random profile from the frequency
-response of the unit on a rigid guideway at standstill (:func:`rigid_gap_response`):
-sigma^2 = sum over the profile's waves of |H(i Omega_k v)|^2 a_k^2 / 2, the midpoint rule of
-the integral of |H|^2 S over the band (a_k^2 / 2 = S(Omega_k) dOmega).
+The linear route (any model): the rms gap deviation of the random profile from the frequency
+response of the model on a rigid guideway (:func:`profile_gap_response`; for the unit also
+model A's closed form :func:`rigid_gap_response`): sigma^2 = mean over the points of the sum
+over the profile's waves of |H_j(Omega_k)|^2 a_k^2 / 2, the midpoint rule of the integral of
+|H|^2 S over the band (a_k^2 / 2 = S(Omega_k) dOmega).
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ from maglev_match.maglev import unit as unit_model
 from maglev_match.maglev.irregularity import Irregularity, parse_irregularity
 from maglev_match.maglev.moving import MovingModel
 
-__all__ = ["IrregularSweep", "irregular_sweep", "check_irregular_setup", "rigid_gap_response", "wilson_interval",
+__all__ = ["IrregularSweep", "irregular_sweep", "check_irregular_setup", "profile_gap_response", "rigid_gap_response", "wilson_interval",
            "linear_gap_rms", "resolved_wavelength", "READOUTS"]
 
 #: read-out name -> (unit, long name)
@@ -58,7 +59,7 @@ READOUTS = {
                              "smooth run; mean over the seeds)"),
     "gap_rms_profile_se": ("m", "standard error of gap_rms_profile over the seeds"),
     "gap_rms_linear": ("m", "rms gap deviation of the profile from the rigid-guideway "
-                            "linearisation at standstill (unit, random profile)"),
+                            "linearisation (random profile)"),
     "current_rms": ("A", "rms of i - i0 (mean over the seeds)"),
     "current_max": ("A", "largest coil current"),
     "reverses": ("1", "1: a run's current would have reversed (the clamp at 0 acted)"),
@@ -122,13 +123,59 @@ def footprint_factor(params: Params, v: float, kappa) -> np.ndarray:
     return np.abs(np.sinc(x / np.pi))
 
 
-def linear_gap_rms(params: Params, v: float, profile: Irregularity) -> float:
-    """The linear route's rms gap deviation of the random profile at speed v (m/s): the
-    unit on a rigid guideway (:func:`rigid_gap_response`), summed over the profile's waves
-    (seed-free: a_k and Omega_k do not depend on the phases)."""
+def profile_gap_response(params: Params, model: str, v: float, kappa) -> np.ndarray:
+    """The gap deviation of every levitation point per unit amplitude of a profile wave
+    cos(kappa x) (kappa in rad/m) at speed v (m/s), complex (points, kappa): the moving model
+    linearised at its equilibrium on a rigid guideway (both span slots frozen, every load on
+    one), its vehicle states driven by the wave under each point (the unit: its mean under
+    the footprint) at the circular frequency kappa v. For the forcing the wave's amplitude
+    is differentiated at 0 with phase 0 and -pi/2 (its real and imaginary parts); the
+    steady response is (i kappa v I - A)^-1 times that. Any model at speed; for the unit it
+    equals :func:`rigid_gap_response` times :func:`footprint_factor` in magnitude (tested)."""
+    kind = MovingModel(model)
+    n_modes = int(params.n_modes)
+    nv = mv.n_vehicle_states(kind)
+    rhs = mv.moving_rhs(kind, n_modes, False, 1)
+    gap = mv.observables(kind, n_modes, 1)["gap_deviation"]
+    pb = jnp.asarray(mv.moving_param_vector(params, kind, v=float(v), active=(0.0, 0.0)))
+    x0 = jnp.asarray(mv.rigid_equilibrium(params, kind))
+
+    def pv(a, kap, phi):
+        return jnp.concatenate([pb, jnp.zeros(7), jnp.stack([a, kap, phi])])
+
+    A = np.asarray(jax.jacfwd(lambda x: rhs(x, pv(0.0, 1.0, 0.0)))(x0))[:nv, :nv]
+    C = np.asarray(jax.jacfwd(lambda x: gap(x, pv(0.0, 1.0, 0.0)))(x0))[:, :nv]
+
+    @jax.jit
+    def forcing(kap):
+        def d(phi):
+            fa = jax.jacfwd(lambda a: rhs(x0, pv(a, kap, phi)))(0.0)[:nv]
+            ga = jax.jacfwd(lambda a: gap(x0, pv(a, kap, phi)))(0.0)
+            return fa, ga
+
+        f0, g0 = d(0.0)
+        f1, g1 = d(-jnp.pi / 2)
+        return f0 + 1j * f1, g0 + 1j * g1
+
+    kap = np.atleast_1d(np.asarray(kappa, float))
+    out = np.empty((C.shape[0], kap.size), complex)
+    eye = np.eye(nv)
+    for k, kk in enumerate(kap):
+        F, G = forcing(jnp.asarray(kk))
+        x_hat = np.linalg.solve(1j * kk * float(v) * eye - A, np.asarray(F))
+        out[:, k] = C @ x_hat + np.asarray(G)
+    return out
+
+
+def linear_gap_rms(params: Params, v: float, profile: Irregularity,
+                   model: str = "unit") -> float:
+    """The linear route's rms gap deviation of the random profile at speed v (m/s), over all
+    levitation points: sigma^2 = mean over the points of sum_k |H_j(Omega_k)|^2 a_k^2 / 2
+    with H_j from :func:`profile_gap_response` (seed-free: a_k and Omega_k do not depend on
+    the phases)."""
     amp, kap, _ = profile.wave_vectors(profile.seed0)
-    H = rigid_gap_response(params, kap * v) * footprint_factor(params, v, kap)
-    return float(math.sqrt(np.sum(np.abs(H) ** 2 * amp**2 / 2.0)))
+    H = profile_gap_response(params, model, v, kap)
+    return float(math.sqrt(np.mean(np.sum(np.abs(H) ** 2 * amp**2 / 2.0, axis=1))))
 
 
 @dataclass(frozen=True)
@@ -280,8 +327,8 @@ def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | 
         vals["contacts"][n], vals["runs"][n] = k_hit, len(per)
         vals["p_contact"][n] = k_hit / len(per)
         vals["p_contact_low"][n], vals["p_contact_high"][n] = wilson_interval(k_hit, len(per))
-        if kind is MovingModel.UNIT and prof.kind == "random":
-            vals["gap_rms_linear"][n] = linear_gap_rms(params, float(v), prof)
+        if prof.kind == "random":
+            vals["gap_rms_linear"][n] = linear_gap_rms(params, float(v), prof, kind.value)
         secs[n] = time.perf_counter() - t0
     return IrregularSweep(params=params, model=kind.value, profile=prof, speeds=speeds,
                           spans=int(spans), warmup=int(warmup),
