@@ -116,7 +116,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     if stage is not None:
         stage(f"{len(moving)} speeds over the irregular guideway ({prof.describe()}), "
               f"{len(prof.seed_list)} run(s) of {irregular_spans} spans each ...")
-    irr = irregular_sweep(p, model, moving, prof, spans=irregular_spans)
+    irr = irregular_sweep(p, model, moving, prof, spans=irregular_spans, progress=progress)
     return dataclasses.replace(sweep, irregular=irr)
 
 

@@ -283,9 +283,11 @@ def check_irregular_setup(params: Params, model: str, speeds, profile, spans: in
 
 def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | str, *,
                     spans: int = 20, warmup: int = 1,
-                    options: SpeedOptions | None = None) -> IrregularSweep:
+                    options: SpeedOptions | None = None,
+                    progress=None) -> IrregularSweep:
     """The read-outs over an irregular guideway at every speed (m/s > 0) (module
-    docstring): one run per seed of ``spans`` spans with the limits on, and the smooth run."""
+    docstring): one run per seed of ``spans`` spans with the limits on, and the smooth run;
+    ``progress(done, total)`` after every speed."""
     import time
 
     speeds = np.asarray(list(speeds), float)
@@ -330,6 +332,8 @@ def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | 
         if prof.kind == "random":
             vals["gap_rms_linear"][n] = linear_gap_rms(params, float(v), prof, kind.value)
         secs[n] = time.perf_counter() - t0
+        if progress is not None:
+            progress(n + 1, speeds.size)
     return IrregularSweep(params=params, model=kind.value, profile=prof, speeds=speeds,
                           spans=int(spans), warmup=int(warmup),
                           distance=float(spans * params.L), seeds=prof.seed_list,
