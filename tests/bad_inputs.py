@@ -425,6 +425,9 @@ CASES: tuple[Case, ...] = (
     Case("simulate --speed --irregularity below the sampling", "irregularity", (
         "simulate", "--speed", "150", "--spans", "2", "--irregularity",
         "sine:wavelength=0.01,amplitude=0.001"), 2, "resolves at this speed"),
+    Case("speed --irregular-spans 0", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--irregularity",
+        "joint:step=0.001", "--irregular-spans", "0"), 2, "--irregular-spans"),
     Case("simulate --speed --irregularity nan", "irregularity", (
         "simulate", "--speed", "100", "--irregularity", "sine:wavelength=nan,amplitude=0.001"),
          2, "must be finite"),

@@ -98,7 +98,8 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     if irregularity is not None:
         from maglev_match.analyses.speed.irregular import check_irregular_setup
 
-        prof = check_irregular_setup(p, model, list(speeds), irregularity, irregular_spans)
+        prof = check_irregular_setup(p, model, list(speeds), irregularity, irregular_spans,
+                                     warmup=_warmup(irregular_spans))
     if stage is not None:
         stage(f"{len(speeds)} speeds, model {model}, "
               f"{'with' if critical else 'without'} chi(v) and the entry disturbance ...")
@@ -116,8 +117,14 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     if stage is not None:
         stage(f"{len(moving)} speeds over the irregular guideway ({prof.describe()}), "
               f"{len(prof.seed_list)} run(s) of {irregular_spans} spans each ...")
-    irr = irregular_sweep(p, model, moving, prof, spans=irregular_spans, progress=progress)
+    irr = irregular_sweep(p, model, moving, prof, spans=irregular_spans,
+                          warmup=_warmup(irregular_spans), progress=progress)
     return dataclasses.replace(sweep, irregular=irr)
+
+
+def _warmup(spans) -> int:
+    """The run-in left out of the irregular read-outs: one span, none in a run of one."""
+    return 1 if isinstance(spans, int) and spans > 1 else 0
 
 
 @reported("map at speed")

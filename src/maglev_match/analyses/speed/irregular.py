@@ -268,6 +268,8 @@ def check_irregular_setup(params: Params, model: str, speeds, profile, spans: in
     prof = parse_irregularity(profile)
     if prof is None:
         raise ParameterError("--irregularity", profile, "must name a profile")
+    if isinstance(spans, bool) or not isinstance(spans, int) or spans < 1:
+        raise ParameterError("--irregular-spans", spans, "must be a whole number >= 1")
     kind = check_speed_setup(params, model, list(speeds), spans)
     if kind is MovingModel.FORCE:
         raise ParameterError("--model", model, "an irregular guideway needs a levitated "
