@@ -235,3 +235,28 @@ def test_linear_route_of_the_vehicle_agrees_with_its_simulated_rms():
     se = sweep.column("gap_rms_profile_se")[0]
     lin = sweep.column("gap_rms_linear")[0]
     assert abs(sim - lin) < 3 * se + 0.02 * lin, (sim, se, lin)
+
+
+def test_simulate_at_speed_over_an_irregular_guideway_writes_and_prints_it(tmp_path):
+    import contextlib
+    import io
+    import json
+
+    import xarray as xr
+
+    from maglev_match.cli import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        code = main(["simulate", "--speed", "100", "--spans", "2", "--set", "n_modes=1",
+                     "--irregularity", "random:class=high,waves=16,seeds=3", "--seed", "2",
+                     "--out", str(tmp_path), "--json"])
+    assert code == 0
+    summary = json.loads(out.getvalue())
+    assert summary["irregularity"].endswith("this run: seed 2")
+    ds = xr.open_dataset(tmp_path / "simulation_unit_speed.nc", engine="h5netcdf")
+    assert ds.attrs["irregularity"] == summary["irregularity"]
+    # the profile moves the gaps: a different run from the smooth one
+    smooth = simulate_over_spans(resolve_params("turnout-soft", n_modes=1), "unit",
+                                 100 * KMH, 2, overlay=False)
+    assert np.max(np.abs(ds["gap_deviation"].values - smooth.gap_deviation)) > 1e-5
