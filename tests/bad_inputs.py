@@ -415,6 +415,25 @@ CASES: tuple[Case, ...] = (
                                             "sigma=3e-4:4e-4:2", "--model", "vehicle",
                                             "--workers", "0"), 2,
          "maps of the standstill index are computed for unit only"),
+    # ---- guideway irregularities at speed (issue 33)
+    Case("speed --irregularity with a negative amplitude", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--irregularity",
+        "sine:wavelength=10,amplitude=-0.001"), 2, "must be >= 0"),
+    Case("speed --irregularity of an unknown kind", "irregularity", (
+        "speed", "--workers", "0", "--irregularity", "bumps:height=1"), 2,
+         "the kind must be one of"),
+    Case("simulate --speed --irregularity below the sampling", "irregularity", (
+        "simulate", "--speed", "150", "--spans", "2", "--irregularity",
+        "sine:wavelength=0.01,amplitude=0.001"), 2, "resolves at this speed"),
+    Case("speed --irregular-spans 0", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--irregularity",
+        "joint:step=0.001", "--irregular-spans", "0"), 2, "--irregular-spans"),
+    Case("simulate --speed --irregularity nan", "irregularity", (
+        "simulate", "--speed", "100", "--irregularity", "sine:wavelength=nan,amplitude=0.001"),
+         2, "must be finite"),
+    Case("simulate --speed --irregularity seeds=1.5", "irregularity", (
+        "simulate", "--speed", "100", "--irregularity", "random:class=low,seeds=1.5"), 2,
+         "must be a whole number"),
     # ---- the environment (a usable run with one line naming the variable)
     Case("JAX_PLATFORMS=gpu", "environment", ("stability", "--json"), 0,
          "JAX_PLATFORMS=gpu", env={"JAX_PLATFORMS": "gpu"}, fresh=True, json_stdout=True),

@@ -22,6 +22,7 @@ from maglev_match.analyses.design import DesignResult  # noqa: E402
 from maglev_match.analyses.matching import MatchingIndex  # noqa: E402
 from maglev_match.analyses.sensitivity import IndexSensitivity  # noqa: E402
 from maglev_match.analyses.simulation import MaglevSimulation  # noqa: E402
+from maglev_match.analyses.speed.irregular import IrregularSweep  # noqa: E402
 from maglev_match.analyses.speed.spans import SpanRun  # noqa: E402
 from maglev_match.analyses.speed.sweep import SpeedSweep  # noqa: E402
 from maglev_match.api.cycle_curves import CycleCurveStudy  # noqa: E402
@@ -50,7 +51,7 @@ def rhs(x, p):
 RESULT_TYPES = [StabilityResult, RootLocusResult, HopfScan, HopfCurveStudy, CycleStudy,
                 CycleCurveStudy,
                 MaglevSimulation, UserSimulation, SpanRun, SpeedSweep, MatchingIndex,
-                IndexSensitivity, IndexSpread, DesignResult]
+                IndexSensitivity, IndexSpread, DesignResult, IrregularSweep]
 
 
 @pytest.mark.parametrize("cls", RESULT_TYPES, ids=lambda c: c.__name__)

@@ -201,6 +201,7 @@ def simulate_over_spans(params: Params | str | None = None, *, model: str = "uni
                         kmh: float = 100.0, spans: int = 10, limits: bool = True,
                         config: str | Path | None = None,
                         stage: Callable[[str], None] | None = None,
+                        irregularity: str | None = None, seed: int | None = None,
                         **overrides: Any) -> SpanRun:
     """The vehicle at speed over `spans` identical spans, from rigid ground and off again,
     with the periodic response overlaid (`maglev-match simulate --speed V --spans N`).
@@ -221,6 +222,12 @@ def simulate_over_spans(params: Params | str | None = None, *, model: str = "uni
         A TOML file applied on top of the preset.
     stage : callable, optional
         Called with a line of text once the inputs are checked and the run starts.
+    irregularity : str, optional
+        A guideway irregularity under every levitation point, `KIND:NAME=VALUE,...` as for
+        [`speed_sweep`][maglev_match.api.speed.speed_sweep] (then no periodic response is
+        overlaid).
+    seed : int, optional
+        The seed of a random profile (default: its `seed0`).
     **overrides : float
         Parameter values applied on top.
 
@@ -245,7 +252,20 @@ def simulate_over_spans(params: Params | str | None = None, *, model: str = "uni
     if spans > SPANS_MAX:
         raise ParameterError("spans", spans, f"must be at most {SPANS_MAX} for a run over "
                              "spans")
+    prof = None
+    if irregularity is not None:
+        from maglev_match.analyses.speed.irregular import check_irregular_setup
+
+        prof = check_irregular_setup(p, model, [kmh * KMH], irregularity, spans, warmup=0)
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int)
+                                 or seed < 0):
+            raise ParameterError("--seed", seed, "must be a whole number >= 0")
+    elif seed is not None:
+        raise ParameterError("--seed", seed, "goes with --irregularity random:...")
     if stage is not None:
-        stage(f"running model {model} over {spans} spans at {kmh:g} km/h ...")
+        stage(f"running model {model} over {spans} spans at {kmh:g} km/h"
+              + ("" if prof is None else f" over an irregular guideway ({prof.describe()})")
+              + " ...")
     return _over_spans(p, model, kmh * KMH, spans, limited=limits,
-                       options=SpeedOptions(critical=False))
+                       options=SpeedOptions(critical=False), profile=prof,
+                       seed=(prof.seed0 if seed is None else seed) if prof else 0)

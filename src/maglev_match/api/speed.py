@@ -25,7 +25,9 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
                 checkpoint: str | Path | None = None, resume: bool = False,
                 progress: Callable[[int, int], None] | None = None,
                 config: str | Path | None = None,
-                stage: Callable[[str], None] | None = None, **overrides: Any) -> SpeedSweep:
+                stage: Callable[[str], None] | None = None,
+                irregularity: str | None = None, irregular_spans: int = 20,
+                **overrides: Any) -> SpeedSweep:
     """The vehicle at speed over identical spans, swept over speed (`maglev-match speed`).
 
     At every speed the periodic response (one span passage, found as the fixed point of
@@ -62,6 +64,16 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         A TOML file applied on top of the preset.
     stage : callable, optional
         Called with a line of text once the inputs are checked and the work starts.
+    irregularity : str, optional
+        A guideway irregularity, `KIND:NAME=VALUE,...` (lengths in m; `sine:wavelength=..,
+        amplitude=..`, `joint:step=..`, `settlement:depth=..[,support=J]`,
+        `camber:amplitude=..`, `random:class=low|high[,seeds=N,seed0=K,lmin=..,lmax=..,
+        waves=..]`; see docs/speed.md). Then at every speed above 0 the vehicle also runs
+        over `irregular_spans` spans of that guideway with the limits on, once per seed,
+        and the result's `irregular` holds the read-outs (gap deviation, current, ride,
+        DAF, the probability of contact with its interval, the linear rms of the unit).
+    irregular_spans : int
+        The length of those runs in spans (the distance of the probability of contact).
     **overrides : float
         Parameter values applied on top.
 
@@ -82,13 +94,37 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         speeds = list(speeds_kmh(*kmh) * KMH)
     opts = SpeedOptions(critical=critical, spans=spans)
     check_speed_setup(p, model, list(speeds), spans)
+    prof = None
+    if irregularity is not None:
+        from maglev_match.analyses.speed.irregular import check_irregular_setup
+
+        prof = check_irregular_setup(p, model, list(speeds), irregularity, irregular_spans,
+                                     warmup=_warmup(irregular_spans))
     if stage is not None:
         stage(f"{len(speeds)} speeds, model {model}, "
               f"{'with' if critical else 'without'} chi(v) and the entry disturbance ...")
-    return _speed_sweep(p, model, list(speeds), opts,
-                        checkpoint=None if checkpoint is None else Path(checkpoint),
-                        resume=resume, scheduler=scheduler, workers=workers,
-                        progress=progress)
+    sweep = _speed_sweep(p, model, list(speeds), opts,
+                         checkpoint=None if checkpoint is None else Path(checkpoint),
+                         resume=resume, scheduler=scheduler, workers=workers,
+                         progress=progress)
+    if prof is None:
+        return sweep
+    import dataclasses
+
+    from maglev_match.analyses.speed.irregular import irregular_sweep
+
+    moving = [v for v in speeds if v > 0]
+    if stage is not None:
+        stage(f"{len(moving)} speeds over the irregular guideway ({prof.describe()}), "
+              f"{len(prof.seed_list)} run(s) of {irregular_spans} spans each ...")
+    irr = irregular_sweep(p, model, moving, prof, spans=irregular_spans,
+                          warmup=_warmup(irregular_spans), progress=progress)
+    return dataclasses.replace(sweep, irregular=irr)
+
+
+def _warmup(spans) -> int:
+    """The run-in left out of the irregular read-outs: one span, none in a run of one."""
+    return 1 if isinstance(spans, int) and spans > 1 else 0
 
 
 @reported("map at speed")

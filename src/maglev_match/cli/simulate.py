@@ -47,7 +47,7 @@ SIMULATE_OPTIONS = {"t_end": "--t", "x5": "--x5", "initial": "--initial", "q1": 
                     "x0": "--x0", "limits": "--limits/--no-limits", "n_save": "--n-save",
                     "rtol": "--rtol", "atol": "--atol", "rtol/atol": "--rtol/--atol",
                     "model": "--model", "config": "--config", "kmh": "--speed",
-                    "spans": "--spans"}
+                    "spans": "--spans", "irregularity": "--irregularity", "seed": "--seed"}
 
 
 def _read_state(text: str) -> np.ndarray:
@@ -119,17 +119,22 @@ def simulate_command(
         "overlaid; --t, --x5, --q1, --initial and --x0 do not apply.")] = None,
     spans: Annotated[int | None, typer.Option(
         "--spans", help="With --speed: the number of spans (default 10).")] = None,
+    irregularity: Annotated[str | None, typer.Option(
+        "--irregularity", help="With --speed: a guideway irregularity under every "
+        "levitation point, KIND:NAME=VALUE,... in m (as for `speed --irregularity`).")] = None,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", help="With --speed and a random --irregularity: its seed.")] = None,
 ) -> None:
     """Simulate model A or B from a named or explicit initial state; report collision
     (time, limit, levitation point), convergence or neither by the horizon. With --speed V
     --spans N: the vehicle at speed over N spans."""
-    if speed is not None or spans is not None:
+    if speed is not None or spans is not None or irregularity is not None or seed is not None:
         from maglev_match.cli.speed import simulate_at_speed
 
         if speed is None:
-            raise UserError("--spans goes with --speed V (km/h)")
+            raise UserError("--spans, --irregularity and --seed go with --speed V (km/h)")
         return simulate_at_speed(params_from_options(preset, config, set_), model, speed,
-                                 spans, limits, out, plot, json_out)
+                                 spans, limits, out, plot, json_out, irregularity, seed)
 
     if not is_model_file(model):
         check_model(model)

@@ -41,7 +41,8 @@ SPEED_MODELS = ("unit", "vehicle", "force")
 SPEED_OPTIONS = {"model": "--model", "speeds": "--from/--to/--step", "critical": "--critical",
                  "spans": "--spans", "workers": "--workers", "scheduler": "--scheduler",
                  "resume": "--resume", "config": "--config", "kmh": "--speed",
-                 "x": "--x", "y": "--y"}
+                 "x": "--x", "y": "--y", "irregularity": "--irregularity",
+                 "irregular_spans": "--irregular-spans"}
 
 SpeedModelOpt = Annotated[str, typer.Option(
     "--model", help="'unit' (model A's unit, the vehicle's k units spread over its length), "
@@ -49,6 +50,11 @@ SpeedModelOpt = Annotated[str, typer.Option(
 SpansOpt = Annotated[int, typer.Option(
     "--spans", help="Spans a disturbed run may take to return to the periodic response "
     "(the guideway's length in spans).")]
+IrregularityOpt = Annotated[str | None, typer.Option(
+    "--irregularity", help="A guideway irregularity under every levitation point, "
+    "KIND:NAME=VALUE,... in m: sine:wavelength=W,amplitude=A; joint:step=S; "
+    "settlement:depth=S[,support=J]; camber:amplitude=A; random:class=low|high[,seeds=N,"
+    "seed0=K,lmin=..,lmax=..,waves=..] (the German track spectrum).")]
 
 
 def _check_model(model: str) -> str:
@@ -164,13 +170,20 @@ def speed_command(
         "--scheduler", help="Existing Dask scheduler, tcp://host:port.",
         callback=scheduler_option)] = None,
     json_out: JsonOpt = False,
+    irregularity: IrregularityOpt = None,
+    irregular_spans: Annotated[int, typer.Option(
+        "--irregular-spans", help="With --irregularity: spans per run over the irregular "
+        "guideway (the distance of the probability of contact).")] = 20,
 ) -> None:
     """The vehicle at speed over identical simply supported spans: the periodic response at
     every speed from --from to --to (km/h), its stability (span-map multipliers), gap
     deviation, current, DAF, car-body acceleration and Sperling's Wz, the index at speed
     chi(v) = h(v) / w0 (the span under the vehicle suddenly displaced; the standstill index
     as v -> 0) next to the standstill headline, and the entry disturbance; resonance speeds
-    and stability changes marked. Writes a netCDF sweep and a figure."""
+    and stability changes marked. Writes a netCDF sweep and a figure. With --irregularity:
+    also runs over that irregular guideway (limits on, one per seed) at every speed above
+    0, with gap, current, ride, DAF and contact-probability read-outs (their own netCDF,
+    CSV and figure)."""
     _check_model(model)
     check_output_path(out)
     params = params_from_options(preset, config, set_)
@@ -188,15 +201,22 @@ def speed_command(
                                 critical=critical, spans=spans, checkpoint=tiles,
                                 resume=resume, scheduler=scheduler, workers=workers,
                                 progress=lambda d, t: prog.tiles(d, t, "speeds"),
-                                stage=prog.stage)
+                                stage=prog.stage, irregularity=irregularity,
+                                irregular_spans=irregular_spans)
         elapsed = time.perf_counter() - started
         prog.stage(f"sweep done in {elapsed:.1f} s; writing files ...")
         files = _write_sweep(sweep, folder, stem)
+        if sweep.irregular is not None:
+            files += _write_irregular(sweep.irregular, folder, f"{stem}_irregular")
     shutil.rmtree(tiles, ignore_errors=True)  # the sweep is complete: its tiles are spent
     summary = sweep.summary() | {"files": [str(f) for f in files]}
+    if sweep.irregular is not None:
+        summary["irregular"] = sweep.irregular.summary()
     if json_out:
         emit_json(summary)
         print_warnings(sweep.warnings)
+        if sweep.irregular is not None:
+            print_warnings(sweep.irregular.warnings)
         return
     console.print(f"maglev-match speed — model {model}, preset {preset}, L = {params.L:g} m, "
                   f"omega1 = {params.omega1:.4g} rad/s", highlight=False)
@@ -209,6 +229,8 @@ def speed_command(
     for line in _summary_lines(sweep):
         console.print(line, highlight=False, markup=False)
     print_warnings(sweep.warnings)
+    if sweep.irregular is not None:
+        _print_irregular(sweep.irregular)
     for f in files:
         console.print(f"wrote {f}", highlight=False)
 
@@ -260,11 +282,61 @@ def _write_sweep(sweep, folder: Path, stem: str) -> list[Path]:
     return [nc, table, *sweep.plot(folder / f"{stem}.png")]
 
 
+def _irregular_table(ir) -> Table:
+    t = Table(box=box.SIMPLE_HEAD, pad_edge=False)
+    cols = ["km/h", "gap rms mm", "gap max mm", "profile rms mm", "linear rms mm",
+            "i rms A", "i max A", "reverses", "acc rms m/s^2", "Wz", "DAF", "contacts",
+            "P(contact)", "95% Wilson", "s"]
+    for c in cols:
+        t.add_column(c, justify="right")
+    for k, row in enumerate(ir.rows()):
+        t.add_row(f"{row['speed'] / KMH:g}", _fmt(row["gap_rms"] * 1e3, ".4f"),
+                  _fmt(row["gap_max"] * 1e3, ".4f"),
+                  _fmt(row["gap_rms_profile"] * 1e3, ".4f")
+                  + ("" if not np.isfinite(row["gap_rms_profile_se"])
+                     else f" ± {row['gap_rms_profile_se'] * 1e3:.4f}"),
+                  _fmt(row["gap_rms_linear"] * 1e3, ".4f"), _fmt(row["current_rms"], ".3f"),
+                  _fmt(row["current_max"], ".2f"), "YES" if row["reverses"] > 0.5 else "no",
+                  _fmt(row["acc_rms"], ".4f"), _fmt(row["wz"], ".3f"), _fmt(row["daf"], ".4f"),
+                  f"{int(row['contacts'])}/{int(row['runs'])}", _fmt(row["p_contact"], ".3f"),
+                  f"[{row['p_contact_low']:.3f}, {row['p_contact_high']:.3f}]",
+                  f"{ir.seconds[k]:.1f}")
+    return t
+
+
+def _print_irregular(ir) -> None:
+    console.print(f"over an irregular guideway: {ir.profile.describe()}; runs of {ir.spans} "
+                  f"spans ({ir.distance:g} m) with the limits on, read-outs after "
+                  f"{ir.warmup} span(s) of run-in, means over {len(ir.seeds)} run(s) per "
+                  "speed (largest values: the largest); P(contact) = runs that hit a gap "
+                  f"limit / runs over {ir.distance:g} m, 95 % Wilson score interval",
+                  highlight=False, markup=False)
+    console.print(_irregular_table(ir))
+    print_warnings(ir.warnings)
+
+
+def _write_irregular(ir, folder: Path, stem: str) -> list[Path]:
+    import csv
+
+    from maglev_match.core.io import atomic_open, atomic_write_netcdf
+
+    nc = folder / f"{stem}.nc"
+    atomic_write_netcdf(nc, ir.to_xarray())
+    table = folder / f"{stem}.csv"
+    header, rows = ir.table()
+    with atomic_open(table, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+    return [nc, table, *ir.plot(folder / f"{stem}.png")]
+
+
 # ---------------------------------------------------------------------------------------
 # simulate --speed V --spans N
 # ---------------------------------------------------------------------------------------
 def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, limits: bool,
-                      out: Path | None, plot: Path | None, json_out: bool) -> None:
+                      out: Path | None, plot: Path | None, json_out: bool,
+                      irregularity: str | None = None, seed: int | None = None) -> None:
     """`simulate --speed V --spans N`: the run over N spans from rigid ground and off again,
     with the periodic response overlaid (called by the simulate command)."""
     _check_model(model)
@@ -275,7 +347,8 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
 
     with progress_report("simulate") as prog, api_options(SPEED_OPTIONS):
         run = api.simulate_over_spans(params, model=model, kmh=speed_kmh, spans=n,
-                                      limits=limits, stage=prog.stage)
+                                      limits=limits, stage=prog.stage,
+                                      irregularity=irregularity, seed=seed)
         prog.stage(f"run done: {run.outcome}")
         folder, stem = output_target(out, "simulate", f"simulation_{model}_speed")
         folder.mkdir(parents=True, exist_ok=True)
@@ -295,6 +368,9 @@ def simulate_at_speed(params, model: str, speed_kmh: float, spans: int | None, l
     console.print(f"model {model} over {n} spans of L = {params.L:g} m at {speed_kmh:g} km/h "
                   f"({run.speed:.4g} m/s), limits {'on' if limits else 'off'}: {run.outcome}",
                   highlight=False)
+    if run.irregularity is not None:
+        console.print(f"guideway irregularity: {run.irregularity}", highlight=False,
+                      markup=False)
     if run.outcome == "collision":
         console.print(f"[bold red]collision[/] at t = {run.collision_time:.6f} s: "
                       f"{run.collision_limit} gap limit at levitation point "

@@ -73,6 +73,7 @@ import numpy as np
 from maglev_match.core import jax_setup  # noqa: F401  (float64 on)
 from maglev_match.core.params import Params
 from maglev_match.dynamics.system import System
+from maglev_match.maglev import irregularity as irr
 from maglev_match.maglev import unit as unit_model
 from maglev_match.maglev import vehicle as vehicle_model
 from maglev_match.maglev.limits import clamp_current, gap_margins
@@ -319,9 +320,11 @@ def _vehicle_offsets(s, s0):
     return b, a, off - jnp.max(off)
 
 
-def _unit_rhs(x, p, n_modes: int, limited: bool):
+def _unit_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None):
     """The unit at speed (module docstring): model A's unit equations with the beam
-    deflection x5 = w (the mean deflection under the vehicle) and x6 = w'."""
+    deflection x5 = w (the mean deflection under the vehicle) and x6 = w'. With ``waves``
+    the parameter vector carries a guideway profile (:mod:`maglev_match.maglev.irregularity`)
+    whose mean under the footprint adds to w and w' in the gap."""
     q_ = _named(p[:_NA], unit_model.PARAM_NAMES)
     L, mbar, length, k = p[_NA], p[_NA + 1], p[_NA + 2], p[_NA + 3]
     pk = _kin(p, _NB_UNIT, 1)
@@ -331,20 +334,28 @@ def _unit_rhs(x, p, n_modes: int, limited: bool):
     K = q_["mu0"] * q_["N"] ** 2 * q_["A"]
     i0 = unit_model.levitation_current(p[:_NA])
     w = jnp.einsum("snj,sn->j", G, q)[0]
+    zr = zrd = 0.0
+    if waves is not None:
+        zr, zrd = irr.profile_under(t, pk, p[_NB_UNIT + 6:], jnp.zeros(1),
+                                    jnp.reshape(length, (1,)), L, waves, False)
+        zr, zrd = zr[0], zrd[0]
+        w = w + zr
     c = q_["c0"] + x[0] - w
     i = x[4] + i0
     r = (clamp_current(i) if limited else i) / c
     force = k * 0.5 * K * r**2  # the k units' force on the guideway (N)
     wd, dq, ddq = _slots_dynamics(q, qd, (q_["xi1"], L, mbar, q_["omega1"]), G, Gdot,
                                   jnp.reshape(force, (1,)), n_modes, pk[2:4])
-    xa = jnp.stack([x[0], x[1], x[2], x[3], w, wd[0], x[4], x[5], x[6]])
+    xa = jnp.stack([x[0], x[1], x[2], x[3], w, wd[0] if waves is None else wd[0] + zrd,
+                    x[4], x[5], x[6]])
     fa = unit_model._rhs(xa, p[:_NA], limited)
     veh = jnp.stack([fa[0], fa[1], fa[2], fa[3], fa[6], fa[7], fa[8]])
     return jnp.concatenate([veh, dq[0], ddq[0], dq[1], ddq[1], jnp.ones(1)])
 
 
-def _vehicle_rhs(x, p, n_modes: int, limited: bool):
-    """Model B at speed: six levitation points, each acting on the span under it."""
+def _vehicle_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None):
+    """Model B at speed: six levitation points, each acting on the span under it (with
+    ``waves``: and the guideway profile under each point added to its deflection)."""
     q_ = _named(p[:_NB_VEH], VEHICLE_PARAM_NAMES)
     pk = _kin(p, _NB_VEH, 6)
     b, a, front = _vehicle_offsets(q_["s"], q_["s0"])
@@ -360,20 +371,24 @@ def _vehicle_rhs(x, p, n_modes: int, limited: bool):
     u = z[vehicle_model.POINT_FRAME] + a * th[vehicle_model.POINT_FRAME]
     ud = zd[vehicle_model.POINT_FRAME] + a * thd[vehicle_model.POINT_FRAME]
     w = jnp.einsum("snj,sn->j", G, q)
+    if waves is not None:
+        zr, zrd = irr.profile_under(t, pk, p[_NB_VEH + 16:], front, jnp.zeros(6), q_["L"],
+                                    waves, True)
+        w = w + zr
     c = q_["c0"] + u - w
     r0 = i0 / q_["c0"]
     r = (clamp_current(i) if limited else i) / c
     f = K * (r - r0) * (r + r0)  # net upward force per point (N), without cancellation
     wd, dq, ddq = _slots_dynamics(q, qd, (q_["xi1"], q_["L"], q_["mbar"], q_["omega1"]), G,
                                   Gdot, K * r**2, n_modes, pk[2:4])
-    cd = ud - wd
+    cd = ud - wd if waves is None else ud - wd - zrd
     body_acc = vehicle_model.body_accelerations(q_, b, body, body_dot, f)
     di, dy1, dv = vehicle_model.loop_rates(q_, K, i0, r, c, cd, ud, i, y1, vv, limited)
     return jnp.concatenate([body_dot, body_acc, di, dy1, dv, dq[0], ddq[0], dq[1], ddq[1],
                             jnp.ones(1)])
 
 
-def _force_rhs(x, p, n_modes: int, limited: bool):
+def _force_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None):
     """A constant point force P crossing the spans (no levitation dynamics)."""
     P, xi1, L, mbar, omega1 = p[0], p[1], p[2], p[3], p[4]
     pk = _kin(p, _NB_FORCE, 1)
@@ -389,19 +404,28 @@ _RHS = {MovingModel.UNIT: _unit_rhs, MovingModel.VEHICLE: _vehicle_rhs,
 
 
 @cache
-def moving_rhs(kind: MovingModel, n_modes: int, limited: bool = False):
+def moving_rhs(kind: MovingModel, n_modes: int, limited: bool = False,
+               waves: int | None = None):
     """The vector field x' = f(x, p) of a model at speed (cached per model, number of modes
     and limits, so compiled code is shared by every speed and segment, and exported ahead
-    of time: the closure holds plain values only)."""
+    of time: the closure holds plain values only). ``waves``: the parameter vector ends
+    with a guideway profile of that many spectral waves
+    (:func:`maglev_match.maglev.irregularity.profile_names`)."""
     kind = MovingModel(kind)
     field_ = _RHS[kind]
     n_modes = int(n_modes)
     limited = bool(limited)
+    if waves is None:
+        def rhs(x, p):
+            return field_(x, p, n_modes, limited)
+    else:
+        waves = int(waves)
 
-    def rhs(x, p):
-        return field_(x, p, n_modes, limited)
+        def rhs(x, p):
+            return field_(x, p, n_modes, limited, waves)
 
-    rhs.__name__ = f"moving_rhs_{kind.value}_{n_modes}{'_limited' if limited else ''}"
+    rhs.__name__ = (f"moving_rhs_{kind.value}_{n_modes}{'_limited' if limited else ''}"
+                    + ("" if waves is None else f"_irregular{waves}"))
     return rhs
 
 
@@ -414,7 +438,7 @@ def _midspan(x, p, nv: int, n_modes: int):
     return q @ mid
 
 
-def _loads_deflection(x, p, kind: str, n_modes: int):
+def _loads_deflection(x, p, kind: str, n_modes: int, waves: int | None = None):
     """The deflection each load feels (m): the mean under the unit's footprint, or the
     deflection at each of model B's points."""
     if kind == MovingModel.VEHICLE:
@@ -423,21 +447,31 @@ def _loads_deflection(x, p, kind: str, n_modes: int):
         G = coupling(x[34 + 4 * n_modes], _kin(p, _NB_VEH, 6), front, jnp.zeros(6), q_["L"],
                      n_modes, True)
         q, _, _ = _slots(x, 34, n_modes)
+        if waves is not None:
+            zr, _ = irr.profile_under(x[34 + 4 * n_modes], _kin(p, _NB_VEH, 6),
+                                      p[_NB_VEH + 16:], front, jnp.zeros(6), q_["L"], waves,
+                                      True)
+            return jnp.einsum("snj,sn->j", G, q) + zr
     else:
         G = coupling(x[7 + 4 * n_modes], _kin(p, _NB_UNIT, 1), jnp.zeros(1),
                      jnp.reshape(p[_NA + 2], (1,)), p[_NA], n_modes, False)
         q, _, _ = _slots(x, 7, n_modes)
+        if waves is not None:
+            zr, _ = irr.profile_under(x[7 + 4 * n_modes], _kin(p, _NB_UNIT, 1),
+                                      p[_NB_UNIT + 6:], jnp.zeros(1),
+                                      jnp.reshape(p[_NA + 2], (1,)), p[_NA], waves, False)
+            return jnp.einsum("snj,sn->j", G, q) + zr
     return jnp.einsum("snj,sn->j", G, q)
 
 
-def _gap_deviation(x, p, kind: str, n_modes: int):
+def _gap_deviation(x, p, kind: str, n_modes: int, waves: int | None = None):
     if kind == MovingModel.VEHICLE:
         s = p[VEHICLE_PARAM_NAMES.index("s")]
         a = jnp.asarray(vehicle_model.POINT_SIGN) * s
         u = x[0:6:2][vehicle_model.POINT_FRAME] + a * x[1:6:2][vehicle_model.POINT_FRAME]
     else:
         u = x[0:1]
-    return u - _loads_deflection(x, p, kind, n_modes)
+    return u - _loads_deflection(x, p, kind, n_modes, waves)
 
 
 def _current(x, p, kind: str):
@@ -446,13 +480,13 @@ def _current(x, p, kind: str):
     return jnp.reshape(x[4] + unit_model.levitation_current(p[:_NA]), (1,))
 
 
-def _body_acceleration(x, p, kind: str, n_modes: int):
-    f = _RHS[MovingModel(kind)](x, p, n_modes, False)
+def _body_acceleration(x, p, kind: str, n_modes: int, waves: int | None = None):
+    f = _RHS[MovingModel(kind)](x, p, n_modes, False, waves)
     return f[14] if kind == MovingModel.VEHICLE else f[3]
 
 
 @cache
-def observables(kind: MovingModel, n_modes: int) -> dict:
+def observables(kind: MovingModel, n_modes: int, waves: int | None = None) -> dict:
     """Named read-outs g(x, p) of a model at speed (module-level per model, so compiled code
     is reused; their closures hold plain values only, so they are exported ahead of time):
 
@@ -463,7 +497,8 @@ def observables(kind: MovingModel, n_modes: int) -> dict:
     * ``body_acceleration`` the car body's vertical acceleration at its centre (m/s^2,
       downward positive: unit z2'', vehicle z0'').
 
-    The force model has ``midspan`` only."""
+    The force model has ``midspan`` only. ``waves``: with a guideway profile in the
+    parameter vector (the gap deviation then includes it)."""
     kind_s = MovingModel(kind).value
     m = int(n_modes)
     nv = n_vehicle_states(MovingModel(kind))
@@ -476,26 +511,27 @@ def observables(kind: MovingModel, n_modes: int) -> dict:
         return out
 
     def gap_deviation(x, p):
-        return _gap_deviation(x, p, kind_s, m)
+        return _gap_deviation(x, p, kind_s, m, waves)
 
     def current(x, p):
         return _current(x, p, kind_s)
 
     def body_acceleration(x, p):
-        return _body_acceleration(x, p, kind_s, m)
+        return _body_acceleration(x, p, kind_s, m, waves)
 
     out.update(gap_deviation=gap_deviation, current=current,
                body_acceleration=body_acceleration)
     return out
 
 
-def _gap_margins(x, p, limits, kind: str, n_modes: int, ic0: int):
-    return jnp.reshape(gap_margins(p[ic0] + _gap_deviation(x, p, kind, n_modes), limits[0],
+def _gap_margins(x, p, limits, kind: str, n_modes: int, ic0: int, waves: int | None = None):
+    return jnp.reshape(gap_margins(p[ic0] + _gap_deviation(x, p, kind, n_modes, waves),
+                                   limits[0],
                                    limits[1]), (-1,))
 
 
 @cache
-def gap_events(kind: MovingModel, n_modes: int):
+def gap_events(kind: MovingModel, n_modes: int, waves: int | None = None):
     """``g(x, p, (gap_min, gap_max))``: gap_j - gap_min and gap_max - gap_j per levitation
     point (entries 2(j-1), 2(j-1)+1); negative is a collision."""
     kind_s = MovingModel(kind).value
@@ -504,7 +540,7 @@ def gap_events(kind: MovingModel, n_modes: int):
            else VEHICLE_PARAM_NAMES.index("c0"))
 
     def events(x, p, limits):
-        return _gap_margins(x, p, limits, kind_s, m, ic0)
+        return _gap_margins(x, p, limits, kind_s, m, ic0, waves)
 
     return events
 
@@ -513,22 +549,26 @@ def gap_events(kind: MovingModel, n_modes: int):
 # systems and reference states
 # ---------------------------------------------------------------------------------------
 def moving_system(params: Params, kind: MovingModel, p: np.ndarray | None = None,
-                  limited: bool = False, period: float = 1.0) -> System:
+                  limited: bool = False, period: float = 1.0,
+                  waves: int | None = None) -> System:
     """A model at speed as a :class:`~maglev_match.dynamics.system.System` (the parameter
-    vector ``p`` defaults to :func:`moving_param_vector` at v = 0)."""
+    vector ``p`` defaults to :func:`moving_param_vector` at v = 0). ``waves``: the
+    parameter vector ends with a guideway profile of that many spectral waves."""
     kind = MovingModel(kind)
     n_modes = int(params.n_modes)
     lay = layout_of(params, kind)
     pv = moving_param_vector(params, kind) if p is None else np.asarray(p, float)
+    extra = () if waves is None else irr.profile_names(int(waves))
     return System(
-        rhs=moving_rhs(kind, n_modes, limited),
+        rhs=moving_rhs(kind, n_modes, limited, waves),
         p=pv,
-        param_names=moving_param_names(kind, lay.n_loads),
+        param_names=moving_param_names(kind, lay.n_loads) + extra,
         state_names=state_names(kind, n_modes),
         x_guess=rigid_equilibrium(params, kind),
         state_scale=state_scale(kind, n_modes, period),
-        observables=observables(kind, n_modes),
-        name=f"{kind.value} at speed ({n_modes} modes per span)",
+        observables=observables(kind, n_modes, waves),
+        name=f"{kind.value} at speed ({n_modes} modes per span)"
+             + ("" if waves is None else ", on an irregular guideway"),
     )
 
 
@@ -540,6 +580,42 @@ def rigid_equilibrium(params: Params, kind: MovingModel) -> np.ndarray:
     x = np.zeros(sl["t"].stop)
     if kind is MovingModel.VEHICLE:
         x[16:22] = params.i0_vehicle
+    return x
+
+
+def follow_profile(params: Params, kind: MovingModel, x: np.ndarray, p: np.ndarray,
+                   waves: int) -> np.ndarray:
+    """The state ``x`` (the equilibrium on rigid ground, t = 0) moved onto the guideway
+    profile in ``p``: every levitation point raised with the profile under it and moving
+    with its rate, so that a run over an irregular guideway starts without the jump of a
+    profile that is not zero where it starts. The unit: z1, z2 by the profile's mean under
+    the footprint, their rates by its rate, the observer's velocity state v by minus it
+    (the steady following of a moving guideway). The vehicle: each frame's heave and pitch
+    through its two points, the car body's heave and pitch through the outer frames, the
+    observers' v_j by minus the points' rates. Gaps and currents are unchanged."""
+    kind = MovingModel(kind)
+    g = observables(kind, int(params.n_modes), int(waves))["gap_deviation"]
+    x = np.array(x, float)
+    e = np.zeros_like(x)
+    e[-1] = 1.0
+    gv, gdot = jax.jvp(lambda xx: g(xx, jnp.asarray(p)), (jnp.asarray(x),), (jnp.asarray(e),))
+    z, zd = -np.asarray(gv), -np.asarray(gdot)  # u = 0 and w = 0 at the start
+    if kind is MovingModel.UNIT:
+        x[0] += z[0]
+        x[2] += z[0]
+        x[1] += zd[0]
+        x[3] += zd[0]
+        x[6] -= zd[0]
+        return x
+    s, s0 = float(params.s), float(params.s0)
+    for off, val in ((0, z), (8, zd)):
+        zf = 0.5 * (val[0::2] + val[1::2])
+        thf = (val[1::2] - val[0::2]) / (2.0 * s)
+        x[off + 0:off + 6:2] += zf
+        x[off + 1:off + 6:2] += thf
+        x[off + 6] += float(np.mean(zf))
+        x[off + 7] += (zf[2] - zf[0]) / (2.0 * s0)
+    x[28:34] -= zd
     return x
 
 

@@ -53,12 +53,16 @@ def slot_flags(params: Params, kind: MovingModel, x_front: float) -> tuple[np.nd
 
 
 def passage_problem(params: Params, model: str, v: float, *, limited: bool = False,
-                    approach_rigid: bool = False, exit_rigid: bool = False) -> PassageProblem:
+                    approach_rigid: bool = False, exit_rigid: bool = False,
+                    profile=None) -> PassageProblem:
     """One span passage at speed v (m/s > 0) as a
     :class:`~maglev_match.dynamics.integrate.passage.PassageProblem`: segments between the support
     crossings of the loads' edges, each with its slot flags; the jump hands slot B over to
     A and brings a fresh span at rest into B. ``approach_rigid``: slot A is rigid ground
-    (the abutment before the first span); ``exit_rigid``: slot B is (after the last)."""
+    (the abutment before the first span); ``exit_rigid``: slot B is (after the last).
+    ``profile``: an :class:`~maglev_match.maglev.irregularity.Irregularity`; the segments'
+    parameter vectors then end with its (zero) entries, which a run over the spans sets per
+    passage (:meth:`~maglev_match.maglev.irregularity.Irregularity.vector`)."""
     kind = MovingModel(model)
     if not v > 0:
         raise ParameterError("speed", v, "a passage needs a speed > 0")
@@ -75,8 +79,11 @@ def passage_problem(params: Params, model: str, v: float, *, limited: bool = Fal
         act = (0.0 if (approach_rigid or not loaded_a) else 1.0, 0.0 if exit_rigid else 1.0)
         p = mv.moving_param_vector(params, kind, v=v, x_front=L, active=act, front_on_B=fb,
                                    rear_on_B=rb)
+        if profile is not None:
+            p = np.concatenate([p, profile.zero_vector()])
         segs.append(Segment(float(b - a), p))
-    system = mv.moving_system(params, kind, segs[0].p, limited=limited, period=T)
+    system = mv.moving_system(params, kind, segs[0].p, limited=limited, period=T,
+                              waves=None if profile is None else profile.n_waves)
     sl = mv.slot_slices(kind, params.n_modes)
     n = system.dim - 1
     R = np.eye(n)

@@ -74,6 +74,8 @@ class SpanRun(Plottable):
     per_span_midspan_max: np.ndarray
     per_passage_gap_max: np.ndarray
     warnings: tuple[str, ...] = field(default=())
+    #: the guideway irregularity under the run (its description and seed), or None
+    irregularity: str | None = None
 
     def summary(self) -> dict[str, Any]:
         return {
@@ -84,7 +86,7 @@ class SpanRun(Plottable):
             "span_midspan_max": [float(v) for v in self.per_span_midspan_max],
             "passage_gap_deviation_max": [float(v) for v in self.per_passage_gap_max],
             "warnings": list(self.warnings),
-        }
+        } | ({} if self.irregularity is None else {"irregularity": self.irregularity})
 
     def to_xarray(self):
         """The histories as an :class:`xarray.Dataset` over ``time`` (s), with units."""
@@ -109,6 +111,8 @@ class SpanRun(Plottable):
                          "outcome": self.outcome, "limits": int(self.limited),
                          "span_starts": json.dumps([float(v) for v in self.span_starts]),
                          "warnings": json.dumps(list(self.warnings))})
+        if self.irregularity is not None:
+            ds.attrs["irregularity"] = self.irregularity
         if self.collision_time is not None:
             ds.attrs.update({"collision_time": self.collision_time,
                              "collision_point": self.collision_point,
@@ -163,13 +167,16 @@ def _integrate_events(system, x_start, t_rel, p, sim, events):
 
 def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
                         limited: bool = True, options: SpeedOptions | None = None,
-                        overlay: bool = True, max_samples: int = 400_000) -> SpanRun:
+                        overlay: bool = True, max_samples: int = 400_000,
+                        profile=None, seed: int = 0) -> SpanRun:
     """Run the vehicle from rigid ground over ``spans`` identical spans and off them at speed
     v (m/s > 0), from its equilibrium on rigid ground with every span at rest; the physical
     limits (current clamp, gap range: a collision ends the run) unless ``limited`` is False.
     With ``overlay`` the periodic response is computed and repeated passage after passage
     beside the run. At most ``max_samples`` saved times in all (each passage sampled as the
-    read-outs are, fewer if that would exceed it)."""
+    read-outs are, fewer if that would exceed it). ``profile``: a guideway irregularity
+    (:class:`~maglev_match.maglev.irregularity.Irregularity`, drawn with ``seed`` if
+    random) under every levitation point; then no overlay."""
     opts = options or SpeedOptions()
     kind = check_speed_setup(params, model, [v], spans)
     if not v > 0:
@@ -177,12 +184,17 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
     L = float(params.L)
     T = L / v
     problems = {
-        "first": passage_problem(params, kind, v, limited=limited, approach_rigid=True),
-        "mid": passage_problem(params, kind, v, limited=limited),
-        "last": passage_problem(params, kind, v, limited=limited, exit_rigid=True),
+        "first": passage_problem(params, kind, v, limited=limited, approach_rigid=True,
+                                 profile=profile),
+        "mid": passage_problem(params, kind, v, limited=limited, profile=profile),
+        "last": passage_problem(params, kind, v, limited=limited, exit_rigid=True,
+                                profile=profile),
     }
+    waves = None if profile is None else profile.n_waves
+    if profile is not None:
+        overlay = False
     sys_ = problems["mid"].system
-    events = (EventsWithArgs(mv.gap_events(kind, params.n_modes),
+    events = (EventsWithArgs(mv.gap_events(kind, params.n_modes, waves),
                              (float(params.gap_min), float(params.gap_max)))
               if limited and kind is not MovingModel.FORCE else None)
     sim = SimulationOptions(rtol=opts.rtol, atol=opts.atol, max_steps=1_000_000)
@@ -190,6 +202,11 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
     if (grid.size - 1) * (spans + 1) > max_samples:
         grid = np.linspace(0.0, T, max(64, max_samples // (spans + 1)) + 1)
     x = mv.rigid_equilibrium(params, kind)
+    if profile is not None:  # start on the profile, not on a jump to it
+        p1 = problems["first"].segments[0].p
+        n0 = p1.size - profile.zero_vector().size
+        x = mv.follow_profile(params, kind, x, np.concatenate(
+            [p1[:n0], profile.vector(1, spans, L, seed)]), profile.n_waves)
     n_pts = mv.layout_of(params, kind).n_loads if kind is not MovingModel.FORCE else 0
     t_all, gaps, curs, accs, mids = [], [], [], [], []
     starts_all: list[np.ndarray] = []
@@ -209,6 +226,10 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
             starts.append(xk.copy())
             idx = np.nonzero(seg_of == j)[0]
             t_rel = np.concatenate([grid[idx] - bounds[j], [seg.duration]])
+            if profile is not None:  # this passage's profile entries
+                n0 = seg.p.size - profile.zero_vector().size
+                seg = type(seg)(seg.duration, np.concatenate(
+                    [seg.p[:n0], profile.vector(k, spans, L, seed)]))
             Xs, te, ie, xe = _integrate_events(prob.system, xk, t_rel, seg.p, sim, events)
             kept = Xs[:-1] if te is None else Xs[Xs[:, -1] < bounds[j] + seg.duration - 1e-15]
             if kept.shape[0] > idx.size:
@@ -283,6 +304,9 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
                    collision_time=t_hit, collision_point=p_hit, collision_limit=lim_hit,
                    periodic_gap=pg, periodic_acceleration=pa,
                    passage_starts=tuple(starts_all), per_span_midspan_max=per_span,
-                   per_passage_gap_max=per_pass, warnings=tuple(warnings))
+                   per_passage_gap_max=per_pass, warnings=tuple(warnings),
+                   irregularity=None if profile is None else (
+                       profile.describe() + ("" if profile.kind != "random"
+                                             else f"; this run: seed {seed}")))
 
 

@@ -347,6 +347,9 @@ class SpeedSweep(Plottable):
     #: the standstill headline index of the same model, chi(v)'s limit as v -> 0 (keys chi,
     #: h, w0, chi_paper, chi_simulation, basis, reading; None when not computed)
     standstill: dict[str, Any] | None = None
+    #: the read-outs over an irregular guideway per speed
+    #: (:class:`~maglev_match.analyses.speed.irregular.IrregularSweep`), or None
+    irregular: Any = None
 
     @property
     def speeds(self) -> np.ndarray:

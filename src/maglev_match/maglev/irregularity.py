@@ -1,0 +1,319 @@
+"""Vertical guideway irregularities for the models at speed (physics and input only).
+
+A profile z_r(x) (m, downward positive like the beam deflection; x in m along the guideway,
+measured from the first span's left support, negative on the approach) is added to the
+beam's deflection under every levitation point: the gap becomes c = c0 + u - w - z_r, the
+same profile under every point, delayed by their spacing. The unit (whose load is the
+vehicle's k units spread over its length l) sees the mean of z_r over its footprint, as it
+sees the mean deflection.
+
+Every profile is a sum of two parts, which the vector field evaluates in closed form:
+
+* a spectral part sum_k a_k cos(kappa_k x + phi_k) over the whole guideway (the sinusoid:
+  one wave; the random profile: many);
+* a part per span: on span n (1-based; 0 is the approach, spans + 1 the ground after the
+  last span), z = c0_n + c1_n xi + c2_n xi^2 with xi the distance from the span's left
+  support (joint steps, support settlement, pre-camber).
+
+Kinds (:func:`parse_irregularity`):
+
+``sine:wavelength=W,amplitude=A``
+    z = A sin(2 pi x / W).
+``joint:step=S``
+    every span S lower than the one before (a step S at every joint, the approach at 0):
+    z = S n on span n. Its mean slope S / L is a gradient the vehicle follows; what it feels
+    repeats every span.
+``settlement:depth=S[,support=J]``
+    support J (0 .. spans; default the middle one) lowered by S; the spans either side
+    tilted (rigid ground beyond the abutments).
+``camber:amplitude=A``
+    every span curved upward, a parabola with A at mid-span and 0 at the supports.
+``random:class=low|high[,seeds=N][,seed0=K][,lmin=..][,lmax=..][,waves=..]``
+    a stationary Gaussian profile with the German high-speed track spectrum
+    (:data:`PSD_CLASSES`), drawn by a spectral sum with seeded random phases over the
+    wavelength band [lmin, lmax] (m).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from maglev_match.core import jax_setup  # noqa: F401  (float64 on)
+from maglev_match.core.params import ParameterError
+
+__all__ = ["Irregularity", "PSD_CLASSES", "parse_irregularity", "target_psd",
+           "PROFILE_NAMES", "profile_names", "profile_under", "KINDS"]
+
+KINDS = ("sine", "joint", "settlement", "camber", "random")
+
+#: The German high-speed track spectrum of the vertical profile (one-sided, in the spatial
+#: circular frequency Omega, rad/m): S(Omega) = A Omega_c^2 / ((Omega^2 + Omega_r^2)
+#: (Omega^2 + Omega_c^2)) m^2/(rad/m), Omega_c = 0.8246 rad/m, Omega_r = 0.0206 rad/m,
+#: A = 4.032e-7 m rad ("low": low interference) or 1.080e-6 m rad ("high": high
+#: interference). Variance = integral over Omega > 0.
+PSD_CLASSES = {"low": 4.032e-7, "high": 1.080e-6}
+OMEGA_C = 0.8246
+OMEGA_R = 0.0206
+
+#: The per-span and spectral entries appended to a model's parameter vector.
+PROFILE_NAMES = ("x_origin", "zA0", "zA1", "zA2", "zB0", "zB1", "zB2")
+
+
+def profile_names(waves: int) -> tuple[str, ...]:
+    return PROFILE_NAMES + tuple(f"wave_{q}_{k + 1}" for q in ("amp", "kappa", "phase")
+                                 for k in range(waves))
+
+
+def target_psd(omega, cls: str) -> np.ndarray:
+    """The one-sided PSD S(Omega) (m^2 / (rad/m)) of the class at Omega (rad/m)."""
+    A = PSD_CLASSES[cls]
+    w = np.asarray(omega, float)
+    return A * OMEGA_C**2 / ((w**2 + OMEGA_R**2) * (w**2 + OMEGA_C**2))
+
+
+@dataclass(frozen=True)
+class Irregularity:
+    """A guideway irregularity (see the module docstring). Lengths in m."""
+
+    kind: str
+    amplitude: float = 0.0  # sine, camber (m); joint step; settlement depth
+    wavelength: float = 0.0  # sine (m)
+    support: int | None = None  # settlement: the lowered support (0 .. spans)
+    cls: str = "low"  # random
+    seeds: int = 1
+    seed0: int = 0
+    lmin: float = 2.0
+    lmax: float = 200.0
+    waves: int = 400
+    text: str = field(default="", compare=False)
+
+    @property
+    def n_waves(self) -> int:
+        return self.waves if self.kind == "random" else 1
+
+    @property
+    def seed_list(self) -> tuple[int, ...]:
+        return tuple(range(self.seed0, self.seed0 + (self.seeds if self.kind == "random" else 1)))
+
+    def describe(self) -> str:
+        if self.kind == "sine":
+            return f"sinusoid, wavelength {self.wavelength:g} m, amplitude {self.amplitude * 1e3:g} mm"
+        if self.kind == "joint":
+            return f"a step of {self.amplitude * 1e3:g} mm at every span joint"
+        if self.kind == "settlement":
+            return f"support {self.support if self.support is not None else 'middle'} " \
+                   f"lowered by {self.amplitude * 1e3:g} mm"
+        if self.kind == "camber":
+            return f"pre-camber {self.amplitude * 1e3:g} mm at mid-span"
+        return (f"random, German track spectrum '{self.cls}' (A = {PSD_CLASSES[self.cls]:g} "
+                f"m rad), wavelengths {self.lmin:g} to {self.lmax:g} m, {self.waves} waves, "
+                f"seeds {self.seed0}..{self.seed0 + self.seeds - 1}")
+
+    def band(self) -> tuple[float, float]:
+        """(Omega_min, Omega_max) rad/m of the random profile."""
+        return 2 * math.pi / self.lmax, 2 * math.pi / self.lmin
+
+    def wave_vectors(self, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(amplitudes a_k (m), wavenumbers kappa_k (rad/m), phases phi_k) of the spectral
+        part: z = sum a_k cos(kappa_k x + phi_k). The random profile: Omega_k the midpoints
+        of ``waves`` equal bands dOmega over the band, a_k = sqrt(2 S(Omega_k) dOmega)
+        (so that the variance is the integral of S over the band), phi_k uniform on
+        [0, 2 pi) from numpy's PCG64 generator seeded with ``seed``."""
+        if self.kind == "sine":
+            return (np.array([self.amplitude]), np.array([2 * math.pi / self.wavelength]),
+                    np.array([-math.pi / 2]))
+        if self.kind != "random":
+            return np.zeros(1), np.ones(1), np.zeros(1)
+        lo, hi = self.band()
+        d = (hi - lo) / self.waves
+        om = lo + d * (np.arange(self.waves) + 0.5)
+        phase = np.random.default_rng(int(seed)).uniform(0.0, 2 * math.pi, self.waves)
+        return np.sqrt(2.0 * target_psd(om, self.cls) * d), om, phase
+
+    def span_poly(self, n: int, spans: int, L: float) -> np.ndarray:
+        """(c0, c1, c2) of span n (0: the approach; spans + 1: the ground after)."""
+        a = self.amplitude
+        if self.kind == "joint":
+            return np.array([a * max(n, 0), 0.0, 0.0])
+        if self.kind == "camber" and 1 <= n <= spans:
+            return np.array([0.0, -4.0 * a / L, 4.0 * a / L**2])
+        if self.kind == "settlement":
+            j = spans // 2 if self.support is None else self.support
+            if n == j and 1 <= n <= spans:
+                return np.array([0.0, a / L, 0.0])
+            if n == j + 1 and 1 <= n <= spans:
+                return np.array([a, -a / L, 0.0])
+        return np.zeros(3)
+
+    def vector(self, passage: int, spans: int, L: float, seed: int) -> np.ndarray:
+        """The profile entries of the parameter vector during passage ``passage`` (1-based:
+        slot A is span passage - 1, slot B span passage)."""
+        amp, kap, ph = self.wave_vectors(seed)
+        return np.concatenate([[(passage - 2) * L], self.span_poly(passage - 1, spans, L),
+                               self.span_poly(passage, spans, L), amp, kap, ph])
+
+    def zero_vector(self) -> np.ndarray:
+        w = self.n_waves
+        return np.concatenate([np.zeros(7), np.zeros(w), np.ones(w), np.zeros(w)])
+
+    def profile(self, x, spans: int, L: float, seed: int) -> np.ndarray:
+        """z_r at the positions x (m) (numpy, for figures and checks)."""
+        x = np.asarray(x, float)
+        amp, kap, ph = self.wave_vectors(seed)
+        z = np.cos(np.multiply.outer(x, kap) + ph) @ amp
+        n = np.floor(x / L).astype(int) + 1
+        n = np.where(x < 0, 0, np.minimum(n, spans + 1))
+        c = np.array([self.span_poly(int(k), spans, L) for k in n])
+        xi = x - (n - 1) * L
+        return z + c[:, 0] + c[:, 1] * xi + c[:, 2] * xi**2
+
+    def check(self, spans: int | None = None, dx_resolved: float | None = None):
+        """Validate (ParameterError naming field, value, rule). ``dx_resolved``: the
+        shortest wavelength (m) the sampling of the runs resolves at the speed."""
+        for name, val in (("amplitude", self.amplitude), ("wavelength", self.wavelength),
+                          ("lmin", self.lmin), ("lmax", self.lmax)):
+            if not math.isfinite(val):
+                raise ParameterError(f"--irregularity {name}", val, "must be finite")
+            if val < 0:
+                raise ParameterError(f"--irregularity {name}", val, "must be >= 0")
+        if self.kind == "sine" and not self.wavelength > 0:
+            raise ParameterError("--irregularity wavelength", self.wavelength, "must be > 0")
+        if self.kind == "random":
+            if not 0 < self.lmin < self.lmax:
+                raise ParameterError("--irregularity lmin", self.lmin,
+                                     f"must be > 0 and below lmax = {self.lmax:g} m")
+            if not 1 <= self.waves <= 5000:
+                raise ParameterError("--irregularity waves", self.waves,
+                                     "must be a whole number from 1 to 5000")
+            if not 1 <= self.seeds <= 1000:
+                raise ParameterError("--irregularity seeds", self.seeds,
+                                     "must be a whole number from 1 to 1000")
+            if self.seed0 < 0:
+                raise ParameterError("--irregularity seed0", self.seed0, "must be >= 0")
+        if self.kind == "settlement" and spans is not None and self.support is not None \
+                and not 0 <= self.support <= spans:
+            raise ParameterError("--irregularity support", self.support,
+                                 f"must be a support of the guideway, 0 to {spans}")
+        if dx_resolved is not None:
+            short = self.wavelength if self.kind == "sine" else (
+                self.lmin if self.kind == "random" else None)
+            if short is not None and short < dx_resolved:
+                field_ = "wavelength" if self.kind == "sine" else "lmin"
+                raise ParameterError(f"--irregularity {field_}", short,
+                                     f"is shorter than the {dx_resolved:.4g} m the sampling "
+                                     "resolves at this speed (8 samples per wavelength)")
+        return self
+
+
+_FIELDS = {
+    "sine": {"wavelength": "wavelength", "amplitude": "amplitude"},
+    "joint": {"step": "amplitude"},
+    "settlement": {"depth": "amplitude", "support": "support"},
+    "camber": {"amplitude": "amplitude"},
+    "random": {"class": "cls", "seeds": "seeds", "seed0": "seed0", "lmin": "lmin",
+               "lmax": "lmax", "waves": "waves"},
+}
+_REQUIRED = {"sine": ("wavelength", "amplitude"), "joint": ("step",),
+             "settlement": ("depth",), "camber": ("amplitude",), "random": ("class",)}
+_INTS = ("seeds", "seed0", "waves", "support")
+
+
+def parse_irregularity(text: str | Irregularity | None) -> Irregularity | None:
+    """``KIND:NAME=VALUE,...`` (lengths in m) to an :class:`Irregularity` (None for None or
+    ''). Raises ParameterError naming the field, the value and the rule."""
+    if text is None or isinstance(text, Irregularity):
+        return text
+    s = str(text).strip()
+    if not s:
+        return None
+    kind, _, rest = s.partition(":")
+    kind = kind.strip().lower()
+    if kind not in _FIELDS:
+        raise ParameterError("--irregularity", s, "the kind must be one of "
+                             + ", ".join(KINDS) + " (KIND:NAME=VALUE,...)")
+    vals: dict = {}
+    for item in (r for r in rest.split(",") if r.strip()):
+        name, eq, value = item.partition("=")
+        name = name.strip().lower()
+        if not eq or name not in _FIELDS[kind]:
+            raise ParameterError("--irregularity", item.strip(),
+                                 f"'{kind}' takes " + ", ".join(
+                                     f"{n}=VALUE" for n in _FIELDS[kind]))
+        attr = _FIELDS[kind][name]
+        value = value.strip()
+        if attr == "cls":
+            if value not in PSD_CLASSES:
+                raise ParameterError("--irregularity class", value,
+                                     "must be one of " + ", ".join(PSD_CLASSES))
+            vals[attr] = value
+        elif name in _INTS:
+            try:
+                vals[attr] = int(value)
+            except ValueError:
+                raise ParameterError(f"--irregularity {name}", value,
+                                     "must be a whole number") from None
+        else:
+            try:
+                vals[attr] = float(value)
+            except ValueError:
+                raise ParameterError(f"--irregularity {name}", value,
+                                     "must be a number (m)") from None
+    for need in _REQUIRED[kind]:
+        if _FIELDS[kind][need] not in vals:
+            raise ParameterError("--irregularity", s, f"'{kind}' needs {need}=VALUE")
+    return Irregularity(kind=kind, text=s, **vals).check()
+
+
+# ---------------------------------------------------------------------------------------
+# the profile under the loads, in the vector field (JAX)
+# ---------------------------------------------------------------------------------------
+def _poly_integral(c, a, b):
+    def P(x):
+        return c[0] * x + c[1] * x**2 / 2 + c[2] * x**3 / 3
+
+    return P(b) - P(a)
+
+
+def _poly_value(c, x):
+    return c[0] + c[1] * x + c[2] * x**2
+
+
+def _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool):
+    v, x_front = p_kin[0], p_kin[1]
+    n_loads = lay_front.shape[0]
+    fb = p_kin[4:4 + n_loads]
+    rb = p_kin[4 + n_loads:4 + 2 * n_loads]
+    x0 = p_prof[0]
+    cA, cB = p_prof[1:4], p_prof[4:7]
+    amp = p_prof[7:7 + waves]
+    kap = p_prof[7 + waves:7 + 2 * waves]
+    ph = p_prof[7 + 2 * waves:7 + 3 * waves]
+    xf = x_front + v * t + lay_front  # local to slot A
+    if point:
+        spec = jnp.cos(kap[None, :] * (x0 + xf)[:, None] + ph[None, :]) @ amp
+        piece = jnp.where(fb > 0.5, _poly_value(cB, xf - L), _poly_value(cA, xf))
+        return spec + piece
+    xr = xf - lay_length
+    sf = jnp.sin(kap[None, :] * (x0 + xf)[:, None] + ph[None, :])
+    sr = jnp.sin(kap[None, :] * (x0 + xr)[:, None] + ph[None, :])
+    spec = ((sf - sr) / kap[None, :]) @ amp / lay_length
+    a_a, b_a = xr, jnp.where(fb > 0.5, L, xf)
+    a_b, b_b = jnp.where(rb > 0.5, xr - L, 0.0), xf - L
+    ia = jnp.where(rb > 0.5, 0.0, _poly_integral(cA, a_a, b_a))
+    ib = jnp.where(fb > 0.5, _poly_integral(cB, a_b, b_b), 0.0)
+    return spec + (ia + ib) / lay_length
+
+
+def profile_under(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool):
+    """(z_r, dz_r/dt) (n_loads,) under each load at passage time t: the profile at each
+    point load, or its mean over each spread load's footprint."""
+
+    def z(tt):
+        return _profile(tt, p_kin, p_prof, lay_front, lay_length, L, waves, point)
+
+    return jax.jvp(z, (t,), (jnp.ones_like(t),))
