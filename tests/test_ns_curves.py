@@ -102,3 +102,65 @@ def test_no_complex_pair_is_reported_not_raised():
     cv = cycle_curve(S, br.points[-1].orbit, "NS", ("nu", "alpha"))
     assert cv.stopped_reason == CurveStop.START_FAILED and not cv.ok
     assert not cv.points and "no complex pair" in cv.warnings[0]
+
+
+NS_FILE = '''import jax.numpy as jnp
+
+STATES = ["x", "y", "u", "w"]
+PARAMS = {"beta": 0.1, "gamma": 0.36}
+X0 = [0.0, 0.0, 0.0, 0.0]
+
+
+def rhs(x, p):
+    r2 = x[0] ** 2 + x[1] ** 2
+    om = 1.0 + r2
+    a = p["gamma"] - r2 * r2
+    q2 = x[2] ** 2 + x[3] ** 2
+    return jnp.array([p["beta"] * x[0] - om * x[1] - x[0] * r2,
+                      om * x[0] + p["beta"] * x[1] - x[1] * r2,
+                      a * x[2] - 0.5 * x[3] - q2 * x[2],
+                      0.5 * x[2] + a * x[3] - q2 * x[3]])
+'''
+
+
+def test_ns_command_for_a_user_model(tmp_path, capsys):
+    """`cycle-curve --kind NS` on a user model file (ns_system without the rotation and
+    the Moebius block): started directly (the branch along beta at gamma = 0.36, NS1 at
+    beta = 0.6) and from a saved branch (--restart FILE --label NS1); the closed form
+    gamma = beta^2 and R3, R4 at beta = 1/2, 1 in the text, JSON and netCDF answers."""
+    import json
+
+    import xarray as xr
+
+    from maglev_match.cli import main
+
+    model = tmp_path / "ns.py"
+    model.write_text(NS_FILE)
+    out = tmp_path / "out"
+    code = main(["cycle-curve", "--model", str(model), "--kind", "NS", "--params",
+                 "beta,gamma", "--from", "-0.5", "--to", "0.5", "--ntst", "20", "--range",
+                 "gamma=0.2:1.2", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    assert "NS curve of cycles in (beta, gamma)" in text and "kappa" in text
+    assert "R31: R3 at beta = 0.5, gamma = 0.25 (solved)" in text
+    assert "R41: R4 at beta = 1, gamma = 1 (solved)" in text
+    ds = xr.load_dataset(next(out.glob("*.nc")), engine="h5netcdf")
+    beta, gamma = ds["beta"].values, ds["gamma"].values
+    assert gamma.min() == pytest.approx(0.2) and gamma.max() == pytest.approx(1.2)
+    assert np.max(np.abs(gamma - beta ** 2)) < 1e-7
+    np.testing.assert_allclose(ds["kappa"].values, np.cos(math.pi / (1 + beta)), atol=1e-7)
+    saved = tmp_path / "branch"
+    assert main(["cycles", "--model", str(model), "--param", "beta", "--from", "-0.5",
+                 "--to", "0.5", "--ntst", "20", "--max-steps", "60", "--out",
+                 str(saved)]) == 0
+    capsys.readouterr()
+    code = main(["cycle-curve", "--model", str(model), "--kind", "NS", "--params",
+                 "beta,gamma", "--restart", str(next(saved.glob("*.nc"))), "--label", "NS1",
+                 "--range", "gamma=0.3:0.5", "--json"])
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["ok"] and res["kind"] == "NS"
+    assert res["restart_of"].startswith("NS1 of")
+    assert max(abs(p["gamma"] - p["beta"] ** 2) for p in res["points"]) < 1e-7
+    assert max(abs(p["kappa"] - math.cos(math.pi / (1 + p["beta"])))
+               for p in res["points"]) < 1e-7
