@@ -351,6 +351,16 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
             continue
         c = ev.point.info["cycle"]
         detail, located = "", ev.located
+        direct = ""
+        if kind == SpecialPointKind.BP and located != SOLVED:
+            # the corrector failed next to the branch point: its own system instead
+            solved = _branch_point_directly(cyc, ev.point, opt)
+            if isinstance(solved, str):
+                located = f"{located}; {solved}"
+            else:
+                c, located = solved, SOLVED
+                direct = "; solved on the branch-point system (the corrector failed inside " \
+                    "the step)"
         if kind == SpecialPointKind.CONTACT:
             mg_c, lname = limit_margin(limits, prob.system, ev.point.info["orbit_here"])
             detail = lname
@@ -376,7 +386,7 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
                     k = int(np.argmin(np.abs(np.abs(mult) - 1.0) + (np.abs(mult.imag) < 1e-9)))
                 else:
                     k = int(np.argmin(np.abs(mult - target)))
-                detail = f"multiplier {mult[k].real:.6g}{mult[k].imag:+.6g}j"
+                detail = f"multiplier {mult[k].real:.6g}{mult[k].imag:+.6g}j" + direct
             if located != SOLVED:
                 warnings.append(f"{kind} at {param} = {c.value:.8g}: {located}")
         specials.append(SpecialPoint(type=kind, value=c.value, period=c.period,
@@ -397,6 +407,39 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
                        newton_iterations=cyc.stats.iterations,
                        factorizations=cyc.stats.factorizations, message=message,
                        chart_from=cyc.chart_at)
+
+
+def _branch_point_directly(cyc: CycleProblem, pt: BranchPoint, opt: CycleOptions
+                           ) -> CyclePoint | str:
+    """The branch point near the event's best trial ``pt`` solved on the minimally
+    augmented branch-point system (:func:`~maglev_match.dynamics.cycles.bp.
+    solve_branch_point`), on that point's mesh; its cycle, or why not (kept only with a
+    nontrivial multiplier within 1e-3 of 1, beta within 1e-8 and the parameter within 1 %
+    of its scale of the trial: the branch point that was bracketed)."""
+    from maglev_match.dynamics.cycles.bp import solve_branch_point
+
+    if cyc.chart_at is not None:
+        return "not solved on the branch-point system (the branch changed coordinates)"
+    prob = cyc.prob
+    mesh_now = prob.mesh
+    prob.mesh = np.array(pt.correction.data[1], float)
+    try:
+        sol = solve_branch_point(prob, pt.u, tol=opt.tol, max_iter=opt.max_newton + 4)
+        if not sol.converged:
+            return f"the branch-point system did not converge either ({sol.message})"
+        lam = float(prob.unpack(sol.Y)[2])
+        corr = Correction(u=sol.Y, iterations=sol.iterations, residual=sol.residual,
+                          solve=pt.correction.solve, data=(None, prob.mesh.copy(), None, None))
+        c = cyc.cycle_point(BranchPoint(u=sol.Y, t=np.zeros_like(sol.Y), value=lam,
+                                        correction=corr), kind="BP")
+    finally:
+        prob.mesh = mesh_now
+    mult = np.asarray(c.multipliers)
+    if not (c.reliable and mult.size and float(np.min(np.abs(mult - 1.0))) <= 1e-3
+            and abs(sol.beta) <= 1e-8 and abs(lam - pt.value) <= 0.01 * prob.lam_scale):
+        return (f"the branch-point system converged to {cyc.prob.system.param_names[prob.ipar]}"
+                f" = {lam:.10g} (beta = {sol.beta:.2e}), not accepted")
+    return c
 
 
 #: A contact whose margin is within this of zero is reported solved (the location runs to
