@@ -6,7 +6,11 @@ r^2 = RC2 -+ sqrt(NU), i.e. mu + 1 = (r^2 - 1)^2: two branch points, in closed f
 Branch points within 1e-6 (in mu) of the fold and pairs 7.5e-5 apart: the branch's corrector
 fails next to a branch point (its bordered matrix is singular there), which left such a
 point "not solved"; it is now solved on the minimally augmented branch-point system
-(``dynamics/cycles/bp.py``).
+(``dynamics/cycles/bp.py``). A pair that falls into one step (the BP test changes sign
+twice, so the same sign at both ends) was missed; a step whose ends both have a real
+multiplier within 1e-2 of +1, on the same side, is now checked inside
+(``CycleProblem.double_zero_suspect``: the test at 1/2, 1/4, 3/4 of the step) and both zeros
+located.
 """
 
 from __future__ import annotations
@@ -37,6 +41,9 @@ def _branch(r2_a: float, r2_b: float):
 
 
 @pytest.mark.parametrize("r2", [
+    (0.99, 0.9913),  # two 2.4e-5 apart (mu + 1 = 1e-4, 7.6e-5) inside the fold: one step
+    (0.9875, 0.9905),  # 6.6e-5 apart, inside
+    (1.0095, 1.0125),  # 6.6e-5 apart, outside (the second one next to a step's end)
     (0.999, 0.9913),  # one 1e-6 below the fold (inner side), one 7.6e-5 away
     (1.001, 1.0087),  # both on the outer side, 1e-6 and 7.6e-5 from it (7.5e-5 apart)
     (1.002, 1.0089),  # outer side, 4e-6 and 7.9e-5

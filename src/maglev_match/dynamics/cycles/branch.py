@@ -352,9 +352,17 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
         c = ev.point.info["cycle"]
         detail, located = "", ev.located
         direct = ""
-        if kind == SpecialPointKind.BP and located != SOLVED:
+        confirm = bool(ev.point.info.get("bp_confirm"))
+        if kind == SpecialPointKind.BP and located == SOLVED and not confirm:
+            # "solved" with its multiplier still away from +1 (a zero pinned by a small
+            # test value at the end of a long step): polished on the branch-point system
+            mlt = np.asarray(c.multipliers)
+            confirm = bool(mlt.size and float(np.min(np.abs(mlt - 1.0))) > 1e-7)
+        if kind == SpecialPointKind.BP and (located != SOLVED or confirm):
             # the corrector failed next to the branch point: its own system instead
             solved = _branch_point_directly(cyc, ev.point, opt)
+            if isinstance(solved, str) and confirm:
+                continue  # a weak zero of the test that the system does not confirm
             if isinstance(solved, str):
                 located = f"{located}; {solved}"
             else:
@@ -392,7 +400,7 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
         specials.append(SpecialPoint(type=kind, value=c.value, period=c.period,
                                      extrema=c.extrema, step=ev.step - 1, located=located,
                                      detail=detail, point=c))
-    specials = label_points(specials)
+    specials = label_points(_distinct_branch_points(specials, warnings, param))
     if cyc.chart_at is not None:
         warnings_note = (f"continued in the system's regular chart from {param} = "
                          f"{cyc.chart_at:.8g} on (an orbit came near the set where the "
@@ -407,6 +415,22 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
                        newton_iterations=cyc.stats.iterations,
                        factorizations=cyc.stats.factorizations, message=message,
                        chart_from=cyc.chart_at)
+
+
+def _distinct_branch_points(specials: list[SpecialPoint], warnings: list[str], param: str
+                            ) -> list[SpecialPoint]:
+    """One report per branch point: two events solved onto the same point (1e-9 relative)
+    keep the first, with a warning."""
+    out: list[SpecialPoint] = []
+    for sp in specials:
+        same = [o for o in out if o.type == sp.type == SpecialPointKind.BP
+                and abs(o.value - sp.value) <= 1e-9 * max(1.0, abs(sp.value))]
+        if same:
+            warnings.append(f"two sign changes of the BP test were solved onto the same branch "
+                            f"point ({param} = {sp.value:.10g}): reported once")
+            continue
+        out.append(sp)
+    return out
 
 
 def _branch_point_directly(cyc: CycleProblem, pt: BranchPoint, opt: CycleOptions
