@@ -337,7 +337,9 @@ class ContinuationProblem(Protocol):
     * ``double_zero_suspect(name, a, b)`` : True when test ``name`` may have changed sign
       twice inside the step from a to b (same sign at both ends): the driver then checks
       its sign inside the step (at 1/2, then 1/4 and 3/4 of it) and, where it differs,
-      locates both zeros (one on each side of that trial point);
+      locates both zeros (one on each side of that trial point); with
+      ``corrector_state()`` / ``set_corrector_state(state)`` the problem's corrector state
+      is restored when the check finds nothing;
     * ``rebase(a, corr)`` : called with the last accepted point and a successful
       correction of the next step; returns None to go on, or the point ``a`` expressed in
       new unknowns (the problem changed its coordinates, e.g. to a chart in which its
@@ -580,6 +582,10 @@ def _two_zeros(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, cor
     (one on each side of it, :func:`_locate` from a to it and from it to b). No event
     otherwise."""
     ga = a.tests[name]
+    # the problem's corrector state (e.g. a kept factorisation) is restored when the check
+    # finds nothing, so that the branch goes on exactly as without it
+    get_state = getattr(problem, "corrector_state", None)
+    state = get_state() if get_state is not None else None
     for frac in (0.5, 0.25, 0.75):
         sm = frac * s_step
         corr = correct_at(a, sm)
@@ -604,6 +610,8 @@ def _two_zeros(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, cor
             if ev is not None:
                 out.append(dataclasses.replace(ev, s=sm + ev.s))
         return out
+    if get_state is not None:
+        problem.set_corrector_state(state)
     return []
 
 

@@ -458,6 +458,14 @@ class CycleProblem:
                 n_complex_outside(b.info["cycle"].multipliers)
         return True
 
+    def corrector_state(self) -> Any:
+        """The chord iterations' kept factorisation (restored after a check inside a step
+        that found nothing, :func:`~maglev_match.dynamics.continuation.continuation`)."""
+        return self.chord_lu
+
+    def set_corrector_state(self, state: Any) -> None:
+        self.chord_lu = state
+
     def double_zero_suspect(self, name: str, a: BranchPoint, b: BranchPoint) -> bool:
         """Whether the BP test may have changed sign twice in the step (two branch points
         in one step, e.g. side by side next to a fold): a real nontrivial multiplier within
