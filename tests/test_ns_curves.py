@@ -164,3 +164,18 @@ def test_ns_command_for_a_user_model(tmp_path, capsys):
     assert max(abs(p["gamma"] - p["beta"] ** 2) for p in res["points"]) < 1e-7
     assert max(abs(p["kappa"] - math.cos(math.pi / (1 + p["beta"])))
                for p in res["points"]) < 1e-7
+
+
+def test_ns_curve_with_mesh_adaptation(ns_start):
+    """The mesh adapted every 3 steps (profile, tangent and the complex border remapped,
+    the borders refreshed) keeps the closed form and the quadratic convergence. (The cycle
+    is a circle, so the adapted mesh stays uniform: this exercises the remapping and the
+    refreshed complex borders, not a moved mesh.)"""
+    S, br = ns_start
+    cv = cycle_curve(S, start_from(br, "NS1"), "NS", ("beta", "gamma"),
+                     ranges={"beta": (0.3, 0.9)}, direction=1, adapt_every=3, ds_max=1.0)
+    assert cv.ok and cv.stopped_reason == CurveStop.BOUND and not cv.warnings
+    assert np.max(np.abs(cv.p2 - cv.p1 ** 2)) < 1e-7
+    theta = np.array([c.angle for c in cv.points])
+    assert np.max(np.abs(theta - math.pi / (1.0 + cv.p1))) < 1e-7
+    assert max(c.iterations for c in cv.points[1:]) <= 4
