@@ -58,3 +58,20 @@ def test_branch_points_next_to_a_fold_are_solved(r2):
     assert len(lpc) == 1 and lpc[0].value == pytest.approx(-1.0, abs=1e-9)
     for s in bps:  # the transverse multiplier at +1
         assert np.min(np.abs(np.asarray(s.point.multipliers) - 1.0)) < 1e-6
+
+
+def test_a_branch_point_pinned_at_a_step_end_is_reported_not_solved():
+    """Limit, reported honestly: BPs at mu = -0.999775 and -0.999856 (r^2 = 0.985, 0.988)
+    with a long step ending between them, where the BP test is nearly zero: the first
+    one's zero is pinned at that step's end (mu = -0.99983, its multiplier 7e-6 from +1),
+    and the branch-point system from there converges to the second one, beyond the step.
+    The first is then reported 'not solved' with why (before: 'solved', 5e-5 off); the
+    second is solved."""
+    br, want = _branch(0.985, 0.988)
+    bps = [s for s in br.special_points if s.type == "BP"]
+    assert len(bps) == 2
+    first, second = sorted(bps, key=lambda s: s.value, reverse=True)
+    assert first.located.startswith("not solved") and "beyond the step" in first.located
+    assert first.value == pytest.approx(want[1], abs=1e-4)
+    assert any("BP at mu" in w and "not solved" in w for w in br.warnings)
+    assert second.located == "solved" and second.value == pytest.approx(want[0], abs=1e-8)

@@ -353,17 +353,24 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
         detail, located = "", ev.located
         direct = ""
         confirm = bool(ev.point.info.get("bp_confirm"))
+        polish = False
         if kind == SpecialPointKind.BP and located == SOLVED and not confirm:
             # "solved" with its multiplier still away from +1 (a zero pinned by a small
             # test value at the end of a long step): polished on the branch-point system
             mlt = np.asarray(c.multipliers)
-            confirm = bool(mlt.size and float(np.min(np.abs(mlt - 1.0))) > 1e-7)
-        if kind == SpecialPointKind.BP and (located != SOLVED or confirm):
+            polish = bool(mlt.size and float(np.min(np.abs(mlt - 1.0))) > 1e-7)
+        if kind == SpecialPointKind.BP and (located != SOLVED or confirm or polish):
             # the corrector failed next to the branch point: its own system instead
-            solved = _branch_point_directly(cyc, ev.point, opt)
+            ends = res.points[ev.step:ev.step + 2] if ev.step + 2 <= len(res.points) else []
+            solved = _branch_point_directly(cyc, ev.point, opt, ends)
             if isinstance(solved, str) and confirm:
                 continue  # a weak zero of the test that the system does not confirm
-            if isinstance(solved, str):
+            if isinstance(solved, str) and polish:
+                mlt = np.asarray(c.multipliers)
+                located = (f"not solved: the test's zero was pinned at a trial whose "
+                           f"multiplier is {float(np.min(np.abs(mlt - 1.0))):.1e} from +1; "
+                           f"{solved}")
+            elif isinstance(solved, str):
                 located = f"{located}; {solved}"
             else:
                 c, located = solved, SOLVED
@@ -433,13 +440,15 @@ def _distinct_branch_points(specials: list[SpecialPoint], warnings: list[str], p
     return out
 
 
-def _branch_point_directly(cyc: CycleProblem, pt: BranchPoint, opt: CycleOptions
-                           ) -> CyclePoint | str:
+def _branch_point_directly(cyc: CycleProblem, pt: BranchPoint, opt: CycleOptions,
+                           ends: Sequence[BranchPoint] = ()) -> CyclePoint | str:
     """The branch point near the event's best trial ``pt`` solved on the minimally
     augmented branch-point system (:func:`~maglev_match.dynamics.cycles.bp.
     solve_branch_point`), on that point's mesh; its cycle, or why not (kept only with a
     nontrivial multiplier within 1e-3 of 1, beta within 1e-8 and the parameter within 1 %
-    of its scale of the trial: the branch point that was bracketed)."""
+    of its scale of the trial, and, given the step's ``ends`` on the same mesh, inside the
+    step along its first point's tangent: the branch point that was bracketed, not a
+    neighbour beyond the step)."""
     from maglev_match.dynamics.cycles.bp import solve_branch_point
 
     if cyc.chart_at is not None:
@@ -463,6 +472,15 @@ def _branch_point_directly(cyc: CycleProblem, pt: BranchPoint, opt: CycleOptions
             and abs(sol.beta) <= 1e-8 and abs(lam - pt.value) <= 0.01 * prob.lam_scale):
         return (f"the branch-point system converged to {cyc.prob.system.param_names[prob.ipar]}"
                 f" = {lam:.10g} (beta = {sol.beta:.2e}), not accepted")
+    if len(ends) == 2 and all(np.array_equal(e.correction.data[1], pt.correction.data[1])
+                              for e in ends):
+        a, b = ends
+        W = cyc.weights
+        s_b = float(np.sum(W * a.t * (b.u - a.u)))
+        s_bp = float(np.sum(W * a.t * (sol.Y - a.u)))
+        if not -1e-9 * abs(s_b) <= s_bp <= s_b * (1.0 + 1e-9):
+            return (f"the branch-point system converged to a branch point beyond the step "
+                    f"({cyc.prob.system.param_names[prob.ipar]} = {lam:.10g})")
     return c
 
 
