@@ -9,6 +9,8 @@
 * :func:`pd_system_2p` - the same with ALPHA a parameter: the PD curve nu = ALPHA^2.
 * :func:`bautin_flip_system` - the same fold of cycles with a transverse block whose
   multiplier passes -1 on it: a fold-flip point (LPPD) in closed form.
+* :func:`ns_system` - a Hopf cycle with a transverse oscillator: the Neimark-Sacker curve
+  gamma = beta^2 with its multipliers' angle pi / (1 + beta) in closed form.
 * :data:`BAUTIN_NF` - the radial Bautin normal form r' = r (mu + l1 r^2 - r^4): its fold of
   cycles is the curve l1^2 + 4 mu = 0, l1 > 0.
 * :func:`planar_system` - a planar system (PD and NS impossible).
@@ -220,6 +222,62 @@ def bautin_flip_system() -> System:
                   state_names=("x1", "x2", "u", "v"),
                   observables={"radius": lambda x, p: jnp.sqrt(x[0] ** 2 + x[1] ** 2)},
                   name="Bautin with a flip block")
+
+
+NS_OMEGA = 0.5  # frequency of the transverse oscillator
+NS_ALPHA = 1.1  # damping of the "Moebius" block: its multiplier passes -1 at beta = alpha^2
+NS_SEED = 5
+
+
+def ns_system() -> System:
+    """A planar Hopf cycle with an amplitude-dependent frequency and a transverse
+    oscillator whose Floquet multipliers are known in closed form (a torus, i.e.
+    Neimark-Sacker, curve of cycles) and :func:`pd_system`'s transverse "Moebius" block
+    q = (q1, q2), rotated by a fixed orthogonal 6 x 6 matrix:
+
+        x' = beta x - om y - x r^2,   y' = om x + beta y - y r^2,   om = 1 + r^2,
+        u' = a u - OMEGA w - (u^2 + w^2) u,  w' = OMEGA u + a w - (u^2 + w^2) w,
+        q' = (om / 2) J q - ALPHA q + [[x, y], [y, -x]] q,   a = gamma - r^4,
+        r^2 = x^2 + y^2,   J = [[0, -1], [1, 0]].
+
+    The cycle u = w = q = 0, r^2 = beta (beta > 0) has the period T = 2 pi / (1 + beta).
+    Along it the linearisation is block diagonal (the (u, w) terms are linear in (u, w) with
+    coefficients that depend on r only, and vanish at u = w = 0 with their x-derivatives),
+    the (u, w) block constant: e^{T (a I + OMEGA J)}; the q block as in :func:`pd_system`
+    (the cycle turns at the constant rate om = 1 + beta). Multipliers: 1, exp(-2 beta T)
+    (the planar part), exp((gamma - beta^2) T) e^{+- i OMEGA T} and
+    -exp((-ALPHA +- sqrt(beta)) T). A Neimark-Sacker point where the pair crosses the
+    unit circle: the curve gamma = beta^2, with the multipliers' angle theta = OMEGA T =
+    pi / (1 + beta) (OMEGA = 1/2), kappa = cos theta: R3 (kappa = -1/2, theta = 2 pi / 3)
+    at beta = 1/2, gamma = 1/4; R4 (kappa = 0) at beta = 1, gamma = 1; theta -> pi (R2)
+    only as beta -> 0; a real multiplier passes -1 on it at beta = ALPHA^2 = 1.21
+    (flip-NS, PDNS: gamma = 1.4641). Parameters (beta, gamma)."""
+    R = jnp.asarray(_orthogonal(6, NS_SEED))
+
+    def rhs(x, p):
+        beta, gamma = p[0], p[1]
+        v = R.T @ x
+        r2 = v[0] ** 2 + v[1] ** 2
+        om = 1.0 + r2
+        a = gamma - r2 * r2
+        q2 = v[2] ** 2 + v[3] ** 2
+        dv = jnp.stack([beta * v[0] - om * v[1] - v[0] * r2, om * v[0] + beta * v[1] - v[1] * r2,
+                        a * v[2] - NS_OMEGA * v[3] - q2 * v[2],
+                        NS_OMEGA * v[2] + a * v[3] - q2 * v[3],
+                        -0.5 * om * v[5] - NS_ALPHA * v[4] + v[0] * v[4] + v[1] * v[5],
+                        0.5 * om * v[4] - NS_ALPHA * v[5] + v[1] * v[4] - v[0] * v[5]])
+        return R @ dv
+
+    return System(rhs=rhs, p=np.array([0.0, 0.36]), param_names=("beta", "gamma"),
+                  state_names=("x1", "x2", "x3", "x4", "x5", "x6"),
+                  observables={"radius": lambda x, p: jnp.sqrt(jnp.sum((R.T @ x)[:2] ** 2))},
+                  name="torus (Neimark-Sacker) curve")
+
+
+def ns_plane_vector() -> np.ndarray:
+    """The critical eigenvector of :func:`ns_system`'s Hopf point beta = 0 (frequency 1)."""
+    return np.asarray(_orthogonal(6, NS_SEED)) @ (np.array([1.0, -1.0j, 0, 0, 0, 0])
+                                                  / math.sqrt(2.0))
 
 
 def pd_multipliers(nu: float) -> np.ndarray:

@@ -127,7 +127,7 @@ def test_restart_from_a_saved_branch(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args, words", [
-    (["--kind", "NS"], ["kind", "NS", "LPC, PD"]),
+    (["--kind", "TR"], ["kind", "TR", "LPC, PD, NS"]),
     (["--params", "omega1"], ["--params", "omega1", "P1,P2"]),
     (["--params", "omega1,omega1"], ["--params", "must differ"]),
     (["--range", "sigma=5e-4:3e-4"], ["--range", "low < high"]),

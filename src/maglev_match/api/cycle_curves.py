@@ -1,5 +1,6 @@
 """Curves of cycle bifurcations in two parameters (`maglev-match cycle-curve`): the fold of
-cycles (LPC) or the period doubling (PD) continued in a plane (x, y), for the maglev models
+cycles (LPC), the period doubling (PD) or the Neimark-Sacker (torus) bifurcation (NS)
+continued in a plane (x, y), for the maglev models
 and user model files.
 
 The start is decided here, once: either a branch of cycles along x at the given values
@@ -25,14 +26,14 @@ from maglev_match.core.results import Plottable
 
 __all__ = ["cycle_curve", "CycleCurveStudy"]
 
-KINDS = ("LPC", "PD")
+KINDS = ("LPC", "PD", "NS")
 
 
 @dataclass(frozen=True)
 class CycleCurveStudy(Plottable):
     """A curve of cycle bifurcations and where it started.
 
-    model : 'unit', 'vehicle' or a user model file's name; kind : 'LPC' or 'PD';
+    model : 'unit', 'vehicle' or a user model file's name; kind : 'LPC', 'PD' or 'NS';
     x, y : the plane's parameters (the curve's p1, p2); at : values fixed with them;
     curve : the :class:`~maglev_match.dynamics.cycle_curves.CycleCurve`;
     start_label : the special point it started from; start_branch : the one-parameter
@@ -63,7 +64,8 @@ class CycleCurveStudy(Plottable):
 
     def rows(self) -> list[dict[str, Any]]:
         """One row per curve point: x, y, period, amplitude, extrema, the largest
-        non-critical multiplier, reliability, kind."""
+        non-critical multiplier, reliability, kind; on an NS curve also kappa = cos theta
+        of the critical pair e^{+-i theta}."""
         import numpy as np
 
         out = []
@@ -76,6 +78,8 @@ class CycleCurveStudy(Plottable):
                 if c.multipliers.size else float("nan")
             r["reliable"] = c.reliable
             r["kind"] = c.kind
+            if self.kind == "NS":
+                r["kappa"] = c.kappa
             out.append(r)
         return out
 
@@ -147,15 +151,16 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
                 config: str | Path | None = None,
                 stage: Callable[[str], None] | None = None,
                 **overrides: Any) -> CycleCurveStudy:
-    """The fold of cycles (`kind="LPC"`) or period doubling (`"PD"`) continued in the
-    plane (`x`, `y`) (`maglev-match cycle-curve`), both ways from its start.
+    """The fold of cycles (`kind="LPC"`), period doubling (`"PD"`) or Neimark-Sacker
+    (torus) bifurcation (`"NS"`) of cycles continued in the plane (`x`, `y`)
+    (`maglev-match cycle-curve`), both ways from its start.
 
     Parameters
     ----------
     params : Params | str | None
         The parameter set (see [`resolve_params`][maglev_match.api.inputs.resolve_params]).
     kind : str
-        "LPC" or "PD".
+        "LPC", "PD" or "NS".
     x, y : str
         The curve's parameters: cycles are continued in `x` at the given `y` to locate the
         start, then the curve in (`x`, `y`).
@@ -196,7 +201,8 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
     Returns
     -------
     CycleCurveStudy
-        The curve (points, special points CPC/LPPD/LPNS or LPPD/PDNS, why it stopped, its
+        The curve (points, special points CPC/LPPD/LPNS, LPPD/PDNS or R1-R4/LPNS/PDNS
+        (NS), why it stopped, its
         warnings), its table (`rows`, `special_rows`, `as_json`), `.to_xarray()` and
         `.plot()`. A numerical failure is reported in the curve, not raised.
     """

@@ -1,7 +1,8 @@
-"""`maglev-match cycle-curve`: the fold of cycles (LPC) or the period doubling (PD) continued
-in two parameters, from a special point of a branch of cycles (located here, or read from a
-saved branch). Options parsed here, the computation in :mod:`maglev_match.api.cycle_curves`,
-the answer printed and saved here (table, CSV, netCDF, figure)."""
+"""`maglev-match cycle-curve`: the fold of cycles (LPC), the period doubling (PD) or the
+Neimark-Sacker bifurcation (NS) continued in two parameters, from a special point of a
+branch of cycles (located here, or read from a saved branch). Options parsed here, the
+computation in :mod:`maglev_match.api.cycle_curves`, the answer printed and saved here
+(table, CSV, netCDF, figure)."""
 
 from __future__ import annotations
 
@@ -72,7 +73,8 @@ def _ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
 @app.command("cycle-curve")
 def cycle_curve_command(
     kind: Annotated[str, typer.Option(
-        "--kind", help="LPC (fold of cycles) or PD (period doubling).")] = "LPC",
+        "--kind", help="LPC (fold of cycles), PD (period doubling) or NS (Neimark-Sacker, "
+        "torus).")] = "LPC",
     params_: Annotated[str, typer.Option(
         "--params", help="The curve's two parameters P1,P2: cycles are continued in P1 to "
         "locate the start, then the curve in (P1, P2).")] = "omega1,sigma",
@@ -113,8 +115,9 @@ def cycle_curve_command(
     json_out: JsonOpt = False,
     out: OutOpt = None,
 ) -> None:
-    """The fold of cycles (LPC) or period doubling (PD) continued in two parameters, with
-    its codimension-two points; writes CSV, netCDF and a figure."""
+    """The fold of cycles (LPC), period doubling (PD) or Neimark-Sacker bifurcation (NS)
+    continued in two parameters, with its codimension-two points; writes CSV, netCDF and
+    a figure."""
     check_output_path(out)
     x, y = _pair(params_)
     bounds = _ranges(range_)
@@ -177,11 +180,14 @@ def _print_text(st) -> None:
     rows = st.rows()
     step = max(1, len(rows) // 15)
     shown = rows[::step] + ([rows[-1]] if rows and (len(rows) - 1) % step else [])
-    head = f"  {st.x:>14}  {st.y:>14}  {'T (s)':>10}  {'amplitude':>10}  {'max|mu|':>9}  kind"
+    ns = st.kind == "NS"  # the critical pair's kappa = cos theta as one more column
+    head = f"  {st.x:>14}  {st.y:>14}  {'T (s)':>10}  {'amplitude':>10}  {'max|mu|':>9}  " \
+        + (f"{'kappa':>10}  " if ns else "") + "kind"
     console.print(head, highlight=False, markup=False)
     for r in shown:
         console.print(f"  {r[st.x]:>14.8g}  {r[st.y]:>14.8g}  {r['period']:>10.6g}  "
-                      f"{r['amplitude']:>10.4g}  {r['max_abs_multiplier']:>9.4g}  {r['kind']}",
+                      f"{r['amplitude']:>10.4g}  {r['max_abs_multiplier']:>9.4g}  "
+                      + (f"{r['kappa']:>10.6f}  " if ns else "") + r["kind"],
                       highlight=False, markup=False)
     for s in st.special_rows():
         console.print(f"  {s['label']}: {s['type']} at {st.x} = {s[st.x]:.10g}, {st.y} = "

@@ -334,6 +334,12 @@ class ContinuationProblem(Protocol):
     * ``event_tests(name, point)`` : the test functions at a trial point of the location
       of event ``name`` (at least ``name``'s; default: all of ``test_functions``), so a
       problem may skip read-outs that the location does not need.
+    * ``double_zero_suspect(name, a, b)`` : True when test ``name`` may have changed sign
+      twice inside the step from a to b (same sign at both ends): the driver then checks
+      its sign inside the step (at 1/2, then 1/4 and 3/4 of it) and, where it differs,
+      locates both zeros (one on each side of that trial point); with
+      ``corrector_state()`` / ``set_corrector_state(state)`` the problem's corrector state
+      is restored when the check finds nothing;
     * ``rebase(a, corr)`` : called with the last accepted point and a successful
       correction of the next step; returns None to go on, or the point ``a`` expressed in
       new unknowns (the problem changed its coordinates, e.g. to a chart in which its
@@ -428,6 +434,7 @@ def continuation(
     admissible = _hook(problem, "admissible", lambda a, u, s: True)
     after_accept = _hook(problem, "after_accept", lambda pt: pt)
     worth = _hook(problem, "worth_locating", lambda name, a, b: True)
+    suspect = _hook(problem, "double_zero_suspect", lambda name, a, b: False)
     stop_hook = _hook(problem, "stop", lambda pt: None)
     rebase = getattr(problem, "rebase", None)
     t0 = np.asarray(t0, float) / math.sqrt(float(np.sum(W * t0 * t0)))
@@ -494,6 +501,11 @@ def continuation(
         found: list[Event] = []
         for name, gb in b.tests.items():
             ga = a.tests.get(name, np.nan)
+            if np.isfinite(ga) and np.isfinite(gb) and ga * gb > 0 and suspect(name, a, b):
+                # two sign changes inside the step? The test at trial points inside it
+                found.extend(_two_zeros(problem, name, a, b, s, correct_at, make_point, opt,
+                                        classify, terminal, step - 1))
+                continue
             if not (np.isfinite(ga) and np.isfinite(gb)) or ga == 0 or ga * gb > 0:
                 continue
             if not worth(name, a, b):
@@ -560,6 +572,47 @@ def _inside_step(u: np.ndarray, ua: np.ndarray, ub: np.ndarray, W: np.ndarray) -
 
     chord = dist(ua, ub)
     return dist(u, ua) <= 1.2 * chord and dist(u, ub) <= 1.2 * chord
+
+
+def _two_zeros(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correct_at,
+               make_point, opt: ContinuationOptions, classify, terminal, step: int
+               ) -> list[Event]:
+    """Test ``name`` has the same sign at both ends of the step: its sign at 1/2, then 1/4
+    and 3/4 of the step; at the first trial point where it differs, both zeros are located
+    (one on each side of it, :func:`_locate` from a to it and from it to b). No event
+    otherwise."""
+    ga = a.tests[name]
+    # the problem's corrector state (e.g. a kept factorisation) is restored when the check
+    # finds nothing, so that the branch goes on exactly as without it
+    get_state = getattr(problem, "corrector_state", None)
+    state = get_state() if get_state is not None else None
+    for frac in (0.5, 0.25, 0.75):
+        sm = frac * s_step
+        corr = correct_at(a, sm)
+        if corr is None or not _inside_step(corr.u, a.u, b.u, np.asarray(problem.weights)):
+            continue
+        mid = make_point(corr, a.t, event=name)
+        gm = mid.tests.get(name, np.nan)
+        if not np.isfinite(gm) or gm * ga > 0:
+            continue
+        out = []
+        if gm != 0.0:  # the near zero, from a; the far one from the trial point (whose
+            # tangent predicts the rest of the step better than a's)
+            ev = _locate(problem, name, a, mid, sm, correct_at, make_point, opt, classify,
+                         terminal, step)
+            if ev is not None:
+                out.append(ev)
+        W = np.asarray(problem.weights, float)
+        s_b = float(np.sum(W * mid.t * (b.u - mid.u)))
+        if gm != 0.0 and s_b > 0:
+            ev = _locate(problem, name, mid, b, s_b, correct_at, make_point, opt, classify,
+                         terminal, step)
+            if ev is not None:
+                out.append(dataclasses.replace(ev, s=sm + ev.s))
+        return out
+    if get_state is not None:
+        problem.set_corrector_state(state)
+    return []
 
 
 def _locate(problem, name, a: BranchPoint, b: BranchPoint, s_step: float, correct_at,

@@ -1,5 +1,6 @@
-"""Curves of cycle bifurcations in two parameters: the fold of cycles (LPC) and the period
-doubling (PD), continued from a located special point of a one-parameter cycle branch.
+"""Curves of cycle bifurcations in two parameters: the fold of cycles (LPC), the period
+doubling (PD) and the Neimark-Sacker (torus, NS) bifurcation, continued from a located
+special point of a one-parameter cycle branch.
 
 Method (and why). The curve is the solution set of a *minimally augmented* collocation
 system (:mod:`~maglev_match.dynamics.cycle_curves.augmented`): the cycle's own collocation,
@@ -16,10 +17,12 @@ the bordered matrix follow the singular vectors of the previous point, which kee
 conditioned along the curve.
 
 * :mod:`~maglev_match.dynamics.cycle_curves.augmented`: the augmented system and g;
+* :mod:`~maglev_match.dynamics.cycle_curves.ns`: the NS system (a complex test function
+  of the multiplier e^{i theta}, theta one more unknown);
 * :mod:`~maglev_match.dynamics.cycle_curves.curve`: the driver :func:`cycle_curve`
   (pseudo-arclength in (p1, p2), Newton, step control, mesh adaptation, the multipliers);
 * :mod:`~maglev_match.dynamics.cycle_curves.codim2`: codimension-two points on the curve
-  (CPC, LPPD, LPNS on LPC; LPPD, PDNS on PD);
+  (CPC, LPPD, LPNS on LPC; LPPD, PDNS on PD; R1-R4, LPNS, PDNS on NS);
 * :mod:`~maglev_match.dynamics.cycle_curves.gh`: the LPC curve born at a generalised Hopf
   point of a Hopf curve (branch switching, :func:`lpc_from_generalised_hopf`);
 * :mod:`~maglev_match.dynamics.cycle_curves.results`: :class:`CycleCurve`,
@@ -33,6 +36,7 @@ from maglev_match.dynamics.cycle_curves.augmented import AugmentedCycleSystem, C
 from maglev_match.dynamics.cycle_curves.codim2 import codim2_tests, detect_codim2
 from maglev_match.dynamics.cycle_curves.curve import cycle_curve, start_from
 from maglev_match.dynamics.cycle_curves.gh import lpc_from_generalised_hopf
+from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
 
 __all__ = [
@@ -41,6 +45,7 @@ __all__ = [
     "CurveStop",
     "CycleCurve",
     "CycleCurvePoint",
+    "NSCycleSystem",
     "codim2_tests",
     "cycle_curve",
     "detect_codim2",

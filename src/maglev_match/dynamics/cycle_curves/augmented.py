@@ -1,5 +1,6 @@
 """The minimally augmented collocation systems of a fold of cycles (LPC) and of a period
-doubling (PD) in two parameters, with their exact Jacobians.
+doubling (PD) in two parameters, with their exact Jacobians (the Neimark-Sacker system,
+which adds the angle theta as an unknown, is :mod:`~maglev_match.dynamics.cycle_curves.ns`).
 
 Unknowns (scaled as in :class:`~maglev_match.dynamics.collocation.CollocationProblem`):
 z = (U_0, ..., U_{N-1}, T, p1, p2). Equations: the collocation rows, periodicity and the
@@ -59,6 +60,7 @@ class CurveKind(StrEnum):
 
     LPC = "LPC"  # fold of cycles: a double multiplier +1
     PD = "PD"  # period doubling: a multiplier -1
+    NS = "NS"  # Neimark-Sacker (torus): a complex pair e^{+-i theta} (ns.py)
 
 
 @cache
@@ -112,12 +114,26 @@ class AugmentedCycleSystem:
     def size(self) -> int:
         return self.prob.size + 1
 
+    @property
+    def i_p1(self) -> int:
+        """Index of p1 in z."""
+        return self.prob.size - 1
+
+    @property
+    def i_p2(self) -> int:
+        """Index of p2 in z (the last unknown here; the NS system has one more)."""
+        return self.prob.size
+
+    def angle(self, z: np.ndarray) -> float:
+        """The angle theta of the critical multipliers e^{+-i theta} (NS only; nan)."""
+        return float("nan")
+
     def border_size(self) -> int:
         p = self.prob
         return p.N * p.n + 1 if self.kind == CurveKind.LPC else p.N * p.n
 
     def split(self, z: np.ndarray) -> tuple[np.ndarray, float]:
-        return z[:-1], float(z[-1] * self.scale2)
+        return z[:self.i_p2], float(z[self.i_p2] * self.scale2)
 
     def join(self, Y: np.ndarray, p2: float) -> np.ndarray:
         return np.append(Y, p2 / self.scale2)
@@ -229,6 +245,14 @@ class AugmentedCycleSystem:
 
     def _g_gradient(self, Y: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
         """g_z = -w^T (A_z v) in the scaled unknowns z."""
+        vT = float(v[self.prob.N * self.prob.n]) if self.kind == CurveKind.LPC else 0.0
+        return -self._bilinear_gradient(Y, v, vT, w)
+
+    def _bilinear_gradient(self, Y: np.ndarray, v: np.ndarray, vT: float, w: np.ndarray
+                           ) -> np.ndarray:
+        """w^T (C_z v), C the scaled collocation rows, over z = (Y, p2) (scaled); ``v``
+        the profile part of a (scaled) vector, ``vT`` its scaled period part, ``w`` the
+        collocation-row part of a left vector (real arrays)."""
         prob = self.prob
         ntst, m, n, N = prob.mesh.size - 1, prob.m, prob.n, prob.N
         U, T, p1 = prob.unpack(Y)
@@ -236,7 +260,7 @@ class AugmentedCycleSystem:
         sc = prob.scale
         idx = interval_nodes(ntst, m)
         Vs = v[:N * n].reshape(N, n) * sc
-        vT = float(v[N * n]) * prob.T_scale if self.kind == CurveKind.LPC else 0.0
+        vT = vT * prob.T_scale
         Wc = w[:ntst * m * n].reshape(ntst, m, n)
         gU, gT, gp = _gradient_kernel(prob.system.rhs, m)(
             U[idx], T, p, Vs[idx], vT, Wc, np.diff(prob.mesh), sc)
@@ -246,4 +270,4 @@ class AugmentedCycleSystem:
         out = np.concatenate([(gradU * sc).ravel(), [float(gT) * prob.T_scale,
                                                       gp[prob.ipar] * prob.lam_scale,
                                                       gp[self.ipar2] * self.scale2]])
-        return -out
+        return out

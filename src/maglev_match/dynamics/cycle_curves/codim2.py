@@ -1,8 +1,9 @@
 """Codimension-two points on a curve of cycle bifurcations, with AUTO / MatCont labels.
 
 Test functions, evaluated at every point of the curve whose Floquet data are reliable
-(|trivial multiplier - 1| within tolerance); a point is reported only where the test
-changes sign between two consecutive reliable points. The critical multiplier of the curve
+(|trivial multiplier - 1| within tolerance; the NS curve's angle tests at every point); a
+point is reported only where the test changes sign between two consecutive points where
+it is evaluated. The critical multiplier of the curve
 (the second +1 on an LPC curve, the -1 on a PD curve) is removed from the nontrivial
 multipliers first; the remaining ones, mu_i, give (Kuznetsov 2004, sec. 10.3.2; the
 products of :func:`~maglev_match.dynamics.cycles.multiplier_tests`, not their geometric
@@ -18,6 +19,14 @@ means, so that they are smooth where they vanish):
   in the parameter plane (a cusp);
 * on PD: LPPD, prod (mu_i - 1) / (1 + |mu_i|) (a second multiplier at +1); PDNS, the NS
   test above on the remaining multipliers.
+* on NS (the critical pair e^{+-i theta} removed, theta an unknown of the augmented system,
+  :mod:`~maglev_match.dynamics.cycle_curves.ns`, kappa = cos theta): the strong resonances
+  R3, kappa + 1/2 (theta = 2 pi / 3), and R4, kappa (theta = pi / 2); R2, cos(theta / 2),
+  and R1, sin(theta / 2), which change sign where theta passes pi or 0, where kappa + 1 and
+  kappa - 1 touch zero (the NS system's theta is not confined to (0, pi)); these four read
+  the solved angle, so they are evaluated at every point; LPNS (fold-NS), prod (mu_i - 1) /
+  (1 + |mu_i|), and PDNS (flip-NS), prod (mu_i + 1) / (1 + |mu_i|), of the remaining
+  multipliers, only where the Floquet data are reliable.
 
 The driver solves the multiplier points on the curve (``located`` "solved"); where it
 cannot, and for CPC, the point stays bracketed: the linear interpolation of the test
@@ -37,11 +46,15 @@ from maglev_match.dynamics.cycle_curves.augmented import CurveKind
 __all__ = ["detect_codim2", "codim2_rest", "codim2_tests", "torus_pair"]
 
 
-def codim2_tests(kind: str, mult: np.ndarray) -> dict[str, float]:
-    """The multiplier test functions of the module docstring at one point (nontrivial
-    multipliers ``mult``, the critical one still among them). Plain products (smooth along
-    the curve, so their zeros are solved by secant iterations)."""
+def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan")
+                 ) -> dict[str, float]:
+    """The test functions of the module docstring at one point (nontrivial multipliers
+    ``mult``, the critical one still among them, empty where unreliable; ``angle`` theta of
+    an NS curve's point). Plain products (smooth along the curve, so their zeros are
+    solved by secant iterations)."""
     mult = np.asarray(mult, complex)
+    if CurveKind(kind) == CurveKind.NS:
+        return _ns_tests(mult, angle)
     if mult.size == 0:
         return {}
     rest = codim2_rest(kind, mult)
@@ -66,9 +79,27 @@ def torus_pair(mult: np.ndarray, tol: float) -> bool:
     return bool(cplx.size and np.min(np.abs(np.abs(cplx) - 1.0)) <= tol)
 
 
-def codim2_rest(kind: str, mult: np.ndarray) -> np.ndarray:
+def _ns_tests(mult: np.ndarray, angle: float) -> dict[str, float]:
+    out = {}
+    if np.isfinite(angle):
+        kappa = float(np.cos(angle))
+        out = {"R1": float(np.sin(angle / 2.0)), "R2": float(np.cos(angle / 2.0)),
+               "R3": kappa + 0.5, "R4": kappa}
+    if mult.size >= 2 and np.isfinite(angle):
+        rest = codim2_rest(CurveKind.NS, mult, angle)
+        if rest.size:
+            out["LPNS"] = float(np.real(np.prod((rest - 1.0) / (1.0 + np.abs(rest)))))
+            out["PDNS"] = float(np.real(np.prod((rest + 1.0) / (1.0 + np.abs(rest)))))
+    return out
+
+
+def codim2_rest(kind: str, mult: np.ndarray, angle: float = float("nan")) -> np.ndarray:
     """The nontrivial multipliers without the curve's critical one (+1 on LPC, -1 on
-    PD)."""
+    PD; on NS the pair nearest e^{+-i angle})."""
+    if CurveKind(kind) == CurveKind.NS:
+        e = complex(np.exp(1j * angle))
+        rest = np.delete(mult, int(np.argmin(np.abs(mult - e))))
+        return np.delete(rest, int(np.argmin(np.abs(rest - e.conjugate()))))
     crit = 1.0 if CurveKind(kind) == CurveKind.LPC else -1.0
     return np.delete(mult, int(np.argmin(np.abs(mult - crit))))
 
@@ -77,18 +108,19 @@ def detect_codim2(kind: str, points: Sequence, params: tuple[str, str]
                   ) -> list[SpecialPoint]:
     """The codimension-two points between consecutive reliable points of a curve."""
     out: list[SpecialPoint] = []
-    rel = [(k, c) for k, c in enumerate(points) if c.reliable]
-    tests = {k: codim2_tests(kind, c.multipliers) for k, c in rel}
-    for (ka, a), (kb, b) in zip(rel, rel[1:], strict=False):
-        if kb != ka + 1:
-            continue
-        ta, tb = tests[ka], tests[kb]
+    ns = CurveKind(kind) == CurveKind.NS
+    # unreliable points carry no multipliers: only the NS curve's angle tests remain there
+    tests = [codim2_tests(kind, c.multipliers if c.reliable else np.zeros(0, complex),
+                          getattr(c, "angle", np.nan)) for c in points]
+    for ka in range(len(points) - 1):
+        a, b = points[ka], points[ka + 1]
+        ta, tb = tests[ka], tests[ka + 1]
         for name in ta:
             fa, fb = ta.get(name, np.nan), tb.get(name, np.nan)
             if not (np.isfinite(fa) and np.isfinite(fb)) or fa * fb >= 0:
                 continue
             near = a if abs(fa) <= abs(fb) else b
-            if name in ("LPNS", "PDNS") and not torus_pair(codim2_rest(
+            if not ns and name in ("LPNS", "PDNS") and not torus_pair(codim2_rest(
                     kind, near.multipliers), 0.1):
                 continue
             f = fa / (fa - fb)

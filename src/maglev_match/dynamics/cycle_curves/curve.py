@@ -33,9 +33,10 @@ from maglev_match.dynamics.cycle_curves.codim2 import (
     detect_codim2,
     torus_pair,
 )
+from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem, critical_angle
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit, orbit_extrema
-from maglev_match.dynamics.cycles.stability import split_trivial
+from maglev_match.dynamics.cycles.stability import floquet_multipliers, split_trivial
 from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 from maglev_match.dynamics.system import System
 
@@ -118,7 +119,9 @@ def cycle_curve(
     detect: bool = True,
     marks: Sequence[float] = (),
 ) -> CycleCurve:
-    """Continue a fold (``kind="LPC"``) or period doubling (``"PD"``) of cycles in the two
+    """Continue a fold (``kind="LPC"``), period doubling (``"PD"``) or Neimark-Sacker
+    bifurcation (``"NS"``; the start angle theta from the orbit's complex pair of
+    multipliers nearest the unit circle) of cycles in the two
     parameters ``params`` = (p1, p2), from a cycle ``orbit`` at (or near) the bifurcation
     (e.g. the solved cycle of a special point of a one-parameter branch,
     ``SpecialPoint.point.orbit``; its mesh and NCOL are kept).
@@ -165,7 +168,13 @@ def cycle_curve(
     prob = CollocationProblem(system=system, ipar=i1, p0=p.copy(), mesh=np.array(orbit.mesh),
                               m=orbit.ncol, scale=np.asarray(system.state_scale, float),
                               T_scale=float(orbit.period), lam_scale=s1)
-    aug = AugmentedCycleSystem(prob, i2, s2, kind)
+    theta0 = None
+    if kind == CurveKind.NS:  # the start angle: the pair of the start orbit's multipliers
+        theta0 = critical_angle(floquet_multipliers(system, orbit))
+        aug: AugmentedCycleSystem = NSCycleSystem(
+            prob, i2, s2, math.nan if theta0 is None else theta0)
+    else:
+        aug = AugmentedCycleSystem(prob, i2, s2, kind)
     W = aug.weights()
     newton = _Newton(aug, tol, max_newton)
     bounds = {}
@@ -173,13 +182,13 @@ def cycle_curve(
         if name not in params:
             raise ValueError(f"ranges: {name!r} is not one of the curve's parameters "
                              f"{params!r}")
-        bounds[aug.size - 2 if name == p1n else aug.size - 1] = (float(lo), float(hi))
+        bounds[aug.i_p1 if name == p1n else aug.i_p2] = (float(lo), float(hi))
     warnings: list[str] = []
     stats = {"iterations": 0, "rejected": 0}
 
     def make_point(z, ev: Evaluation, its, res, kind_="step") -> CycleCurvePoint:
         U, T, v1, v2 = aug.unpack(z)
-        J, Tb, h = prob.jacobian_blocks(z[:-1])
+        J, Tb, h = prob.jacobian_blocks(aug.split(z)[0])
         mult = floquet_multipliers_from_blocks(
             J, Tb, h, prob.m, method=getattr(system, "floquet_method", "auto"))
         triv, rest = split_trivial(mult)
@@ -191,7 +200,8 @@ def cycle_curve(
                                multipliers=rest if reliable else np.zeros(0, complex),
                                trivial_multiplier=triv, reliable=reliable, test=ev.g,
                                iterations=its, residual=res,
-                               extrema=orbit_extrema(system, orb, names), kind=kind_)
+                               extrema=orbit_extrema(system, orb, names), kind=kind_,
+                               angle=aug.angle(z))
 
     states: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (z, t, mesh) per point
 
@@ -208,11 +218,15 @@ def cycle_curve(
                           newton_iterations=stats["iterations"])
 
     # --- the start: correct onto the curve at fixed p2
+    if kind == CurveKind.NS and theta0 is None:
+        warnings.append(f"the start at {p2n} = {p[i2]:.10g} has no complex pair of "
+                        "Floquet multipliers: it is not at a Neimark-Sacker point")
+        return finish([], CurveStop.START_FAILED)
     z = aug.join(prob.pack(orbit.states, orbit.period, p[i1]), p[i2])
     aug.init_borders(z)
     e2 = np.zeros(aug.size)
-    e2[-1] = 1.0
-    out = newton(z, e2, float(z[-1]), orbit.states)
+    e2[aug.i_p2] = 1.0
+    out = newton(z, e2, float(z[aug.i_p2]), orbit.states)
     if out is None:
         warnings.append(f"the start at {p2n} = {p[i2]:.10g} could not be corrected onto the "
                         f"{kind} curve (Newton's method failed): is the orbit at a {kind}?")
@@ -253,13 +267,13 @@ def cycle_curve(
         if hit is not None:
             idx, bound = hit
             frac = (bound / _sc(aug, idx) - z[idx]) / (z_new[idx] - z[idx])
-        z2, dz2 = float(z[-1]), float(z_new[-1] - z[-1])
+        z2, dz2 = float(z[aug.i_p2]), float(z_new[aug.i_p2] - z[aug.i_p2])
         inside = _marks_inside(marks, z2 * aug.scale2, (z2 + frac * dz2) * aug.scale2) \
             if dz2 else []
         for mark in inside:
             fm = (mark / aug.scale2 - z2) / dz2
             e = np.zeros(aug.size)
-            e[-1] = 1.0
+            e[aug.i_p2] = 1.0
             om = newton(z + fm * (z_new - z), e, mark / aug.scale2, U_prev)
             if om is None:
                 warnings.append(f"the point at {p2n} = {mark:.10g} (a value asked for) "
@@ -320,13 +334,14 @@ def _both_ways(system, orbit, kind, params, **kw) -> CycleCurve:
 
 def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: Callable,
            W: np.ndarray, tol: float) -> Any:
-    """Solve a bracketed codimension-two point of the multiplier tests on the curve: the
+    """Solve a bracketed codimension-two point of the multiplier (and NS angle) tests on the
+    curve (R1, a singular point of the NS system, stays bracketed): the
     zero of its test function along the step from point k (Illinois iterations on the
     arclength, each a point corrected onto the curve). Points of other kinds, and steps
     over which the mesh was adapted, stay bracketed; None for an NS zero that turns out to
     be a neutral saddle (no complex pair on the unit circle there)."""
     k = sp.step
-    if sp.type not in ("LPPD", "LPNS", "PDNS") or k + 1 >= len(states):
+    if sp.type not in ("LPPD", "LPNS", "PDNS", "R2", "R3", "R4") or k + 1 >= len(states):
         return sp
     (za, ta, mesh_a), (zb, _, mesh_b) = states[k], states[k + 1]
     if not np.array_equal(mesh_a, mesh_b):
@@ -343,7 +358,9 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
         if out is None:
             return None, np.nan
         pt = make_point(out[0], out[1], out[3], out[4], sp.type)
-        return pt, codim2_tests(aug.kind, pt.multipliers).get(sp.type, np.nan) \
+        if sp.type in ("R2", "R3", "R4"):  # the solved angle, reliable or not
+            return pt, codim2_tests(aug.kind, np.zeros(0, complex), pt.angle)[sp.type]
+        return pt, codim2_tests(aug.kind, pt.multipliers, pt.angle).get(sp.type, np.nan) \
             if pt.reliable else np.nan
 
     lo, hi = 0.0, float(row @ (zb - za))
@@ -365,7 +382,7 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
             break
     else:
         return sp
-    if sp.type in ("LPNS", "PDNS") and not torus_pair(
+    if aug.kind != CurveKind.NS and sp.type in ("LPNS", "PDNS") and not torus_pair(
             codim2_rest(aug.kind, best.multipliers), 1e-4):
         return None  # a neutral saddle, no torus bifurcation
     return dataclasses.replace(sp, value=best.values[0], values=best.values, located="solved",
@@ -380,7 +397,7 @@ def _marks_inside(marks: Sequence[float], a: float, b: float) -> list[float]:
 
 
 def _sc(aug: AugmentedCycleSystem, idx: int) -> float:
-    return aug.scale2 if idx == aug.size - 1 else aug.prob.lam_scale
+    return aug.scale2 if idx == aug.i_p2 else aug.prob.lam_scale
 
 
 def _crossed(bounds, z, z_new, aug) -> tuple[int, float] | None:
@@ -398,7 +415,7 @@ def _adapt(aug: AugmentedCycleSystem, z: np.ndarray, t: np.ndarray, W: np.ndarra
     remapped, the borders refreshed."""
     prob = aug.prob
     U, T, v1, v2 = aug.unpack(z)
-    Y_t = t[:-1]
+    Y_t = t[:aug.i_p2]
     Ut, Tt, lt = prob.unpack(Y_t)
     old = prob.mesh
     new = adapt_mesh(old, prob.m, U, prob.scale)
@@ -406,10 +423,12 @@ def _adapt(aug: AugmentedCycleSystem, z: np.ndarray, t: np.ndarray, W: np.ndarra
     Ut2 = remesh(old, prob.m, Ut, new)
     N, n = prob.N, prob.n
     c = aug.c
-    cU = remesh(old, prob.m, c[:N * n].reshape(N, n), new).ravel()
+    cU = remesh(old, prob.m, c[:N * n].real.reshape(N, n), new).ravel()
+    if np.iscomplexobj(c):  # the NS border
+        cU = cU + 1j * remesh(old, prob.m, c[:N * n].imag.reshape(N, n), new).ravel()
     prob.mesh = new
-    z2 = aug.join(prob.pack(U2, T, v1), v2)
-    t2 = np.append(prob.pack(Ut2, Tt, lt), t[-1])
+    z2 = np.concatenate([prob.pack(U2, T, v1), z[aug.i_p2:]])  # p2 (and theta) unchanged
+    t2 = np.concatenate([prob.pack(Ut2, Tt, lt), t[aug.i_p2:]])
     t2 /= math.sqrt(float(np.sum(W * t2 * t2)))
     aug.init_borders(z2, np.concatenate([cU, c[N * n:]]))
     return z2, t2

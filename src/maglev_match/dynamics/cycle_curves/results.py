@@ -40,7 +40,10 @@ class CycleCurvePoint:
     second one lies at 1, the critical one), reported only where ``reliable`` (|trivial -
     1| <= trivial_tol), else empty; ``test`` the value of the bordered test function g at
     the last Newton iterate (0 to the tolerance);
-    ``residual`` the largest residual there."""
+    ``residual`` the largest residual there; ``angle`` (NS curves only, else nan) the
+    angle theta (rad) of the critical multipliers e^{+-i theta}, an unknown of the
+    augmented system (``kappa`` = cos theta), where ``test`` is |g| of the complex test
+    function."""
 
     __repr__ = compact_repr
 
@@ -56,6 +59,12 @@ class CycleCurvePoint:
     residual: float
     extrema: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     kind: str = "step"
+    angle: float = float("nan")
+
+    @property
+    def kappa(self) -> float:
+        """cos theta of the critical pair e^{+-i theta} on an NS curve (nan on others)."""
+        return float(np.cos(self.angle))
 
 
 @dataclass(frozen=True)
@@ -143,6 +152,9 @@ def curve_to_xarray(curve: CycleCurve, units: Mapping[str, str] | None = None) -
         "kind": (("point",), np.array([c.kind for c in pts], object), {"units": "1",
                  "long_name": "kind of point (start, step, bound)"}),
     }
+    if curve.kind == "NS":
+        data["kappa"] = (("point",), np.array([c.kappa for c in pts]), {"units": "1",
+                         "long_name": "cos theta of the critical multipliers e^(+-i theta)"})
     names = sorted({n for c in pts for n in c.extrema})
     for n in names:
         for j, w in ((0, "max"), (1, "min")):

@@ -351,6 +351,31 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
             continue
         c = ev.point.info["cycle"]
         detail, located = "", ev.located
+        direct = ""
+        confirm = bool(ev.point.info.get("bp_confirm"))
+        polish = False
+        if kind == SpecialPointKind.BP and located == SOLVED and not confirm:
+            # "solved" with its multiplier still away from +1 (a zero pinned by a small
+            # test value at the end of a long step): polished on the branch-point system
+            mlt = np.asarray(c.multipliers)
+            polish = bool(mlt.size and float(np.min(np.abs(mlt - 1.0))) > 1e-7)
+        if kind == SpecialPointKind.BP and (located != SOLVED or confirm or polish):
+            # the corrector failed next to the branch point: its own system instead
+            ends = res.points[ev.step:ev.step + 2] if ev.step + 2 <= len(res.points) else []
+            solved = _branch_point_directly(cyc, ev.point, opt, ends)
+            if isinstance(solved, str) and confirm:
+                continue  # a weak zero of the test that the system does not confirm
+            if isinstance(solved, str) and polish:
+                mlt = np.asarray(c.multipliers)
+                located = (f"not solved: the test's zero was pinned at a trial whose "
+                           f"multiplier is {float(np.min(np.abs(mlt - 1.0))):.1e} from +1; "
+                           f"{solved}")
+            elif isinstance(solved, str):
+                located = f"{located}; {solved}"
+            else:
+                c, located = solved, SOLVED
+                direct = "; solved on the branch-point system (the corrector failed inside " \
+                    "the step)"
         if kind == SpecialPointKind.CONTACT:
             mg_c, lname = limit_margin(limits, prob.system, ev.point.info["orbit_here"])
             detail = lname
@@ -376,13 +401,13 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
                     k = int(np.argmin(np.abs(np.abs(mult) - 1.0) + (np.abs(mult.imag) < 1e-9)))
                 else:
                     k = int(np.argmin(np.abs(mult - target)))
-                detail = f"multiplier {mult[k].real:.6g}{mult[k].imag:+.6g}j"
+                detail = f"multiplier {mult[k].real:.6g}{mult[k].imag:+.6g}j" + direct
             if located != SOLVED:
                 warnings.append(f"{kind} at {param} = {c.value:.8g}: {located}")
         specials.append(SpecialPoint(type=kind, value=c.value, period=c.period,
                                      extrema=c.extrema, step=ev.step - 1, located=located,
                                      detail=detail, point=c))
-    specials = label_points(specials)
+    specials = label_points(_distinct_branch_points(specials, warnings, param))
     if cyc.chart_at is not None:
         warnings_note = (f"continued in the system's regular chart from {param} = "
                          f"{cyc.chart_at:.8g} on (an orbit came near the set where the "
@@ -397,6 +422,66 @@ def _assemble(cyc: CycleProblem, res: Any, start: HopfStart, param: str,
                        newton_iterations=cyc.stats.iterations,
                        factorizations=cyc.stats.factorizations, message=message,
                        chart_from=cyc.chart_at)
+
+
+def _distinct_branch_points(specials: list[SpecialPoint], warnings: list[str], param: str
+                            ) -> list[SpecialPoint]:
+    """One report per branch point: two events solved onto the same point (1e-9 relative)
+    keep the first, with a warning."""
+    out: list[SpecialPoint] = []
+    for sp in specials:
+        same = [o for o in out if o.type == sp.type == SpecialPointKind.BP
+                and abs(o.value - sp.value) <= 1e-9 * max(1.0, abs(sp.value))]
+        if same:
+            warnings.append(f"two sign changes of the BP test were solved onto the same branch "
+                            f"point ({param} = {sp.value:.10g}): reported once")
+            continue
+        out.append(sp)
+    return out
+
+
+def _branch_point_directly(cyc: CycleProblem, pt: BranchPoint, opt: CycleOptions,
+                           ends: Sequence[BranchPoint] = ()) -> CyclePoint | str:
+    """The branch point near the event's best trial ``pt`` solved on the minimally
+    augmented branch-point system (:func:`~maglev_match.dynamics.cycles.bp.
+    solve_branch_point`), on that point's mesh; its cycle, or why not (kept only with a
+    nontrivial multiplier within 1e-3 of 1, beta within 1e-8 and the parameter within 1 %
+    of its scale of the trial, and, given the step's ``ends`` on the same mesh, inside the
+    step along its first point's tangent: the branch point that was bracketed, not a
+    neighbour beyond the step)."""
+    from maglev_match.dynamics.cycles.bp import solve_branch_point
+
+    if cyc.chart_at is not None:
+        return "not solved on the branch-point system (the branch changed coordinates)"
+    prob = cyc.prob
+    mesh_now = prob.mesh
+    prob.mesh = np.array(pt.correction.data[1], float)
+    try:
+        sol = solve_branch_point(prob, pt.u, tol=opt.tol, max_iter=opt.max_newton + 4)
+        if not sol.converged:
+            return f"the branch-point system did not converge either ({sol.message})"
+        lam = float(prob.unpack(sol.Y)[2])
+        corr = Correction(u=sol.Y, iterations=sol.iterations, residual=sol.residual,
+                          solve=pt.correction.solve, data=(None, prob.mesh.copy(), None, None))
+        c = cyc.cycle_point(BranchPoint(u=sol.Y, t=np.zeros_like(sol.Y), value=lam,
+                                        correction=corr), kind="BP")
+    finally:
+        prob.mesh = mesh_now
+    mult = np.asarray(c.multipliers)
+    if not (c.reliable and mult.size and float(np.min(np.abs(mult - 1.0))) <= 1e-3
+            and abs(sol.beta) <= 1e-8 and abs(lam - pt.value) <= 0.01 * prob.lam_scale):
+        return (f"the branch-point system converged to {cyc.prob.system.param_names[prob.ipar]}"
+                f" = {lam:.10g} (beta = {sol.beta:.2e}), not accepted")
+    if len(ends) == 2 and all(np.array_equal(e.correction.data[1], pt.correction.data[1])
+                              for e in ends):
+        a, b = ends
+        W = cyc.weights
+        s_b = float(np.sum(W * a.t * (b.u - a.u)))
+        s_bp = float(np.sum(W * a.t * (sol.Y - a.u)))
+        if not -1e-9 * abs(s_b) <= s_bp <= s_b * (1.0 + 1e-9):
+            return (f"the branch-point system converged to a branch point beyond the step "
+                    f"({cyc.prob.system.param_names[prob.ipar]} = {lam:.10g})")
+    return c
 
 
 #: A contact whose margin is within this of zero is reported solved (the location runs to

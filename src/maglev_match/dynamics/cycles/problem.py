@@ -110,6 +110,11 @@ class _TangentMemo:
         return self._solve(b)
 
 
+#: A step whose ends both have a real nontrivial multiplier within this of +1 (on the same
+#: side) is checked inside for two branch points (:meth:`CycleProblem.double_zero_suspect`).
+BP_SUSPECT = 1e-2
+
+
 class CycleProblem:
     """The collocation BVP of periodic orbits in one parameter as a problem for
     :func:`~maglev_match.dynamics.continuation.continuation`: corrector (Newton on the
@@ -453,6 +458,36 @@ class CycleProblem:
                 n_complex_outside(b.info["cycle"].multipliers)
         return True
 
+    def corrector_state(self) -> Any:
+        """The chord iterations' kept factorisation (restored after a check inside a step
+        that found nothing, :func:`~maglev_match.dynamics.continuation.continuation`)."""
+        return self.chord_lu
+
+    def set_corrector_state(self, state: Any) -> None:
+        self.chord_lu = state
+
+    def double_zero_suspect(self, name: str, a: BranchPoint, b: BranchPoint) -> bool:
+        """Whether the BP test may have changed sign twice in the step (two branch points
+        in one step, e.g. side by side next to a fold): a real nontrivial multiplier within
+        :data:`BP_SUSPECT` of +1 at both ends (reliable), on the same side of it; the
+        driver then checks the test's sign inside the step (1 to 3 more corrections)."""
+        if name != "BP":
+            return False
+        side = []
+        for pt in (a, b):
+            c = pt.info.get("cycle")
+            if c is None or not c.reliable or pt.info.get("lazy"):
+                return False
+            mult = np.asarray(c.multipliers, complex)
+            real = mult[np.abs(mult.imag) <= 1e-9 * np.maximum(1.0, np.abs(mult))].real
+            if real.size == 0:
+                return False
+            d = real[int(np.argmin(np.abs(real - 1.0)))] - 1.0
+            if abs(d) > BP_SUSPECT:
+                return False
+            side.append(d > 0)
+        return side[0] == side[1]
+
     def classify(self, name: str, pt: BranchPoint, a: BranchPoint, b: BranchPoint):
         if name not in ("PD", "NS", "BP"):
             return self.event_kind(name)
@@ -468,10 +503,16 @@ class CycleProblem:
             # nontrivial multiplier at +1 as a branch point of cycles has
             g = abs(pt.tests.get("BP", np.inf))
             ends = max(abs(a.tests.get("BP", 0.0)), abs(b.tests.get("BP", 0.0)))
-            if not (g <= 1e-3 * ends) or mult.size == 0 or \
-                    float(np.min(np.abs(mult - 1.0))) > 1e-3:
+            if mult.size == 0 or float(np.min(np.abs(mult - 1.0))) > 1e-3:
                 return None
-            return SpecialPointKind.BP
+            if g <= 1e-3 * ends:
+                return SpecialPointKind.BP
+            if g <= 0.1 * ends:
+                # a smaller drop (the corrector failed close to it): reported only if the
+                # branch-point system confirms it (cycle_branch drops it otherwise)
+                pt.info["bp_confirm"] = True
+                return SpecialPointKind.BP
+            return None
         if name == "PD":
             k = int(np.argmin(np.abs(mult + 1.0)))
             return SpecialPointKind.PD if abs(mult[k] + 1.0) < 1e-3 else None
