@@ -19,6 +19,7 @@ from maglev_match.plots import (  # noqa: F401  (each registers its drawers)
     design,
     hopf,
     index,
+    iso,
     maps,
     rootlocus,
     simulate,

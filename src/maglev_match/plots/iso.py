@@ -1,0 +1,106 @@
+"""The iso-chi curve figure: the curve chi(P1, P2) = target in the plane of its two
+parameters, coloured by the part that decides chi, points whose deciding part is only
+bracketed or whose corrector failed marked, the start and the special points (switches of
+the deciding part, changes of mechanism) labelled; and the overlay of an iso-chi curve on
+a design map (:func:`draw_iso_on_map`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from maglev_match.analyses.iso import IsoChiCurve
+from maglev_match.core.results import figure
+from maglev_match.plots.base import new_figure
+
+__all__ = ["iso_figure", "draw_iso_curve", "draw_iso_contour", "SOLVED_LABEL",
+           "INTERPOLATED_LABEL"]
+
+BASIS_COLOURS = {"paper": "tab:blue", "simulation": "tab:red"}
+SOLVED_LABEL = "iso-chi curve chi = {target:g} (solved)"
+INTERPOLATED_LABEL = "chi = {target:g}, interpolated from the map grid"
+
+
+def draw_iso_curve(ax, curve: IsoChiCurve, xname: str | None = None) -> list:
+    """Draw ``curve`` into ``ax`` (x axis: ``xname``, default the curve's first parameter;
+    the other on y). Returns the legend handles."""
+    a, b = curve.names
+    swap = xname is not None and xname == b
+    pts = curve.points
+    xs = np.array([p.p2 if swap else p.p1 for p in pts])
+    ys = np.array([p.p1 if swap else p.p2 for p in pts])
+    handles = []
+    seen: set[str] = set()
+    for k in range(len(pts) - 1):
+        basis = pts[k + 1].sample.basis if pts[k].sample.basis != pts[k + 1].sample.basis \
+            else pts[k].sample.basis
+        label = None
+        if basis not in seen:
+            seen.add(basis)
+            label = (SOLVED_LABEL.format(target=curve.target)
+                     + f", decided by the {'paper part' if basis == 'paper' else 'simulation'}")
+        line, = ax.plot(xs[k:k + 2], ys[k:k + 2], "-", color=BASIS_COLOURS.get(basis, "k"),
+                        lw=2.0, label=label, zorder=5)
+        if label:
+            handles.append(line)
+    if len(pts) == 1:
+        handles.append(ax.plot(xs, ys, "o", color="k", label=SOLVED_LABEL.format(
+            target=curve.target))[0])
+    for status, marker, colour in (("bracketed", "s", "darkorange"),
+                                   ("not converged", "x", "k")):
+        sel = [k for k, p in enumerate(pts) if p.status == status]
+        if sel:
+            handles.append(ax.plot(xs[sel], ys[sel], marker, color=colour, ms=7, mfc="none",
+                                   zorder=6, label=f"{status}: {len(sel)} point(s)")[0])
+    if curve.start is not None and pts:
+        handles.append(ax.plot(xs[curve.start], ys[curve.start], "o", color="k", ms=5,
+                               zorder=7, label="start of the curve")[0])
+    for s in curve.specials:
+        sx, sy = (s.p2, s.p1) if swap else (s.p1, s.p2)
+        mark = "*" if s.kind == "basis switch" else "D"
+        handles.append(ax.plot(sx, sy, mark, color="gold", mec="k", ms=12 if mark == "*"
+                               else 7, zorder=8,
+                               label=f"{s.kind}: {s.before} -> {s.after}"
+                                     + ("" if s.located else " (not located)"))[0])
+    return handles
+
+
+def draw_iso_contour(ax, x, y, values, target: float, colour: str = "w") -> list:
+    """The level set ``values`` = ``target`` of a gridded field (marching squares,
+    matplotlib's contour of the stored grid), labelled as interpolated. Returns the legend
+    handles (none when the level is not crossed)."""
+    from matplotlib.lines import Line2D
+
+    v = np.ma.masked_invalid(np.asarray(values, float))
+    if v.count() == 0 or not (v.min() < target < v.max()):
+        return []
+    ax.contour(x, y, v, levels=[target], colors=colour, linewidths=1.6, linestyles="--",
+               zorder=5)
+    return [Line2D([], [], color=colour, lw=1.6, ls="--",
+                   label=INTERPOLATED_LABEL.format(target=target))]
+
+
+def iso_figure(curve: IsoChiCurve, title: str = ""):
+    """The figure of an :class:`~maglev_match.analyses.iso.IsoChiCurve`. Returns it."""
+    fig, ax = new_figure(figsize=(7.5, 5.6))
+    handles = draw_iso_curve(ax, curve)
+    a, b = curve.names
+    (lo1, hi1), (lo2, hi2) = curve.ranges
+    ax.set_xlim(lo1, hi1)
+    ax.set_ylim(lo2, hi2)
+    ua, ub = curve.units
+    ax.set_xlabel(f"{a} ({ua})" if ua not in ("", "1") else a)
+    ax.set_ylabel(f"{b} ({ub})" if ub not in ("", "1") else b)
+    what = "headline chi" if curve.simulate else "chi by the paper's definition"
+    ax.set_title(title or f"Iso-chi curve: {what} = {curve.target:g}, model {curve.model}")
+    if not curve.points:
+        ax.text(0.5, 0.5, "the curve could not start:\n" + "\n".join(curve.warnings),
+                ha="center", va="center", transform=ax.transAxes, wrap=True, fontsize=8)
+    if handles:
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2,
+                  fontsize=8, frameon=False)
+    return fig
+
+
+@figure.register(IsoChiCurve)
+def _iso(curve: IsoChiCurve, **kw):
+    return iso_figure(curve, **kw)

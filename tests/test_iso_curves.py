@@ -1,0 +1,184 @@
+"""Iso-chi curves (`iso-curve`, `api.iso_curve`): the level set chi(p1, p2) = target.
+
+The continuation is checked on toy evaluators whose curve, switch point and mechanism
+change are known in closed form, and on model A: every point re-evaluated independently by
+`api.matching_index` gives the target, and a point agrees with a 1-D root of chi along
+p1 solved by brentq on independent index evaluations."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from maglev_match.analyses.iso import Sample, TraceSettings, trace_iso
+from maglev_match.core.params import ParameterError
+
+R2 = 0.5  # the paper part of the toy: chi_paper = 10 (p1^2 + p2^2), = 5 on p1^2 + p2^2 = R2
+SWITCH = (1.0 / 3.0, math.sqrt(R2 - 1.0 / 9.0))  # chi_paper = chi_sim = 5 there
+
+
+def toy(p1: float, p2: float, bracketed_below: float = -math.inf) -> Sample:
+    """chi_paper = 10 (p1^2 + p2^2), chi_simulation = 4 + 3 p1 (= 5 on p1 = 1/3), the
+    headline their minimum; the simulated part's mechanism is grazing above p2 = 0.8 and a
+    basin boundary below; below ``bracketed_below`` in p2 the simulated part is only a
+    bisection bracket (its value rounded to 0.01)."""
+    cp, cs = 10.0 * (p1 * p1 + p2 * p2), 4.0 + 3.0 * p1
+    status = "solved"
+    if p2 < bracketed_below:
+        cs, status = round(cs, 2) + 0.003, "bracketed"
+    basis = "simulation" if cs < cp else "paper"
+    return Sample(min(cp, cs), cp, cs, basis, "grazing" if p2 > 0.8 else "basin_boundary",
+                  "up", "cycle", status)
+
+
+BOX = ((-1.0, 1.0), (-1.0, 1.0))
+
+
+def test_toy_curve_follows_both_parts_and_locates_the_switches():
+    tr = trace_iso(toy, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    assert tr.start is not None and len(tr.points) > 10
+    for pt in tr.points:
+        s = pt.sample
+        assert pt.status == "solved"
+        assert abs(s.chi - 5.0) <= 1e-7 * 5.0 + 1e-15
+        if s.basis == "paper":  # on the circle
+            assert abs(pt.p1 ** 2 + pt.p2 ** 2 - R2) < 1e-7
+        else:  # on the line p1 = 1/3
+            assert abs(pt.p1 - 1.0 / 3.0) < 1e-7
+    # both directions end on the edge of the box: p2 = -1 and p2 = +1 on the line
+    assert "end of the p2 range" in tr.ends[0] and "end of the p2 range" in tr.ends[1]
+    assert tr.points[0].p2 == pytest.approx(-1.0) and tr.points[-1].p2 == pytest.approx(1.0)
+    switches = [s for s in tr.specials if s.kind == "basis switch"]
+    assert len(switches) == 2
+    for s, sign in zip(switches, (-1, 1), strict=True):
+        assert s.located
+        assert s.p1 == pytest.approx(SWITCH[0], abs=1e-7)
+        assert s.p2 == pytest.approx(sign * SWITCH[1], abs=1e-7)
+        assert abs(s.sample.chi_paper - s.sample.chi_simulation) <= 1e-6 * 5.0
+    # the mechanism changes at p2 = 0.8 on the simulation-decided line: located within
+    # 1/32 of the step that crossed it
+    changes = [s for s in tr.specials if s.kind == "mechanism change"]
+    assert len(changes) == 1 and changes[0].located
+    assert {changes[0].before, changes[0].after} == {"grazing", "basin_boundary"}
+    step = max(abs(b.p2 - a.p2) for a, b in zip(tr.points, tr.points[1:], strict=False))
+    assert abs(changes[0].p2 - 0.8) <= step / 16
+
+
+def test_toy_curve_says_where_the_deciding_part_is_only_bracketed():
+    # below p2 = -0.85 the simulated part is a bracket (a step function): the corrector
+    # cannot converge on it; the curve ends there, says why, and marks that point
+    def ev(p1, p2):
+        return toy(p1, p2, bracketed_below=-0.85)
+
+    tr = trace_iso(ev, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    first = tr.points[0]
+    assert first.status == "not converged"
+    assert first.sample.simulation_status == "bracketed"
+    assert "only bracketed" in tr.ends[0]
+    assert any("only bracketed" in w for w in tr.warnings)
+    assert all(p.status == "solved" for p in tr.points[1:])
+
+
+def test_toy_curve_that_cannot_start_says_why():
+    tr = trace_iso(toy, BOX, 50.0, fixed=1, value=0.0)
+    assert not tr.points and tr.start is None
+    assert "no sign change" in tr.warnings[0] and "chi from" in tr.warnings[0]
+
+
+# ---------------------------------------------------------------------------------------
+# model A (the paper's chi alone, turnout-soft)
+# ---------------------------------------------------------------------------------------
+PAPER = dict(names=("EI", "kD"), ranges={"EI": (1.5e10, 3e10), "kD": (120.0, 180.0)},
+             simulate=False, stage=False)
+
+
+@pytest.fixture(scope="module")
+def paper_curve():
+    from maglev_match import api
+
+    return api.iso_curve("turnout-soft", 9.0, points=5, **PAPER)
+
+
+def test_paper_curve_points_give_the_target_when_evaluated_again(paper_curve):
+    from maglev_match import api
+
+    assert len(paper_curve.points) == 5 and paper_curve.ok
+    assert {r["paper_part"] for r in paper_curve.rows()} == {"cycle"}
+    for pt in paper_curve.points:
+        idx = api.matching_index("turnout-soft", simulate=False, stage=False, EI=pt.p1,
+                                 kD=pt.p2)
+        assert abs(idx.chi - 9.0) <= 1e-6 * 9.0, (pt, idx.chi)
+    # the curve goes somewhere: its points are not all the start
+    kd = [p.p2 for p in paper_curve.points]
+    assert max(kd) - min(kd) > 5.0
+
+
+def test_paper_curve_point_equals_a_brentq_root_along_p1(paper_curve):
+    from scipy.optimize import brentq
+
+    from maglev_match import api
+
+    pt = paper_curve.points[-1]
+
+    def f(ei):
+        return api.matching_index("turnout-soft", simulate=False, stage=False, EI=ei,
+                                  kD=pt.p2).chi - 9.0
+
+    root = brentq(f, 0.97 * pt.p1, 1.03 * pt.p1, xtol=1.0, rtol=1e-10)
+    assert root == pytest.approx(pt.p1, rel=1e-6)
+
+
+def test_curve_xarray_round_trip_and_figure(paper_curve, tmp_path):
+    import xarray as xr
+
+    ds = paper_curve.to_xarray()
+    path = tmp_path / "iso.nc"
+    ds.to_netcdf(path)
+    back = xr.load_dataset(path)
+    np.testing.assert_array_equal(back["EI"].values, [p.p1 for p in paper_curve.points])
+    np.testing.assert_array_equal(back["chi"].values,
+                                  [p.sample.chi for p in paper_curve.points])
+    assert list(back["status"].values) == [p.status for p in paper_curve.points]
+    assert back.attrs["target"] == 9.0 and back["EI"].attrs["units"] == "N m^2"
+    files = paper_curve.plot(tmp_path / "iso")
+    assert sorted(f.suffix for f in files) == [".png", ".svg"]
+
+
+@pytest.mark.parametrize("kw, field, text", [
+    (dict(target=0.0), "target", "finite number > 0"),
+    (dict(target=float("nan")), "target", "finite number > 0"),
+    (dict(names=("EI", "EI")), "names", "the same parameter twice"),
+    (dict(names=("EI", "kQ")), "names", "unknown parameter"),
+    (dict(names=("EI", "w0")), "names", "derived"),
+    (dict(ranges={"kD": (-5.0, 10.0)}), "ranges kD", "valid range of kD"),
+    (dict(ranges={"kP": (1.0, 10.0)}), "ranges", "not one of the curve's parameters"),
+    (dict(at="kD=500"), "at", "inside the range of kD"),
+    (dict(at="kP=5"), "at", "not one of the curve's parameters"),
+])
+def test_bad_inputs_are_refused_naming_the_field(kw, field, text):
+    from maglev_match import api
+
+    args = dict(names=("EI", "kD"), ranges={"kD": (120.0, 180.0)})
+    args.update(kw)
+    target = args.pop("target", 5.0)
+    with pytest.raises(ParameterError) as exc:
+        api.iso_inputs("turnout-soft", target, **args)
+    assert exc.value.args and field in str(exc.value) and text in str(exc.value)
+
+
+def test_headline_curve_points_give_the_target_when_evaluated_again():
+    # the one headline case: at turnout-soft the simulated part decides (grazing), each
+    # point computed warm-started from its neighbour; re-evaluated from scratch
+    from maglev_match import api
+
+    c = api.iso_curve("turnout-soft", 4.2, names=("EI", "kD"), points=3, stage=False,
+                      ranges={"EI": (1.8e10, 2.2e10), "kD": (140.0, 160.0)})
+    assert len(c.points) == 3 and c.ok
+    for r in c.rows():
+        assert r["basis"] == "simulation" and r["simulation_part"] == "solved"
+        assert r["mechanism"] and r["direction"] in ("up", "down")
+        idx = api.matching_index("turnout-soft", stage=False, EI=r["EI"], kD=r["kD"])
+        assert abs(idx.chi - 4.2) <= 1e-6 * 4.2, (r, idx.chi)
+        assert idx.reading_basis == "simulation"
