@@ -152,7 +152,7 @@ def test_curve_xarray_round_trip_and_figure(paper_curve, tmp_path):
     (dict(names=("EI", "EI")), "names", "the same parameter twice"),
     (dict(names=("EI", "kQ")), "names", "unknown parameter"),
     (dict(names=("EI", "w0")), "names", "derived"),
-    (dict(ranges={"kD": (-5.0, 10.0)}), "ranges kD", "valid range of kD"),
+    (dict(ranges={"kD": (-5.0, 10.0)}), "ranges", "valid range of kD"),
     (dict(ranges={"kP": (1.0, 10.0)}), "ranges", "not one of the curve's parameters"),
     (dict(at="kD=500"), "at", "inside the range of kD"),
     (dict(at="kP=5"), "at", "not one of the curve's parameters"),
@@ -182,3 +182,29 @@ def test_headline_curve_points_give_the_target_when_evaluated_again():
         idx = api.matching_index("turnout-soft", stage=False, EI=r["EI"], kD=r["kD"])
         assert abs(idx.chi - 4.2) <= 1e-6 * 4.2, (r, idx.chi)
         assert idx.reading_basis == "simulation"
+
+
+def test_the_docs_example_runs_as_written_and_prints_its_table(tmp_path, monkeypatch):
+    import contextlib
+    import io
+    import re
+    import shlex
+    from pathlib import Path
+
+    from maglev_match.cli import main
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "iso.md").read_text()
+    line = next(ln for ln in page.splitlines() if ln.startswith("maglev-match iso-curve"))
+    shown = re.search(r"```text\n(.*?)```", page, re.S).group(1).splitlines()
+    monkeypatch.chdir(tmp_path)
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(shlex.split(line)[1:])
+    assert code == 0, err.getvalue()
+    printed = out.getvalue()
+    for row in shown[1:]:  # every table row and the ends as printed (the first line has
+        assert row in printed, row  # the CPU time)
+    folder = tmp_path / "maglev-match-out" / "iso-curve"
+    assert {p.name for p in folder.iterdir()} >= {
+        "iso_chi_unit_EI_kD.csv", "iso_chi_unit_EI_kD_special_points.csv",
+        "iso_chi_unit_EI_kD.nc", "iso_chi_unit_EI_kD.png", "iso_chi_unit_EI_kD.svg"}

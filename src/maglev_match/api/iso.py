@@ -62,16 +62,16 @@ def _ranges(base: Params, names: tuple[str, str],
             try:
                 lo, hi = (float(v) for v in ranges[n])
             except (TypeError, ValueError):
-                raise ParameterError(f"ranges {n}", ranges[n], "expected (low, high) "
+                raise ParameterError("ranges", f"{n}={ranges[n]}", "expected (low, high) "
                                      "numbers") from None
             if not (math.isfinite(lo) and math.isfinite(hi)):
-                raise ParameterError(f"ranges {n}", f"{lo:g}:{hi:g}", "LOW and HIGH must "
+                raise ParameterError("ranges", f"{n}={lo:g}:{hi:g}", "LOW and HIGH must "
                                      "be finite numbers")
             if not lo < hi:
-                raise ParameterError(f"ranges {n}", f"{lo:g}:{hi:g}", "LOW must be below "
+                raise ParameterError("ranges", f"{n}={lo:g}:{hi:g}", "LOW must be below "
                                      "HIGH")
             if lo < valid[0] or hi > valid[1]:
-                raise ParameterError(f"ranges {n}", f"{lo:g}:{hi:g}", f"must lie inside "
+                raise ParameterError("ranges", f"{n}={lo:g}:{hi:g}", f"must lie inside "
                                      f"the valid range of {n}, [{valid[0]:g}, {valid[1]:g}]")
         else:
             v = float(getattr(base, n))
@@ -136,7 +136,10 @@ def iso_inputs(params: Params | str | None = None, target: float = 5.0, *,
     base = resolve_params(params, config=config, **overrides)
     box = _ranges(base, pair, ranges)
     start = _at(at, pair, box)
-    check_vary_ranges(base, [Variable(n, *box[n]) for n in pair], "ranges")
+    try:
+        check_vary_ranges(base, [Variable(n, *box[n]) for n in pair], "ranges")
+    except ParameterError as exc:  # named by the option that gives the ranges
+        raise ParameterError("ranges", exc.value, exc.rule) from None
     for n in pair:
         engineering_nodes(base, info.name, n, box[n], option="names")
     if not base.w0 > 0:
