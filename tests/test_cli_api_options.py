@@ -18,7 +18,7 @@ from maglev_match.cli import app
 from maglev_match.cli.common import PARAMETER_SET_OPTIONS
 
 #: options about presenting or keeping the answer, not about what is computed
-PRESENTATION = {"--json", "--out", "--plot", "--keep-tiles"}
+PRESENTATION = {"--json", "--out", "--plot", "--keep-tiles", "--iso", "--iso-curve"}
 
 #: command -> (its option tables in cli/, the API functions it calls)
 COMMANDS = {

@@ -208,3 +208,58 @@ def test_the_docs_example_runs_as_written_and_prints_its_table(tmp_path, monkeyp
     assert {p.name for p in folder.iterdir()} >= {
         "iso_chi_unit_EI_kD.csv", "iso_chi_unit_EI_kD_special_points.csv",
         "iso_chi_unit_EI_kD.nc", "iso_chi_unit_EI_kD.png", "iso_chi_unit_EI_kD.svg"}
+
+
+def _fake_map(x, y, chi):
+    import xarray as xr
+
+    shape = (len(y), len(x))
+    return xr.Dataset({"chi": (("kD", "EI"), chi), "chi_paper": (("kD", "EI"), chi),
+                       "chi_simulation": (("kD", "EI"), np.full(shape, np.nan)),
+                       "stable": (("kD", "EI"), np.ones(shape, np.int8)),
+                       "resolved": (("kD", "EI"), np.ones(shape, np.int8))},
+                      coords={"EI": x, "kD": y})
+
+
+def test_map_overlay_is_the_level_set_of_the_grid_labelled_interpolated(paper_curve):
+    # chi linear over the grid: the marching-squares level set is exact, kD = 150 + 4 (EI/1e9 - 20)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from maglev_match.plots.maps import map_figure
+
+    x, y = np.linspace(1.5e10, 3e10, 7), np.linspace(120.0, 180.0, 9)
+    chi = 5.0 + (y[:, None] - 150.0) / 4.0 - (x[None, :] / 1e9 - 20.0)
+    fig = map_figure(_fake_map(x, y, chi), iso=5.0)
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "chi = 5, interpolated from the map grid" in labels
+    verts = np.concatenate([p.vertices for c in ax.collections
+                            for p in getattr(c, "get_paths", list)()
+                            if type(c).__name__ in ("QuadContourSet", "PathCollection",
+                                                    "LineCollection") and len(p.vertices)])
+    assert len(verts) > 2
+    np.testing.assert_allclose(verts[:, 1], 150.0 + 4.0 * (verts[:, 0] / 1e9 - 20.0),
+                               atol=1e-9)
+    # an iso-curve file is drawn as solved, point for point
+    fig = map_figure(_fake_map(x, y, chi), iso_curve=paper_curve.to_xarray(),
+                     iso_source="c.nc")
+    ax = fig.axes[0]
+    line = next(ln for ln in ax.get_lines() if "(solved)" in str(ln.get_label()))
+    np.testing.assert_array_equal(line.get_xdata(), [p.p1 for p in paper_curve.points])
+    assert "from c.nc" in line.get_label()
+
+
+def test_map_iso_options_are_checked_before_the_map(tmp_path, paper_curve):
+    from maglev_match.cli.common import UserError
+    from maglev_match.cli.index import iso_overlay
+
+    path = tmp_path / "c.nc"
+    paper_curve.to_xarray().to_netcdf(path)
+    assert iso_overlay(None, path, ["kD", "EI"])["iso_curve"].attrs["target"] == 9.0
+    with pytest.raises(UserError, match=r"a curve in \(EI, kD\), the map is in"):
+        iso_overlay(None, path, ["EI", "omega0"])
+    with pytest.raises(UserError, match="name different levels"):
+        iso_overlay(5.0, path, ["EI", "kD"])
+    with pytest.raises(ParameterError, match="--iso"):
+        iso_overlay(float("nan"), None, ["EI", "kD"])

@@ -12,7 +12,8 @@ from maglev_match.analyses.iso import IsoChiCurve
 from maglev_match.core.results import figure
 from maglev_match.plots.base import new_figure
 
-__all__ = ["iso_figure", "draw_iso_curve", "draw_iso_contour", "SOLVED_LABEL",
+__all__ = ["iso_figure", "draw_iso_curve", "draw_iso_contour", "draw_iso_dataset",
+           "SOLVED_LABEL",
            "INTERPOLATED_LABEL"]
 
 BASIS_COLOURS = {"paper": "tab:blue", "simulation": "tab:red"}
@@ -67,16 +68,37 @@ def draw_iso_curve(ax, curve: IsoChiCurve, xname: str | None = None) -> list:
 def draw_iso_contour(ax, x, y, values, target: float, colour: str = "w") -> list:
     """The level set ``values`` = ``target`` of a gridded field (marching squares,
     matplotlib's contour of the stored grid), labelled as interpolated. Returns the legend
-    handles (none when the level is not crossed)."""
+    handles (a line saying so when the level is not crossed)."""
     from matplotlib.lines import Line2D
 
     v = np.ma.masked_invalid(np.asarray(values, float))
     if v.count() == 0 or not (v.min() < target < v.max()):
-        return []
+        return [Line2D([], [], color="none", label=f"chi = {target:g} is not crossed on the "
+                       "map grid")]
     ax.contour(x, y, v, levels=[target], colors=colour, linewidths=1.6, linestyles="--",
                zorder=5)
     return [Line2D([], [], color=colour, lw=1.6, ls="--",
                    label=INTERPOLATED_LABEL.format(target=target))]
+
+
+def draw_iso_dataset(ax, ds, xname: str, source: str = "") -> list:
+    """Draw an iso-chi curve read from its netCDF file (:meth:`IsoChiCurve.to_xarray`)
+    into ``ax`` (x axis ``xname``), as solved; points not solved are marked. Returns the
+    legend handles."""
+    a, b = str(ds.attrs["curve_params"]).split(",")
+    xs, ys = ds[a].values, ds[b].values
+    if xname == b:
+        xs, ys = ys, xs
+    status = ds["status"].values.astype(str)
+    target = float(ds.attrs["target"])
+    label = SOLVED_LABEL.format(target=target) + (f" from {source}" if source else "")
+    handles = [ax.plot(xs, ys, "-", color="w", lw=2.2, zorder=5, label=label)[0]]
+    bad = status != "solved"
+    if bad.any():
+        handles.append(ax.plot(xs[bad], ys[bad], "s", color="darkorange", mfc="none", ms=7,
+                               zorder=6, label=f"iso-chi curve: {int(bad.sum())} point(s) "
+                                               "not solved")[0])
+    return handles
 
 
 def iso_figure(curve: IsoChiCurve, title: str = ""):

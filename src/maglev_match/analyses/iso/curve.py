@@ -190,7 +190,7 @@ class IsoChiCurve(Plottable):
         ds = xr.Dataset(data, coords={"point": np.arange(len(rows)),
                                       "special": np.arange(len(sp))}, attrs={
             "title": f"maglev-match iso-chi curve chi = {self.target:g} in ({a}, {b})",
-            "target": self.target, "params": f"{a},{b}", "model": self.model,
+            "target": self.target, "curve_params": f"{a},{b}", "model": self.model,
             "simulate": int(self.simulate), "start_point": -1 if self.start is None
             else int(self.start), "end_backwards": self.ends[0],
             "end_forwards": self.ends[1], "tolerance": self.tolerance,

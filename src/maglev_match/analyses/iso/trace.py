@@ -468,11 +468,14 @@ class _Tracer:
             else:
                 b = mid
         u = last if last is not None else 0.5 * (ua + ub)
-        located = last is not None
+        located = last is not None and b - a <= 1.0 / 32
+        if located:
+            msg = f"bracketed to {b - a:.3g} of the step"
+        else:
+            msg = (f"not located: the corrector failed between the points (bracketed to "
+                   f"{b - a:.3g} of the step)")
         return IsoSpecial("mechanism change", *self.params(u), str(sa.mechanism),
-                          str(sb.mechanism), self.sample(u), located, float("nan"),
-                          f"bracketed to {b - a:.3g} of the step" if located
-                          else "not located: the corrector failed between the points")
+                          str(sb.mechanism), self.sample(u), located, float("nan"), msg)
 
 
 @dataclass(frozen=True)
