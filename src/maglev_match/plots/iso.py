@@ -29,20 +29,34 @@ def draw_iso_curve(ax, curve: IsoChiCurve, xname: str | None = None) -> list:
     pts = curve.points
     xs = np.array([p.p2 if swap else p.p1 for p in pts])
     ys = np.array([p.p1 if swap else p.p2 for p in pts])
+    switches = [s for s in curve.specials if s.kind == "basis switch" and s.located]
     handles = []
     seen: set[str] = set()
-    for k in range(len(pts) - 1):
-        basis = pts[k + 1].sample.basis if pts[k].sample.basis != pts[k + 1].sample.basis \
-            else pts[k].sample.basis
+
+    def segment(x0, y0, x1, y1, basis):
         label = None
         if basis not in seen:
             seen.add(basis)
             label = (SOLVED_LABEL.format(target=curve.target)
                      + f", decided by the {'paper part' if basis == 'paper' else 'simulation'}")
-        line, = ax.plot(xs[k:k + 2], ys[k:k + 2], "-", color=BASIS_COLOURS.get(basis, "k"),
-                        lw=2.0, label=label, zorder=5)
+        line, = ax.plot([x0, x1], [y0, y1], "-", color=BASIS_COLOURS.get(basis, "k"), lw=2.0,
+                        label=label, zorder=5)
         if label:
             handles.append(line)
+
+    for k in range(len(pts) - 1):
+        b0, b1 = pts[k].sample.basis, pts[k + 1].sample.basis
+        if b0 == b1 or not switches:
+            segment(xs[k], ys[k], xs[k + 1], ys[k + 1], b0 if b0 == b1 else b1)
+            continue
+        # through the located switch between the two points (the corner of the curve)
+        mid = np.array([0.5 * (pts[k].p1 + pts[k + 1].p1), 0.5 * (pts[k].p2 + pts[k + 1].p2)])
+        scale = np.array([w[1] - w[0] for w in curve.ranges])
+        sw = min(switches, key=lambda s: float(np.linalg.norm((np.array([s.p1, s.p2]) - mid)
+                                                               / scale)))
+        sx, sy = (sw.p2, sw.p1) if swap else (sw.p1, sw.p2)
+        segment(xs[k], ys[k], sx, sy, b0)
+        segment(sx, sy, xs[k + 1], ys[k + 1], b1)
     if len(pts) == 1:
         handles.append(ax.plot(xs, ys, "o", color="k", label=SOLVED_LABEL.format(
             target=curve.target))[0])
