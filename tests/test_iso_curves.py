@@ -168,20 +168,31 @@ def test_bad_inputs_are_refused_naming_the_field(kw, field, text):
     assert exc.value.args and field in str(exc.value) and text in str(exc.value)
 
 
-def test_headline_curve_points_give_the_target_when_evaluated_again():
-    # the one headline case: at turnout-soft the simulated part decides (grazing), each
-    # point computed warm-started from its neighbour; re-evaluated from scratch
+def test_headline_curve_points_and_its_switch_evaluated_again():
+    # the one headline case (turnout-soft, chi = 5 in (EI, kD) near kD = 222): the curve
+    # is decided by the simulation (grazing) below the switch and by the paper part above
+    # it, each point computed warm-started from its neighbour. Re-evaluated from scratch,
+    # every point gives the target, and at the located switch both parts equal it.
     from maglev_match import api
 
-    c = api.iso_curve("turnout-soft", 4.2, names=("EI", "kD"), points=3, stage=False,
-                      ranges={"EI": (1.8e10, 2.2e10), "kD": (140.0, 160.0)})
+    c = api.iso_curve("turnout-soft", 5.0, names=("EI", "kD"), points=3, step=0.1,
+                      at="kD=222.2", stage=False,
+                      ranges={"EI": (2.0e10, 2.4e10), "kD": (218.0, 226.0)})
     assert len(c.points) == 3 and c.ok
-    for r in c.rows():
-        assert r["basis"] == "simulation" and r["simulation_part"] == "solved"
-        assert r["mechanism"] and r["direction"] in ("up", "down")
+    rows = c.rows()
+    assert [r["basis"] for r in rows] == ["simulation", "paper", "paper"]
+    for r in rows:
+        assert r["simulation_part"] == "solved" and r["mechanism"] == "grazing"
+        assert r["direction"] in ("up", "down")
         idx = api.matching_index("turnout-soft", stage=False, EI=r["EI"], kD=r["kD"])
-        assert abs(idx.chi - 4.2) <= 1e-6 * 4.2, (r, idx.chi)
-        assert idx.reading_basis == "simulation"
+        assert abs(idx.chi - 5.0) <= 1e-6 * 5.0, (r, idx.chi)
+        assert idx.reading_basis == r["basis"]
+    (sw,) = c.specials
+    assert sw.kind == "basis switch" and sw.located
+    assert rows[0]["kD"] < sw.p2 < rows[1]["kD"]
+    idx = api.matching_index("turnout-soft", stage=False, EI=sw.p1, kD=sw.p2)
+    assert abs(idx.chi_paper - 5.0) <= 1e-6 * 5.0
+    assert abs(idx.chi_simulation - 5.0) <= 1e-6 * 5.0
 
 
 def test_the_docs_example_runs_as_written_and_prints_its_table(tmp_path, monkeypatch):
