@@ -120,6 +120,7 @@ class TraceSettings:
     max_points: int = 30
     fd_step: float = 1e-4
     max_iter: int = 12
+    max_inexact: int = 3  # the corrector gives up after this many bracketed iterates
     min_cos: float = 0.8
 
 
@@ -190,6 +191,7 @@ class _Tracer:
         hi: tuple[float, float] | None = (0.0, f0) if f0 > 0 else None  # F > 0 end
         s = -f0 / slope
         moved = 0  # the end replaced last (-1 lo, +1 hi), for Illinois
+        inexact = 0  # iterates whose deciding part is only a bracket (a step function)
         for it in range(1, self.s.max_iter + 1):
             u = u0 + s * d
             f = self.F(u)
@@ -199,6 +201,9 @@ class _Tracer:
                 best = (u, f)
             if self.converged(f):
                 return u, f, it
+            inexact += not self.sample(u).exact
+            if inexact >= self.s.max_inexact:  # no Newton on a bracket's midpoint
+                return best[0], best[1], it
             if f < 0:
                 if hi is not None and moved == -1:
                     hi = (hi[0], hi[1] / 2)
