@@ -274,3 +274,20 @@ def test_map_iso_options_are_checked_before_the_map(tmp_path, paper_curve):
         iso_overlay(5.0, path, ["EI", "kD"])
     with pytest.raises(ParameterError, match="--iso"):
         iso_overlay(float("nan"), None, ["EI", "kD"])
+
+
+def test_the_curve_crosses_the_design_kd_at_the_design_ei():
+    # independent methods: `design` (SLSQP on exact gradients, the cheapest EI with the
+    # headline chi >= 5 at the base kD = 150) and the curve's point at kD = 150 (chi = 5
+    # solved along EI by regula falsi on index evaluations)
+    from maglev_match import api
+
+    design = api.design_search("turnout-soft", vary={"EI": (5e9, 4e10)}, minimize="EI",
+                               require={"chi": 5.0}, stage=False)
+    assert "chi" in " ".join(design.active), design.active  # chi = 5 holds there
+    ei = design.values["EI"]
+    c = api.iso_curve("turnout-soft", 5.0, names=("EI", "kD"), at="kD=150", points=1,
+                      ranges={"EI": (1.2e10, 3.6e10), "kD": (100.0, 200.0)}, stage=False)
+    (pt,) = c.points
+    assert pt.p2 == 150.0 and pt.status == "solved"
+    assert pt.p1 == pytest.approx(ei, rel=1e-4)

@@ -187,7 +187,8 @@ def iso_curve(params: Params | str | None = None, target: float = 5.0, *,
     simulate : bool
         The headline chi (default); False: the paper's chi alone (``--no-simulation``).
     points : int
-        At most this many points (both directions together).
+        At most this many points (both directions together); 1: the start alone (chi =
+        target solved along the free parameter).
     step : float
         The first step, as a fraction of the ranges.
     tol : float
@@ -207,8 +208,9 @@ def iso_curve(params: Params | str | None = None, target: float = 5.0, *,
     """
     from maglev_match.analyses.iso import TraceSettings, iso_chi_curve
 
-    if isinstance(points, bool) or not isinstance(points, int) or points < 3:
-        raise ParameterError("points", points, "must be a whole number >= 3")
+    if isinstance(points, bool) or not isinstance(points, int) or points < 1:
+        raise ParameterError("points", points, "must be a whole number >= 1 (1: the start "
+                             "alone, chi = target solved along one parameter)")
     if not (math.isfinite(step) and 0 < step <= 0.5):
         raise ParameterError("step", step, "must be a fraction of the ranges in (0, 0.5]")
     if not (math.isfinite(tol) and 1e-12 <= tol <= 1e-3):

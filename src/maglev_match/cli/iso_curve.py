@@ -81,7 +81,8 @@ def iso_curve_command(
         "--no-simulation", help="Follow the paper's chi alone (no critical disturbance "
         "simulated).")] = False,
     points: Annotated[int, typer.Option(
-        "--points", help="At most this many points, both directions together.")] = 30,
+        "--points", help="At most this many points, both directions together (1: the "
+        "start alone).")] = 30,
     step: Annotated[float, typer.Option(
         "--step", help="The first step as a fraction of the ranges.")] = 0.05,
     tol: Annotated[float, typer.Option(

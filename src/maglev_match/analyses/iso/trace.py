@@ -517,10 +517,13 @@ def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: fl
         tr.warnings.append(f"the curve could not start: {why}")
         return done([], None, [], (why, why))
     f0 = tr.F(u0)
-    g0 = tr.gradient(u0, f0)
     smp = tr.sample(u0)
     p1, p2 = tr.params(u0)
     first = IsoPoint(p1, p2, smp, f0, 0, "solved" if smp.exact else "bracketed", 0)
+    if settings.max_points <= 1:  # the start alone: chi = target along one parameter
+        why = "one point asked: the start alone"
+        return done([first], 0, [], (why, why))
+    g0 = tr.gradient(u0, f0)
     if g0 is None:
         why = "the gradient of chi could not be computed at the start" + tr._why(u0)
         tr.warnings.append(why)
