@@ -434,6 +434,18 @@ CASES: tuple[Case, ...] = (
     Case("simulate --speed --irregularity seeds=1.5", "irregularity", (
         "simulate", "--speed", "100", "--irregularity", "random:class=low,seeds=1.5"), 2,
          "must be a whole number"),
+    Case("iso-curve chi=0", "options", ("iso-curve", "chi=0"), 2,
+         "parameter 'TARGET' = 0.0: must be a finite number > 0"),
+    Case("iso-curve chi=inf", "options", ("iso-curve", "chi=inf"), 2,
+         "parameter 'TARGET' = inf: must be a finite number > 0"),
+    Case("iso-curve --params EI,EI", "options", ("iso-curve", "chi=5", "--params", "EI,EI"),
+         2, "parameter '--params' = 'EI,EI': the same parameter twice"),
+    Case("iso-curve unknown parameter", "options", ("iso-curve", "chi=5", "--params",
+                                                    "EI,kQ"), 2,
+         "parameter '--params' = 'kQ': unknown parameter"),
+    Case("iso-curve --range outside the valid range", "options", (
+        "iso-curve", "chi=5", "--range", "kD=-5:10"), 2,
+         "parameter '--range' = 'kD=-5:10': must lie inside the valid range of kD"),
     # ---- the environment (a usable run with one line naming the variable)
     Case("JAX_PLATFORMS=gpu", "environment", ("stability", "--json"), 0,
          "JAX_PLATFORMS=gpu", env={"JAX_PLATFORMS": "gpu"}, fresh=True, json_stdout=True),

@@ -18,7 +18,7 @@ from maglev_match.cli import app
 from maglev_match.cli.common import PARAMETER_SET_OPTIONS
 
 #: options about presenting or keeping the answer, not about what is computed
-PRESENTATION = {"--json", "--out", "--plot", "--keep-tiles"}
+PRESENTATION = {"--json", "--out", "--plot", "--keep-tiles", "--iso", "--iso-curve"}
 
 #: command -> (its option tables in cli/, the API functions it calls)
 COMMANDS = {
@@ -29,6 +29,7 @@ COMMANDS = {
     "cycles": (["cycles.CYCLES_OPTIONS", "cycles.HOPF_SEARCH_OPTIONS"],
                ["cycle_study"]),
     "cycle-curve": (["cycle_curve.CYCLE_CURVE_OPTIONS"], ["cycle_curve"]),
+    "iso-curve": (["iso_curve.ISO_CURVE_OPTIONS"], ["iso_curve"]),
     "simulate": (["simulate.SIMULATE_OPTIONS"], ["simulate", "simulate_over_spans"]),
     "speed": (["speed.SPEED_OPTIONS"], ["speed_sweep", "speed_map"]),
     "index": (["index.INDEX_OPTIONS", "design.SCATTER_OPTIONS"],

@@ -19,6 +19,7 @@ from matplotlib.figure import Figure  # noqa: E402
 
 from maglev_match import api  # noqa: E402
 from maglev_match.analyses.design import DesignResult  # noqa: E402
+from maglev_match.analyses.iso import IsoChiCurve  # noqa: E402
 from maglev_match.analyses.matching import MatchingIndex  # noqa: E402
 from maglev_match.analyses.sensitivity import IndexSensitivity  # noqa: E402
 from maglev_match.analyses.simulation import MaglevSimulation  # noqa: E402
@@ -51,7 +52,8 @@ def rhs(x, p):
 RESULT_TYPES = [StabilityResult, RootLocusResult, HopfScan, HopfCurveStudy, CycleStudy,
                 CycleCurveStudy,
                 MaglevSimulation, UserSimulation, SpanRun, SpeedSweep, MatchingIndex,
-                IndexSensitivity, IndexSpread, DesignResult, IrregularSweep]
+                IndexSensitivity, IndexSpread, DesignResult, IrregularSweep,
+                IsoChiCurve]
 
 
 @pytest.mark.parametrize("cls", RESULT_TYPES, ids=lambda c: c.__name__)

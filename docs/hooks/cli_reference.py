@@ -28,7 +28,7 @@ def _cell(text: str) -> str:
 
 
 def _default(param) -> str:
-    if param.is_flag:
+    if getattr(param, "is_flag", False):
         return "on" if param.default else "off"
     if param.default is None or param.default == ():
         return "required" if param.required else ""
@@ -50,6 +50,8 @@ def cli_reference() -> str:
             if p.name == "help":
                 continue
             opts = " / ".join(f"`{o}`" for o in [*p.opts, *p.secondary_opts])
+            if p.param_type_name == "argument":  # a positional argument: its form
+                opts = f"`{p.metavar or p.name.upper()}` (positional)"
             if getattr(p, "multiple", False):
                 opts += " (repeatable)"
             lines.append(f"| {opts} | {_cell(_default(p))} | {_cell(_unwrap(p.help))} |")

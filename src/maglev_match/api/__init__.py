@@ -53,6 +53,7 @@ _NAMES: dict[str, str] = {
     "design_map": "maps", "map_warnings": "maps", "remove_tiles": "maps",
     "speed_sweep": "speed", "speed_map": "speed", "ride_reading": "speed",
     "show_progress": "progress",
+    "iso_curve": "iso", "iso_inputs": "iso",
 }
 
 __all__ = [
@@ -95,6 +96,8 @@ __all__ = [
     "restart_branch",
     "speed_sweep",
     "show_progress",
+    "iso_curve",
+    "iso_inputs",
     "MODELS",
     "RestartFileError",
     "RestartLabelError",

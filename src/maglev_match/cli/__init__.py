@@ -73,6 +73,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "cycle-curve": ("cycle_curve", "The fold of cycles (LPC) or period doubling (PD) "
                                    "continued in two parameters, with its codimension-two "
                                    "points; writes CSV, netCDF and a figure."),
+    "iso-curve": ("iso_curve", "The iso-chi curve: where the headline chi(P1, P2) equals the "
+                               "target, continued in two parameters, with the deciding part "
+                               "and the status of each point; writes CSV, netCDF and a "
+                               "figure."),
     "simulate": ("simulate", "Simulate model A or B from a named or explicit initial state; "
                              "report collision (time, limit, levitation point), convergence "
                              "or neither by the horizon. With --speed V --spans N: the "

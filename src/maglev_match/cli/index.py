@@ -15,6 +15,7 @@ from maglev_match.cli.common import (
     ModelOpt,
     PresetOpt,
     SetOpt,
+    UserError,
     api_options,
     check_index_params,
     check_model,
@@ -25,6 +26,7 @@ from maglev_match.cli.common import (
     output_target,
     params_from_options,
     progress_report,
+    refuse_given,
     rows_per_tile_option,
     scheduler_option,
     workers_option,
@@ -273,6 +275,12 @@ def map_command(
     model: Annotated[str | None, typer.Option(
         "--model", help="unit (the default): a map of the standstill index is computed for "
         "model A; with a speed axis v=... also vehicle or force (see `speed`).")] = None,
+    iso: Annotated[float | None, typer.Option(
+        "--iso", help="Draw the level chi = VALUE on the figure, interpolated from the map "
+        "grid (drawing only).")] = None,
+    iso_curve: Annotated[Path | None, typer.Option(
+        "--iso-curve", help="Draw this iso-chi curve (the netCDF file of `iso-curve`) on "
+        "the figure, as solved (drawing only).")] = None,
 ) -> None:
     """The headline matching index chi = min(chi_paper, chi_simulation), its two parts,
     h, the simulated critical disturbances and stability over a grid of two parameters
@@ -281,6 +289,8 @@ def map_command(
     from maglev_match.cli.speed import has_speed_axis, speed_map_command
 
     if has_speed_axis(x, y):
+        refuse_given({"iso": "--iso", "iso_curve": "--iso-curve"}, "the iso-chi overlay "
+                     "is drawn on maps of the standstill index")
         return speed_map_command(x, y, preset, config, set_, out, resume, scheduler, workers,
                                  json_out, model)
     if model is not None and is_model_file(model):
@@ -290,6 +300,7 @@ def map_command(
         raise ParameterError("--rows-per-tile", rows_per_tile, "must be at least 1")
     base = params_from_options(preset, config, set_)
     names = [a.split("=", 1)[0].strip() for a in (x, y)]
+    overlay = iso_overlay(iso, iso_curve, names)
     folder, stem = output_target(out, "map", f"map_{names[0]}_{names[1]}")
     from maglev_match import api
     from maglev_match.core.io import atomic_write_netcdf
@@ -310,7 +321,8 @@ def map_command(
     from maglev_match.plots import plot as draw
 
     figs = draw(ds, out.with_suffix(""), design_point=(float(getattr(base, names[0])),
-                                                       float(getattr(base, names[1]))))
+                                                       float(getattr(base, names[1]))),
+                **overlay)
     tiles_left = keep_tiles or not api.remove_tiles(checkpoint)
     summary = _map_summary(ds, names, not no_simulation, out, figs, warns,
                            str(checkpoint) if tiles_left else None,
@@ -319,6 +331,37 @@ def map_command(
         emit_json(summary)
         return
     _print_map(summary)
+
+
+def iso_overlay(iso: float | None, iso_curve: Path | None, names: list[str]) -> dict:
+    """The figure options of ``map --iso VALUE`` / ``--iso-curve FILE``, checked before the
+    map is computed: a level (finite, > 0), or an iso-chi curve file of the map's two
+    parameters (its level must equal ``--iso`` when both are given)."""
+    import math
+
+    if iso is not None and not (math.isfinite(iso) and iso > 0):
+        raise ParameterError("--iso", iso, "must be a finite number > 0 (a level of chi)")
+    if iso_curve is None:
+        return {} if iso is None else {"iso": iso}
+    import xarray as xr
+
+    try:
+        curve = xr.load_dataset(iso_curve)
+    except (OSError, ValueError) as exc:
+        raise UserError(f"--iso-curve {iso_curve}: not a readable netCDF file ({exc})") \
+            from None
+    if not str(curve.attrs.get("title", "")).startswith("maglev-match iso-chi curve"):
+        raise UserError(f"--iso-curve {iso_curve}: not an iso-chi curve file (written by "
+                        "`maglev-match iso-curve`)")
+    pair = str(curve.attrs.get("curve_params", "")).split(",")
+    if sorted(pair) != sorted(names):
+        raise UserError(f"--iso-curve {iso_curve}: a curve in ({', '.join(pair)}), the map "
+                        f"is in ({', '.join(names)})")
+    target = float(curve.attrs["target"])
+    if iso is not None and iso != target:
+        raise UserError(f"--iso {iso:g} and --iso-curve {iso_curve} (chi = {target:g}) "
+                        "name different levels")
+    return {"iso_curve": curve, "iso_source": Path(iso_curve).name}
 
 
 def _map_summary(ds, names, simulate, out, figs, warnings, tiles, log) -> dict:

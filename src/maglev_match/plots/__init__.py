@@ -20,6 +20,7 @@ from maglev_match.plots import (  # noqa: F401  (each registers its drawers)
     hopf,
     index,
     irregular,
+    iso,
     maps,
     rootlocus,
     simulate,

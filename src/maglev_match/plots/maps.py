@@ -26,7 +26,8 @@ _COLOUR_LABELS = {
 
 
 def map_figure(ds, title: str = "", design_point: tuple[float, float] | None = None,
-               variable: str = "chi"):
+               variable: str = "chi", iso: float | None = None, iso_curve=None,
+               iso_source: str = ""):
     """The map of :func:`maglev_match.analyses.maps.map_dataset` (or
     :func:`maglev_match.design_map`).
 
@@ -38,6 +39,10 @@ def map_figure(ds, title: str = "", design_point: tuple[float, float] | None = N
     design_point : optional (x value, y value) of the design, marked with a star.
     variable : the index drawn as colour: ``chi`` (the headline index, default),
         ``chi_paper`` or ``chi_simulation``.
+    iso : optional level of ``variable`` drawn as a contour line of the stored grid
+        (marching squares), labelled "interpolated from the map grid".
+    iso_curve : optional iso-chi curve Dataset (the netCDF file of `iso-curve`), drawn
+        as solved instead of the contour (``iso_source`` names its file in the legend).
 
     Colour: the index at stable, resolved points (the scale starts at 0); unstable points
     (no index; the paper's chi = 0) grey with hatching; unresolved points marked with an
@@ -77,6 +82,14 @@ def map_figure(ds, title: str = "", design_point: tuple[float, float] | None = N
                      else "chi by the paper's definition, h / w0 (no simulation)")
         fig.colorbar(mesh, ax=ax, label=label)
     handles.extend(_boundary(ax, ds, xname, x))
+    if iso_curve is not None:
+        from maglev_match.plots.iso import draw_iso_dataset
+
+        handles.extend(draw_iso_dataset(ax, iso_curve, xname, iso_source))
+    elif iso is not None:
+        from maglev_match.plots.iso import draw_iso_contour
+
+        handles.extend(draw_iso_contour(ax, x, y, np.where(stable, values, np.nan), iso))
     unres = stable & ~resolved
     if unres.any():
         yy, xx = np.nonzero(unres)

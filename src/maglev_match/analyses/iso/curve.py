@@ -1,0 +1,242 @@
+"""The iso-chi curve of a maglev model (`maglev-match iso-curve`): where in two parameters
+the headline index chi equals a target, with, at every point, the part that decides it and
+whether that part was solved; the switches of the deciding part and the changes of the
+simulated part's mechanism as special points. The continuation itself is
+:mod:`maglev_match.analyses.iso.trace`."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from maglev_match.analyses.iso.maglev import MaglevChi
+from maglev_match.analyses.iso.trace import (
+    DEFAULT_SETTINGS,
+    IsoPoint,
+    IsoSpecial,
+    TraceSettings,
+    trace_iso,
+)
+from maglev_match.core.params import Params
+from maglev_match.core.reprs import compact_repr
+from maglev_match.core.results import Plottable
+
+__all__ = ["IsoChiCurve", "iso_chi_curve", "POINT_STATUSES"]
+
+#: the status of a curve point, and what it means
+POINT_STATUSES = {
+    "solved": "chi = target to the corrector's tolerance, the deciding part solved",
+    "bracketed": "the corrector converged, but the deciding simulated part is only the "
+                 "bisection's bracket (chi known to the bisection's tolerance)",
+    "not converged": "the corrector's last iterate where the curve ends (see the end "
+                     "reason)",
+}
+
+
+def _none(v: Any) -> float:
+    return float("nan") if v is None else float(v)
+
+
+@dataclass(frozen=True)
+class IsoChiCurve(Plottable):
+    """The curve headline chi(p1, p2) = ``target`` of ``model`` at the base parameter set.
+
+    ``names`` the two parameters (SI units, ``units``), ``ranges`` the box the curve was
+    followed in, ``points`` in order along the curve (``start`` the index of the start
+    point), ``specials`` the located switches of the deciding part ("basis switch", where
+    chi_paper = chi_simulation = target) and changes of the simulated part's mechanism,
+    ``ends`` why each direction ended (backwards, forwards), ``warnings`` (a corrector
+    failure, a start that did not converge), ``simulate`` whether chi is the headline
+    (False: the paper's chi alone), ``evaluations`` the index evaluations and
+    ``cpu_seconds`` the process CPU time spent."""
+
+    __repr__ = compact_repr
+
+    target: float
+    names: tuple[str, str]
+    units: tuple[str, str]
+    model: str
+    simulate: bool
+    ranges: tuple[tuple[float, float], tuple[float, float]]
+    points: tuple[IsoPoint, ...]
+    start: int | None
+    specials: tuple[IsoSpecial, ...]
+    ends: tuple[str, str]
+    warnings: tuple[str, ...]
+    evaluations: int = 0
+    cpu_seconds: float = 0.0
+    tolerance: float = 1e-7
+    base: Params | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def ok(self) -> bool:
+        """The curve started and every point is solved."""
+        return bool(self.points) and all(p.status == "solved" for p in self.points)
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One dict per point (SI units): the two parameters, chi, chi_paper,
+        chi_simulation, the deciding part, the simulated part's mechanism and direction,
+        the status of each part and of the point, the residual chi - target."""
+        a, b = self.names
+        out = []
+        for k, pt in enumerate(self.points):
+            s = pt.sample
+            out.append({a: pt.p1, b: pt.p2, "chi": s.chi, "chi_paper": s.chi_paper,
+                        "chi_simulation": _none(s.chi_simulation), "basis": s.basis,
+                        "mechanism": s.mechanism or "", "direction": s.direction or "",
+                        "paper_part": s.paper_status, "simulation_part": s.simulation_status,
+                        "status": pt.status, "residual": pt.residual,
+                        "iterations": pt.iterations,
+                        "start": int(k == self.start)})
+        return out
+
+    def special_rows(self) -> list[dict[str, Any]]:
+        """One dict per special point: kind, the two parameters, chi_paper,
+        chi_simulation, what changes (before -> after), located, residual, message."""
+        a, b = self.names
+        return [{"kind": s.kind, a: s.p1, b: s.p2, "chi_paper": s.sample.chi_paper,
+                 "chi_simulation": _none(s.sample.chi_simulation), "before": s.before,
+                 "after": s.after, "located": s.located, "residual": s.residual,
+                 "message": s.message} for s in self.specials]
+
+    def as_json(self) -> dict[str, Any]:
+        """The machine-readable form (SI units)."""
+        return {"target": self.target, "params": list(self.names), "units": list(self.units),
+                "model": self.model, "simulate": self.simulate,
+                "ranges": {n: list(r) for n, r in zip(self.names, self.ranges, strict=True)},
+                "points": self.rows(), "special_points": self.special_rows(),
+                "start": self.start, "ends": {"backwards": self.ends[0],
+                                              "forwards": self.ends[1]},
+                "ok": self.ok, "warnings": list(self.warnings),
+                "evaluations": self.evaluations, "cpu_seconds": self.cpu_seconds,
+                "tolerance": self.tolerance, "point_statuses": POINT_STATUSES}
+
+    def to_xarray(self) -> Any:
+        """The curve as an :class:`xarray.Dataset` over ``point`` (the two parameters,
+        chi, chi_paper, chi_simulation, residual, iterations as numbers; basis, mechanism,
+        direction, paper_part, simulation_part and status as strings) and over ``special``
+        (kind, position, parts, before/after, located); the target, names, ends and
+        warnings as attributes, the base parameter set and the version as well."""
+        import json
+
+        import xarray as xr
+
+        from maglev_match.core.datasets import annotate
+
+        a, b = self.names
+        rows, sp = self.rows(), self.special_rows()
+
+        def col(key: str, kind: Any = float) -> np.ndarray:
+            return np.array([r[key] for r in rows], dtype=kind)
+
+        def scol(key: str, kind: Any = float) -> np.ndarray:
+            return np.array([r[key] for r in sp], dtype=kind)
+
+        data = {
+            a: ("point", col(a)), b: ("point", col(b)), "chi": ("point", col("chi")),
+            "chi_paper": ("point", col("chi_paper")),
+            "chi_simulation": ("point", col("chi_simulation")),
+            "residual": ("point", col("residual")),
+            "iterations": ("point", col("iterations", np.int64)),
+            "basis": ("point", col("basis", str)), "mechanism": ("point", col("mechanism", str)),
+            "direction": ("point", col("direction", str)),
+            "paper_part": ("point", col("paper_part", str)),
+            "simulation_part": ("point", col("simulation_part", str)),
+            "status": ("point", col("status", str)),
+            "special_kind": ("special", scol("kind", str)),
+            f"special_{a}": ("special", scol(a)), f"special_{b}": ("special", scol(b)),
+            "special_chi_paper": ("special", scol("chi_paper")),
+            "special_chi_simulation": ("special", scol("chi_simulation")),
+            "special_before": ("special", scol("before", str)),
+            "special_after": ("special", scol("after", str)),
+            "special_located": ("special", scol("located", np.int8)),
+        }
+        ua, ub = self.units
+        units = {a: ua, b: ub, "chi": "1", "chi_paper": "1", "chi_simulation": "1",
+                 "residual": "1", "iterations": "1", "basis": "1", "mechanism": "1",
+                 "direction": "1", "paper_part": "1", "simulation_part": "1",
+                 "status": "1", "special_kind": "1", f"special_{a}": ua, f"special_{b}": ub,
+                 "special_chi_paper": "1", "special_chi_simulation": "1",
+                 "special_before": "1", "special_after": "1", "special_located": "1",
+                 "point": "1", "special": "1"}
+        longs = {
+            a: f"{a} on the curve", b: f"{b} on the curve",
+            "chi": "headline matching index at the point" if self.simulate
+            else "matching index by the paper's definition (no simulation)",
+            "chi_paper": "matching index by the paper's definition, h / w0",
+            "chi_simulation": "h_simulation / w0 (NaN: not simulated or inconclusive)",
+            "residual": "chi - target at the point", "iterations": "corrector iterations",
+            "basis": "the part deciding the headline (paper or simulation)",
+            "mechanism": "what decided the simulated critical disturbance",
+            "direction": "the direction of the simulated critical disturbance (up/down)",
+            "paper_part": "the paper part: cycle, rule (no cycle within the limits), "
+                          "unstable or failed",
+            "simulation_part": "the simulated part: solved, bracketed, inconclusive, "
+                               "skipped or off",
+            "status": "the point: solved, bracketed or not converged",
+            "special_kind": "basis switch or mechanism change",
+            f"special_{a}": f"{a} at the special point",
+            f"special_{b}": f"{b} at the special point",
+            "special_chi_paper": "chi_paper at the special point",
+            "special_chi_simulation": "chi_simulation at the special point",
+            "special_before": "deciding part or mechanism before the special point",
+            "special_after": "deciding part or mechanism after the special point",
+            "special_located": "location converged (1) or not (0)",
+            "point": "point number along the curve", "special": "special point number"}
+        ds = xr.Dataset(data, coords={"point": np.arange(len(rows)),
+                                      "special": np.arange(len(sp))}, attrs={
+            "title": f"maglev-match iso-chi curve chi = {self.target:g} in ({a}, {b})",
+            "target": self.target, "curve_params": f"{a},{b}", "model": self.model,
+            "simulate": int(self.simulate), "start_point": -1 if self.start is None
+            else int(self.start), "end_backwards": self.ends[0],
+            "end_forwards": self.ends[1], "tolerance": self.tolerance,
+            "range_" + a: json.dumps(list(self.ranges[0])),
+            "range_" + b: json.dumps(list(self.ranges[1])),
+            "warnings": json.dumps(list(self.warnings)),
+            "evaluations": self.evaluations})
+        return annotate(ds, self.base, units=units, long_names=longs)
+
+
+def iso_chi_curve(base: Params, names: tuple[str, str],
+                  ranges: Mapping[str, tuple[float, float]], target: float, *,
+                  at: tuple[str, float], model: str = "unit", simulate: bool = True,
+                  settings: TraceSettings = DEFAULT_SETTINGS,
+                  stage: Callable[[str], None] | None = None) -> IsoChiCurve:
+    """The iso-chi curve of ``model`` at ``base``: chi(names) = ``target`` inside
+    ``ranges`` (both names), started where ``at`` = (name, value) holds (the other
+    parameter solved over its range), followed both ways
+    (:func:`~maglev_match.analyses.iso.trace.trace_iso`). Inputs are checked by the API."""
+    from maglev_match.core.params import PARAMETER_DOCS
+
+    box = (tuple(map(float, ranges[names[0]])), tuple(map(float, ranges[names[1]])))
+    fixed = names.index(at[0])
+    evaluate = MaglevChi(base, names, model=model, simulate=simulate)
+    traced = trace_iso(evaluate, box, target, fixed=fixed, value=float(at[1]),
+                       settings=settings, stage=stage)
+    warnings = list(traced.warnings)
+    brack = sum(p.status == "bracketed" for p in traced.points)
+    if brack:
+        warnings.append(f"{brack} point(s) of the curve rest on a simulated part that is "
+                        "only bracketed (status 'bracketed'): chi there is known to the "
+                        "bisection's tolerance only")
+    for s in traced.specials:
+        if not s.located:
+            warnings.append(f"a {s.kind} ({s.before} -> {s.after}) near {names[0]} = "
+                            f"{s.p1:.6g}, {names[1]} = {s.p2:.6g}: {s.message}")
+    units = tuple(PARAMETER_DOCS.get(n, ("1",))[0] for n in names)
+    return IsoChiCurve(float(target), names, units, model, simulate, box,  # type: ignore[arg-type]
+                       traced.points, traced.start, traced.specials, traced.ends,
+                       tuple(warnings), traced.evaluations, traced.cpu_seconds,
+                       settings.tol, base)
+
+
+def finite_target(target: Any) -> bool:
+    """A target chi is a finite number > 0."""
+    try:
+        return math.isfinite(float(target)) and float(target) > 0
+    except (TypeError, ValueError):
+        return False

@@ -1,0 +1,77 @@
+"""The headline index of a maglev model as the evaluator of an iso-chi curve: one
+:func:`~maglev_match.analyses.matching.matching_index` per (p1, p2), warm-started from the
+previous evaluation (``near=``: its solved critical disturbances are continued instead of
+searched again), read into a :class:`~maglev_match.analyses.iso.trace.Sample`."""
+
+from __future__ import annotations
+
+import math
+
+from maglev_match.analyses.iso.trace import Sample
+from maglev_match.analyses.matching import Case, MatchingIndex, matching_index
+from maglev_match.core.params import ParameterError, Params
+
+__all__ = ["MaglevChi", "sample_of"]
+
+_PAPER_STATUS = {Case.UNSTABLE_CYCLE: "cycle", Case.NO_CYCLE_WITHIN_LIMITS: "rule",
+                 Case.UNSTABLE_EQUILIBRIUM: "unstable"}
+
+
+def sample_of(idx: MatchingIndex) -> Sample:
+    """The parts of a computed index as a curve sample: the deciding part, the simulated
+    part's direction (the one whose size is h_simulation), its mechanism and whether that
+    size was solved or only bracketed."""
+    paper = "failed" if not idx.converged else _PAPER_STATUS.get(idx.case, "failed")
+    chi = float(idx.chi) if idx.converged else float("nan")
+    if idx.simulation is None:
+        return Sample(chi, float(idx.chi_paper), None, "paper", paper_status=paper,
+                      simulation_status="off", reason=idx.message, state=idx)
+    if idx.simulation.get("status") == "skipped":
+        return Sample(chi, float(idx.chi_paper), None, "paper", paper_status=paper,
+                      simulation_status="skipped", reason=idx.simulation.get("reason", ""),
+                      state=idx)
+    if idx.chi_simulation is None:
+        return Sample(chi, float(idx.chi_paper), None, str(idx.reading_basis),
+                      paper_status=paper, simulation_status="inconclusive",
+                      reason="the simulation was inconclusive", state=idx)
+    key = "up" if idx.h_simulation_up == idx.h_simulation else "down"
+    crit = idx.critical_up if key == "up" else idx.critical_down
+    mech = idx.mechanism_up if key == "up" else idx.mechanism_down
+    info = idx.simulation.get(key, {})
+    status = "solved" if crit is not None and crit.solved else "bracketed"
+    if info.get("status") == "all_return":
+        status = "solved"  # the whole gap range returns: h_simulation is the range itself
+    return Sample(chi, float(idx.chi_paper), float(idx.chi_simulation),
+                  str(idx.reading_basis), None if mech is None else str(mech), key,
+                  paper, status, reason=idx.message, state=idx)
+
+
+class MaglevChi:
+    """Callable (p1, p2) -> :class:`Sample` of the headline index of ``model`` at ``base``
+    with ``names`` set to (p1, p2); ``simulate`` False: the paper's chi only. Each call
+    continues the simulated part from the previous call's index (``warm``)."""
+
+    def __init__(self, base: Params, names: tuple[str, str], *, model: str = "unit",
+                 simulate: bool = True, warm: bool = True) -> None:
+        self.base, self.names, self.model = base, names, model
+        self.simulate, self.warm = simulate, warm
+        self.last: MatchingIndex | None = None
+
+    def __call__(self, v1: float, v2: float) -> Sample:
+        try:
+            p = self.base.replace(**{self.names[0]: v1, self.names[1]: v2})
+        except ParameterError as exc:
+            return Sample(float("nan"), float("nan"), reason=f"not a valid parameter set: "
+                          f"{exc}")
+        near = self.last if (self.warm and self.simulate) else None
+        try:
+            idx = matching_index(p, model=self.model, simulate=self.simulate,
+                                 **({} if near is None else {"near": near}))
+        except (ArithmeticError, ValueError, RuntimeError) as exc:
+            # a numerical failure of the index at this point: reported on the point
+            return Sample(float("nan"), float("nan"), reason=f"the index failed: {exc}")
+        smp = sample_of(idx)
+        if math.isfinite(smp.chi) and idx.critical_up is not None:
+            self.last = idx
+        return smp
+

@@ -1,0 +1,545 @@
+"""The level set chi(p1, p2) = target continued in two parameters, for any evaluator of the
+headline index and its two parts.
+
+Method (pseudo-arclength continuation of a scalar level set, Allgower & Georg 1990, ch. 2
+and 10): the unknowns are the two parameters scaled to their ranges, u_i = (p_i - lo_i) /
+(hi_i - lo_i), so that a step means the same fraction of either range. With
+F(u) = chi(u) - target and g its gradient (a forward difference on warm-started
+evaluations), the tangent t is g turned by 90 degrees; the predictor steps ds along t and
+the corrector solves F = 0 on the line through the predicted point along the normal g
+(Newton with the gradient's slope, then secant steps), to |F| <= tol * target. Steps grow
+after easy corrections (at most 2 iterations) and halve after a failed one or a turn of the
+tangent by more than about 37 degrees; below the smallest step the curve ends with its
+reason and a warning. Both directions are followed from the start; a curve that leaves the
+ranges ends on their edge (the last point solved on the edge line).
+
+Between two neighbouring points where the deciding part switches (paper <-> simulation)
+the switch is the point where both parts equal the target: started where D = chi_paper -
+chi_simulation interpolates to 0 on the chord (corrected onto the curve), located by Newton
+on (chi_paper - target, chi_simulation - target) = 0 with a forward-difference Jacobian, to
+10 tol * target in both; a change of the simulated part's mechanism (a discrete label) is
+located by bisection of the same kind to 1/32 of the step. Both are special points.
+
+Every point records which parts were solved: the simulated part's critical size may only
+be bracketed by its bisection (no solved condition, chi known only to the bisection's
+tolerance). Such a point is marked, never smoothed over; where the corrector cannot
+converge because of it, the curve ends there and says why.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Sample", "IsoPoint", "IsoSpecial", "TraceSettings", "DEFAULT_SETTINGS", "Traced",
+           "trace_iso"]
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One evaluation of the headline index at (p1, p2).
+
+    ``chi`` the headline (NaN: not computed, ``reason`` says why), ``chi_paper`` and
+    ``chi_simulation`` its parts (None: not simulated or inconclusive), ``basis`` the
+    deciding part ("paper" or "simulation"), ``mechanism`` and ``direction`` what decided
+    the simulated part and in which direction, ``paper_status`` ("cycle": the unstable
+    cycle solved, "rule": no cycle within the limits, h = gap range; "unstable": h = 0;
+    "failed") and ``simulation_status`` ("solved", "bracketed": only the bisection's
+    bracket, "inconclusive", "skipped", "off"). ``state`` is the evaluator's own record (the
+    full index), not compared."""
+
+    chi: float
+    chi_paper: float
+    chi_simulation: float | None = None
+    basis: str = "paper"
+    mechanism: str | None = None
+    direction: str | None = None
+    paper_status: str = "cycle"
+    simulation_status: str = "off"
+    reason: str = ""
+    state: Any = None
+
+    @property
+    def exact(self) -> bool:
+        """True when the deciding part is a solved number (not a bracket's midpoint)."""
+        if not math.isfinite(self.chi):
+            return False
+        if self.basis == "simulation":
+            return self.simulation_status == "solved"
+        return self.paper_status in ("cycle", "rule", "unstable")
+
+
+@dataclass(frozen=True)
+class IsoPoint:
+    """A point of the curve: the two parameter values, the evaluation there, the
+    corrector's residual chi - target and iterations, and ``status``: "solved" (the
+    deciding part solved, |chi - target| <= tol target), "bracketed" (the corrector
+    converged but the deciding simulated part is only a bisection bracket), or "not
+    converged" (the last iterate of a failed corrector, where the curve ends)."""
+
+    p1: float
+    p2: float
+    sample: Sample
+    residual: float
+    iterations: int
+    status: str
+    branch: int = 0  # 0 the start, +1 / -1 the direction followed
+
+
+@dataclass(frozen=True)
+class IsoSpecial:
+    """A special point between two neighbouring curve points: ``kind`` "basis switch"
+    (the deciding part changes; chi_paper = chi_simulation = target there) or "mechanism
+    change"; ``before``/``after`` the labels on either side, ``located`` whether the
+    location converged, ``residual`` chi_paper - chi_simulation there (switch)."""
+
+    kind: str
+    p1: float
+    p2: float
+    before: str
+    after: str
+    sample: Sample
+    located: bool
+    residual: float
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class TraceSettings:
+    """Tolerances and step control of :func:`trace_iso` (steps in range fractions)."""
+
+    tol: float = 1e-7
+    ds: float = 0.05
+    ds_min: float = 2e-3
+    ds_max: float = 0.2
+    max_points: int = 30
+    fd_step: float = 1e-4
+    max_iter: int = 12
+    max_inexact: int = 3  # the corrector gives up after this many bracketed iterates
+    min_cos: float = 0.8
+
+
+#: the default tolerances and steps
+DEFAULT_SETTINGS = TraceSettings()
+
+Evaluate = Callable[[float, float], Sample]
+
+
+class _Tracer:
+    def __init__(self, evaluate: Evaluate, box: Sequence[tuple[float, float]],
+                 target: float, settings: TraceSettings,
+                 stage: Callable[[str], None] | None) -> None:
+        self.evaluate = evaluate
+        self.lo = np.array([b[0] for b in box], float)
+        self.width = np.array([b[1] - b[0] for b in box], float)
+        self.target = float(target)
+        self.s = settings
+        self.say = stage or (lambda text: None)
+        self.cache: dict[tuple[float, float], Sample] = {}
+        self.evaluations = 0
+        self.warnings: list[str] = []
+
+    # -- evaluation ------------------------------------------------------------------
+    def params(self, u: np.ndarray) -> tuple[float, float]:
+        p = self.lo + self.width * np.asarray(u, float)
+        return float(p[0]), float(p[1])
+
+    def sample(self, u: np.ndarray) -> Sample:
+        key = self.params(u)
+        if key not in self.cache:
+            self.evaluations += 1
+            self.cache[key] = self.evaluate(*key)
+        return self.cache[key]
+
+    def F(self, u: np.ndarray) -> float:
+        return self.sample(u).chi - self.target
+
+    def gradient(self, u: np.ndarray, f0: float) -> np.ndarray | None:
+        g = np.zeros(2)
+        for i in range(2):
+            h = self.s.fd_step if u[i] + self.s.fd_step <= 1.0 + 1e-12 else -self.s.fd_step
+            e = np.zeros(2)
+            e[i] = h
+            fi = self.F(u + e)
+            if not math.isfinite(fi):
+                return None
+            g[i] = (fi - f0) / h
+        return g if np.linalg.norm(g) > 0 else None
+
+    def converged(self, f: float) -> bool:
+        return math.isfinite(f) and abs(f) <= self.s.tol * self.target
+
+    # -- 1-D solves ------------------------------------------------------------------
+    def line_solve(self, u0: np.ndarray, d: np.ndarray, slope: float
+                   ) -> tuple[np.ndarray, float, int]:
+        """F = 0 on u0 + s d: Newton's first step with ``slope`` (dF/ds), then secant
+        steps; once F has changed sign (at a kink of the headline, where the deciding part
+        switches, secant steps can cycle) regula falsi (Illinois) inside the bracket.
+        Returns (the best iterate, its F, iterations); converged iff :meth:`converged` of
+        that F."""
+        f0 = self.F(u0)
+        if not math.isfinite(f0) or self.converged(f0):
+            return u0, f0, 0
+        best = (u0, f0)
+        prev = (0.0, f0)
+        lo: tuple[float, float] | None = (0.0, f0) if f0 < 0 else None  # F < 0 end
+        hi: tuple[float, float] | None = (0.0, f0) if f0 > 0 else None  # F > 0 end
+        s = -f0 / slope
+        moved = 0  # the end replaced last (-1 lo, +1 hi), for Illinois
+        inexact = 0  # iterates whose deciding part is only a bracket (a step function)
+        for it in range(1, self.s.max_iter + 1):
+            u = u0 + s * d
+            f = self.F(u)
+            if not math.isfinite(f):
+                return best[0], float("nan"), it
+            if abs(f) < abs(best[1]):
+                best = (u, f)
+            if self.converged(f):
+                return u, f, it
+            inexact += not self.sample(u).exact
+            if inexact >= self.s.max_inexact:  # no Newton on a bracket's midpoint
+                return best[0], best[1], it
+            if f < 0:
+                if hi is not None and moved == -1:
+                    hi = (hi[0], hi[1] / 2)
+                lo, moved = (s, f), -1
+            else:
+                if lo is not None and moved == 1:
+                    lo = (lo[0], lo[1] / 2)
+                hi, moved = (s, f), 1
+            if lo is not None and hi is not None:  # bracketed: Illinois
+                s_new = (lo[0] * hi[1] - hi[0] * lo[1]) / (hi[1] - lo[1])
+            else:  # secant from the last two iterates
+                if f == prev[1]:
+                    break
+                s_new = s - f * (s - prev[0]) / (f - prev[1])
+            prev, s = (s, f), s_new
+        return best[0], best[1], self.s.max_iter
+
+    def bracket_solve(self, ua: np.ndarray, ub: np.ndarray, fa: float, fb: float,
+                      fn: Callable[[np.ndarray], float], tol: float, iters: int = 40
+                      ) -> tuple[float, float, bool]:
+        """Illinois regula falsi for fn = 0 on the segment ua..ub (fa, fb of opposite
+        sign); returns (theta, fn there, converged)."""
+        a, b = 0.0, 1.0
+        side = 0
+        theta, f = (a, fa) if abs(fa) < abs(fb) else (b, fb)
+        for _ in range(iters):
+            theta = (a * fb - b * fa) / (fb - fa)
+            f = fn(ua + theta * (ub - ua))
+            if not math.isfinite(f):
+                return theta, f, False
+            if abs(f) <= tol:
+                return theta, f, True
+            if (f > 0) == (fa > 0):
+                a, fa = theta, f
+                if side == -1:
+                    fb /= 2
+                side = -1
+            else:
+                b, fb = theta, f
+                if side == 1:
+                    fa /= 2
+                side = 1
+            if b - a < 1e-10:
+                break
+        return theta, f, False
+
+    # -- the start -------------------------------------------------------------------
+    def start(self, fixed: int, value: float, scan: int = 7
+              ) -> tuple[np.ndarray | None, str]:
+        """Solve chi = target along the free parameter with parameter ``fixed`` at
+        ``value`` (its range fraction): a scan of ``scan`` points, then regula falsi on
+        the sign change nearest the middle of the range."""
+        free = 1 - fixed
+        grid = np.linspace(0.0, 1.0, scan)
+        us = []
+        for c in grid:
+            u = np.zeros(2)
+            u[fixed], u[free] = value, c
+            us.append(u)
+        self.say(f"start: chi along the free parameter at {scan} points ...")
+        fs = [self.F(u) for u in us]
+        pairs = [k for k in range(scan - 1)
+                 if math.isfinite(fs[k]) and math.isfinite(fs[k + 1])
+                 and (fs[k] > 0) != (fs[k + 1] > 0)]
+        if not pairs:
+            finite = [f + self.target for f in fs if math.isfinite(f)]
+            span = (f"chi from {min(finite):.4g} to {max(finite):.4g}" if finite
+                    else "chi could not be computed at any of them")
+            return None, (f"no sign change of chi - {self.target:g} along the free "
+                          f"parameter's range ({scan} points; {span})")
+        k = min(pairs, key=lambda j: abs(0.5 - 0.5 * (grid[j] + grid[j + 1])))
+        theta, f, ok = self.bracket_solve(us[k], us[k + 1], fs[k], fs[k + 1], self.F,
+                                          self.s.tol * self.target)
+        u = us[k] + theta * (us[k + 1] - us[k])
+        if not ok:
+            return None, (f"the start did not converge: chi - target = {f:.3g} after the "
+                          "bracketed search" + self._why(u))
+        return u, ""
+
+    def _why(self, u: np.ndarray) -> str:
+        smp = self.sample(u)
+        if not math.isfinite(smp.chi):
+            return f" (the index failed there: {smp.reason})"
+        if not smp.exact:
+            return (" (the deciding simulated part is only bracketed there, "
+                    f"{smp.simulation_status}: chi is known only to the bisection's "
+                    "tolerance)")
+        return ""
+
+    # -- the curve -------------------------------------------------------------------
+    def branch(self, u0: np.ndarray, g0: np.ndarray, sign: int, n_max: int,
+               first: list[IsoPoint]) -> tuple[list[IsoPoint], list[IsoSpecial], str]:
+        pts: list[IsoPoint] = []
+        specials: list[IsoSpecial] = []
+        u, g = u0.copy(), g0.copy()
+        t = sign * np.array([-g[1], g[0]]) / np.linalg.norm(g)
+        ds = self.s.ds
+        prev = first[0]
+        while len(pts) < n_max:
+            gn = np.linalg.norm(g)
+            step = self._step(u, t, ds)
+            if step is None:
+                return pts, specials, "reached the edge of the ranges"
+            ds_used, edge = step
+            pred = u + ds_used * t
+            if edge is None:
+                new, f, its = self.line_solve(pred, g / gn, gn)
+            else:  # on the edge: solve along it
+                d = np.zeros(2)
+                d[1 - edge] = 1.0
+                slope = g[1 - edge] if abs(g[1 - edge]) > 1e-12 * gn else gn
+                new, f, its = self.line_solve(pred, d, slope)
+            ok = self.converged(f) and bool(np.all(new >= -1e-9) and np.all(new <= 1 + 1e-9))
+            g_new = self.gradient(new, f) if ok else None
+            t_new = None
+            if g_new is not None:
+                t_new = np.array([-g_new[1], g_new[0]]) / np.linalg.norm(g_new)
+                if t_new @ (new - u) < 0:  # onwards: away from the previous point
+                    t_new = -t_new
+                corner = self.sample(new).basis != self.sample(u).basis
+                if (t_new @ t < self.s.min_cos and ds_used > self.s.ds_min
+                        and not corner):  # (a switch of the deciding part is a corner)
+                    g_new = None  # turned too fast: a shorter step
+            if g_new is None or t_new is None:
+                if ds_used / 2 >= self.s.ds_min:
+                    ds = ds_used / 2
+                    continue
+                why = self._fail_reason(new, f, ok)
+                smp = self.sample(new)
+                if math.isfinite(f):
+                    p1, p2 = self.params(new)
+                    pts.append(IsoPoint(p1, p2, smp, f, its, "not converged", sign))
+                return pts, specials, why
+            smp = self.sample(new)
+            p1, p2 = self.params(new)
+            point = IsoPoint(p1, p2, smp, f, its, "solved" if smp.exact else "bracketed",
+                             sign)
+            specials += self.specials_between(prev, point, g, g_new)
+            pts.append(point)
+            prev = point
+            if edge is not None:
+                name = ("p1", "p2")[edge]
+                return pts, specials, f"reached the end of the {name} range"
+            closed = (len(first) + len(pts) > 3
+                      and np.linalg.norm(new - u0) < 0.75 * ds_used and sign > 0
+                      and len(pts) > 2)
+            if closed:
+                return pts, specials, "the curve closed on its start"
+            u, g, t = new, g_new, t_new
+            if its <= 2:
+                ds = min(1.5 * ds_used, self.s.ds_max)
+            else:
+                ds = ds_used
+        return pts, specials, f"the number of points ({n_max} in this direction) reached"
+
+    def _step(self, u: np.ndarray, t: np.ndarray, ds: float
+              ) -> tuple[float, int | None] | None:
+        """The step along t that stays in the unit box: (ds, None), or the step to the box
+        edge and the index of the parameter held there; None when already on it."""
+        limit, edge = ds, None
+        for i in range(2):
+            if t[i] > 1e-14:
+                room = (1.0 - u[i]) / t[i]
+            elif t[i] < -1e-14:
+                room = -u[i] / t[i]
+            else:
+                continue
+            if room < limit:
+                limit, edge = room, i
+        if edge is not None and limit < 1e-9:
+            return None
+        return limit, edge
+
+    def _fail_reason(self, u: np.ndarray, f: float, in_range: bool) -> str:
+        p1, p2 = self.params(u)
+        where = f"near p1 = {p1:.6g}, p2 = {p2:.6g}"
+        if math.isfinite(f) and not in_range and self.converged(f):
+            return f"the corrector left the ranges {where}"
+        if math.isfinite(f) and self.converged(f):
+            return (f"the curve turns faster than the smallest step "
+                    f"({self.s.ds_min:g}) can follow {where}")
+        return (f"the corrector did not converge at the smallest step ({self.s.ds_min:g}) "
+                f"{where}: chi - target = {f:.3g}" + self._why(u))
+
+    # -- special points between neighbours --------------------------------------------
+    def on_curve(self, u: np.ndarray, g: np.ndarray) -> tuple[np.ndarray, bool]:
+        gn = np.linalg.norm(g)
+        new, f, _ = self.line_solve(u, g / gn, gn)
+        return new, self.converged(f)
+
+    def specials_between(self, a: IsoPoint, b: IsoPoint, ga: np.ndarray,
+                         gb: np.ndarray) -> list[IsoSpecial]:
+        sa, sb = a.sample, b.sample
+        ua = (np.array([a.p1, a.p2]) - self.lo) / self.width
+        ub = (np.array([b.p1, b.p2]) - self.lo) / self.width
+        g = 0.5 * (ga + gb)
+        out = []
+        if sa.basis != sb.basis:
+            out.append(self.locate_switch(ua, ub, sa, sb, g))
+        if (sa.mechanism != sb.mechanism and sa.basis == sb.basis == "simulation"
+                and sa.mechanism is not None and sb.mechanism is not None):
+            out.append(self.locate_change(ua, ub, sa, sb, g))
+        return out
+
+    def _difference(self, smp: Sample) -> float:
+        if smp.chi_simulation is None or not math.isfinite(smp.chi_paper):
+            return float("nan")
+        return smp.chi_paper - smp.chi_simulation
+
+    def _parts(self, u: np.ndarray) -> np.ndarray:
+        smp = self.sample(u)
+        sim = float("nan") if smp.chi_simulation is None else smp.chi_simulation
+        return np.array([smp.chi_paper, sim]) - self.target
+
+    def locate_switch(self, ua, ub, sa: Sample, sb: Sample, g) -> IsoSpecial:
+        """Where both parts equal the target between the points a and b: Newton on
+        (chi_paper - target, chi_simulation - target) = 0 (forward-difference Jacobian of
+        the two parts), from the chord point where chi_paper - chi_simulation interpolates
+        to 0, corrected onto the curve."""
+        self.say("locating the switch of the deciding part ...")
+        kind = "basis switch"
+        da, db = self._difference(sa), self._difference(sb)
+        if not (math.isfinite(da) and math.isfinite(db)) or (da > 0) == (db > 0):
+            u = 0.5 * (ua + ub)
+            return IsoSpecial(kind, *self.params(u), sa.basis, sb.basis, self.sample(u),
+                              False, float("nan"), "not located: a part is missing on one "
+                              "side")
+        theta = da / (da - db)
+        u, _ = self.on_curve(ua + theta * (ub - ua), g)
+        tol = 10 * self.s.tol * self.target
+        G = self._parts(u)
+        for _ in range(8):
+            if not np.all(np.isfinite(G)) or np.max(np.abs(G)) <= tol:
+                break
+            J = np.empty((2, 2))
+            for k in range(2):
+                e = np.zeros(2)
+                e[k] = self.s.fd_step
+                J[:, k] = (self._parts(u + e) - G) / self.s.fd_step
+            try:
+                du = np.linalg.solve(J, -G)
+            except np.linalg.LinAlgError:
+                break
+            if not np.all(np.isfinite(du)) or np.linalg.norm(du) > 2 * np.linalg.norm(ub - ua):
+                break
+            u = u + du
+            G = self._parts(u)
+        ok = bool(np.all(np.isfinite(G)) and np.max(np.abs(G)) <= tol)
+        d = float(G[0] - G[1])
+        msg = "" if ok else (f"not converged: chi_paper - target = {G[0]:.3g}, "
+                             f"chi_simulation - target = {G[1]:.3g}")
+        return IsoSpecial(kind, *self.params(u), sa.basis, sb.basis, self.sample(u), ok,
+                          d, msg)
+
+    def locate_change(self, ua, ub, sa: Sample, sb: Sample, g) -> IsoSpecial:
+        self.say("locating the change of mechanism ...")
+        a, b = 0.0, 1.0
+        last = None
+        for _ in range(5):
+            mid = 0.5 * (a + b)
+            uu, ok = self.on_curve(ua + mid * (ub - ua), g)
+            if not ok:
+                break
+            last = uu
+            if self.sample(uu).mechanism == sa.mechanism:
+                a = mid
+            else:
+                b = mid
+        u = last if last is not None else 0.5 * (ua + ub)
+        located = last is not None and b - a <= 1.0 / 32
+        if located:
+            msg = f"bracketed to {b - a:.3g} of the step"
+        else:
+            msg = (f"not located: the corrector failed between the points (bracketed to "
+                   f"{b - a:.3g} of the step)")
+        return IsoSpecial("mechanism change", *self.params(u), str(sa.mechanism),
+                          str(sb.mechanism), self.sample(u), located, float("nan"), msg)
+
+
+@dataclass(frozen=True)
+class Traced:
+    """What :func:`trace_iso` returns: the points in order along the curve, the start's
+    position among them, the special points, each direction's end, the warnings and the
+    counts."""
+
+    points: tuple[IsoPoint, ...]
+    start: int | None
+    specials: tuple[IsoSpecial, ...]
+    ends: tuple[str, str]
+    warnings: tuple[str, ...]
+    evaluations: int
+    cpu_seconds: float
+
+
+def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: float, *,
+              fixed: int, value: float, settings: TraceSettings = DEFAULT_SETTINGS,
+              stage: Callable[[str], None] | None = None) -> Traced:
+    """The curve chi(p1, p2) = ``target`` inside ``box`` ((lo1, hi1), (lo2, hi2)), started
+    where parameter ``fixed`` (0 or 1) equals ``value`` (solving for the other over its
+    range), followed both ways. ``evaluate(p1, p2)`` returns a :class:`Sample`."""
+    cpu = time.process_time()
+    tr = _Tracer(evaluate, box, target, settings, stage)
+    lo, hi = box[fixed]
+    u0, why = tr.start(fixed, (value - lo) / (hi - lo))
+
+    def done(points, start, specials, ends) -> Traced:
+        return Traced(tuple(points), start, tuple(specials), ends, tuple(tr.warnings),
+                      tr.evaluations, time.process_time() - cpu)
+
+    if u0 is None:
+        tr.warnings.append(f"the curve could not start: {why}")
+        return done([], None, [], (why, why))
+    f0 = tr.F(u0)
+    smp = tr.sample(u0)
+    p1, p2 = tr.params(u0)
+    first = IsoPoint(p1, p2, smp, f0, 0, "solved" if smp.exact else "bracketed", 0)
+    if settings.max_points <= 1:  # the start alone: chi = target along one parameter
+        why = "one point asked: the start alone"
+        return done([first], 0, [], (why, why))
+    g0 = tr.gradient(u0, f0)
+    if g0 is None:
+        why = "the gradient of chi could not be computed at the start" + tr._why(u0)
+        tr.warnings.append(why)
+        return done([first], 0, [], (why, why))
+    per = max(1, (settings.max_points - 1) // 2)
+    stage = stage or (lambda text: None)
+    stage("following the curve forwards ...")
+    fwd, sp_f, end_f = tr.branch(u0, g0, +1, settings.max_points - 1 - per, [first])
+    if end_f == "the curve closed on its start":
+        bwd, sp_b, end_b = [], [], "the curve closed on its start"
+    else:
+        stage("following the curve backwards ...")
+        bwd, sp_b, end_b = tr.branch(u0, g0, -1, per, [first])
+    for end, name in ((end_f, "forwards"), (end_b, "backwards")):
+        if "did not converge" in end or "turns faster" in end or "left the ranges" in end:
+            tr.warnings.append(f"the curve ended {name}: {end}")
+    points = list(reversed(bwd)) + [first] + fwd
+    return done(points, len(bwd), list(reversed(sp_b)) + sp_f, (end_b, end_f))
+

@@ -1,0 +1,293 @@
+"""Iso-chi curves (`iso-curve`, `api.iso_curve`): the level set chi(p1, p2) = target.
+
+The continuation is checked on toy evaluators whose curve, switch point and mechanism
+change are known in closed form, and on model A: every point re-evaluated independently by
+`api.matching_index` gives the target, and a point agrees with a 1-D root of chi along
+p1 solved by brentq on independent index evaluations."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from maglev_match.analyses.iso import Sample, TraceSettings, trace_iso
+from maglev_match.core.params import ParameterError
+
+R2 = 0.5  # the paper part of the toy: chi_paper = 10 (p1^2 + p2^2), = 5 on p1^2 + p2^2 = R2
+SWITCH = (1.0 / 3.0, math.sqrt(R2 - 1.0 / 9.0))  # chi_paper = chi_sim = 5 there
+
+
+def toy(p1: float, p2: float, bracketed_below: float = -math.inf) -> Sample:
+    """chi_paper = 10 (p1^2 + p2^2), chi_simulation = 4 + 3 p1 (= 5 on p1 = 1/3), the
+    headline their minimum; the simulated part's mechanism is grazing above p2 = 0.8 and a
+    basin boundary below; below ``bracketed_below`` in p2 the simulated part is only a
+    bisection bracket (its value rounded to 0.01)."""
+    cp, cs = 10.0 * (p1 * p1 + p2 * p2), 4.0 + 3.0 * p1
+    status = "solved"
+    if p2 < bracketed_below:
+        cs, status = round(cs, 2) + 0.003, "bracketed"
+    basis = "simulation" if cs < cp else "paper"
+    return Sample(min(cp, cs), cp, cs, basis, "grazing" if p2 > 0.8 else "basin_boundary",
+                  "up", "cycle", status)
+
+
+BOX = ((-1.0, 1.0), (-1.0, 1.0))
+
+
+def test_toy_curve_follows_both_parts_and_locates_the_switches():
+    tr = trace_iso(toy, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    assert tr.start is not None and len(tr.points) > 10
+    for pt in tr.points:
+        s = pt.sample
+        assert pt.status == "solved"
+        assert abs(s.chi - 5.0) <= 1e-7 * 5.0 + 1e-15
+        if s.basis == "paper":  # on the circle
+            assert abs(pt.p1 ** 2 + pt.p2 ** 2 - R2) < 1e-7
+        else:  # on the line p1 = 1/3
+            assert abs(pt.p1 - 1.0 / 3.0) < 1e-7
+    # both directions end on the edge of the box: p2 = -1 and p2 = +1 on the line
+    assert "end of the p2 range" in tr.ends[0] and "end of the p2 range" in tr.ends[1]
+    assert tr.points[0].p2 == pytest.approx(-1.0) and tr.points[-1].p2 == pytest.approx(1.0)
+    switches = [s for s in tr.specials if s.kind == "basis switch"]
+    assert len(switches) == 2
+    for s, sign in zip(switches, (-1, 1), strict=True):
+        assert s.located
+        assert s.p1 == pytest.approx(SWITCH[0], abs=1e-7)
+        assert s.p2 == pytest.approx(sign * SWITCH[1], abs=1e-7)
+        assert abs(s.sample.chi_paper - s.sample.chi_simulation) <= 1e-6 * 5.0
+    # the mechanism changes at p2 = 0.8 on the simulation-decided line: located within
+    # 1/32 of the step that crossed it
+    changes = [s for s in tr.specials if s.kind == "mechanism change"]
+    assert len(changes) == 1 and changes[0].located
+    assert {changes[0].before, changes[0].after} == {"grazing", "basin_boundary"}
+    step = max(abs(b.p2 - a.p2) for a, b in zip(tr.points, tr.points[1:], strict=False))
+    assert abs(changes[0].p2 - 0.8) <= step / 16
+
+
+def test_toy_curve_says_where_the_deciding_part_is_only_bracketed():
+    # below p2 = -0.85 the simulated part is a bracket (a step function): the corrector
+    # cannot converge on it; the curve ends there, says why, and marks that point
+    def ev(p1, p2):
+        return toy(p1, p2, bracketed_below=-0.85)
+
+    tr = trace_iso(ev, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    first = tr.points[0]
+    assert first.status == "not converged"
+    assert first.sample.simulation_status == "bracketed"
+    assert "only bracketed" in tr.ends[0]
+    assert any("only bracketed" in w for w in tr.warnings)
+    assert all(p.status == "solved" for p in tr.points[1:])
+
+
+def test_toy_curve_that_cannot_start_says_why():
+    tr = trace_iso(toy, BOX, 50.0, fixed=1, value=0.0)
+    assert not tr.points and tr.start is None
+    assert "no sign change" in tr.warnings[0] and "chi from" in tr.warnings[0]
+
+
+# ---------------------------------------------------------------------------------------
+# model A (the paper's chi alone, turnout-soft)
+# ---------------------------------------------------------------------------------------
+PAPER = dict(names=("EI", "kD"), ranges={"EI": (1.5e10, 3e10), "kD": (120.0, 180.0)},
+             simulate=False, stage=False)
+
+
+@pytest.fixture(scope="module")
+def paper_curve():
+    from maglev_match import api
+
+    return api.iso_curve("turnout-soft", 9.0, points=5, **PAPER)
+
+
+def test_paper_curve_points_give_the_target_when_evaluated_again(paper_curve):
+    from maglev_match import api
+
+    assert len(paper_curve.points) == 5 and paper_curve.ok
+    assert {r["paper_part"] for r in paper_curve.rows()} == {"cycle"}
+    for pt in paper_curve.points:
+        idx = api.matching_index("turnout-soft", simulate=False, stage=False, EI=pt.p1,
+                                 kD=pt.p2)
+        assert abs(idx.chi - 9.0) <= 1e-6 * 9.0, (pt, idx.chi)
+    # the curve goes somewhere: its points are not all the start
+    kd = [p.p2 for p in paper_curve.points]
+    assert max(kd) - min(kd) > 5.0
+
+
+def test_paper_curve_point_equals_a_brentq_root_along_p1(paper_curve):
+    from scipy.optimize import brentq
+
+    from maglev_match import api
+
+    pt = paper_curve.points[-1]
+
+    def f(ei):
+        return api.matching_index("turnout-soft", simulate=False, stage=False, EI=ei,
+                                  kD=pt.p2).chi - 9.0
+
+    root = brentq(f, 0.97 * pt.p1, 1.03 * pt.p1, xtol=1.0, rtol=1e-10)
+    assert root == pytest.approx(pt.p1, rel=1e-6)
+
+
+def test_curve_xarray_round_trip_and_figure(paper_curve, tmp_path):
+    import xarray as xr
+
+    ds = paper_curve.to_xarray()
+    path = tmp_path / "iso.nc"
+    ds.to_netcdf(path)
+    back = xr.load_dataset(path)
+    np.testing.assert_array_equal(back["EI"].values, [p.p1 for p in paper_curve.points])
+    np.testing.assert_array_equal(back["chi"].values,
+                                  [p.sample.chi for p in paper_curve.points])
+    assert list(back["status"].values) == [p.status for p in paper_curve.points]
+    assert back.attrs["target"] == 9.0 and back["EI"].attrs["units"] == "N m^2"
+    files = paper_curve.plot(tmp_path / "iso")
+    assert sorted(f.suffix for f in files) == [".png", ".svg"]
+
+
+@pytest.mark.parametrize("kw, field, text", [
+    (dict(target=0.0), "target", "finite number > 0"),
+    (dict(target=float("nan")), "target", "finite number > 0"),
+    (dict(names=("EI", "EI")), "names", "the same parameter twice"),
+    (dict(names=("EI", "kQ")), "names", "unknown parameter"),
+    (dict(names=("EI", "w0")), "names", "derived"),
+    (dict(ranges={"kD": (-5.0, 10.0)}), "ranges", "valid range of kD"),
+    (dict(ranges={"kP": (1.0, 10.0)}), "ranges", "not one of the curve's parameters"),
+    (dict(at="kD=500"), "at", "inside the range of kD"),
+    (dict(at="kP=5"), "at", "not one of the curve's parameters"),
+])
+def test_bad_inputs_are_refused_naming_the_field(kw, field, text):
+    from maglev_match import api
+
+    args = dict(names=("EI", "kD"), ranges={"kD": (120.0, 180.0)})
+    args.update(kw)
+    target = args.pop("target", 5.0)
+    with pytest.raises(ParameterError) as exc:
+        api.iso_inputs("turnout-soft", target, **args)
+    assert exc.value.args and field in str(exc.value) and text in str(exc.value)
+
+
+def test_headline_curve_points_and_its_switch_evaluated_again():
+    # the one headline case (turnout-soft, chi = 5 in (EI, kD) near kD = 222): the curve
+    # is decided by the simulation (grazing) below the switch and by the paper part above
+    # it, each point computed warm-started from its neighbour. Re-evaluated from scratch,
+    # every point gives the target, and at the located switch both parts equal it.
+    from maglev_match import api
+
+    c = api.iso_curve("turnout-soft", 5.0, names=("EI", "kD"), points=3, step=0.1,
+                      at="kD=222.2", stage=False,
+                      ranges={"EI": (2.0e10, 2.4e10), "kD": (218.0, 226.0)})
+    assert len(c.points) == 3 and c.ok
+    rows = c.rows()
+    assert [r["basis"] for r in rows] == ["simulation", "paper", "paper"]
+    for r in rows:
+        assert r["simulation_part"] == "solved" and r["mechanism"] == "grazing"
+        assert r["direction"] in ("up", "down")
+        idx = api.matching_index("turnout-soft", stage=False, EI=r["EI"], kD=r["kD"])
+        assert abs(idx.chi - 5.0) <= 1e-6 * 5.0, (r, idx.chi)
+        assert idx.reading_basis == r["basis"]
+    (sw,) = c.specials
+    assert sw.kind == "basis switch" and sw.located
+    assert rows[0]["kD"] < sw.p2 < rows[1]["kD"]
+    idx = api.matching_index("turnout-soft", stage=False, EI=sw.p1, kD=sw.p2)
+    assert abs(idx.chi_paper - 5.0) <= 1e-6 * 5.0
+    assert abs(idx.chi_simulation - 5.0) <= 1e-6 * 5.0
+
+
+def test_the_docs_example_runs_as_written_and_prints_its_table(tmp_path, monkeypatch):
+    import contextlib
+    import io
+    import re
+    import shlex
+    from pathlib import Path
+
+    from maglev_match.cli import main
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "iso.md").read_text()
+    line = next(ln for ln in page.splitlines() if ln.startswith("maglev-match iso-curve"))
+    shown = re.search(r"```text\n(.*?)```", page, re.S).group(1).splitlines()
+    monkeypatch.chdir(tmp_path)
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(shlex.split(line)[1:])
+    assert code == 0, err.getvalue()
+    printed = out.getvalue()
+    for row in shown[1:]:  # every table row and the ends as printed (the first line has
+        assert row in printed, row  # the CPU time)
+    folder = tmp_path / "maglev-match-out" / "iso-curve"
+    assert {p.name for p in folder.iterdir()} >= {
+        "iso_chi_unit_EI_kD.csv", "iso_chi_unit_EI_kD_special_points.csv",
+        "iso_chi_unit_EI_kD.nc", "iso_chi_unit_EI_kD.png", "iso_chi_unit_EI_kD.svg"}
+
+
+def _fake_map(x, y, chi):
+    import xarray as xr
+
+    shape = (len(y), len(x))
+    return xr.Dataset({"chi": (("kD", "EI"), chi), "chi_paper": (("kD", "EI"), chi),
+                       "chi_simulation": (("kD", "EI"), np.full(shape, np.nan)),
+                       "stable": (("kD", "EI"), np.ones(shape, np.int8)),
+                       "resolved": (("kD", "EI"), np.ones(shape, np.int8))},
+                      coords={"EI": x, "kD": y})
+
+
+def test_map_overlay_is_the_level_set_of_the_grid_labelled_interpolated(paper_curve):
+    # chi linear over the grid: the marching-squares level set is exact, kD = 150 + 4 (EI/1e9 - 20)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from maglev_match.plots.maps import map_figure
+
+    x, y = np.linspace(1.5e10, 3e10, 7), np.linspace(120.0, 180.0, 9)
+    chi = 5.0 + (y[:, None] - 150.0) / 4.0 - (x[None, :] / 1e9 - 20.0)
+    fig = map_figure(_fake_map(x, y, chi), iso=5.0)
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "chi = 5, interpolated from the map grid" in labels
+    verts = np.concatenate([p.vertices for c in ax.collections
+                            for p in getattr(c, "get_paths", list)()
+                            if type(c).__name__ in ("QuadContourSet", "PathCollection",
+                                                    "LineCollection") and len(p.vertices)])
+    assert len(verts) > 2
+    np.testing.assert_allclose(verts[:, 1], 150.0 + 4.0 * (verts[:, 0] / 1e9 - 20.0),
+                               atol=1e-9)
+    # an iso-curve file is drawn as solved, point for point
+    fig = map_figure(_fake_map(x, y, chi), iso_curve=paper_curve.to_xarray(),
+                     iso_source="c.nc")
+    ax = fig.axes[0]
+    line = next(ln for ln in ax.get_lines() if "(solved)" in str(ln.get_label()))
+    np.testing.assert_array_equal(line.get_xdata(), [p.p1 for p in paper_curve.points])
+    assert "from c.nc" in line.get_label()
+
+
+def test_map_iso_options_are_checked_before_the_map(tmp_path, paper_curve):
+    from maglev_match.cli.common import UserError
+    from maglev_match.cli.index import iso_overlay
+
+    path = tmp_path / "c.nc"
+    paper_curve.to_xarray().to_netcdf(path)
+    assert iso_overlay(None, path, ["kD", "EI"])["iso_curve"].attrs["target"] == 9.0
+    with pytest.raises(UserError, match=r"a curve in \(EI, kD\), the map is in"):
+        iso_overlay(None, path, ["EI", "omega0"])
+    with pytest.raises(UserError, match="name different levels"):
+        iso_overlay(5.0, path, ["EI", "kD"])
+    with pytest.raises(ParameterError, match="--iso"):
+        iso_overlay(float("nan"), None, ["EI", "kD"])
+
+
+def test_the_curve_crosses_the_design_kd_at_the_design_ei():
+    # independent methods: `design` (SLSQP on exact gradients, the cheapest EI with the
+    # headline chi >= 5 at the base kD = 150) and the curve's point at kD = 150 (chi = 5
+    # solved along EI by regula falsi on index evaluations)
+    from maglev_match import api
+
+    design = api.design_search("turnout-soft", vary={"EI": (5e9, 4e10)}, minimize="EI",
+                               require={"chi": 5.0}, stage=False)
+    assert "chi" in " ".join(design.active), design.active  # chi = 5 holds there
+    ei = design.values["EI"]
+    c = api.iso_curve("turnout-soft", 5.0, names=("EI", "kD"), at="kD=150", points=1,
+                      ranges={"EI": (1.2e10, 3.6e10), "kD": (100.0, 200.0)}, stage=False)
+    (pt,) = c.points
+    assert pt.p2 == 150.0 and pt.status == "solved"
+    assert pt.p1 == pytest.approx(ei, rel=1e-4)
