@@ -76,6 +76,7 @@ SET_COMMANDS = {
     "sensitivity": (), "speed": (), "cycle-curve": (),
     "map": ("--x", "omega1=40:190:3", "--y", "sigma=2e-4:6e-4:3"),
     "design": ("--vary", "EI=5e9:4e10", "--maximize", "chi"),
+    "explore": ("--no-browser",),
 }
 
 

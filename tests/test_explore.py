@@ -134,6 +134,9 @@ def test_a_request_behind_a_newer_one_is_answered_stale(server):
     assert code == 200 and not r.get("stale") and r["seq"] == 1000
     code, r = _json(server, "/api/quick?preset=turnout-soft&kD=141&seq=999")
     assert r == {"seq": 999, "stale": True}
+    # the numbers are a page's own: another page (a reload, a second tab) starts again
+    code, r = _json(server, "/api/quick?preset=turnout-soft&kD=141&seq=1&client=tab2")
+    assert code == 200 and not r.get("stale") and r["seq"] == 1
 
 
 def test_another_host_name_is_refused(server):
@@ -231,7 +234,9 @@ def test_a_background_job_is_cancelled_for_real_and_the_next_one_runs(server):
 # ----- the command ----------------------------------------------------------------------
 @pytest.mark.parametrize("args, option", [(["--port", "70000"], "--port"),
                                           (["--preset", "nope"], "--preset"),
-                                          (["--model", "car"], "--model")])
+                                          (["--model", "car"], "--model"),
+                                          (["--set", "kD=-1"], "kD"),
+                                          (["--set", "sigma=0"], "sigma")])
 def test_explore_refuses_bad_options(args, option, capsys):
     code = main(["explore", "--no-browser", *args])
     assert code == 2
@@ -241,13 +246,15 @@ def test_explore_refuses_bad_options(args, option, capsys):
 def test_explore_serves_prints_its_address_and_stops_on_ctrl_c():
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1] / "src")}
     proc = subprocess.Popen([sys.executable, "-m", "maglev_match", "explore", "--no-browser",
-                             "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env, start_new_session=True)
+                             "--port", "0", "--set", "EI=2.2e10"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
     try:
         line = proc.stdout.readline()
         assert "http://127.0.0.1:" in line, line
         url = line.split()[2]
         base = url.split("/?")[0]
+        # the page opens on the design of --preset and --set
+        assert url.endswith("/?preset=turnout-soft&EI=22000000000.0"), url
         with urllib.request.urlopen(base + "/api/init?preset=turnout-soft", timeout=60) as r:
             assert json.loads(r.read())["model"] == "unit"
         os.killpg(proc.pid, signal.SIGINT)

@@ -69,9 +69,10 @@ CONTROLS: tuple[Control, ...] = (
     Control("tau", "delay tau", "s", 0.0, 5e-3, log=False, group="controller"),
 )
 CONTROL_NAMES = tuple(c.name for c in CONTROLS)
-#: query keys of a request that are not parameters: the sequence number, what to export,
+#: query keys of a request that are not parameters: the page and its sequence number, what
+#: to export,
 #: the kind of background job (the model is chosen on the command line only)
-REQUEST_KEYS = ("preset", "seq", "what", "kind", "model")
+REQUEST_KEYS = ("preset", "seq", "client", "what", "kind", "model")
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from importlib import resources
 from typing import Any
+from urllib.parse import urlencode
 
 import tornado.httpserver
 import tornado.netutil
@@ -29,6 +30,7 @@ from maglev_match.explore.inputs import (
     State,
     command_line,
     controls_json,
+    params_of,
     parse_query,
     toml_text,
 )
@@ -91,6 +93,12 @@ class PageHandler(_Base):
         self.finish((STATIC / "index.html").read_bytes())
 
 
+class NoIconHandler(_Base):
+    def get(self) -> None:
+        self.set_status(204)
+        self.finish()
+
+
 class InitHandler(_Base):
     def get(self) -> None:
         state, errors = parse_query(self.query())
@@ -112,9 +120,10 @@ class ComputeHandler(_Base):
         if errors:  # the command line's messages; nothing computed
             self.send({"seq": seq, "errors": errors}, 400)
             return
-        self.server.latest[self.tier] = max(self.server.latest[self.tier], seq)
+        key = (self.get_argument("client", ""), self.tier)
+        self.server.note_latest(key, seq)
         try:
-            data = await self.server.run(self.tier, seq, state)
+            data = await self.server.run(key, seq, state)
         except ParameterError as e:
             self.send({"seq": seq, "errors": {str(e.field): str(e)}}, 400)
             return
@@ -128,22 +137,29 @@ class ComputeHandler(_Base):
 
 
 class JobHandler(_Base):
-    def post(self, job_id: str | None = None, action: str | None = None) -> None:
+    """``POST /api/job?kind=K&...`` starts a background job (cancelling the one running),
+    ``GET /api/job/ID`` polls it, ``POST /api/job/ID/cancel`` cancels it. Starting and
+    ending the child process run off the server's event loop."""
+
+    async def post(self, job_id: str | None = None, action: str | None = None) -> None:
         runner = self.server.jobs
         if job_id is None:
-            state, errors = parse_query({k: v for k, v in self.query().items() if k != "kind"})
+            state, errors = parse_query(self.query())
             if errors:
                 self.send({"errors": errors}, 400)
                 return
             kind = self.get_argument("kind", "hopf_curve")
             try:
-                job = runner.start(kind, state, self.seq())
+                job = await asyncio.to_thread(runner.start, kind, state, self.seq())
             except KeyError:
                 self.send({"error": f"no background job '{kind}'"}, 400)
                 return
             self.send(job.as_json())
             return
-        job = runner.cancel(int(job_id)) if action == "cancel" else runner.poll(int(job_id))
+        if action == "cancel":
+            job = await asyncio.to_thread(runner.cancel, int(job_id))
+        else:
+            job = runner.poll(int(job_id))
         if job is None:
             self.send({"error": f"no job {job_id}"}, 404)
         else:
@@ -208,15 +224,20 @@ class ExploreServer:
     ``stop()`` ends it."""
 
     def __init__(self, preset: str = DEFAULT_PRESET, model: str = "unit",
-                 host: str = "127.0.0.1", port: int = 0) -> None:
+                 host: str = "127.0.0.1", port: int = 0,
+                 overrides: dict[str, float] | None = None) -> None:
         if preset not in available_presets():
             raise ParameterError("--preset", preset, "no such preset; available: "
                                  + ", ".join(available_presets()))
         self.preset, self.host, self.port = preset, host, port
+        self.start_state = State(preset, tuple((overrides or {}).items()))
+        params_of(self.start_state)  # refused before serving
         self.session = Session(model)
         self.jobs = JobRunner(self.session.model)
         self.executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="explore")
-        self.latest = {"quick": 0, "release": 0}
+        #: (client, tier) -> the newest sequence number received (a page is one client: its
+        #: numbers start again at a reload, in a second tab)
+        self.latest: dict[tuple[str, str], int] = {}
         self.curves: dict[str, dict[str, Any]] = {}
         self.allowed_hosts = {h.lower() for h in LOOPBACK} | {host.strip("[]").lower()}
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -227,12 +248,13 @@ class ExploreServer:
     @property
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/?preset={self.preset}"
+        return f"http://{host}:{self.port}/?{urlencode(self.start_state.query())}"
 
     def app(self) -> tornado.web.Application:
         kw = {"server": self}
         return tornado.web.Application([
             (r"/", PageHandler, kw),
+            (r"/favicon.ico", NoIconHandler, kw),
             (r"/api/init", InitHandler, kw),
             (r"/api/quick", ComputeHandler, {**kw, "tier": "quick"}),
             (r"/api/release", ComputeHandler, {**kw, "tier": "release"}),
@@ -243,13 +265,20 @@ class ExploreServer:
             (r"/static/(.*)", _Static, {"path": str(STATIC), "server": self}),
         ], compress_response=True)
 
-    async def run(self, tier: str, seq: int, state: State) -> dict[str, Any] | None:
-        """Compute one tier on the worker thread; None when a newer request of the tier
-        arrived before this one started (stale, not computed)."""
+    def note_latest(self, key: tuple[str, str], seq: int) -> None:
+        if key not in self.latest and len(self.latest) > 1000:  # forget old pages
+            self.latest.clear()
+        self.latest[key] = max(self.latest.get(key, seq), seq)
+
+    async def run(self, key: tuple[str, str], seq: int, state: State
+                  ) -> dict[str, Any] | None:
+        """Compute one tier (``key``: the client and the tier) on the worker thread; None
+        when a newer request of the same client and tier arrived before this one started
+        (stale, not computed)."""
         def work() -> dict[str, Any] | None:
-            if seq < self.latest[tier]:
+            if seq < self.latest.get(key, seq):
                 return None
-            if tier == "quick":
+            if key[1] == "quick":
                 return self.session.quick(state)
             data = self.session.release(state)
             self._keep_curves(data)

@@ -9,12 +9,20 @@ const S = {
   job: null, jobTimer: null, hopf: null, plots: {},
 };
 const $ = (id) => document.getElementById(id);
+// this page's name for the server: sequence numbers are compared within one page
+const CLIENT = Math.random().toString(36).slice(2) + Date.now().toString(36);
 const SLIDER_STEPS = 1000;
 
 function fmt(v, d = 4) {
   if (v === null || v === undefined) return "–";
   if (typeof v !== "number") return String(v);
   return Number(v.toPrecision(d)).toString();
+}
+
+function fieldText(v) {
+  // a typed field: six significant digits, large and small values with an exponent
+  const x = Number(v.toPrecision(6));
+  return x !== 0 && (Math.abs(x) >= 1e5 || Math.abs(x) < 1e-3) ? x.toExponential() : String(x);
 }
 
 // ----- state <-> URL ------------------------------------------------------------------
@@ -92,7 +100,7 @@ function showControls(controls) {
   for (const c of controls) {
     const field = $("field-" + c.name), slider = $("slider-" + c.name);
     if (!field) continue;
-    if (document.activeElement !== field) field.value = fmt(c.value, 6);
+    if (document.activeElement !== field) field.value = fieldText(c.value);
     if (document.activeElement !== slider) slider.value = toSlider(c, c.value);
     $("ctl-" + c.name).classList.toggle("explicit", !!c.explicit);
   }
@@ -111,7 +119,7 @@ async function typed(name, raw) {
   $("field-errors").textContent = "";
   const values = Object.assign({}, S.values, { [name]: raw });
   const seq = ++S.seq;
-  const r = await getJSON("/api/quick?" + queryOf(S.preset, values) + "&seq=" + seq);
+  const r = await getJSON("/api/quick?" + queryOf(S.preset, values) + "&seq=" + seq + "&client=" + CLIENT);
   if (!r) return;
   if (r.body.errors) { showFieldErrors(r.body.errors); setStatus("idle", "value refused"); return; }
   S.values = values;
@@ -138,7 +146,7 @@ async function quick() {
   const seq = ++S.seq;
   S.sent.quick = seq;
   $("chi-mark").textContent = S.shown.release ? "at the last released design (release to recompute)" : "";
-  const r = await getJSON("/api/quick?" + currentQuery() + "&seq=" + seq);
+  const r = await getJSON("/api/quick?" + currentQuery() + "&seq=" + seq + "&client=" + CLIENT);
   if (!r || r.body.stale || seq < S.shown.quick) return;
   if (r.body.errors) { showFieldErrors(r.body.errors); return; }
   if (r.body.error) { showError(r.body.error); return; }
@@ -159,7 +167,7 @@ async function release() {
   S.sent.release = seq;
   setStatus("busy", "computing the index ...");
   const q = currentQuery();
-  const r = await getJSON("/api/release?" + q + "&seq=" + seq);
+  const r = await getJSON("/api/release?" + q + "&seq=" + seq + "&client=" + CLIENT);
   if (!r) return;
   if (r.body.stale || seq < S.shown.release) return;  // a newer answer is shown or coming
   if (r.body.errors) { showFieldErrors(r.body.errors); setStatus("idle", "value refused"); return; }
@@ -173,7 +181,7 @@ async function release() {
   showRelease(r.body);
   showExports(q);
   if (seq === S.sent.release) setStatus("idle", "up to date");
-  startJob();
+  if (curveKey(S.preset, S.values) !== S.jobKey) startJob();
 }
 function showRelease(b) {
   const ix = b.index;
@@ -285,10 +293,21 @@ function currentDesign(names) {
 function markHopf() { if (S.hopf) drawHopf(); }
 
 // ----- background job -----------------------------------------------------------------
+function curveKey(preset, values) {
+  // what the Hopf curve depends on: not the plane's own two parameters and, in the
+  // (omega1, sigma) plane, not the beam data L, EI, mbar (they enter through omega1, sigma)
+  const skip = new Set(S.hopf ? S.hopf.names : []);
+  if (skip.has("omega1") && skip.has("sigma")) for (const n of ["L", "EI", "mbar"]) skip.add(n);
+  return preset + "|" + Object.keys(values).filter((k) => !skip.has(k)).sort()
+    .map((k) => k + "=" + values[k]).join("&");
+}
 async function startJob() {
   const seq = ++S.seq;
-  const r = await getJSON("/api/job?kind=hopf_curve&seq=" + seq + "&" + currentQuery(), { method: "POST" });
+  const preset = S.preset, values = Object.assign({}, S.values);
+  S.jobKey = curveKey(preset, values);
+  const r = await getJSON("/api/job?kind=hopf_curve&seq=" + seq + "&" + queryOf(preset, values), { method: "POST" });
   if (!r || r.body.error || r.body.errors) return;
+  r.body.preset = preset; r.body.values = values;
   S.job = r.body;
   showJob(r.body);
   pollJob(r.body.id);
@@ -299,8 +318,8 @@ function pollJob(id) {
     if (!S.job || S.job.id !== id) return;
     const r = await getJSON("/api/job/" + id);
     if (!r || !S.job || S.job.id !== id) return;
-    S.job = r.body;
-    showJob(r.body);
+    Object.assign(S.job, r.body);
+    showJob(S.job);
     if (r.body.status === "running") pollJob(id);
   }, 300);
 }
@@ -312,6 +331,7 @@ function showJob(j) {
   $("job-status").dataset.status = j.status;
   if (j.status === "done" && j.result) {
     S.hopf = j.result;
+    if (j.values) S.jobKey = curveKey(j.preset, j.values);  // now that the plane is known
     drawHopf();
     const rows = ["branch,l1," + j.result.names.join(",")];
     j.result.branches.forEach((b, k) => b.x.forEach((x, i) => rows.push(`${k + 1},${b.l1[i]},${x},${b.y[i]}`)));
@@ -321,7 +341,7 @@ function showJob(j) {
 async function cancelJob() {
   if (!S.job) return;
   const r = await getJSON("/api/job/" + S.job.id + "/cancel", { method: "POST" });
-  if (r) { S.job = r.body; showJob(r.body); }
+  if (r) { Object.assign(S.job, r.body); showJob(S.job); S.jobKey = null; }
 }
 
 // ----- start --------------------------------------------------------------------------
@@ -358,7 +378,7 @@ document.addEventListener("DOMContentLoaded", () => {
     history.pushState({}, "", "?" + currentQuery());
     load(false);
   });
-  $("job-start").addEventListener("click", startJob);
+  $("job-start").addEventListener("click", () => startJob());
   $("job-cancel").addEventListener("click", cancelJob);
   load(false);
 });
