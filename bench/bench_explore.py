@@ -10,11 +10,11 @@ made directly in the same process as the baseline.
   sequence of designs (shifted by half a step, so that neither side reuses the other's
   answer);
 
-each without a delay (tau = 0) and with one (``--tau``, default 1 ms). Medians and 95th
-percentiles (nearest rank); the server's time includes HTTP, JSON and, for a release, the
-cycle curve and the critical run the page draws. Not the browser's drawing time.
+each without a delay (tau = 0) and with one (``--tau 0,1e-3``, the default: both).
+Medians and 95th percentiles (nearest rank); the server's time includes HTTP, JSON and,
+for a release, the cycle curve and the critical run the page draws. Not the browser's drawing time.
 
-    PYTHONPATH=src python bench/bench_explore.py [--moves 50] [--releases 20] [--tau 1e-3]
+    PYTHONPATH=src python bench/bench_explore.py [--moves 50] [--releases 20] [--tau 0,1e-3]
 """
 
 from __future__ import annotations
@@ -45,7 +45,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--moves", type=int, default=50)
     ap.add_argument("--releases", type=int, default=20)
-    ap.add_argument("--tau", type=float, default=1e-3)
+    ap.add_argument("--tau", default="0,1e-3",
+                    help="the delays, comma-separated (s; 0: without a delay)")
     ap.add_argument("--preset", default="turnout-soft")
     args = ap.parse_args()
 
@@ -73,7 +74,7 @@ def main() -> None:
 
     rows = []
     load_before = open("/proc/loadavg").read().split()[:3]
-    for tau in (0.0, args.tau):
+    for tau in (float(t) for t in args.tau.split(",")):
         extra = {} if tau == 0 else {"tau": tau}
         q = "".join(f"&{k}={v!r}" for k, v in extra.items())
         # warm-up: compile every kernel of both paths once (not measured)
@@ -98,6 +99,7 @@ def main() -> None:
         label = "tau = 0" if tau == 0 else f"tau = {tau:g} s"
         rows.append(row(f"slider move ({label})", s_quick, d_quick))
         rows.append(row(f"release ({label})", s_rel, d_rel))
+        print(json.dumps(rows[-2:]), flush=True)  # each delay's rows as they finish
     server.stop()
     load_after = open("/proc/loadavg").read().split()[:3]
     print(f"load average before: {' '.join(load_before)}; after: {' '.join(load_after)}")
