@@ -19,6 +19,8 @@ from maglev_match.cli.common import PARAMETER_SET_OPTIONS
 
 #: options about presenting or keeping the answer, not about what is computed
 PRESENTATION = {"--json", "--out", "--plot", "--keep-tiles", "--iso", "--iso-curve"}
+#: where and how `explore` serves its page (the computations are the API's, as in `index`)
+PRESENTATION |= {"--port", "--host", "--no-browser"}
 
 #: command -> (its option tables in cli/, the API functions it calls)
 COMMANDS = {
@@ -35,6 +37,7 @@ COMMANDS = {
     "index": (["index.INDEX_OPTIONS", "design.SCATTER_OPTIONS"],
               ["matching_index", "index_spread"]),
     "map": (["index.MAP_OPTIONS"], ["design_map"]),
+    "explore": (["explore.EXPLORE_OPTIONS"], ["matching_index", "stability"]),
     "sensitivity": (["design.SENSITIVITY_OPTIONS", "design.SCATTER_OPTIONS"],
                     ["index_sensitivity", "index_spread"]),
     "design": (["design.DESIGN_OPTIONS", "design.SCATTER_OPTIONS"],

@@ -77,6 +77,7 @@ SET_COMMANDS = {
     "map": ("--x", "omega1=40:190:3", "--y", "sigma=2e-4:6e-4:3"),
     "design": ("--vary", "EI=5e9:4e10", "--maximize", "chi"),
     "iso-curve": ("chi=5",),
+    "explore": ("--no-browser",),
 }
 
 

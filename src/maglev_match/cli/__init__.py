@@ -113,6 +113,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
                        "the standstill index as v -> 0) next to the standstill headline, and "
                        "the entry disturbance; resonance speeds and stability changes marked."
                        " Writes a netCDF sweep and a figure."),
+    "explore": ("explore", "The design explorer in the browser: a local web page with the "
+                           "beam, gains and delay on sliders, the stability margin live, the"
+                           " headline index on release (warm-started from the previous "
+                           "design), the basin-bounding cycle, the critical run and the Hopf "
+                           "curve; stops with Ctrl-C."),
 }
 
 

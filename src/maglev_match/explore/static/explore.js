@@ -1,0 +1,384 @@
+// maglev-match explore: the page. Vanilla JavaScript; figures by uPlot (vendored) and a
+// small canvas drawing for the Hopf curve. Every computing request carries a sequence
+// number; an answer older than what a panel shows is dropped.
+"use strict";
+
+const S = {
+  preset: "turnout-soft", values: {}, controls: [], model: "unit",
+  seq: 0, shown: { quick: 0, release: 0 }, sent: { quick: 0, release: 0 },
+  job: null, jobTimer: null, hopf: null, plots: {},
+};
+const $ = (id) => document.getElementById(id);
+// this page's name for the server: sequence numbers are compared within one page
+const CLIENT = Math.random().toString(36).slice(2) + Date.now().toString(36);
+const SLIDER_STEPS = 1000;
+
+function fmt(v, d = 4) {
+  if (v === null || v === undefined) return "–";
+  if (typeof v !== "number") return String(v);
+  return Number(v.toPrecision(d)).toString();
+}
+
+function fieldText(v) {
+  // a typed field: six significant digits, large and small values with an exponent
+  const x = Number(v.toPrecision(6));
+  return x !== 0 && (Math.abs(x) >= 1e5 || Math.abs(x) < 1e-3) ? x.toExponential() : String(x);
+}
+
+// ----- state <-> URL ------------------------------------------------------------------
+function stateFromLocation() {
+  const q = new URLSearchParams(window.location.search);
+  const values = {};
+  for (const [k, v] of q.entries()) if (k !== "preset") values[k] = v;
+  return { preset: q.get("preset") || S.preset, values };
+}
+function queryOf(preset, values) {
+  const q = new URLSearchParams();
+  q.set("preset", preset);
+  for (const [k, v] of Object.entries(values)) q.set(k, String(v));
+  return q.toString();
+}
+function currentQuery() { return queryOf(S.preset, S.values); }
+function pushState() {
+  const url = "?" + currentQuery();
+  if (url !== window.location.search) history.pushState({}, "", url);
+}
+
+// ----- controls -----------------------------------------------------------------------
+function toSlider(c, v) {
+  const lo = c.low, hi = c.high;
+  let f = c.log ? (Math.log(v) - Math.log(lo)) / (Math.log(hi) - Math.log(lo))
+                : (v - lo) / (hi - lo);
+  return Math.round(Math.min(1, Math.max(0, f)) * SLIDER_STEPS);
+}
+function fromSlider(c, k) {
+  const f = k / SLIDER_STEPS;
+  const v = c.log ? Math.exp(Math.log(c.low) + f * (Math.log(c.high) - Math.log(c.low)))
+                  : c.low + f * (c.high - c.low);
+  return Number(v.toPrecision(4));
+}
+function buildControls(controls) {
+  const box = $("controls");
+  box.innerHTML = "";
+  for (const c of controls) {
+    const div = document.createElement("div");
+    div.className = "ctl";
+    div.id = "ctl-" + c.name;
+    div.innerHTML =
+      `<label for="field-${c.name}">${c.label} (${c.name}, ${c.unit})</label>` +
+      `<div class="row"><input type="range" id="slider-${c.name}" min="0" max="${SLIDER_STEPS}" step="1">` +
+      `<input type="text" id="field-${c.name}" name="${c.name}" autocomplete="off">` +
+      `<button type="button" id="reset-${c.name}" title="back to the preset">&#x21ba;</button></div>` +
+      `<div class="err" id="err-${c.name}"></div>`;
+    box.appendChild(div);
+    const slider = div.querySelector("input[type=range]");
+    const field = div.querySelector("input[type=text]");
+    slider.addEventListener("input", () => {
+      const v = fromSlider(c, Number(slider.value));
+      field.value = String(v);
+      clearFieldError(c.name);
+      S.values[c.name] = v;
+      quick();
+    });
+    slider.addEventListener("change", () => {
+      S.values[c.name] = fromSlider(c, Number(slider.value));
+      pushState();
+      release();
+    });
+    field.addEventListener("change", () => typed(c.name, field.value.trim()));
+    div.querySelector("button").addEventListener("click", () => {
+      delete S.values[c.name];
+      clearFieldError(c.name);
+      pushState();
+      quick();
+      release();
+    });
+  }
+}
+function showControls(controls) {
+  S.controls = controls;
+  for (const c of controls) {
+    const field = $("field-" + c.name), slider = $("slider-" + c.name);
+    if (!field) continue;
+    if (document.activeElement !== field) field.value = fieldText(c.value);
+    if (document.activeElement !== slider) slider.value = toSlider(c, c.value);
+    $("ctl-" + c.name).classList.toggle("explicit", !!c.explicit);
+  }
+}
+function clearFieldError(name) { const e = $("err-" + name); if (e) e.textContent = ""; }
+function showFieldErrors(errors) {
+  for (const [name, msg] of Object.entries(errors)) {
+    const e = $("err-" + name);
+    if (e) e.textContent = msg;
+    else { const g = $("field-errors"); g.textContent = msg; g.className = "err"; }
+  }
+}
+async function typed(name, raw) {
+  // a typed value is checked by the command line's rules first; refused: nothing changes
+  clearFieldError(name);
+  $("field-errors").textContent = "";
+  const values = Object.assign({}, S.values, { [name]: raw });
+  const seq = ++S.seq;
+  const r = await getJSON("/api/quick?" + queryOf(S.preset, values) + "&seq=" + seq + "&client=" + CLIENT);
+  if (!r) return;
+  if (r.body.errors) { showFieldErrors(r.body.errors); setStatus("idle", "value refused"); return; }
+  S.values = values;
+  pushState();
+  if (seq >= S.shown.quick) showQuick(r.body, seq);
+  release();
+}
+
+// ----- requests -----------------------------------------------------------------------
+async function getJSON(url, opts) {
+  try {
+    const resp = await fetch(url, opts);
+    const body = await resp.json();
+    return { status: resp.status, body };
+  } catch (e) {
+    showError("the server did not answer: " + e);
+    return null;
+  }
+}
+function setStatus(state, text) { const s = $("status"); s.dataset.state = state; s.textContent = text; }
+function showError(msg) { const e = $("error"); e.hidden = !msg; e.textContent = msg || ""; }
+
+async function quick() {
+  const seq = ++S.seq;
+  S.sent.quick = seq;
+  $("chi-mark").textContent = S.shown.release ? "at the last released design (release to recompute)" : "";
+  const r = await getJSON("/api/quick?" + currentQuery() + "&seq=" + seq + "&client=" + CLIENT);
+  if (!r || r.body.stale || seq < S.shown.quick) return;
+  if (r.body.errors) { showFieldErrors(r.body.errors); return; }
+  if (r.body.error) { showError(r.body.error); return; }
+  showQuick(r.body, seq);
+}
+function showQuick(b, seq) {
+  S.shown.quick = seq;
+  $("verdict").textContent = b.stable ? "stable" : "unstable";
+  $("margin").textContent = fmt(b.margin) + " 1/s (max Re λ = " + fmt(b.max_real_part) + ")";
+  $("modal").textContent = fmt(b.omega1, 5) + " rad/s, " + fmt(b.sigma) + " 1/kg";
+  $("w0").textContent = fmt(b.w0 * 1e3) + " mm";
+  showControls(b.controls);
+  markHopf();
+}
+
+async function release() {
+  const seq = ++S.seq;
+  S.sent.release = seq;
+  setStatus("busy", "computing the index ...");
+  const q = currentQuery();
+  const r = await getJSON("/api/release?" + q + "&seq=" + seq + "&client=" + CLIENT);
+  if (!r) return;
+  if (r.body.stale || seq < S.shown.release) return;  // a newer answer is shown or coming
+  if (r.body.errors) { showFieldErrors(r.body.errors); setStatus("idle", "value refused"); return; }
+  if (r.body.error) {
+    showError("the computation failed: " + r.body.error);
+    if (seq === S.sent.release) setStatus("error", "computation failed");
+    return;
+  }
+  showError("");
+  S.shown.release = seq;
+  showRelease(r.body);
+  showExports(q);
+  if (seq === S.sent.release) setStatus("idle", "up to date");
+  if (curveKey(S.preset, S.values) !== S.jobKey) startJob();
+}
+function showRelease(b) {
+  const ix = b.index;
+  $("chi").textContent = ix.chi === null ? "nan" : ix.chi.toFixed(3);
+  $("chi").dataset.value = ix.chi === null ? "" : String(ix.chi);
+  $("chi").dataset.query = b.state ? new URLSearchParams(b.state).toString() : "";
+  $("chi-mark").textContent = "";
+  $("chi-paper").textContent = fmt(ix.chi_paper) + " (h = " + fmt(ix.h * 1e3) + " mm, " + ix.case + ")";
+  $("chi-sim").textContent = ix.chi_simulation === null ? "not computed" : fmt(ix.chi_simulation);
+  $("basis").textContent = ix.headline;
+  $("reading").textContent = ix.reading;
+  $("warm").textContent = b.warm_start;
+  $("hopf-nearest").textContent = ix.hopf_param
+    ? `${ix.hopf_param} = ${fmt(ix.hopf_value, 6)}` + (ix.hopf_distance !== null ? ` (${fmt(100 * ix.hopf_distance, 3)} % away)` : "")
+      + (ix.l1 ? (ix.l1 > 0 ? ", subcritical" : ", supercritical") + ` l1 = ${fmt(ix.l1, 3)}` : "")
+    : "none found";
+  $("warnings").textContent = (ix.warnings || []).map((w) => "⚠ " + w).join("\n");
+  showControls(b.controls);
+  drawCycle(b.cycle);
+  drawRun(b.run, b.limits);
+}
+function showExports(q) {
+  getText("/api/export/command?" + q).then((t) => { if (t !== null) $("cmdline").textContent = t; });
+  $("x-toml").href = "/api/export/toml?" + q;
+  $("x-cycle-csv").href = "/api/export/csv?what=cycle&" + q;
+  $("x-run-csv").href = "/api/export/csv?what=run&" + q;
+  for (const w of ["index", "run"]) for (const f of ["png", "svg"])
+    $(`x-${w}-${f}`).href = `/api/export/${f}?what=${w}&` + q;
+}
+async function getText(url) {
+  try { const r = await fetch(url); return r.ok ? await r.text() : null; } catch (e) { return null; }
+}
+
+// ----- figures ------------------------------------------------------------------------
+function plotInto(id, opts, data) {
+  if (S.plots[id]) { S.plots[id].destroy(); delete S.plots[id]; }
+  const box = $(id);
+  box.innerHTML = "";
+  if (!data) { box.textContent = "none"; return; }
+  S.plots[id] = new uPlot(opts, data, box);
+}
+function drawCycle(c) {
+  if (!c) { plotInto("cycle", null, null); $("cycle").textContent = "no cycle bounds the basin here"; return; }
+  const dash = c.stable ? [] : [6, 4];
+  plotInto("cycle", {
+    width: 480, height: 260,
+    scales: { x: { time: false } },
+    axes: [{ label: "t (s)" }, { label: "gap deviation (mm)" }],
+    series: [{ label: "t" }, { label: `point ${c.point} (${c.stable ? "stable" : "unstable"})`, stroke: "#c62828", dash, width: 2 }],
+  }, [c.t, c.gap_deviation.map((v) => v * 1e3)]);
+}
+function drawRun(r, lim) {
+  if (!r) { plotInto("run", null, null); $("run-info").textContent = "no critical disturbance was solved"; return; }
+  $("run-info").textContent = `${r.direction}: size ${fmt(r.size * 1e3)} mm (just below the critical ${fmt(r.critical_size * 1e3, 6)} mm, ${r.mechanism}); outcome: ${r.outcome}`;
+  const n = r.t.length;
+  plotInto("run", {
+    width: 480, height: 260,
+    scales: { x: { time: false }, gap: {}, i: {} },
+    axes: [{ label: "t (s)" }, { scale: "gap", label: "gap (mm)" }, { scale: "i", side: 1, label: "current (A)", grid: { show: false } }],
+    series: [{ label: "t" },
+      { label: "gap", scale: "gap", stroke: "#1565c0", width: 2 },
+      { label: "gap_min", scale: "gap", stroke: "#999", dash: [4, 4] },
+      { label: "gap_max", scale: "gap", stroke: "#999", dash: [4, 4] },
+      { label: "current", scale: "i", stroke: "#2e7d32", width: 1 }],
+  }, [r.t, r.gap.map((v) => v * 1e3), new Array(n).fill(lim.gap_min * 1e3), new Array(n).fill(lim.gap_max * 1e3), r.current]);
+}
+function drawHopf() {
+  const cv = $("hopf"), ctx = cv.getContext("2d");
+  ctx.clearRect(0, 0, cv.width, cv.height);
+  const h = S.hopf;
+  if (!h || !h.branches.length) { ctx.fillText(h ? "no Hopf curve in the plane" : "", 20, 20); return; }
+  const xs = [], ys = [];
+  for (const b of h.branches) { xs.push(...b.x); ys.push(...b.y); }
+  const cur = currentDesign(h.names);
+  if (cur) { xs.push(cur[0]); ys.push(cur[1]); }
+  const pad = 50, W = cv.width, H = cv.height;
+  const [x0, x1] = [Math.min(...xs), Math.max(...xs)], [y0, y1] = [Math.min(...ys), Math.max(...ys)];
+  const sx = (x) => pad + (x - x0) / ((x1 - x0) || 1) * (W - 1.5 * pad);
+  const sy = (y) => H - pad + -(y - y0) / ((y1 - y0) || 1) * (H - 1.5 * pad);
+  ctx.strokeStyle = "#444"; ctx.fillStyle = "#222"; ctx.lineWidth = 1; ctx.setLineDash([]);
+  ctx.strokeRect(pad, pad / 2, W - 1.5 * pad, H - 1.5 * pad);
+  ctx.font = "11px sans-serif";
+  ctx.fillText(`${h.names[0]} ${fmt(x0)} … ${fmt(x1)}`, pad, H - pad + 30);
+  ctx.save(); ctx.translate(12, H - pad); ctx.rotate(-Math.PI / 2);
+  ctx.fillText(`${h.names[1]} ${fmt(y0)} … ${fmt(y1)}`, 0, 0); ctx.restore();
+  for (const b of h.branches) {
+    for (let i = 1; i < b.x.length; i++) {
+      ctx.beginPath();
+      ctx.setLineDash(b.l1[i] > 0 ? [6, 4] : []);
+      ctx.strokeStyle = "#283593"; ctx.lineWidth = 2;
+      ctx.moveTo(sx(b.x[i - 1]), sy(b.y[i - 1])); ctx.lineTo(sx(b.x[i]), sy(b.y[i])); ctx.stroke();
+    }
+    ctx.setLineDash([]);
+    for (const p of b.special) {
+      ctx.fillStyle = "#c62828"; ctx.beginPath(); ctx.arc(sx(p.x), sy(p.y), 4, 0, 2 * Math.PI); ctx.fill();
+      ctx.fillText(p.label, sx(p.x) + 5, sy(p.y) - 5);
+    }
+  }
+  if (cur) {
+    ctx.fillStyle = "#000"; ctx.beginPath(); ctx.arc(sx(cur[0]), sy(cur[1]), 5, 0, 2 * Math.PI); ctx.fill();
+    ctx.fillText("this design", sx(cur[0]) + 7, sy(cur[1]) + 4);
+  }
+}
+function currentDesign(names) {
+  const byName = Object.fromEntries(S.controls.map((c) => [c.name, c.value]));
+  const v = names.map((n) => byName[n]);
+  return v.every((x) => typeof x === "number") ? v : null;
+}
+function markHopf() { if (S.hopf) drawHopf(); }
+
+// ----- background job -----------------------------------------------------------------
+function curveKey(preset, values) {
+  // what the Hopf curve depends on: not the plane's own two parameters and, in the
+  // (omega1, sigma) plane, not the beam data L, EI, mbar (they enter through omega1, sigma)
+  const skip = new Set(S.hopf ? S.hopf.names : []);
+  if (skip.has("omega1") && skip.has("sigma")) for (const n of ["L", "EI", "mbar"]) skip.add(n);
+  return preset + "|" + Object.keys(values).filter((k) => !skip.has(k)).sort()
+    .map((k) => k + "=" + values[k]).join("&");
+}
+async function startJob() {
+  const seq = ++S.seq;
+  const preset = S.preset, values = Object.assign({}, S.values);
+  S.jobKey = curveKey(preset, values);
+  const r = await getJSON("/api/job?kind=hopf_curve&seq=" + seq + "&" + queryOf(preset, values), { method: "POST" });
+  if (!r || r.body.error || r.body.errors) return;
+  r.body.preset = preset; r.body.values = values;
+  S.job = r.body;
+  showJob(r.body);
+  pollJob(r.body.id);
+}
+function pollJob(id) {
+  clearTimeout(S.jobTimer);
+  S.jobTimer = setTimeout(async () => {
+    if (!S.job || S.job.id !== id) return;
+    const r = await getJSON("/api/job/" + id);
+    if (!r || !S.job || S.job.id !== id) return;
+    Object.assign(S.job, r.body);
+    showJob(S.job);
+    if (r.body.status === "running") pollJob(id);
+  }, 300);
+}
+function showJob(j) {
+  $("job-cancel").disabled = j.status !== "running";
+  const last = j.progress.length ? j.progress[j.progress.length - 1] : "";
+  $("job-status").textContent = j.status === "running" ? "running: " + (last || "starting the worker ...")
+    : j.status === "error" ? "failed: " + j.error : j.status;
+  $("job-status").dataset.status = j.status;
+  if (j.status === "done" && j.result) {
+    S.hopf = j.result;
+    if (j.values) S.jobKey = curveKey(j.preset, j.values);  // now that the plane is known
+    drawHopf();
+    const rows = ["branch,l1," + j.result.names.join(",")];
+    j.result.branches.forEach((b, k) => b.x.forEach((x, i) => rows.push(`${k + 1},${b.l1[i]},${x},${b.y[i]}`)));
+    $("x-hopf-csv").href = "data:text/csv;charset=utf-8," + encodeURIComponent(rows.join("\n") + "\n");
+  }
+}
+async function cancelJob() {
+  if (!S.job) return;
+  const r = await getJSON("/api/job/" + S.job.id + "/cancel", { method: "POST" });
+  if (r) { Object.assign(S.job, r.body); showJob(S.job); S.jobKey = null; }
+}
+
+// ----- start --------------------------------------------------------------------------
+async function load(fromHistory) {
+  const st = stateFromLocation();
+  S.preset = st.preset;
+  S.values = {};
+  for (const el of document.querySelectorAll(".err")) el.textContent = "";
+  const r = await getJSON("/api/init?" + queryOf(st.preset, st.values));
+  if (!r) return;
+  const b = r.body;
+  S.model = b.model;
+  $("model-label").textContent = "model " + b.model;
+  if (!S.controls.length) buildControls(b.controls);
+  const sel = $("preset");
+  if (!sel.options.length) for (const p of b.presets) sel.add(new Option(p, p));
+  S.preset = b.state.preset;
+  sel.value = S.preset;
+  for (const [k, v] of Object.entries(b.state)) if (k !== "preset") S.values[k] = Number(v);
+  showControls(b.controls);
+  if (Object.keys(b.errors).length) {
+    showFieldErrors(b.errors);
+    setStatus("idle", "value refused");
+    return;  // a refused URL value: nothing is computed
+  }
+  quick();
+  release();
+}
+window.addEventListener("popstate", () => load(true));
+document.addEventListener("DOMContentLoaded", () => {
+  $("preset").addEventListener("change", () => {
+    S.preset = $("preset").value;
+    S.values = {};
+    history.pushState({}, "", "?" + currentQuery());
+    load(false);
+  });
+  $("job-start").addEventListener("click", () => startJob());
+  $("job-cancel").addEventListener("click", cancelJob);
+  load(false);
+});

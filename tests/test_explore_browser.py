@@ -1,0 +1,142 @@
+"""The explorer's page in a real browser (headless Chromium of the system, driven by
+Playwright): the page loaded with a URL state shows the headline chi that `index` gives
+with the same --set values; a slider moved and released updates it to the value at the
+new design; the URL round-trips (reload, back, forward); cancel stops a background job; a
+bad value shows the command line's message next to its field and changes nothing.
+No assertion depends on timing: the test waits for states of the page."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+from urllib.parse import parse_qs, urlparse
+
+import pytest
+
+from maglev_match import api
+from maglev_match.explore.server import ExploreServer
+
+playwright_api = pytest.importorskip(
+    "playwright.sync_api", reason="playwright is not installed (pip install -e '.[dev]')")
+
+CHROMIUM = next((p for p in (shutil.which("chromium"), shutil.which("chromium-browser"),
+                             "/usr/bin/chromium") if p and Path(p).exists()), None)
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium found (the Debian "
+                                "package chromium; .ci/run installs it in CI)")
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+# ms: generous, the machine may be busy (EXPLORE_WAIT_MS to shorten it); nothing is timed
+WAIT = int(os.environ.get("EXPLORE_WAIT_MS", "600000"))
+
+
+@pytest.fixture(scope="module")
+def server():
+    s = ExploreServer("turnout-soft", "unit", port=0).start()
+    yield s
+    s.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with playwright_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def page(browser):
+    pg = browser.new_page(viewport={"width": 1500, "height": 1000})
+    yield pg
+    pg.close()
+
+
+def _base(server) -> str:
+    return f"http://127.0.0.1:{server.port}/"
+
+
+def _settled(page) -> str:
+    """Wait until the index shown is that of the page's latest release; its text."""
+    page.wait_for_function(
+        "() => document.getElementById('status').textContent === 'up to date'",
+        timeout=WAIT)
+    return page.locator("#chi").inner_text()
+
+
+def _index_chi(query: dict[str, list[str]]) -> str:
+    """chi as `maglev-match index` prints its headline, to three decimals."""
+    sets = {k: float(v[0]) for k, v in query.items() if k != "preset"}
+    res = api.matching_index(query["preset"][0], stage=False, **sets)
+    return f"{res.chi:.3f}"
+
+
+def test_the_url_state_shows_the_index_of_the_command_line(server, page):
+    page.goto(_base(server) + "?preset=turnout-soft&EI=2.2e10&kD=140")
+    assert _settled(page) == _index_chi({"preset": ["turnout-soft"], "EI": ["2.2e10"],
+                                         "kD": ["140"]})
+    assert page.locator("#field-EI").input_value() == "2.2e+10"
+    assert "--set EI=22000000000.0 --set kD=140.0" in page.locator("#cmdline").inner_text()
+
+
+def test_a_released_slider_gives_the_index_there_and_the_url_round_trips(server, page):
+    page.goto(_base(server) + "?preset=turnout-soft&kD=140")
+    first = _settled(page)
+    first_url = page.url
+    page.locator("#slider-kD").fill("620")  # input + change: a move and its release
+    page.wait_for_function("() => new URLSearchParams(location.search).get('kD') !== '140'",
+                           timeout=WAIT)
+    second = _settled(page)
+    query = parse_qs(urlparse(page.url).query)
+    assert set(query) == {"preset", "kD"}
+    assert float(query["kD"][0]) == float(page.locator("#field-kD").input_value())
+    assert second == _index_chi(query) != first
+    # back: the earlier state and its index; forward: the new one again
+    page.go_back()
+    page.wait_for_function(f"() => location.href === {first_url!r}", timeout=WAIT)
+    page.wait_for_function(f"() => document.getElementById('chi').textContent === "
+                           f"{first!r}", timeout=WAIT)
+    page.go_forward()
+    page.wait_for_function(f"() => document.getElementById('chi').textContent === "
+                           f"{second!r}", timeout=WAIT)
+    # reload: the same state from the URL alone
+    page.reload()
+    assert _settled(page) == second
+
+
+def test_cancel_stops_a_background_job(server, page):
+    page.goto(_base(server) + "?preset=turnout-soft")
+    _settled(page)
+    # a new job replaces the running one (its worker process is ended, so the new job
+    # waits for a fresh worker to start: it is running when cancel is pressed)
+    page.locator("#job-start").click()
+    page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
+                           "'running'", timeout=WAIT)
+    page.locator("#job-cancel").click()
+    page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
+                           "'cancelled'", timeout=WAIT)
+    assert server.jobs.process is None
+    # the next job runs to its end and draws the curve
+    page.locator("#job-start").click()
+    page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
+                           "'done'", timeout=WAIT)
+
+
+def test_a_bad_value_shows_the_message_and_changes_nothing(server, page):
+    page.goto(_base(server) + "?preset=turnout-soft&kD=140")
+    chi = _settled(page)
+    url = page.url
+    field = page.locator("#field-kD")
+    field.fill("-5")
+    field.press("Enter")
+    field.blur()
+    page.wait_for_function("() => document.getElementById('err-kD').textContent !== ''",
+                           timeout=WAIT)
+    assert page.locator("#err-kD").inner_text() == "parameter 'kD' = -5.0: must be >= 0"
+    assert page.url == url and page.locator("#chi").inner_text() == chi
+    # a bad value in the URL: refused the same way, nothing computed
+    page.goto(_base(server) + "?preset=turnout-soft&EI=inf")
+    page.wait_for_function("() => document.getElementById('err-EI').textContent !== ''",
+                           timeout=WAIT)
+    assert "must be a finite number" in page.locator("#err-EI").inner_text()
+    assert page.locator("#chi").inner_text() == "–"
