@@ -39,7 +39,19 @@ def test_the_writers_are_the_ones_checked_here():
                      and p.name != "io.py")  # (io.py: the one atomic writer they all call)
     assert writers == ["analyses/restart/equilibria.py", "analyses/simulation.py",
                        "cli/cycle_curve.py", "cli/cycles.py", "cli/hopf.py", "cli/index.py",
-                       "cli/speed.py"], writers
+                       "cli/iso_curve.py", "cli/speed.py"], writers
+
+
+def test_saved_iso_curve_is_self_describing(tmp_path):
+    """The netCDF of `iso-curve` (the paper's chi alone, the start point only): units and
+    long names on every variable, the version and the parameter set it was computed at."""
+    assert cli_main(["iso-curve", "chi=9", "--params", "EI,kD", "--range", "EI=1.5e10:3e10",
+                     "--range", "kD=120:180", "--no-simulation", "--points", "1", "--out",
+                     str(tmp_path / "i"), "--json"]) == 0
+    ncs = sorted((tmp_path / "i").glob("*.nc"))
+    assert len(ncs) == 1
+    ds = _check_self_describing(ncs[0], mm.load_preset("turnout-soft"))
+    assert ds.sizes["point"] == 1
 
 
 def test_saved_cycle_curve_is_self_describing(tmp_path):

@@ -70,8 +70,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                            "writes CSV and a Fig. 4-style figure."),
     "cycles": ("cycles", "Cycles born at Hopf points, continued in --param until a physical "
                          "limit (Fig. 5)."),
-    "cycle-curve": ("cycle_curve", "The fold of cycles (LPC) or period doubling (PD) "
-                                   "continued in two parameters, with its codimension-two "
+    "cycle-curve": ("cycle_curve", "The fold of cycles (LPC), period doubling (PD) or "
+                                   "Neimark-Sacker bifurcation (NS) continued in two parameters, with its codimension-two "
                                    "points; writes CSV, netCDF and a figure."),
     "iso-curve": ("iso_curve", "The iso-chi curve: where the headline chi(P1, P2) equals the "
                                "target, continued in two parameters, with the deciding part "
@@ -112,7 +112,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
                        "chi(v) = h(v) / w0 (the span under the vehicle suddenly displaced; "
                        "the standstill index as v -> 0) next to the standstill headline, and "
                        "the entry disturbance; resonance speeds and stability changes marked."
-                       " Writes a netCDF sweep and a figure."),
+                       " Writes a netCDF sweep and a figure. With --irregularity: also "
+                       "runs over that irregular guideway (limits on, one per seed) at every"
+                       " speed above 0, with gap, current, ride, DAF and contact-probability "
+                       "read-outs (their own netCDF, CSV and figure)."),
     "explore": ("explore", "The design explorer in the browser: a local web page with the "
                            "beam, gains and delay on sliders, the stability margin live, the"
                            " headline index on release (warm-started from the previous "
