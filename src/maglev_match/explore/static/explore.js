@@ -258,21 +258,39 @@ function drawHopf() {
   const cur = currentDesign(h.names);
   if (cur) { xs.push(cur[0]); ys.push(cur[1]); }
   const pad = 50, W = cv.width, H = cv.height;
-  const [x0, x1] = [Math.min(...xs), Math.max(...xs)], [y0, y1] = [Math.min(...ys), Math.max(...ys)];
+  // the data's range with 5 % room on each side, so that neither the curve nor the design
+  // sits on the frame
+  const room = (lo, hi) => { const d = (hi - lo) || Math.abs(hi) || 1; return [lo - 0.05 * d, hi + 0.05 * d]; };
+  const [x0, x1] = room(Math.min(...xs), Math.max(...xs)), [y0, y1] = room(Math.min(...ys), Math.max(...ys));
   const sx = (x) => pad + (x - x0) / ((x1 - x0) || 1) * (W - 1.5 * pad);
   const sy = (y) => H - pad + -(y - y0) / ((y1 - y0) || 1) * (H - 1.5 * pad);
   ctx.strokeStyle = "#444"; ctx.fillStyle = "#222"; ctx.lineWidth = 1; ctx.setLineDash([]);
   ctx.strokeRect(pad, pad / 2, W - 1.5 * pad, H - 1.5 * pad);
   ctx.font = "11px sans-serif";
-  ctx.fillText(`${h.names[0]} ${fmt(x0)} … ${fmt(x1)}`, pad, H - pad + 30);
-  ctx.save(); ctx.translate(12, H - pad); ctx.rotate(-Math.PI / 2);
-  ctx.fillText(`${h.names[1]} ${fmt(y0)} … ${fmt(y1)}`, 0, 0); ctx.restore();
+  // five ticks on each axis, labelled with the parameter's value
+  for (let k = 0; k <= 4; k++) {
+    const xv = x0 + (k / 4) * (x1 - x0), yv = y0 + (k / 4) * (y1 - y0);
+    ctx.beginPath(); ctx.moveTo(sx(xv), H - pad); ctx.lineTo(sx(xv), H - pad + 4); ctx.stroke();
+    ctx.fillText(fmt(xv, 4), sx(xv) - 14, H - pad + 15);
+    ctx.beginPath(); ctx.moveTo(pad, sy(yv)); ctx.lineTo(pad - 4, sy(yv)); ctx.stroke();
+    ctx.save(); ctx.translate(pad - 7, sy(yv) + 14); ctx.rotate(-Math.PI / 2);
+    ctx.fillText(fmt(yv, 3), 0, 0); ctx.restore();
+  }
+  ctx.fillText(h.names[0], pad + (W - 1.5 * pad) / 2, H - pad + 30);
+  ctx.save(); ctx.translate(12, H / 2); ctx.rotate(-Math.PI / 2);
+  ctx.fillText(h.names[1], 0, 0); ctx.restore();
   for (const b of h.branches) {
-    for (let i = 1; i < b.x.length; i++) {
+    // one path per run of points with the same sign of l1 (a dash pattern restarts with
+    // every path, so segments shorter than a dash drawn one by one would all look solid)
+    ctx.strokeStyle = "#283593"; ctx.lineWidth = 2;
+    let i = 1;
+    while (i < b.x.length) {
+      const sub = b.l1[i] > 0;
       ctx.beginPath();
-      ctx.setLineDash(b.l1[i] > 0 ? [6, 4] : []);
-      ctx.strokeStyle = "#283593"; ctx.lineWidth = 2;
-      ctx.moveTo(sx(b.x[i - 1]), sy(b.y[i - 1])); ctx.lineTo(sx(b.x[i]), sy(b.y[i])); ctx.stroke();
+      ctx.setLineDash(sub ? [6, 4] : []);
+      ctx.moveTo(sx(b.x[i - 1]), sy(b.y[i - 1]));
+      while (i < b.x.length && (b.l1[i] > 0) === sub) { ctx.lineTo(sx(b.x[i]), sy(b.y[i])); i++; }
+      ctx.stroke();
     }
     ctx.setLineDash([]);
     for (const p of b.special) {
