@@ -235,7 +235,7 @@ function drawCycle(c) {
 }
 function drawRun(r, lim) {
   if (!r) { plotInto("run", null, null); $("run-info").textContent = "no critical disturbance was solved"; return; }
-  $("run-info").textContent = `${r.direction}: size ${fmt(r.size * 1e3)} mm (just below the critical ${fmt(r.critical_size * 1e3, 6)} mm, ${r.mechanism}); outcome: ${r.outcome}`;
+  $("run-info").textContent = `${r.direction}: size ${fmt(r.size * 1e3)} mm (just below the critical ${fmt(r.critical_size * 1e3, 6)} mm, ${r.mechanism}); ${runOutcome(r)}`;
   const n = r.t.length;
   plotInto("run", {
     width: 480, height: 260,
@@ -247,6 +247,12 @@ function drawRun(r, lim) {
       { label: "gap_max", scale: "gap", stroke: "#999", dash: [4, 4] },
       { label: "current", scale: "i", stroke: "#2e7d32", width: 1 }],
   }, [r.t, r.gap.map((v) => v * 1e3), new Array(n).fill(lim.gap_min * 1e3), new Array(n).fill(lim.gap_max * 1e3), r.current]);
+}
+function runOutcome(r) {
+  // a run shown over a short window has usually not settled yet: say what it shows
+  if (r.outcome === "running")
+    return `no contact within the ${fmt(r.t[r.t.length - 1], 3)} s shown (the index's search found that this size returns)`;
+  return `outcome: ${r.outcome}`;
 }
 function drawHopf() {
   const cv = $("hopf"), ctx = cv.getContext("2d");
