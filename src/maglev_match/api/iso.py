@@ -23,8 +23,7 @@ DEFAULT_FACTOR = 2.0
 
 
 def _names(names: Sequence[str] | str) -> tuple[str, str]:
-    from maglev_match.analyses.design import DERIVED_QUANTITIES, NOT_DESIGN_PARAMETERS
-    from maglev_match.core.params import FIELD_NAMES, INTEGER_FIELDS
+    from maglev_match.analyses.design import check_varied_name
 
     parts = [n.strip() for n in names.split(",")] if isinstance(names, str) else list(names)
     if len(parts) != 2:
@@ -34,16 +33,7 @@ def _names(names: Sequence[str] | str) -> tuple[str, str]:
         raise ParameterError("names", ",".join(parts), "the same parameter twice: an "
                              "iso-chi curve needs two different parameters")
     for n in parts:
-        if n in NOT_DESIGN_PARAMETERS:
-            raise ParameterError("names", n, NOT_DESIGN_PARAMETERS[n])
-        if n in DERIVED_QUANTITIES:
-            raise ParameterError("names", n, f"is derived, not a parameter: "
-                                 f"{DERIVED_QUANTITIES[n]}")
-        if n not in FIELD_NAMES:
-            raise ParameterError("names", n, "unknown parameter")
-        if n in INTEGER_FIELDS:
-            raise ParameterError("names", n, "a whole-number parameter cannot be varied "
-                                 "continuously")
+        check_varied_name("names", n)
     return parts[0], parts[1]
 
 

@@ -36,6 +36,7 @@ from maglev_match.analyses.design.problem import (
     Requirement,
     SystemEvaluator,
     Variable,
+    check_varied_name,  # noqa: F401  (re-exported)
     check_vary_ranges,  # noqa: F401  (re-exported)
     parse_requirement,
     parse_vary,

@@ -529,22 +529,29 @@ DERIVED_QUANTITIES: dict[str, str] = {
 W0_MIN = 1e-5
 
 
+def check_varied_name(field: str, name: str) -> None:
+    """A ParameterError (naming ``field``) unless ``name`` is a parameter a design can vary
+    continuously: not a constant of nature, not a derived quantity, a known field, not a
+    whole number."""
+    if name in NOT_DESIGN_PARAMETERS:
+        raise ParameterError(field, name, NOT_DESIGN_PARAMETERS[name])
+    if name in DERIVED_QUANTITIES:
+        raise ParameterError(field, name, f"is derived, not a parameter: "
+                             f"{DERIVED_QUANTITIES[name]}")
+    if name not in FIELD_NAMES:
+        raise ParameterError(field, name, "unknown parameter")
+    if name in INTEGER_FIELDS:
+        raise ParameterError(field, name, "a whole-number parameter cannot be varied "
+                             "continuously")
+
+
 def parse_vary(text: str) -> Variable:
     """``NAME=LO:HI`` -> :class:`Variable`; the name must be a design parameter (not a
     constant of nature such as g or mu0, nor a derived quantity such as w0 or i0)."""
     if "=" not in text or ":" not in text:
         raise ParameterError("--vary", text, "expected NAME=LO:HI, e.g. EI=5e9:4e10")
     name, rng = (s.strip() for s in text.split("=", 1))
-    if name in NOT_DESIGN_PARAMETERS:
-        raise ParameterError("--vary", name, NOT_DESIGN_PARAMETERS[name])
-    if name in DERIVED_QUANTITIES:
-        raise ParameterError("--vary", name, f"is derived, not a parameter: "
-                             f"{DERIVED_QUANTITIES[name]}")
-    if name not in FIELD_NAMES:
-        raise ParameterError("--vary", name, "unknown parameter")
-    if name in INTEGER_FIELDS:
-        raise ParameterError("--vary", name, "a whole-number parameter cannot be varied "
-                             "continuously")
+    check_varied_name("--vary", name)
     try:
         lo, hi = (float(s) for s in rng.split(":"))
     except ValueError:
