@@ -21,8 +21,8 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
-import time
+import sys
+from pathlib import Path
 
 from maglev_match.analyses.design import (
     DesignProblem,
@@ -37,15 +37,8 @@ from maglev_match.analyses.matching import matching_index
 from maglev_match.analyses.sensitivity import index_sensitivity
 from maglev_match.core.params import load_preset
 
-
-def timed(fn, repeat: int) -> tuple[float, float, object]:
-    walls, cpus, out = [], [], None
-    for _ in range(repeat):
-        t, c = time.perf_counter(), time.process_time()
-        out = fn()
-        walls.append(time.perf_counter() - t)
-        cpus.append(time.process_time() - c)
-    return statistics.median(walls), statistics.median(cpus), out
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/_timing.py
+from _timing import timed  # noqa: E402
 
 
 def main() -> None:

@@ -15,26 +15,23 @@ from __future__ import annotations
 
 import os
 import sys
-import time
-
-import numpy as np
+from pathlib import Path
 
 from maglev_match import load_preset
 from maglev_match.analyses.speed.irregular import linear_gap_rms
 from maglev_match.analyses.speed.spans import simulate_over_spans
 from maglev_match.maglev.irregularity import parse_irregularity
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/_timing.py
+from _timing import timed  # noqa: E402
+
 KMH = 1 / 3.6
 
 
 def median_cpu(fn, repeat: int) -> float:
-    fn()  # compile
-    times = []
-    for _ in range(repeat):
-        t0 = time.process_time()
-        fn()
-        times.append(time.process_time() - t0)
-    return float(np.median(times))
+    """Median CPU s of ``repeat`` calls after one that compiles."""
+    fn()
+    return timed(fn, repeat)[1]
 
 
 def main() -> None:
@@ -46,15 +43,16 @@ def main() -> None:
     for model in models:
         for kmh in (60, 120):
             v = kmh * KMH
-            base = median_cpu(lambda: simulate_over_spans(p, model, v, 20, overlay=False),
+            base = median_cpu(lambda model=model, v=v: simulate_over_spans(p, model, v, 20,
+                                                                          overlay=False),
                               repeat)
             line = f"{model:8s} {kmh:4d} km/h  smooth run of 20 spans {base:7.2f} s CPU"
             for w, prof in profiles.items():
-                t = median_cpu(lambda prof=prof: simulate_over_spans(
+                t = median_cpu(lambda prof=prof, model=model, v=v: simulate_over_spans(
                     p, model, v, 20, profile=prof, seed=1), repeat)
                 line += f" | {w} waves {t:7.2f} s ({t / base:5.2f} x)"
             if model == "unit":
-                t = median_cpu(lambda: linear_gap_rms(p, v, profiles[400]), repeat)
+                t = median_cpu(lambda v=v: linear_gap_rms(p, v, profiles[400]), repeat)
                 line += f" | linear rms {t * 1e3:.1f} ms"
             print(line, flush=True)
     print(f"load after: {os.getloadavg()}")

@@ -18,20 +18,13 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
-import time
+import sys
+from pathlib import Path
 
 from maglev_match import api
 
-
-def timed(fn, repeat: int) -> tuple[float, float, object]:
-    walls, cpus, out = [], [], None
-    for _ in range(repeat):
-        t, c = time.perf_counter(), time.process_time()
-        out = fn()
-        walls.append(time.perf_counter() - t)
-        cpus.append(time.process_time() - c)
-    return statistics.median(walls), statistics.median(cpus), out
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/_timing.py
+from _timing import timed, timed_once  # noqa: E402
 
 
 def main() -> None:
@@ -50,11 +43,9 @@ def main() -> None:
                                                  near=first, EI=1.97e10), args.repeat)
     print(f"one index from scratch: {w1:.2f} s wall, {c1:.2f} s CPU; warm-started: "
           f"{w2:.2f} s wall, {c2:.2f} s CPU")
-    t, c = time.perf_counter(), time.process_time()
-    curve = api.iso_curve("turnout-soft", 5.0, names=("EI", "kD"),
-                          ranges={"kD": (75.0, 300.0)}, points=args.points, simulate=sim,
-                          stage=False)
-    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    curve, cpu, wall = timed_once(lambda: api.iso_curve(
+        "turnout-soft", 5.0, names=("EI", "kD"), ranges={"kD": (75.0, 300.0)},
+        points=args.points, simulate=sim, stage=False))
     n = len(curve.points)
     print(f"iso-chi curve chi = 5 in (EI, kD): {n} points, {curve.evaluations} evaluations "
           f"({curve.evaluations / max(n, 1):.1f} per point), {wall:.1f} s wall, {cpu:.1f} s "
