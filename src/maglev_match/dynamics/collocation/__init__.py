@@ -34,6 +34,7 @@ from maglev_match.dynamics.collocation.bvp import (
     LinearSolver,
     adapt_mesh,
     collocation_kernel,
+    collocation_second_derivative,
     collocation_tables,
     evaluate_profile,
     interval_nodes,
@@ -79,6 +80,7 @@ __all__ = [
     "lagrange_basis",
     "node_times",
     "remesh",
+    "collocation_second_derivative",
     "scaled_collocation_rows",
     "sparse_matrix",
 ]

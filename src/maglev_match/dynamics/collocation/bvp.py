@@ -189,6 +189,24 @@ def scaled_collocation_rows(rhs: Callable, m: int) -> Callable:
 
 
 @cache
+def collocation_second_derivative(rhs: Callable, m: int) -> Callable:
+    """Jitted gradient with respect to (nodes per interval, T, p) of
+    phi = sum Wc * (d/d eps) R(U + eps V, T + eps vT, p + eps vp), R the scaled collocation
+    rows of :func:`scaled_collocation_rows` (physical unknowns): the bilinear products
+    w^T (R_zz v) that the gradients of bordered test functions need (a branch point of
+    cycles; the LPC, PD and NS curves, with vp = 0). Called as
+    ``kernel(Ui, T, p, Vi, vT, vp, Wc, h, sc) -> (gU, gT, gp)``."""
+    rows = scaled_collocation_rows(rhs, m)
+
+    def phi(Ui, T, p, Vi, vT, vp, Wc, h, sc):
+        _, jv = jax.jvp(lambda a, b, c: rows(a, h, b, c, sc), (Ui, T, p), (Vi, vT, vp))
+        return jnp.sum(Wc * jv)
+
+    return cached_kernel(jax.grad(phi, argnums=(0, 1, 2)), rhs, m,
+                         name="collocation.second_derivative")
+
+
+@cache
 def _residual_kernel(rhs: Callable, m: int) -> Callable:
     """Jitted scaled residual of the collocation rows alone, (NTST, m, n), as
     :meth:`CollocationProblem.parts` scales it (for the chord iterations, which need no

@@ -33,22 +33,17 @@ after each accepted point, as MatCont does), so M stays well conditioned along t
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
-from functools import cache
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import scipy.sparse
 
-from maglev_match.core.aot import cached_kernel
 from maglev_match.dynamics.collocation import (
     CollocationProblem,
+    collocation_second_derivative,
     factorize,
     interval_nodes,
-    scaled_collocation_rows,
     sparse_matrix,
 )
 
@@ -61,21 +56,6 @@ class CurveKind(StrEnum):
     LPC = "LPC"  # fold of cycles: a double multiplier +1
     PD = "PD"  # period doubling: a multiplier -1
     NS = "NS"  # Neimark-Sacker (torus): a complex pair e^{+-i theta} (ns.py)
-
-
-@cache
-def _gradient_kernel(rhs: Callable, m: int) -> Callable:
-    """Gradient with respect to (nodes per interval, T, p) of
-    phi = sum Wc * (d/d eps) R(U + eps V, T + eps vT, p), R the scaled collocation rows
-    (NTST, m, n), as :meth:`CollocationProblem.parts` scales them (physical unknowns)."""
-    rows = scaled_collocation_rows(rhs, m)
-
-    def phi(Ui, T, p, Vi, vT, Wc, h, sc):
-        _, jv = jax.jvp(lambda a, b: rows(a, h, b, p, sc), (Ui, T), (Vi, vT))
-        return jnp.sum(Wc * jv)
-
-    return cached_kernel(jax.grad(phi, argnums=(0, 1, 2)), rhs, m,
-                         name="cycle_curves.test_gradient")
 
 
 @dataclass(frozen=True)
@@ -262,8 +242,8 @@ class AugmentedCycleSystem:
         Vs = v[:N * n].reshape(N, n) * sc
         vT = vT * prob.T_scale
         Wc = w[:ntst * m * n].reshape(ntst, m, n)
-        gU, gT, gp = _gradient_kernel(prob.system.rhs, m)(
-            U[idx], T, p, Vs[idx], vT, Wc, np.diff(prob.mesh), sc)
+        gU, gT, gp = collocation_second_derivative(prob.system.rhs, m)(
+            U[idx], T, p, Vs[idx], vT, np.zeros_like(p), Wc, np.diff(prob.mesh), sc)
         gradU = np.zeros((N, n))
         np.add.at(gradU, idx, np.asarray(gU))
         gp = np.asarray(gp)

@@ -29,39 +29,20 @@ of B at the located trial point.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cache
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import scipy.sparse
 
-from maglev_match.core.aot import cached_kernel
 from maglev_match.dynamics.collocation import (
     CollocationBVP,
+    collocation_second_derivative,
     factorize,
     interval_nodes,
-    scaled_collocation_rows,
     sparse_matrix,
 )
 
 __all__ = ["BranchPointSolution", "solve_branch_point"]
-
-
-@cache
-def _second_kernel(rhs: Callable, m: int) -> Callable:
-    """Gradient with respect to (nodes, T, p) of sum Wc * (d/d eps) R(U + eps V, T + eps vT,
-    p + eps vp), R the scaled collocation rows (physical unknowns)."""
-    rows = scaled_collocation_rows(rhs, m)
-
-    def phi(Ui, T, p, Vi, vT, vp, Wc, h, sc):
-        _, jv = jax.jvp(lambda a, b, c: rows(a, h, b, c, sc), (Ui, T, p), (Vi, vT, vp))
-        return jnp.sum(Wc * jv)
-
-    return cached_kernel(jax.grad(phi, argnums=(0, 1, 2)), rhs, m,
-                         name="cycles.bp_second_derivative")
 
 
 @dataclass(frozen=True)
@@ -139,7 +120,7 @@ class _BPSystem:
             Vs = V[:N * n, j].reshape(N, n) * sc
             vp = np.zeros_like(p)
             vp[prob.ipar] = V[-1, j] * prob.lam_scale
-            gU, gT, gp = _second_kernel(prob.system.rhs, m)(
+            gU, gT, gp = collocation_second_derivative(prob.system.rhs, m)(
                 U[idx], T, p, Vs[idx], V[N * n, j] * prob.T_scale, vp, Wc,
                 np.diff(prob.mesh), sc)
             gradU = np.zeros((N, n))
