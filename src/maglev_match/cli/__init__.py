@@ -71,8 +71,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "cycles": ("cycles", "Cycles born at Hopf points, continued in --param until a physical "
                          "limit (Fig. 5)."),
     "cycle-curve": ("cycle_curve", "The fold of cycles (LPC), period doubling (PD) or "
-                                   "Neimark-Sacker bifurcation (NS) continued in two parameters, with its codimension-two "
-                                   "points; writes CSV, netCDF and a figure."),
+                                   "Neimark-Sacker bifurcation (NS) continued in two "
+                                   "parameters, with its codimension-two points; writes "
+                                   "CSV, netCDF and a figure."),
     "iso-curve": ("iso_curve", "The iso-chi curve: where the headline chi(P1, P2) equals the "
                                "target, continued in two parameters, with the deciding part "
                                "and the status of each point; writes CSV, netCDF and a "

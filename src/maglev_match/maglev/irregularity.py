@@ -102,7 +102,8 @@ class Irregularity:
 
     def describe(self) -> str:
         if self.kind == "sine":
-            return f"sinusoid, wavelength {self.wavelength:g} m, amplitude {self.amplitude * 1e3:g} mm"
+            return (f"sinusoid, wavelength {self.wavelength:g} m, amplitude "
+                    f"{self.amplitude * 1e3:g} mm")
         if self.kind == "joint":
             return f"a step of {self.amplitude * 1e3:g} mm at every span joint"
         if self.kind == "settlement":

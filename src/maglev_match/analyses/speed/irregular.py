@@ -48,8 +48,9 @@ from maglev_match.maglev import unit as unit_model
 from maglev_match.maglev.irregularity import Irregularity, parse_irregularity
 from maglev_match.maglev.moving import MovingModel
 
-__all__ = ["IrregularSweep", "irregular_sweep", "check_irregular_setup", "profile_gap_response", "rigid_gap_response", "wilson_interval",
-           "linear_gap_rms", "resolved_wavelength", "READOUTS"]
+__all__ = ["IrregularSweep", "irregular_sweep", "check_irregular_setup", "profile_gap_response",
+           "rigid_gap_response", "wilson_interval", "linear_gap_rms", "resolved_wavelength",
+           "READOUTS"]
 
 #: read-out name -> (unit, long name)
 READOUTS = {
