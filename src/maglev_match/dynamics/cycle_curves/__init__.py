@@ -22,7 +22,9 @@ conditioned along the curve.
 * :mod:`~maglev_match.dynamics.cycle_curves.curve`: the driver :func:`cycle_curve`
   (pseudo-arclength in (p1, p2), Newton, step control, mesh adaptation, the multipliers);
 * :mod:`~maglev_match.dynamics.cycle_curves.codim2`: codimension-two points on the curve
-  (CPC, LPPD, LPNS on LPC; LPPD, PDNS on PD; R1-R4, LPNS, PDNS on NS);
+  (CPC, LPPD, LPNS on LPC; LPPD, PDNS, R2, GPD on PD; R1-R4, LPNS, PDNS on NS);
+* :mod:`~maglev_match.dynamics.cycle_curves.flip`: the period doubling's normal-form
+  coefficient (:func:`flip_coefficient`), read out along PD curves (GPD where it vanishes);
 * :mod:`~maglev_match.dynamics.cycle_curves.gh`: the LPC curve born at a generalised Hopf
   point of a Hopf curve (branch switching, :func:`lpc_from_generalised_hopf`);
 * :mod:`~maglev_match.dynamics.cycle_curves.results`: :class:`CycleCurve`,
@@ -35,6 +37,7 @@ system is not used), with the mesh (NTST, NCOL) of the start orbit.
 from maglev_match.dynamics.cycle_curves.augmented import AugmentedCycleSystem, CurveKind
 from maglev_match.dynamics.cycle_curves.codim2 import codim2_tests, detect_codim2
 from maglev_match.dynamics.cycle_curves.curve import cycle_curve, start_from
+from maglev_match.dynamics.cycle_curves.flip import FlipCoefficient, flip_coefficient
 from maglev_match.dynamics.cycle_curves.gh import lpc_from_generalised_hopf
 from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
@@ -45,10 +48,12 @@ __all__ = [
     "CurveStop",
     "CycleCurve",
     "CycleCurvePoint",
+    "FlipCoefficient",
     "NSCycleSystem",
     "codim2_tests",
     "cycle_curve",
     "detect_codim2",
+    "flip_coefficient",
     "lpc_from_generalised_hopf",
     "start_from",
 ]

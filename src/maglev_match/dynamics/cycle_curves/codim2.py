@@ -18,7 +18,14 @@ means, so that they are smooth where they vanish):
   plane on its direction one step before, which changes sign where the curve turns back
   in the parameter plane (a cusp);
 * on PD: LPPD, prod (mu_i - 1) / (1 + |mu_i|) (a second multiplier at +1); PDNS, the NS
-  test above on the remaining multipliers.
+  test above on the remaining multipliers; R2 (1:2 resonance), prod (mu_i + 1) / (1 +
+  |mu_i|) (a second multiplier at -1; there the PD system's test function g vanishes to
+  second order, (mu_1 + 1)(mu_2 + 1) with the Jordan block of the pair, so the system is
+  singular and the point stays bracketed, the curve passing it); GPD (generalised period
+  doubling), the critical coefficient c of the flip's normal form eta -> -eta + c eta^3
+  (:mod:`~maglev_match.dynamics.cycle_curves.flip`), evaluated only where |c| exceeds
+  its estimated error (a c that is zero within its accuracy all along, as for a flip that is
+  linear in the critical direction, reports no GPD).
 * on NS (the critical pair e^{+-i theta} removed, theta an unknown of the augmented system,
   :mod:`~maglev_match.dynamics.cycle_curves.ns`, kappa = cos theta): the strong resonances
   R3, kappa + 1/2 (theta = 2 pi / 3), and R4, kappa (theta = pi / 2); R2, cos(theta / 2),
@@ -28,10 +35,10 @@ means, so that they are smooth where they vanish):
   (1 + |mu_i|), and PDNS (flip-NS), prod (mu_i + 1) / (1 + |mu_i|), of the remaining
   multipliers, only where the Floquet data are reliable.
 
-The driver solves the multiplier points on the curve (``located`` "solved"); where it
-cannot, and for CPC, the point stays bracketed: the linear interpolation of the test
-function's zero between the two points, CPC the point where the direction reverses
-(``located`` says so).
+The driver solves the multiplier points and GPD on the curve (``located`` "solved");
+where it cannot, and for CPC, R1 on NS and R2 on PD, the point stays bracketed: the
+linear interpolation of the test function's zero between the two points, CPC the point
+where the direction reverses (``located`` says so).
 """
 
 from __future__ import annotations
@@ -46,11 +53,13 @@ from maglev_match.dynamics.cycle_curves.augmented import CurveKind
 __all__ = ["detect_codim2", "codim2_rest", "codim2_tests", "torus_pair"]
 
 
-def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan")
+def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan"),
+                 coefficient: float = float("nan"), error: float = float("nan")
                  ) -> dict[str, float]:
     """The test functions of the module docstring at one point (nontrivial multipliers
     ``mult``, the critical one still among them, empty where unreliable; ``angle`` theta of
-    an NS curve's point). Plain products (smooth along the curve, so their zeros are
+    an NS curve's point; ``coefficient`` and ``error`` a PD curve's flip coefficient
+    and its estimated error). Plain products (smooth along the curve, so their zeros are
     solved by secant iterations)."""
     mult = np.asarray(mult, complex)
     if CurveKind(kind) == CurveKind.NS:
@@ -67,7 +76,8 @@ def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan")
     if CurveKind(kind) == CurveKind.LPC:
         return {"LPPD": flip, "LPNS": ns}
     fold = float(np.real(np.prod((rest - 1.0) / (1.0 + np.abs(rest)))))
-    return {"LPPD": fold, "PDNS": ns}
+    gpd = coefficient if abs(coefficient) > error else np.nan  # nan if not evaluated
+    return {"LPPD": fold, "PDNS": ns, "R2": flip, "GPD": gpd}
 
 
 def torus_pair(mult: np.ndarray, tol: float) -> bool:
@@ -111,7 +121,8 @@ def detect_codim2(kind: str, points: Sequence, params: tuple[str, str]
     ns = CurveKind(kind) == CurveKind.NS
     # unreliable points carry no multipliers: only the NS curve's angle tests remain there
     tests = [codim2_tests(kind, c.multipliers if c.reliable else np.zeros(0, complex),
-                          getattr(c, "angle", np.nan)) for c in points]
+                          getattr(c, "angle", np.nan), getattr(c, "flip", np.nan),
+                          getattr(c, "flip_error", np.nan)) for c in points]
     for ka in range(len(points) - 1):
         a, b = points[ka], points[ka + 1]
         ta, tb = tests[ka], tests[ka + 1]

@@ -33,6 +33,7 @@ from maglev_match.dynamics.cycle_curves.codim2 import (
     detect_codim2,
     torus_pair,
 )
+from maglev_match.dynamics.cycle_curves.flip import flip_coefficient
 from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem, critical_angle
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit, orbit_extrema
@@ -196,12 +197,14 @@ def cycle_curve(
         orb = PeriodicOrbit(mesh=prob.mesh.copy(), ncol=prob.m, states=U.copy(), period=T,
                             p=prob.params(v1))
         amp = float(np.max(np.linalg.norm((U - U[:-1].mean(axis=0)) / prob.scale, axis=1)))
+        fc = flip_coefficient(system, orb) if kind == CurveKind.PD and reliable else None
+        flip = dict(flip=fc.c, flip_error=fc.error) if fc is not None and fc.ok else {}
         return CycleCurvePoint(values=(v1, v2), period=T, amplitude=amp, orbit=orb,
                                multipliers=rest if reliable else np.zeros(0, complex),
                                trivial_multiplier=triv, reliable=reliable, test=ev.g,
                                iterations=its, residual=res,
                                extrema=orbit_extrema(system, orb, names), kind=kind_,
-                               angle=aug.angle(z))
+                               angle=aug.angle(z), **flip)
 
     states: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (z, t, mesh) per point
 
@@ -335,13 +338,15 @@ def _both_ways(system, orbit, kind, params, **kw) -> CycleCurve:
 def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: Callable,
            W: np.ndarray, tol: float) -> Any:
     """Solve a bracketed codimension-two point of the multiplier (and NS angle) tests on the
-    curve (R1, a singular point of the NS system, stays bracketed): the
+    curve (R1, a singular point of the NS system, and R2 on a PD curve, a singular point of
+    the PD system, stay bracketed): the
     zero of its test function along the step from point k (Illinois iterations on the
     arclength, each a point corrected onto the curve). Points of other kinds, and steps
     over which the mesh was adapted, stay bracketed; None for an NS zero that turns out to
     be a neutral saddle (no complex pair on the unit circle there)."""
     k = sp.step
-    if sp.type not in ("LPPD", "LPNS", "PDNS", "R2", "R3", "R4") or k + 1 >= len(states):
+    if sp.type not in ("LPPD", "LPNS", "PDNS", "R2", "R3", "R4", "GPD") \
+            or (sp.type == "R2" and aug.kind != CurveKind.NS) or k + 1 >= len(states):
         return sp
     (za, ta, mesh_a), (zb, _, mesh_b) = states[k], states[k + 1]
     if not np.array_equal(mesh_a, mesh_b):
@@ -358,8 +363,10 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
         if out is None:
             return None, np.nan
         pt = make_point(out[0], out[1], out[3], out[4], sp.type)
-        if sp.type in ("R2", "R3", "R4"):  # the solved angle, reliable or not
+        if aug.kind == CurveKind.NS and sp.type in ("R2", "R3", "R4"):  # the solved angle
             return pt, codim2_tests(aug.kind, np.zeros(0, complex), pt.angle)[sp.type]
+        if sp.type == "GPD":  # the coefficient itself, however small (its zero is sought)
+            return pt, pt.flip
         return pt, codim2_tests(aug.kind, pt.multipliers, pt.angle).get(sp.type, np.nan) \
             if pt.reliable else np.nan
 
@@ -385,6 +392,8 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
     if aug.kind != CurveKind.NS and sp.type in ("LPNS", "PDNS") and not torus_pair(
             codim2_rest(aug.kind, best.multipliers), 1e-4):
         return None  # a neutral saddle, no torus bifurcation
+    if sp.type == "GPD" and not abs(f) <= max(best.flip_error, 1e-9 * max(abs(flo), 1.0)):
+        return None  # the coefficient changed sign through a pole (a second -1: R2)
     return dataclasses.replace(sp, value=best.values[0], values=best.values, located="solved",
                                detail=f"test function {f:.2e} there", period=best.period,
                                point=best)

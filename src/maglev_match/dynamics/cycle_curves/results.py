@@ -43,7 +43,11 @@ class CycleCurvePoint:
     ``residual`` the largest residual there; ``angle`` (NS curves only, else nan) the
     angle theta (rad) of the critical multipliers e^{+-i theta}, an unknown of the
     augmented system (``kappa`` = cos theta), where ``test`` is |g| of the complex test
-    function."""
+    function; ``flip`` (PD curves only, else nan) the critical coefficient c of the period
+    doubling's normal form eta -> -eta + c eta^3 (:mod:`~maglev_match.dynamics.
+    cycle_curves.flip`; c > 0 supercritical, c < 0 subcritical; nan also where the
+    Floquet data are unreliable or it could not be computed), ``flip_error`` its
+    estimated error."""
 
     __repr__ = compact_repr
 
@@ -60,6 +64,8 @@ class CycleCurvePoint:
     extrema: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     kind: str = "step"
     angle: float = float("nan")
+    flip: float = float("nan")
+    flip_error: float = float("nan")
 
     @property
     def kappa(self) -> float:
@@ -155,6 +161,13 @@ def curve_to_xarray(curve: CycleCurve, units: Mapping[str, str] | None = None) -
     if curve.kind == "NS":
         data["kappa"] = (("point",), np.array([c.kappa for c in pts]), {"units": "1",
                          "long_name": "cos theta of the critical multipliers e^(+-i theta)"})
+    if curve.kind == "PD":
+        data["flip_coefficient"] = (("point",), np.array([c.flip for c in pts]), {
+            "units": "1", "long_name": "critical coefficient c of the period doubling's "
+            "normal form eta -> -eta + c eta^3 (c > 0 supercritical; states in units of the "
+            "system's state scale)"})
+        data["flip_error"] = (("point",), np.array([c.flip_error for c in pts]), {
+            "units": "1", "long_name": "estimated error of the flip coefficient"})
     names = sorted({n for c in pts for n in c.extrema})
     for n in names:
         for j, w in ((0, "max"), (1, "min")):
