@@ -30,7 +30,8 @@ means, so that they are smooth where they vanish):
   :mod:`~maglev_match.dynamics.cycle_curves.ns`, kappa = cos theta): the strong resonances
   R3, kappa + 1/2 (theta = 2 pi / 3), and R4, kappa (theta = pi / 2); R2, cos(theta / 2),
   and R1, sin(theta / 2), which change sign where theta passes pi or 0, where kappa + 1 and
-  kappa - 1 touch zero (the NS system's theta is not confined to (0, pi)); these four read
+  kappa - 1 touch zero (the driver ends the curve there: R2 solved at theta = pi, R1
+  bracketed, :func:`~maglev_match.dynamics.cycle_curves.curve.cycle_curve`); these four read
   the solved angle, so they are evaluated at every point; LPNS (fold-NS), prod (mu_i - 1) /
   (1 + |mu_i|), and PDNS (flip-NS), prod (mu_i + 1) / (1 + |mu_i|), of the remaining
   multipliers, only where the Floquet data are reliable.

@@ -21,7 +21,7 @@ from maglev_match.dynamics.collocation import (
     factorize,
     remesh,
 )
-from maglev_match.dynamics.continuation import label_points
+from maglev_match.dynamics.continuation import SpecialPoint, label_points
 from maglev_match.dynamics.cycle_curves.augmented import (
     AugmentedCycleSystem,
     CurveKind,
@@ -149,6 +149,9 @@ def cycle_curve(
     detect : locate the codimension-two points (:mod:`~maglev_match.dynamics.
         cycle_curves.codim2`).
 
+    An NS curve ends where its angle theta reaches pi (R2, the point solved at theta =
+    pi) or 0 (R1, bracketed): ``stopped_reason`` RESONANCE, the point in ``message``.
+
     Returns
     -------
     :class:`CycleCurve`. A failure (the start not corrected, the step falling below
@@ -208,10 +211,14 @@ def cycle_curve(
 
     states: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (z, t, mesh) per point
 
-    def finish(points, reason, message=""):
+    def finish(points, reason, message="", end: SpecialPoint | None = None):
         sps = detect_codim2(kind, points, params) if detect else []
         if sps and len(states) == len(points):
             sps = [_solve(sp, states, aug, newton, make_point, W, tol) for sp in sps]
+        if end is not None:  # the resonance the NS curve ended on, and no duplicate of it
+            sps = [sp for sp in sps if sp is None or sp.type != end.type
+                   or sp.step < end.step - 1] + [end]
+        if sps:
             sps = label_points([sp for sp in sps if sp is not None])
         return CycleCurve(kind=str(kind), params=(p1n, p2n), points=tuple(points),
                           special_points=tuple(sps), stopped_reason=str(reason),
@@ -297,6 +304,16 @@ def cycle_curve(
             warnings.append(f"the point on the bound {bound:g} could not be solved; the "
                             "curve ends at the last point before it")
             return finish(points, CurveStop.BOUND)
+        if kind == CurveKind.NS:  # the NS curve ends where theta reaches pi (R2) or 0 (R1)
+            end = _resonance_end(aug, newton, z, z_new, U_prev, make_point, len(points))
+            if end is not None:
+                pt, z_end, sp, note = end
+                if pt is not None:
+                    points.append(pt)
+                    states.append((z_end, t, prob.mesh.copy()))
+                v1, v2 = sp.values
+                return finish(points, CurveStop.RESONANCE, f"the NS curve ends at a "
+                              f"{note} at ({p1n}, {p2n}) = ({v1:.10g}, {v2:.10g})", sp)
         aug.update_borders(ev)
         t = _tangent(J, W, t)
         z = z_new
@@ -397,6 +414,43 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
     return dataclasses.replace(sp, value=best.values[0], values=best.values, located="solved",
                                detail=f"test function {f:.2e} there", period=best.period,
                                point=best)
+
+
+def _resonance_end(aug, newton: _Newton, z: np.ndarray, z_new: np.ndarray,
+                   U_prev: np.ndarray, make_point: Callable, step: int) -> Any:
+    """Where theta crossed an odd multiple of pi (R2: the critical pair meets at -1) or a
+    multiple of 2 pi (R1: at +1) over the step z -> z_new: the NS curve ends there (past
+    it, the same torus points are met again with the conjugate angle, or the pair is real:
+    PD or LPC curves begin there). R2 is solved with theta fixed at that multiple of pi
+    (the NS system is regular there); R1, a singular point of the system, is bracketed
+    between the two points. Returns (the solved end point and its unknowns, or None and
+    None; the special point; a phrase), or None if theta crossed neither."""
+    a, b = aug.angle(z), aug.angle(z_new)
+    ka, kb = math.floor(a / math.pi), math.floor(b / math.pi)
+    if ka == kb:
+        return None
+    m = max(ka, kb)  # theta crossed m pi
+    name = "R2" if m % 2 else "R1"
+    f = (m * math.pi - a) / (b - a)
+    note = ("1:2 resonance (theta = pi: the critical pair meets at -1)" if name == "R2"
+            else "1:1 resonance (theta = 0: the critical pair meets at +1)")
+    if name == "R2":
+        e = np.zeros(aug.size)
+        e[-1] = 1.0
+        out = newton(z + f * (z_new - z), e, m * math.pi, U_prev)
+        if out is not None:
+            pt = make_point(out[0], out[1], out[3], out[4], "R2")
+            return pt, out[0], SpecialPoint(type="R2", value=pt.values[0], values=pt.values,
+                                    step=step, located="solved", detail="theta = pi there "
+                                    "(the end of the NS curve)", period=pt.period,
+                                    point=pt), note
+    vals = tuple(float(x + f * (y - x)) for x, y in zip(aug.unpack(z)[2:], aug.unpack(
+        z_new)[2:], strict=True))
+    return None, None, SpecialPoint(type=name, value=vals[0], values=vals, step=step - 1,
+                              located="bracketed between two consecutive points of the "
+                              "curve (linear interpolation of theta, not solved; the "
+                              "curve ends at the last point before it)",
+                              detail=f"theta {a:.6g} and {b:.6g} at the two points"), note
 
 
 def _marks_inside(marks: Sequence[float], a: float, b: float) -> list[float]:

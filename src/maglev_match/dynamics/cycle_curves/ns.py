@@ -23,12 +23,12 @@ g_theta = -w^H (A_theta v) = i e^{i theta} sum_a conj(w_a) v_a(0) over the bound
 The borders are the singular vectors of the previous point.
 
 kappa = cos theta is what the resonance tests read (:mod:`codim2`). theta is an unknown of
-the system, not restricted to (0, pi): where the pair meets -1 (R2) or +1 (R1) the
-formulation continues with theta through pi (or 0) while the curve turns back in the
-parameter plane (the conjugate pair, the same points), so the resonance tests of those two
-are the sign changes of cos(theta / 2) and sin(theta / 2), where kappa + 1 and kappa - 1
-touch zero. At theta = 0 the trivial multiplier makes A singular anyway: an R1 point is a
-singular point of this system, reported only as bracketed.
+the system, not restricted to (0, pi), and the system is regular where the pair meets -1
+(R2: the curve turns back in the parameter plane there, the conjugate pair giving the same
+points again); the driver ends the NS curve there, where theta reaches pi (solved with
+theta fixed at pi), or where it reaches 0 (R1). At theta = 0 the trivial multiplier makes
+A singular anyway: an R1 point is a singular point of this system, reported only as
+bracketed.
 """
 
 from __future__ import annotations
