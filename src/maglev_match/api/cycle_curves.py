@@ -194,6 +194,9 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
     ignore_current : bool
         The start branch does not stop where the coil current reaches zero (default True:
         a fold of the basin-bounding cycle usually lies beyond it); the maglev models only.
+        The curve stops where its cycle reaches a gap limit (and, with False, where the
+        coil current reaches zero): the point solved there, the reason "reached a physical
+        limit" and the limit's name in its message.
     config : str or Path, optional
         A TOML file applied on top of the preset.
     stage : callable, optional
@@ -271,8 +274,14 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
         lo, hi = sorted((0.5 * y0, 2.0 * y0)) if y0 != 0 else (-1.0, 1.0)
         bnds[y] = (lo, hi)
     say(f"continuing the {kind} curve in ({x}, {y}) from {start_label} ...")
+    limits = None
+    if not is_user and prm is not None:  # the curve stops where its cycle reaches a limit
+        from maglev_match.maglev.limits import cycle_limit_margins
+
+        limits = cycle_limit_margins(prm, include_current=not ignore_current)
     curve = _cycle_curve(system, orbit, kind, (x, y), ranges=bnds, direction=0,
-                         max_steps=max_steps, marks=tuple(float(m) for m in marks))
+                         max_steps=max_steps, marks=tuple(float(m) for m in marks),
+                         limits=limits)
     say(f"{kind} curve: {len(curve.points)} points, {curve.message}")
     return CycleCurveStudy(model=studied_label, kind=kind, x=x, y=y, at=at_used, curve=curve,
                            start_label=start_label, start_branch=branch,

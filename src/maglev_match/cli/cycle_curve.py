@@ -106,8 +106,9 @@ def cycle_curve_command(
         "--mark", help="A value of P2 at which a point is solved exactly on the curve "
         "(repeatable).", callback=lambda v: [finite(x) for x in v or []])] = None,
     stop_at_current: Annotated[bool, typer.Option(
-        "--stop-at-current", help="The start branch stops where the coil current reaches 0 "
-        "(default: only the gap limits stop it, a fold usually lies beyond).")] = False,
+        "--stop-at-current", help="The start branch and the curve stop where the coil "
+        "current reaches 0 (default: only the gap limits stop them, a fold usually lies "
+        "beyond).")] = False,
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
     set_: SetOpt = None,

@@ -37,6 +37,7 @@ from maglev_match.dynamics.cycle_curves.flip import flip_coefficient
 from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem, critical_angle
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit, orbit_extrema
+from maglev_match.dynamics.cycles.problem import LimitFn, limit_margin
 from maglev_match.dynamics.cycles.stability import floquet_multipliers, split_trivial
 from maglev_match.dynamics.floquet import floquet_multipliers_from_blocks
 from maglev_match.dynamics.system import System
@@ -119,6 +120,7 @@ def cycle_curve(
     observables: Sequence[str] | None = None,
     detect: bool = True,
     marks: Sequence[float] = (),
+    limits: LimitFn | None = None,
 ) -> CycleCurve:
     """Continue a fold (``kind="LPC"``), period doubling (``"PD"``) or Neimark-Sacker
     bifurcation (``"NS"``; the start angle theta from the orbit's complex pair of
@@ -148,6 +150,11 @@ def cycle_curve(
         e.g. to compare with one-parameter branches there.
     detect : locate the codimension-two points (:mod:`~maglev_match.dynamics.
         cycle_curves.codim2`).
+    limits : ``limits(system, orbit)`` -> mapping of limit name -> margin (positive
+        inside), as for cycle branches: where the smallest margin of the curve's cycle
+        passes zero (e.g. the cycle's largest gap deviation reaches a gap limit) the curve
+        stops, with the point solved on the curve there (kind "contact", a special point
+        "contact") and the reason CONTACT.
 
     An NS curve ends where its angle theta reaches pi (R2, the point solved at theta =
     pi) or 0 (R1, bracketed): ``stopped_reason`` RESONANCE, the point in ``message``.
@@ -304,6 +311,17 @@ def cycle_curve(
             warnings.append(f"the point on the bound {bound:g} could not be solved; the "
                             "curve ends at the last point before it")
             return finish(points, CurveStop.BOUND)
+        if limits is not None:  # a physical limit reached over the step: the curve ends
+            con = _contact(limits, system, aug, newton, points[-1], z, z_new, t, W,
+                           U_prev, make_point, tol)
+            if con is not None:
+                pt, z_end, sp = con
+                points.append(pt)
+                states.append((z_end, t, prob.mesh.copy()))
+                v1, v2 = pt.values
+                return finish(points, CurveStop.CONTACT, f"the cycle reaches the limit "
+                              f"{sp.detail} at ({p1n}, {p2n}) = ({v1:.10g}, {v2:.10g})",
+                              dataclasses.replace(sp, step=len(points) - 1))
         if kind == CurveKind.NS:  # the NS curve ends where theta reaches pi (R2) or 0 (R1)
             end = _resonance_end(aug, newton, z, z_new, U_prev, make_point, len(points))
             if end is not None:
@@ -414,6 +432,56 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
     return dataclasses.replace(sp, value=best.values[0], values=best.values, located="solved",
                                detail=f"test function {f:.2e} there", period=best.period,
                                point=best)
+
+
+def _contact(limits: LimitFn, system: System, aug, newton: _Newton, last, z: np.ndarray,
+             z_new: np.ndarray, t: np.ndarray, W: np.ndarray, U_prev: np.ndarray,
+             make_point: Callable, tol: float) -> Any:
+    """Where the smallest limit margin of the curve's cycle passes zero over the step z ->
+    z_new: the point on the curve there (Illinois iterations on the arclength along the
+    step, each a point corrected onto the curve), its unknowns and a special point
+    "contact" (solved, or bracketed at the last point before it if the solve fails).
+    None if the margin stays positive (or was negative already at z)."""
+    fa, _ = limit_margin(limits, system, last.orbit)
+    row = W * t
+    span = float(row @ (z_new - z))
+    lo, hi = 0.0, span
+
+    def at(s):
+        z0 = z + (s / span) * (z_new - z)
+        out = newton(z0, row, float(row @ z0), U_prev)
+        if out is None:
+            return None, np.nan, ""
+        pt = make_point(out[0], out[1], out[3], out[4], "contact")
+        m, name = limit_margin(limits, system, pt.orbit)
+        return (pt, out[0]), m, name
+
+    end, fb, name = at(hi)
+    if not (fa >= 0 and np.isfinite(fb) and fb < 0):
+        return None
+    flo, fhi = fa, fb
+    best, f = end, fb
+    for _ in range(60):  # Illinois, as _solve
+        s = hi - fhi * (hi - lo) / (fhi - flo)
+        best, f, name = at(s)
+        if best is None or not np.isfinite(f):
+            break
+        if f * fhi < 0:
+            lo, flo = hi, fhi
+        else:
+            flo *= 0.5
+        hi, fhi = s, f
+        if abs(f) < 1e-12 or abs(hi - lo) < tol:
+            break
+    if best is None or not abs(f) < 1e-8:
+        return None if end is None else (end[0], end[1], SpecialPoint(
+            type="contact", value=end[0].values[0], values=end[0].values, step=0,
+            located="bracketed: the first point past the limit (the contact could not be "
+            "solved)", detail=name or "limit", period=end[0].period, point=end[0]))
+    pt, zc = best
+    return pt, zc, SpecialPoint(type="contact", value=pt.values[0], values=pt.values,
+                                step=0, located="solved", detail=name or "limit",
+                                period=pt.period, point=pt)
 
 
 def _resonance_end(aug, newton: _Newton, z: np.ndarray, z_new: np.ndarray,

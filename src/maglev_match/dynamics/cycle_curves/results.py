@@ -29,6 +29,7 @@ class CurveStop(StrEnum):
     STEP_TOO_SMALL = "step too small"
     START_FAILED = "the start could not be corrected onto the curve"
     RESONANCE = "reached a strong resonance (R1 or R2)"
+    CONTACT = "reached a physical limit"
 
 
 @dataclass(frozen=True)
@@ -96,9 +97,10 @@ class CycleCurve(Plottable):
     @property
     def ok(self) -> bool:
         """Whether the curve ended where it was asked to (the range's end or max_steps) or
-        where an NS curve ends (R1, R2), not on a numerical failure."""
+        where an NS curve ends (R1, R2) or at a physical limit, not on a numerical
+        failure."""
         return self.stopped_reason in (CurveStop.BOUND, CurveStop.MAX_STEPS,
-                                       CurveStop.RESONANCE)
+                                       CurveStop.RESONANCE, CurveStop.CONTACT)
 
     @property
     def p1(self) -> np.ndarray:
