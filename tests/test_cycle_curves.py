@@ -159,10 +159,11 @@ def test_fold_flip_point_on_the_lpc_curve():
     assert np.min(np.abs(sp.point.multipliers + 1.0)) < 1e-7
 
 
-def test_cusp_of_cycles_is_bracketed():
+def test_cusp_of_cycles_is_solved():
     """g(s) = mu + l1 s + 0.3 s^2 - s^3: folds where g = g' = 0, a cusp where also g'' = 0:
     s = 0.1, l1 = -0.03, mu = 0.001. The LPC curve (mu, l1) = (0.3 s^2 - 2 s^3,
-    -0.6 s + 3 s^2) turns back there (s the squared radius)."""
+    -0.6 s + 3 s^2) turns back there (s the squared radius); the CPC is solved where its
+    tangent in the parameter plane vanishes (dynamics/cycle_curves/cusp.py)."""
     S = embedded(lambda mu, l1, r2: mu + l1 * r2 + 0.3 * r2 ** 2 - r2 ** 3)
     br, orbit = _fold_orbit(S, 0.2, ntst=20, ncol=4)
     cv = cycle_curve(S, orbit, "LPC", ("mu", "l1"), ranges={"l1": (-0.2, 0.2)},
@@ -171,9 +172,10 @@ def test_cusp_of_cycles_is_bracketed():
     np.testing.assert_allclose(cv.p1, 0.3 * s ** 2 - 2 * s ** 3, atol=1e-7)
     np.testing.assert_allclose(cv.p2, -0.6 * s + 3 * s ** 2, atol=1e-7)
     cpc = [sp for sp in cv.special_points if sp.type == "CPC"]
-    assert len(cpc) == 1 and cpc[0].located.startswith("bracketed")
-    assert cpc[0].values[0] == pytest.approx(0.001, abs=2e-4)
-    assert cpc[0].values[1] == pytest.approx(-0.03, abs=5e-3)
+    assert len(cpc) == 1 and cpc[0].located == "solved"
+    assert cpc[0].values[0] == pytest.approx(0.001, abs=1e-9)
+    assert cpc[0].values[1] == pytest.approx(-0.03, abs=1e-8)
+    assert cpc[0].point.extrema["radius"][0] ** 2 == pytest.approx(0.1, abs=1e-7)
 
 
 def test_a_stall_at_the_generalised_hopf_end_is_reported():

@@ -23,6 +23,8 @@ conditioned along the curve.
   (pseudo-arclength in (p1, p2), Newton, step control, mesh adaptation, the multipliers);
 * :mod:`~maglev_match.dynamics.cycle_curves.codim2`: codimension-two points on the curve
   (CPC, LPPD, LPNS on LPC; LPPD, PDNS, R2, GPD on PD; R1-R4, LPNS, PDNS on NS);
+* :mod:`~maglev_match.dynamics.cycle_curves.cusp`: the CPC solved (the curve's tangent in
+  the parameter plane vanishes);
 * :mod:`~maglev_match.dynamics.cycle_curves.flip`: the period doubling's normal-form
   coefficient (:func:`flip_coefficient`), read out along PD curves (GPD where it vanishes);
 * :mod:`~maglev_match.dynamics.cycle_curves.gh`: the LPC curve born at a generalised Hopf

@@ -16,7 +16,8 @@ means, so that they are smooth where they vanish):
   bifurcation;
   CPC (cusp of cycles): the projection of the curve's direction in the scaled parameter
   plane on its direction one step before, which changes sign where the curve turns back
-  in the parameter plane (a cusp);
+  in the parameter plane (a cusp; then solved where the curve's tangent in the parameter
+  plane vanishes, :mod:`~maglev_match.dynamics.cycle_curves.cusp`);
 * on PD: LPPD, prod (mu_i - 1) / (1 + |mu_i|) (a second multiplier at +1); PDNS, the NS
   test above on the remaining multipliers; R2 (1:2 resonance), prod (mu_i + 1) / (1 +
   |mu_i|) (a second multiplier at -1; there the PD system's test function g vanishes to
@@ -37,9 +38,9 @@ means, so that they are smooth where they vanish):
   multipliers, only where the Floquet data are reliable.
 
 The driver solves the multiplier points and GPD on the curve (``located`` "solved");
-where it cannot, and for CPC, R1 on NS and R2 on PD, the point stays bracketed: the
-linear interpolation of the test function's zero between the two points, CPC the point
-where the direction reverses (``located`` says so).
+where it cannot, and for R1 on NS and R2 on PD, the point stays bracketed: the linear
+interpolation of the test function's zero between the two points, CPC (if its solve
+fails) the point where the direction reverses (``located`` says so).
 """
 
 from __future__ import annotations

@@ -33,6 +33,7 @@ from maglev_match.dynamics.cycle_curves.codim2 import (
     detect_codim2,
     torus_pair,
 )
+from maglev_match.dynamics.cycle_curves.cusp import solve_cusp
 from maglev_match.dynamics.cycle_curves.flip import flip_coefficient
 from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem, critical_angle
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
@@ -380,6 +381,8 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
     over which the mesh was adapted, stay bracketed; None for an NS zero that turns out to
     be a neutral saddle (no complex pair on the unit circle there)."""
     k = sp.step
+    if sp.type == "CPC":
+        return solve_cusp(sp, states, aug, newton, make_point, W, tol, _tangent)
     if sp.type not in ("LPPD", "LPNS", "PDNS", "R2", "R3", "R4", "GPD") \
             or (sp.type == "R2" and aug.kind != CurveKind.NS) or k + 1 >= len(states):
         return sp
