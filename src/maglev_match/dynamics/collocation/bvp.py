@@ -45,7 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse
 
-from maglev_match.core.jax_setup import to_device
+from maglev_match.core.jax_setup import kernel_arg, to_device
 from maglev_match.core.aot import cached_kernel
 from maglev_match.dynamics.system import System
 
@@ -392,7 +392,7 @@ class CollocationProblem:
         h = np.diff(self.mesh)
         idx = interval_nodes(ntst, m)
         _, _, J, _ = collocation_kernel(self.system.rhs, m)(
-            to_device(U[idx]), to_device(h), T, to_device(p), to_device(np.zeros_like(p)))
+            kernel_arg(U[idx]), kernel_arg(h), T, kernel_arg(p), np.zeros_like(p))
         return np.asarray(J), T, h
 
     def evaluate(

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64)
-from maglev_match.core.jax_setup import to_device
+from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.aot import cached_kernel
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.hybrid.system import HybridSystem, identity_project
@@ -491,12 +491,12 @@ def hybrid_flow(
     kern = _flow_kernel(hs.rhs, hs.guards, hs.project or identity_project,
                         hs.domain or _whole_space, int(k), int(ts.shape[1]),
                         int(opts.max_switches))
-    out = kern(to_device(x0 / sc), to_device(Zs), to_device(s), to_device(pp),
-               to_device(Ps), to_device(sc), to_device(t0), to_device(t1),
-               to_device(a), to_device(b), to_device(c),
-               to_device(ts if ts.size else np.zeros((B, 1))),
-               to_device(opts.rtol), to_device(opts.atol),
-               to_device(np.full(B, opts.h0)), to_device(opts.max_steps))
+    out = kern(kernel_arg(x0 / sc), kernel_arg(Zs), kernel_arg(s), kernel_arg(pp),
+               kernel_arg(Ps), kernel_arg(sc), kernel_arg(t0), kernel_arg(t1),
+               kernel_arg(a), kernel_arg(b), kernel_arg(c),
+               kernel_arg(ts if ts.size else np.zeros((B, 1))),
+               kernel_arg(opts.rtol), kernel_arg(opts.atol),
+               kernel_arg(np.full(B, opts.h0)), kernel_arg(opts.max_steps))
     o = {key: np.asarray(v) for key, v in out.items()}
     phi = (o["phi"] / colscale[:, None, :])[:, :, :k_req]
     if tangents is None and param_tangents is None:

@@ -59,7 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64 on)
-from maglev_match.core.jax_setup import to_device
+from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.integrate.kernel import (
     COLLISION,
@@ -296,12 +296,12 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
                           bool(opts.stop_on_converged), batch_x, batch_p, opts.unroll_stages)
     xr = system.x_guess if x_ref is None else np.asarray(x_ref, float)
     out = fn(
-        to_device(x0, jnp.float64), to_device(p, jnp.float64),
-        to_device(system.state_scale, jnp.float64), to_device(xr, jnp.float64),
-        to_device(float(t_end)), to_device(ts), to_device(opts.rtol),
-        to_device(opts.atol), to_device(opts.converge_tol), to_device(opts.hold_time),
-        to_device(opts.max_steps), to_device(opts.dt0 or 0.0),
-        to_device(opts.decay_floor), to_device(ev_args),
+        kernel_arg(x0, jnp.float64), kernel_arg(p, jnp.float64),
+        kernel_arg(system.state_scale, jnp.float64), kernel_arg(xr, jnp.float64),
+        kernel_arg(float(t_end)), kernel_arg(ts), kernel_arg(opts.rtol),
+        kernel_arg(opts.atol), kernel_arg(opts.converge_tol), kernel_arg(opts.hold_time),
+        kernel_arg(opts.max_steps), kernel_arg(opts.dt0 or 0.0),
+        kernel_arg(opts.decay_floor), kernel_arg(ev_args),
     )
     return ts, {k: np.asarray(v) for k, v in out.items()}
 
