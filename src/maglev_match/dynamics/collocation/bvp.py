@@ -45,8 +45,8 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.sparse
 
-from maglev_match.core.jax_setup import kernel_arg, to_device
 from maglev_match.core.aot import cached_kernel
+from maglev_match.core.jax_setup import kernel_arg, to_device
 from maglev_match.dynamics.system import System
 
 __all__ = [

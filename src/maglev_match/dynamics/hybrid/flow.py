@@ -35,8 +35,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64)
-from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.aot import cached_kernel
+from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.hybrid.system import HybridSystem, identity_project
 
