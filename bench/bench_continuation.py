@@ -51,9 +51,9 @@ def row(points: list, direction: int, repeat: int, label: str) -> None:
           f"largest difference {diff:.2e} m")
 
 
-def neighbour(steps: int, repeat: int) -> None:
+def neighbour(steps: int, repeat: int, step: float = 1e-3) -> None:
     P = load_preset("turnout-soft")
-    designs = [P.replace(EI=P.EI * (1 + 1e-3 * k)) for k in range(steps + 1)]
+    designs = [P.replace(EI=P.EI * (1 + step * k)) for k in range(steps + 1)]
     first = matching_index(designs[0])
     matching_index(designs[1], near=first)  # warm
     matching_index(designs[1], simulate=False)
@@ -88,7 +88,8 @@ def neighbour(steps: int, repeat: int) -> None:
             critical_delay_info(d)
             cd_w.append(time.perf_counter() - t)
     med = statistics.median
-    print(f"headline index at a neighbouring design (EI +0.1 % steps, {len(near_w)} designs):")
+    print(f"headline index at a neighbouring design (EI +{step:.1%} steps, {len(near_w)} "
+          "designs):")
     print(f"  point-wise index      {med(full_w):.3f} s wall, {med(full_c):.3f} s CPU")
     print(f"  near=previous         {med(near_w):.3f} s wall, {med(near_c):.3f} s CPU")
     print(f"  paper part only       {med(pap_w):.3f} s wall, {med(pap_c):.3f} s CPU")
@@ -107,6 +108,10 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=9)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--basin", action="store_true")
+    ap.add_argument("--neighbour-only", action="store_true",
+                    help="only the neighbouring-design timing")
+    ap.add_argument("--step", type=float, default=1e-3,
+                    help="relative EI step of the neighbouring designs")
     a = ap.parse_args()
     print(f"python {platform.python_version()}, {platform.machine()}")
     with open("/proc/loadavg") as fh:
@@ -114,8 +119,9 @@ def main() -> None:
     P = load_preset("turnout-soft")
     n = a.points
     pts = [P.replace(EI=P.EI * (0.98 + 0.04 * k / (n - 1))) for k in range(n)]
-    row(pts, 1, a.repeat, "grazing row (turnout-soft, EI 0.98..1.02, beam down)")
-    neighbour(5, a.repeat)
+    if not a.neighbour_only:
+        row(pts, 1, a.repeat, "grazing row (turnout-soft, EI 0.98..1.02, beam down)")
+    neighbour(5, a.repeat, a.step)
     if a.basin:
         pts = [P.replace(omega1=om) for om in (117.0, 117.5, 118.0, 118.5)]
         row(pts, -1, 1, "basin-boundary row (turnout-soft, omega1 117..118.5, beam up)")

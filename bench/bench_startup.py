@@ -10,6 +10,12 @@ exported kernels). Also the import time of the CLI (``python -c "import maglev_m
 The machine may be shared: compare CPU times when the load average is high.
 
     python bench/bench_startup.py [--repeats 5] [--cold-repeats 5]
+    python bench/bench_startup.py --floor [--against OTHER/src] [--repeats 5]
+
+``--floor`` times ``maglev-match index --json`` (the user's cache, warm after one unmeasured
+run) interleaved with a bare ``python -c "import jax"`` (the floor no command can go below)
+and, with ``--against``, the same command run from another source tree (e.g. an export of
+the previous commit): the "before" of a change, measured in the same run.
 
 Targets (issue 14): ``index`` and ``cycles`` under 1.5 s with a warm cache, under 4 s with
 an empty one.
@@ -78,6 +84,9 @@ def main() -> None:
     ap.add_argument("--only", choices=sorted(COMMANDS), help="one command only")
     ap.add_argument("--quick-only", action="store_true",
                     help="only the answers without computation (--version, --help, ...)")
+    ap.add_argument("--floor", action="store_true",
+                    help="index against the bare import of jax, interleaved (see above)")
+    ap.add_argument("--against", help="with --floor: another source tree to time as well")
     opts = ap.parse_args()
     base_env = dict(os.environ)
     src = Path(__file__).resolve().parents[1] / "src"
@@ -86,6 +95,9 @@ def main() -> None:
     print(f"# bench_startup  python {sys.version.split()[0]}  cpus {os.cpu_count()}  "
           f"load {os.getloadavg()[0]:.2f}")
 
+    if opts.floor:
+        floor(opts, base_env, src)
+        return
     imp = [run(["-c", "import maglev_match.cli"], base_env) for _ in range(opts.repeats)]
     w, c = medians(imp)
     print(f"import maglev_match.cli: {w:.3f} s wall, {c:.3f} s CPU")
@@ -134,6 +146,30 @@ def main() -> None:
         (aw, awc), (ac, acc), _ = results["ahead-of-time (default)"]
         print(f"{name:6s} ratio plain / AOT: warm {bw / aw:.2f}x wall ({bwc / awc:.2f}x CPU), "
               f"empty {bc / ac:.2f}x wall ({bcc / acc:.2f}x CPU)")
+    print(f"# load at the end {os.getloadavg()[0]:.2f}")
+
+
+def floor(opts: argparse.Namespace, base_env: dict[str, str], src: Path) -> None:
+    """``index --json`` (warm) interleaved with ``import jax`` and, optionally, the same
+    command from another source tree; medians of ``--repeats`` rounds."""
+    cases = {"python -c 'import jax'": (["-c", "import jax"], base_env),
+             f"index --json ({src})": (["-m", "maglev_match", "index", "--json"], base_env)}
+    if opts.against:
+        other = {**base_env, "PYTHONPATH": str(Path(opts.against).resolve()) + os.pathsep
+                 + os.environ.get("PYTHONPATH", "")}
+        cases[f"index --json ({opts.against})"] = (
+            ["-m", "maglev_match", "index", "--json"], other)
+    for argv, env in cases.values():  # warm the caches (exported kernels of each tree)
+        run(argv, env)
+    samples: dict[str, list[tuple[float, float]]] = {k: [] for k in cases}
+    for _ in range(opts.repeats):
+        for label, (argv, env) in cases.items():
+            samples[label].append(run(argv, env))
+    base = medians(samples["python -c 'import jax'"])
+    for label, s in samples.items():
+        w, c = medians(s)
+        print(f"{label}: {w:.3f} s wall, {c:.3f} s CPU  ({w / base[0]:.2f}x the jax floor "
+              f"wall)")
     print(f"# load at the end {os.getloadavg()[0]:.2f}")
 
 

@@ -155,3 +155,28 @@ def test_preload_imports_jax_before_its_thread_starts():
                          timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[True]"
+
+
+def test_index_json_imports_no_module_it_does_not_use():
+    """`index --json` (model A) prints numbers: it needs neither the figures (matplotlib),
+    the gridded results (xarray, pandas), the parallel maps (dask) nor scipy.optimize (whose
+    only use on this path, matching the characteristic roots of the critical delay, has one
+    candidate per side for model A). Each of them costs 0.1-0.5 s of a process start."""
+    code = (
+        "import contextlib, io, json, sys\n"
+        "from maglev_match.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+        "    code = main(['index', '--json'])\n"
+        "chi = json.loads(out.getvalue())['chi']\n"
+        "print(json.dumps({'code': code, 'chi': chi, 'modules': sorted(sys.modules)}))\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(ROOT / "src"), *filter(None, [os.environ.get("PYTHONPATH")])]))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env, timeout=600, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert r["code"] == 0 and r["chi"] > 0, r
+    assert "jax" in r["modules"]  # the probe sees the modules of a real computation
+    unwanted = ("matplotlib", "xarray", "pandas", "dask", "distributed", "scipy.optimize")
+    found = [m for m in r["modules"] if m in unwanted]
+    assert found == [], f"index --json imported {found}"

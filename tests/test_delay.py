@@ -235,3 +235,33 @@ def test_a_delay_branch_stops_at_the_discretisations_bound_and_says_so():
     said = " ".join(br.warnings)
     assert "longest delay" in said and "discretisation" in said
     assert "not defined" not in said
+
+
+def test_one_row_delay_candidates_equal_the_qz_eigenvalues():
+    """The batched closed form z = 1 / (a^T M^{-1} e_r) for a delay matrix with one nonzero
+    row (model A's outer loop) gives the finite eigenvalues of the pencil (M, A_k) that the
+    QZ algorithm gives, frequency by frequency; with another delay in M and with a full
+    A_k (the QZ path) as well."""
+    import scipy.linalg
+
+    from maglev_match.dynamics.delay import crossings
+
+    rng = np.random.default_rng(7)
+    n = 6
+    A0 = rng.normal(size=(n, n))
+    Ak = np.zeros((n, n))
+    Ak[3] = rng.normal(size=n)
+    Aj = rng.normal(size=(n, n))
+    omegas = np.geomspace(1e-3, 50.0, 40)
+    for As, taus, k in (([Ak], [0.0], 0), ([Aj, Ak], [0.3, 0.0], 1),
+                        ([Ak, Aj], [0.0, 0.2], 1)):
+        got = crossings._candidates_on_grid(A0, As, taus, k, omegas)
+        assert len(got) == omegas.size
+        for w, z in zip(omegas, got, strict=True):
+            M = crossings._rest_matrix(A0, As, taus, k, w)
+            ref = scipy.linalg.eigvals(M, As[k].astype(complex))
+            ref = ref[np.isfinite(ref) & (np.abs(ref) < 1e12)]
+            assert z.size == ref.size, (w, z, ref)
+            assert np.allclose(np.sort_complex(z), np.sort_complex(ref), rtol=1e-9, atol=0)
+            if As[k] is Ak:
+                assert z.size == 1  # one finite eigenvalue: the closed form's

@@ -52,6 +52,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.core.jax_setup import to_device
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.escape import (
@@ -233,7 +234,7 @@ def disturbance_line(params: Params | MaglevModel, direction: int, model: str = 
     hs = m.clamped()
     n = hs.dim
     g = hs.observables["gap_deviation"]
-    pj = jnp.asarray(hs.p)
+    pj = to_device(hs.p)
     W = np.atleast_2d(np.asarray(jax.jacfwd(lambda x: jnp.atleast_1d(g(x, pj)))(
         jnp.zeros(n))))
     g0 = np.atleast_1d(np.asarray(g(jnp.zeros(n), pj)))

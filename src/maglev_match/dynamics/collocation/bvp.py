@@ -46,6 +46,7 @@ import numpy as np
 import scipy.sparse
 
 from maglev_match.core.aot import cached_kernel
+from maglev_match.core.jax_setup import kernel_arg, to_device
 from maglev_match.dynamics.system import System
 
 __all__ = [
@@ -123,7 +124,7 @@ def evaluate_profile(mesh: np.ndarray, m: int, U: np.ndarray, s: np.ndarray) -> 
 def collocation_kernel(rhs: Callable, m: int) -> Callable:
     """Jitted collocation kernel for one right-hand side and NCOL (cached)."""
     _, _, _, L, D = collocation_tables(m)
-    Lj, Dj = jnp.asarray(L), jnp.asarray(D)
+    Lj, Dj = to_device(L), to_device(D)
     jac = jax.jacfwd(rhs, argnums=0)
 
     def f_dir(x, p, e):
@@ -151,7 +152,7 @@ def _parts_kernel(rhs: Callable, m: int) -> Callable:
     Returns (r_col (NTST, m, n), colT (NTST, m, n), colL (NTST, m, n), blk (NTST, m n,
     (m+1) n) with rows (l, a) and columns (k, b), J (NTST, m, n, n))."""
     _, _, _, L, D = collocation_tables(m)
-    Lj, Dj = jnp.asarray(L), jnp.asarray(D)
+    Lj, Dj = to_device(L), to_device(D)
     base = collocation_kernel(rhs, m)
 
     def parts(Ui, h, T, p, e, sc, T_scale, lam_scale):
@@ -391,7 +392,7 @@ class CollocationProblem:
         h = np.diff(self.mesh)
         idx = interval_nodes(ntst, m)
         _, _, J, _ = collocation_kernel(self.system.rhs, m)(
-            jnp.asarray(U[idx]), jnp.asarray(h), T, jnp.asarray(p), jnp.zeros_like(p))
+            kernel_arg(U[idx]), kernel_arg(h), T, kernel_arg(p), np.zeros_like(p))
         return np.asarray(J), T, h
 
     def evaluate(

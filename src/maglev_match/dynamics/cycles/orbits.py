@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.core.aot import cached_kernel
+from maglev_match.core.jax_setup import to_device
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.collocation import (
     collocation_tables,
@@ -143,7 +144,7 @@ def _lagrange_jnp(m: int) -> Callable:
     c = np.linspace(0.0, 1.0, m + 1)
     others = np.array([[i for i in range(m + 1) if i != k] for k in range(m + 1)])
     denom = np.array([np.prod(c[k] - c[others[k]]) for k in range(m + 1)])
-    co, de = jnp.asarray(c[others]), jnp.asarray(denom)
+    co, de = to_device(c[others]), to_device(denom)
 
     def basis(tau):
         return jnp.prod(tau - co, axis=1) / de
@@ -162,8 +163,8 @@ def _extrema_kernel(gs: tuple[Callable, ...], m: int, refine: int) -> Callable:
     on model A's gap), and a margin built on them would be rough at that level; the vertex
     is within O(dt^2) of the polynomial's own extremum, so its value is within O(dt^4)
     (~1e-13 relative there): a smooth function of the orbit to the branch tolerance."""
-    Lc = jnp.asarray(_local_basis(m, 4 * m + 1))
-    Lf = jnp.asarray(_local_basis(m, refine + 1))
+    Lc = to_device(_local_basis(m, 4 * m + 1))
+    Lf = to_device(_local_basis(m, refine + 1))
     npts = Lf.shape[0]
     dtau = 1.0 / (npts - 1.0)
     basis = _lagrange_jnp(m)

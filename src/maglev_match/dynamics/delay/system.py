@@ -99,7 +99,8 @@ class DelayDifferentialSystem:
         object.__setattr__(self, "x_guess", xg)
         sc = np.ones(n) if self.state_scale is None else np.asarray(self.state_scale, float)
         object.__setattr__(self, "state_scale", sc)
-        sizes = tuple(int(np.size(np.asarray(g(jnp.asarray(xg), jnp.asarray(p)))))
+        # the signals' sizes from their shapes alone (traced, nothing compiled or run)
+        sizes = tuple(int(np.prod(jax.eval_shape(g, xg, p).shape, dtype=int))
                       for g in self.signals)
         object.__setattr__(self, "_sizes", sizes)
         if not self.signal_names:

@@ -36,6 +36,7 @@ import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64)
 from maglev_match.core.aot import cached_kernel
+from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.hybrid.system import HybridSystem, identity_project
 
@@ -490,12 +491,12 @@ def hybrid_flow(
     kern = _flow_kernel(hs.rhs, hs.guards, hs.project or identity_project,
                         hs.domain or _whole_space, int(k), int(ts.shape[1]),
                         int(opts.max_switches))
-    out = kern(jnp.asarray(x0 / sc), jnp.asarray(Zs), jnp.asarray(s), jnp.asarray(pp),
-               jnp.asarray(Ps), jnp.asarray(sc), jnp.asarray(t0), jnp.asarray(t1),
-               jnp.asarray(a), jnp.asarray(b), jnp.asarray(c),
-               jnp.asarray(ts if ts.size else np.zeros((B, 1))),
-               jnp.asarray(opts.rtol), jnp.asarray(opts.atol),
-               jnp.asarray(np.full(B, opts.h0)), jnp.asarray(opts.max_steps))
+    out = kern(kernel_arg(x0 / sc), kernel_arg(Zs), kernel_arg(s), kernel_arg(pp),
+               kernel_arg(Ps), kernel_arg(sc), kernel_arg(t0), kernel_arg(t1),
+               kernel_arg(a), kernel_arg(b), kernel_arg(c),
+               kernel_arg(ts if ts.size else np.zeros((B, 1))),
+               kernel_arg(opts.rtol), kernel_arg(opts.atol),
+               kernel_arg(np.full(B, opts.h0)), kernel_arg(opts.max_steps))
     o = {key: np.asarray(v) for key, v in out.items()}
     phi = (o["phi"] / colscale[:, None, :])[:, :, :k_req]
     if tangents is None and param_tangents is None:

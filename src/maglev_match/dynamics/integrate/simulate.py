@@ -59,6 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64 on)
+from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.integrate.kernel import (
     COLLISION,
@@ -295,12 +296,12 @@ def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_sa
                           bool(opts.stop_on_converged), batch_x, batch_p, opts.unroll_stages)
     xr = system.x_guess if x_ref is None else np.asarray(x_ref, float)
     out = fn(
-        jnp.asarray(x0, jnp.float64), jnp.asarray(p, jnp.float64),
-        jnp.asarray(system.state_scale, jnp.float64), jnp.asarray(xr, jnp.float64),
-        jnp.asarray(float(t_end)), jnp.asarray(ts), jnp.asarray(opts.rtol),
-        jnp.asarray(opts.atol), jnp.asarray(opts.converge_tol), jnp.asarray(opts.hold_time),
-        jnp.asarray(opts.max_steps), jnp.asarray(opts.dt0 or 0.0),
-        jnp.asarray(opts.decay_floor), jnp.asarray(ev_args),
+        kernel_arg(x0, jnp.float64), kernel_arg(p, jnp.float64),
+        kernel_arg(system.state_scale, jnp.float64), kernel_arg(xr, jnp.float64),
+        kernel_arg(float(t_end)), kernel_arg(ts), kernel_arg(opts.rtol),
+        kernel_arg(opts.atol), kernel_arg(opts.converge_tol), kernel_arg(opts.hold_time),
+        kernel_arg(opts.max_steps), kernel_arg(opts.dt0 or 0.0),
+        kernel_arg(opts.decay_floor), kernel_arg(ev_args),
     )
     return ts, {k: np.asarray(v) for k, v in out.items()}
 
