@@ -34,6 +34,7 @@ from maglev_match.explore.inputs import (
     parse_query,
     toml_text,
 )
+from maglev_match.explore.background import KINDS
 from maglev_match.explore.jobs import JobRunner
 from maglev_match.explore.session import Session, finite
 
@@ -175,7 +176,8 @@ class JobHandler(_Base):
 
 class ExportHandler(_Base):
     """``/api/export/KIND``: command, toml, csv (what=cycle|run), png or svg (what=index|
-    run: the product's figure through the result's ``.plot()``)."""
+    run: the product's figure through the result's ``.plot()``), netcdf (what=index|run|
+    hopf_curve|tile|speed|cycle_branch: the result object's ``.to_xarray()``)."""
 
     async def get(self, kind: str) -> None:
         state, errors = parse_query(self.query())
@@ -198,6 +200,8 @@ class ExportHandler(_Base):
             w.writerow(rows["header"])
             w.writerows(zip(*rows["columns"], strict=True))
             self._text(buf.getvalue(), "text/csv", f"{what}.csv")
+        elif kind == "netcdf":
+            await self._netcdf(self.get_argument("what", "index"))
         elif kind in ("png", "svg"):
             what = self.get_argument("what", "index")
             loop = asyncio.get_running_loop()
@@ -212,6 +216,30 @@ class ExportHandler(_Base):
             self.finish(data)
         else:
             self.send({"error": f"no export '{kind}'"}, 404)
+
+    async def _netcdf(self, what: str) -> None:
+        """The result object's ``.to_xarray()`` as netCDF-4: the last release's index or
+        critical run, or the last finished background job of a kind."""
+        if what in ("index", "run"):
+            loop = asyncio.get_running_loop()
+            try:
+                data = await loop.run_in_executor(self.server.executor,
+                                                  self.server.session.netcdf, what)
+            except LookupError as e:
+                self.send({"error": str(e)}, 404)
+                return
+        elif what in KINDS:
+            job = await asyncio.to_thread(self.server.jobs.latest, what)
+            data = None if job is None else job.netcdf
+            if data is None:
+                self.send({"error": f"no {what} result yet: run it first"}, 404)
+                return
+        else:
+            self.send({"error": f"no netCDF export '{what}'"}, 404)
+            return
+        self.set_header("Content-Type", "application/x-netcdf")
+        self.set_header("Content-Disposition", f'attachment; filename="{what}.nc"')
+        self.finish(data)
 
     def _text(self, text: str, ctype: str, name: str) -> None:
         self.set_header("Content-Type", f"{ctype}; charset=utf-8")
