@@ -203,3 +203,22 @@ def test_a_moving_slider_shows_chi_interpolated_from_the_map_tile(server, page):
     page.wait_for_function("() => document.getElementById('chi-interp').textContent"
                            ".startsWith('no tile here')", timeout=WAIT)
     assert page.locator("#chi-interp").get_attribute("data-state") == "none"
+
+
+def test_the_speed_sweep_shows_chi_at_speed_beside_the_standstill_headline(server, page):
+    page.goto(_base(server) + "?preset=turnout-soft&kD=140&v=60")
+    chi = _settled(page)
+    _job_done(page, "speed")
+    assert float(page.locator("#chi-v").get_attribute("data-value")) > 0
+    assert "at 60 km/h" in page.locator("#chi-v").inner_text()
+    # the sweep's own standstill headline is the index the page released
+    assert page.locator("#chi-0").inner_text() == chi
+    assert parse_qs(urlparse(page.url).query)["v"] == ["60"]
+    # a speed that is refused: the rule next to the field, no job started
+    field = page.locator("#field-v")
+    field.fill("-3")
+    field.press("Enter")
+    page.wait_for_function("() => document.getElementById('err-v').textContent !== ''",
+                           timeout=WAIT)
+    assert page.locator("#err-v").inner_text() == ("parameter 'v' = -3.0: must be 0 "
+                                                   "(standstill) or from 3 to 900 km/h")

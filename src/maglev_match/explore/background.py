@@ -17,8 +17,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["KINDS", "NETCDF", "TILE_POINTS", "TILE_SPAN", "SPEEDS_KMH", "hopf_curve_job",
-           "tile_job", "speed_job", "cycle_branch_job"]
+__all__ = ["KINDS", "NETCDF", "TILE_POINTS", "TILE_SPAN", "SPEED_STEPS", "V_MIN", "V_MAX",
+           "check_speed", "hopf_curve_job", "tile_job", "speed_job", "cycle_branch_job"]
 
 #: the key of a result's netCDF bytes (taken out before the result goes to the page)
 NETCDF = "_netcdf"
@@ -26,8 +26,11 @@ NETCDF = "_netcdf"
 #: 5 x 5 headline tile costs about 8 s warm on a quiet 2-core machine (bench_explore.py)
 TILE_POINTS = 5
 TILE_SPAN = 0.15
-#: the speed sweep's speeds (km/h): from standstill to 150 km/h
-SPEEDS_KMH = (0.0, 150.0, 25.0)
+#: the speed sweep: from standstill to the page's speed v in this many steps
+SPEED_STEPS = 3
+#: the page's speed v (km/h): 0 (standstill) or from V_MIN (the sweep's steps v / 3 then
+#: are at least `speed`'s slowest 1 km/h) to `speed`'s fastest 900 km/h
+V_MIN, V_MAX = 3.0, 900.0
 #: the cycle branch's continuation steps and mesh (coarser than `cycles`' default)
 BRANCH_STEPS = 60
 BRANCH_NTST = 40
@@ -103,22 +106,41 @@ def tile_job(params: Any, model: str, say: Callable[[str], None]) -> dict[str, A
             "warnings": list(api.map_warnings(ds)), NETCDF: _netcdf(ds)}
 
 
-def speed_job(params: Any, model: str, say: Callable[[str], None]) -> dict[str, Any]:
-    """The speed sweep from standstill to 150 km/h (`api.speed_sweep`, with chi(v) and the
-    standstill headline): per speed chi(v), DAF, Wz and the verdict of the periodic
-    response."""
+def check_speed(v: float) -> float:
+    """The page's speed v (km/h), checked (a ParameterError naming ``v``)."""
+    from maglev_match.core.params import ParameterError
+
+    if not math.isfinite(v):
+        raise ParameterError("v", v, "must be a finite number (km/h)")
+    if not (v == 0 or V_MIN <= v <= V_MAX):
+        raise ParameterError("v", v, f"must be 0 (standstill) or from {V_MIN:g} to "
+                             f"{V_MAX:g} km/h")
+    return v
+
+
+def speed_job(params: Any, model: str, say: Callable[[str], None], v: float = 0.0
+              ) -> dict[str, Any]:
+    """The vehicle at speed over identical spans (`api.speed_sweep`) up to the page's speed
+    v (km/h): the sweep 0, v/3, 2v/3, v without the index at speed (DAF, Sperling's Wz, the
+    verdict of the periodic response), then the index chi(v) at v with the standstill
+    headline of the same sweep (`critical=True` at v alone: the slow part)."""
     from maglev_match import api
 
-    sw = api.speed_sweep(params, model=model, kmh=SPEEDS_KMH, critical=True, stage=say,
+    kmh = [check_speed(float(v)) * k / SPEED_STEPS for k in range(SPEED_STEPS + 1)]
+    say(f"periodic response at {', '.join(f'{x:g}' for x in kmh)} km/h ...")
+    sw = api.speed_sweep(params, model=model, speeds=[x / 3.6 for x in kmh], critical=False,
                          progress=lambda done, total: say(f"speed {done} of {total}"))
+    say(f"the index at {v:g} km/h and at standstill ...")
+    at = api.speed_sweep(params, model=model, speeds=[kmh[-1] / 3.6], critical=True)
+    pv, stand = at.points[0], at.standstill or {}
     pts = sw.points
-    stand = sw.standstill or {}
-    return {"kmh": [p.speed * 3.6 for p in pts], "chi": [_f(p.chi) for p in pts],
-            "daf": [_f(p.daf) for p in pts], "wz": [_f(p.wz) for p in pts],
-            "stable": [p.stable for p in pts], "converged": [bool(p.converged) for p in pts],
-            "standstill_chi": _f(stand.get("chi", math.nan)),
-            "resonances": [{"kmh": r.speed * 3.6, "source": r.source} for r in sw.resonances],
-            "warnings": list(sw.warnings), NETCDF: _netcdf(sw.to_xarray())}
+    return {"kmh": [p.speed * 3.6 for p in pts], "daf": [_f(p.daf) for p in pts],
+            "wz": [_f(p.wz) for p in pts], "stable": [p.stable for p in pts],
+            "converged": [bool(p.converged) for p in pts],
+            "v": float(v), "chi_v": _f(pv.chi), "daf_v": _f(pv.daf), "wz_v": _f(pv.wz),
+            "stable_v": pv.stable, "standstill_chi": _f(stand.get("chi", math.nan)),
+            "warnings": list(sw.warnings) + list(at.warnings),
+            NETCDF: _netcdf(sw.to_xarray())}
 
 
 def cycle_branch_job(params: Any, model: str, say: Callable[[str], None]) -> dict[str, Any]:

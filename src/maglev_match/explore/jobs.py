@@ -28,14 +28,14 @@ def _worker(tasks: Any, events: Any) -> None:  # pragma: no cover - runs in the 
         task = tasks.get()
         if task is None:
             return
-        job_id, kind, preset, values, model = task
+        job_id, kind, preset, values, model, extra = task
 
         def say(text: str, job_id=job_id) -> None:
             events.put((job_id, "progress", str(text)))
 
         try:
             params = params_of(State(preset, tuple(values)))
-            events.put((job_id, "done", KINDS[kind](params, model, say)))
+            events.put((job_id, "done", KINDS[kind](params, model, say, **extra)))
         except Exception as e:  # noqa: BLE001 - reported to the page, the child lives on
             events.put((job_id, "error", f"{type(e).__name__}: {e}"))
 
@@ -91,7 +91,7 @@ class JobRunner:
                                        daemon=True, name="maglev-match-explore-worker")
         self._proc.start()
 
-    def start(self, kind: str, state: State, seq: int) -> Job:
+    def start(self, kind: str, state: State, seq: int, **extra: Any) -> Job:
         """Start a job, cancelling the running or waiting one of the same kind; while a
         job of another kind runs it waits ("queued") and starts when that one ends."""
         if kind not in KINDS:
@@ -102,7 +102,7 @@ class JobRunner:
                 if job.kind == kind and job.status in ("running", "queued"):
                     self._cancel_locked(job)
             job = Job(next(self._ids), kind, seq, status="queued")
-            job.task = (job.id, kind, state.preset, list(state.values), self.model)
+            job.task = (job.id, kind, state.preset, list(state.values), self.model, extra)
             self._jobs[job.id] = job
             self._dispatch()
             return job

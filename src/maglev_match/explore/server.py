@@ -26,6 +26,7 @@ import tornado.netutil
 import tornado.web
 
 from maglev_match.core.params import DEFAULT_PRESET, ParameterError, available_presets
+from maglev_match.explore.background import KINDS, check_speed
 from maglev_match.explore.inputs import (
     State,
     command_line,
@@ -34,7 +35,6 @@ from maglev_match.explore.inputs import (
     parse_query,
     toml_text,
 )
-from maglev_match.explore.background import KINDS
 from maglev_match.explore.jobs import JobRunner
 from maglev_match.explore.session import Session, finite
 
@@ -150,8 +150,22 @@ class JobHandler(_Base):
                 self.send({"errors": errors}, 400)
                 return
             kind = self.get_argument("kind", "hopf_curve")
+            extra = {}
+            if kind == "speed":  # the page's speed (km/h), checked before anything starts
+                raw = self.get_argument("v", "0")
+                try:
+                    v = float(raw)
+                except ValueError:
+                    v = None
+                try:
+                    if v is None:
+                        raise ParameterError("v", raw, "must be a number (km/h)")
+                    extra["v"] = check_speed(v)
+                except ParameterError as e:
+                    self.send({"errors": {"v": str(e)}}, 400)
+                    return
             try:
-                job = await asyncio.to_thread(runner.start, kind, state, self.seq())
+                job = await asyncio.to_thread(runner.start, kind, state, self.seq(), **extra)
             except KeyError:
                 self.send({"error": f"no background job '{kind}'"}, 400)
                 return

@@ -29,8 +29,8 @@ function fieldText(v) {
 function stateFromLocation() {
   const q = new URLSearchParams(window.location.search);
   const values = {};
-  for (const [k, v] of q.entries()) if (k !== "preset") values[k] = v;
-  return { preset: q.get("preset") || S.preset, values };
+  for (const [k, v] of q.entries()) if (k !== "preset" && k !== "v") values[k] = v;
+  return { preset: q.get("preset") || S.preset, values, v: q.get("v") || "0" };
 }
 function queryOf(preset, values) {
   const q = new URLSearchParams();
@@ -38,7 +38,8 @@ function queryOf(preset, values) {
   for (const [k, v] of Object.entries(values)) q.set(k, String(v));
   return q.toString();
 }
-function currentQuery() { return queryOf(S.preset, S.values); }
+function hasSpeed() { return S.v !== undefined && S.v !== "" && S.v !== "0"; }
+function currentQuery() { return queryOf(S.preset, S.values) + (hasSpeed() ? "&v=" + encodeURIComponent(S.v) : ""); }
 function pushState() {
   const url = "?" + currentQuery();
   if (url !== window.location.search) history.pushState({}, "", url);
@@ -187,6 +188,7 @@ async function release() {
   if (seq === S.sent.release) setStatus("idle", "up to date");
   if (curveKey(S.preset, S.values) !== S.jobKey) startJob("hopf_curve");
   if (!S.tileRefused && !tileCovers() && tileKey(S.preset, S.values) !== S.tileKey) startJob("tile");
+  if (hasSpeed() && speedKey() !== S.speedKey) startJob("speed");
 }
 function showRelease(b) {
   const ix = b.index;
@@ -281,7 +283,13 @@ function drawHopf() {
   // the data's range with 5 % room on each side, so that neither the curve nor the design
   // sits on the frame
   const room = (lo, hi) => { const d = (hi - lo) || Math.abs(hi) || 1; return [lo - 0.05 * d, hi + 0.05 * d]; };
-  const [x0, x1] = room(Math.min(...xs), Math.max(...xs)), [y0, y1] = room(Math.min(...ys), Math.max(...ys));
+  let [x0, x1] = room(Math.min(...xs), Math.max(...xs)), [y0, y1] = room(Math.min(...ys), Math.max(...ys));
+  if (t && S.zoom) {
+    // zoomed on the tile: 2.5 times its width around it (the curve clipped to the frame)
+    const mx = (t.x[0] + t.x[t.x.length - 1]) / 2, my = (t.y[0] + t.y[t.y.length - 1]) / 2;
+    const rx = 2.5 * (t.x[t.x.length - 1] - t.x[0] + 2 * half(t.x)) / 2, ry = 2.5 * (t.y[t.y.length - 1] - t.y[0] + 2 * half(t.y)) / 2;
+    [x0, x1, y0, y1] = [mx - rx, mx + rx, my - ry, my + ry];
+  }
   const sx = (x) => pad + (x - x0) / ((x1 - x0) || 1) * (W - 1.5 * pad);
   const sy = (y) => H - pad + -(y - y0) / ((y1 - y0) || 1) * (H - 1.5 * pad);
   ctx.strokeStyle = "#444"; ctx.fillStyle = "#222"; ctx.lineWidth = 1; ctx.setLineDash([]);
@@ -301,6 +309,8 @@ function drawHopf() {
   ctx.fillText(h.names[0], pad + (W - 1.5 * pad) / 2, H - pad + 30);
   ctx.save(); ctx.translate(12, H / 2); ctx.rotate(-Math.PI / 2);
   ctx.fillText(h.names[1], 0, 0); ctx.restore();
+  ctx.save();
+  ctx.beginPath(); ctx.rect(pad, pad / 2, W - 1.5 * pad, H - 1.5 * pad); ctx.clip();
   for (const b of h.branches) {
     // one path per run of points with the same sign of l1 (a dash pattern restarts with
     // every path, so segments shorter than a dash drawn one by one would all look solid)
@@ -320,12 +330,52 @@ function drawHopf() {
       ctx.fillText(p.label, sx(p.x) + 5, sy(p.y) - 5);
     }
   }
+  ctx.restore();
   if (cur) {
     ctx.fillStyle = "#000"; ctx.beginPath(); ctx.arc(sx(cur[0]), sy(cur[1]), 5, 0, 2 * Math.PI); ctx.fill();
     ctx.fillText("this design", sx(cur[0]) + 7, sy(cur[1]) + 4);
   }
 }
 function t_names(t) { return t.names.join(); }
+function drawBranch() {
+  // the cycles' largest gap deviation against omega1: solid where stable, dashed where
+  // not, the special points with their AUTO labels, H at the Hopf point, the design's omega1
+  const cv = $("branch"), ctx = cv.getContext("2d"), b = S.branch;
+  ctx.clearRect(0, 0, cv.width, cv.height);
+  ctx.font = "11px sans-serif"; ctx.fillStyle = "#222";
+  if (!b || !b.points.length) { ctx.fillText(b ? b.message || "no cycles" : "", 20, 20); return; }
+  const xs = b.points.map((p) => p.x).concat([b.design]), ys = b.points.map((p) => p.size * 1e3).concat([0]);
+  const W = cv.width, H = cv.height, pad = 50;
+  const room = (lo, hi) => { const d = (hi - lo) || Math.abs(hi) || 1; return [lo - 0.05 * d, hi + 0.05 * d]; };
+  const [x0, x1] = room(Math.min(...xs), Math.max(...xs)), [y0, y1] = room(Math.min(...ys), Math.max(...ys));
+  const sx = (x) => pad + (x - x0) / (x1 - x0) * (W - 1.5 * pad), sy = (y) => H - pad - (y - y0) / (y1 - y0) * (H - 1.5 * pad);
+  ctx.strokeStyle = "#444"; ctx.lineWidth = 1; ctx.setLineDash([]);
+  ctx.strokeRect(pad, pad / 2, W - 1.5 * pad, H - 1.5 * pad);
+  for (let k = 0; k <= 4; k++) {
+    const xv = x0 + (k / 4) * (x1 - x0), yv = y0 + (k / 4) * (y1 - y0);
+    ctx.fillText(fmt(xv, 4), sx(xv) - 14, H - pad + 15);
+    ctx.fillText(fmt(yv, 3), 4, sy(yv) + 4);
+  }
+  ctx.fillText("omega1 (rad/s)", pad + (W - 1.5 * pad) / 2 - 30, H - pad + 30);
+  ctx.fillText("max |gap - c0| (mm)", pad + 4, pad / 2 + 12);
+  ctx.strokeStyle = "#999"; ctx.setLineDash([2, 3]);
+  ctx.beginPath(); ctx.moveTo(sx(b.design), pad / 2); ctx.lineTo(sx(b.design), H - pad); ctx.stroke();
+  ctx.fillText("this design", sx(b.design) + 3, H - pad - 4);
+  ctx.strokeStyle = "#c62828"; ctx.lineWidth = 2;
+  const P = b.points;
+  let i = 1;
+  while (i < P.length) {
+    const st = P[i].stable;
+    ctx.beginPath(); ctx.setLineDash(st ? [] : [6, 4]);
+    ctx.moveTo(sx(P[i - 1].x), sy(P[i - 1].size * 1e3));
+    while (i < P.length && P[i].stable === st) { ctx.lineTo(sx(P[i].x), sy(P[i].size * 1e3)); i++; }
+    ctx.stroke();
+  }
+  ctx.setLineDash([]); ctx.fillStyle = "#283593";
+  const mark = (x, y, label) => { ctx.beginPath(); ctx.arc(sx(x), sy(y), 4, 0, 2 * Math.PI); ctx.fill(); ctx.fillText(label, sx(x) + 5, sy(y) - 5); };
+  if (b.hopf) mark(b.hopf.x, 0, b.hopf.label);
+  for (const p of b.special) mark(p.x, p.size * 1e3, p.label);
+}
 function drawTile(ctx, t, sx, sy, half) {
   // the headline chi on the tile: one cell per point (colour from the tile's smallest to
   // its largest chi, its value written in it; grey: unstable or unresolved)
@@ -358,7 +408,11 @@ function markHopf() { if (S.hopf) drawHopf(); }
 const JOBS = {
   hopf_curve: { prefix: "job" },
   tile: { prefix: "tile" },
+  speed: { prefix: "speed" },
+  cycle_branch: { prefix: "branch" },
 };
+function speedKey() { return curveKey(S.preset, S.values) + "|" + PLANE_KEY() + "|v=" + S.v; }
+function PLANE_KEY() { return ["omega1", "sigma", "L", "EI", "mbar"].map((n) => S.values[n]).join(","); }
 // the beam data enter model A only through omega1 and sigma
 const PLANE = new Set(["omega1", "sigma", "L", "EI", "mbar"]);
 function curveKey(preset, values) {
@@ -379,8 +433,12 @@ async function startJob(kind = "hopf_curve") {
   const preset = S.preset, values = Object.assign({}, S.values);
   if (kind === "hopf_curve") S.jobKey = curveKey(preset, values);
   if (kind === "tile") S.tileKey = tileKey(preset, values);
-  const r = await getJSON(`/api/job?kind=${kind}&seq=${seq}&` + queryOf(preset, values), { method: "POST" });
-  if (!r || r.body.error || r.body.errors) return;
+  if (kind === "speed") S.speedKey = speedKey();
+  const extra = kind === "speed" ? "&v=" + encodeURIComponent(S.v) : "";
+  const r = await getJSON(`/api/job?kind=${kind}&seq=${seq}&` + queryOf(preset, values) + extra, { method: "POST" });
+  if (!r) return;
+  if (r.body.errors) { showFieldErrors(r.body.errors); return; }
+  if (r.body.error) return;
   r.body.preset = preset; r.body.values = values;
   JOBS[kind].job = r.body;
   showJob(kind, r.body);
@@ -410,6 +468,21 @@ function showJob(kind, j) {
   if (kind === "tile" && j.status === "error") { S.tileRefused = j.error; S.tile = null; showInterp(); drawHopf(); }
 }
 const DONE = {
+  speed(j) {
+    const r = j.result;
+    $("chi-v").textContent = r.chi_v === null ? "not found" : r.chi_v.toFixed(3) + ` at ${fmt(r.v)} km/h`;
+    $("chi-v").dataset.value = r.chi_v === null ? "" : String(r.chi_v);
+    $("chi-0").textContent = r.standstill_chi === null ? "–" : r.standstill_chi.toFixed(3);
+    $("daf-v").textContent = fmt(r.daf_v) + (r.stable_v === false ? " (periodic response unstable)" : "");
+    $("wz-v").textContent = fmt(r.wz_v, 3);
+    plotInto("speed-plot", {
+      width: 320, height: 180, scales: { x: { time: false }, daf: {}, wz: {} },
+      axes: [{ label: "v (km/h)" }, { scale: "daf", label: "DAF" }, { scale: "wz", side: 1, label: "Wz", grid: { show: false } }],
+      series: [{ label: "v" }, { label: "DAF", scale: "daf", stroke: "#1565c0", width: 2 },
+        { label: "Wz", scale: "wz", stroke: "#ef6c00", width: 2 }],
+    }, [r.kmh, r.daf, r.wz]);
+  },
+  cycle_branch(j) { S.branch = j.result; drawBranch(); },
   hopf_curve(j) {
     S.hopf = j.result;
     if (j.values) S.jobKey = curveKey(j.preset, j.values);  // now that the plane is known
@@ -488,6 +561,8 @@ async function load(fromHistory) {
   const st = stateFromLocation();
   S.preset = st.preset;
   S.values = {};
+  S.v = st.v;
+  $("field-v").value = st.v; $("slider-v").value = Number(st.v) || 0;
   for (const el of document.querySelectorAll(".err")) el.textContent = "";
   const r = await getJSON("/api/init?" + queryOf(st.preset, st.values));
   if (!r) return;
@@ -517,9 +592,22 @@ document.addEventListener("DOMContentLoaded", () => {
     history.pushState({}, "", "?" + currentQuery());
     load(false);
   });
+  const speedTo = (raw) => {
+    clearFieldError("v");
+    S.v = raw;
+    $("field-v").value = raw;
+    pushState();
+    if (hasSpeed()) startJob("speed");
+    else { $("speed-status").textContent = "v = 0: standstill"; $("speed-status").dataset.status = ""; }
+  };
+  $("slider-v").addEventListener("input", () => { $("field-v").value = $("slider-v").value; });
+  $("slider-v").addEventListener("change", () => speedTo($("slider-v").value));
+  $("field-v").addEventListener("change", () => speedTo($("field-v").value.trim()));
   for (const kind of Object.keys(JOBS)) {
     $(JOBS[kind].prefix + "-start").addEventListener("click", () => startJob(kind));
     $(JOBS[kind].prefix + "-cancel").addEventListener("click", () => cancelJob(kind));
   }
+  S.zoom = true;
+  $("zoom").addEventListener("change", () => { S.zoom = $("zoom").checked; drawHopf(); });
   load(false);
 });
