@@ -11,10 +11,18 @@ made directly in the same process as the baseline.
   answer);
 
 each without a delay (tau = 0) and with one (``--tau 0,1e-3``, the default: both).
+With ``--background N`` (tau = 0): the background tiers' time from the start of a job to
+its result (the map tile, the speed sweep to 60 km/h, the cycle branch; one warm-up job
+each in the child, then N jobs at designs kD stepped 1 %); baseline the same job function
+called directly in this process. With ``--browser N``: the interpolated-chi slider tier
+in the page (headless Chromium): N moves of the EI slider inside the map tile, each the
+time from the input event to the redrawn, interpolated chi (one request ``/api/quick``
+and the page's interpolation and drawing); no baseline (a page-only path).
 Medians and 95th percentiles (nearest rank); the server's time includes HTTP, JSON and,
 for a release, the cycle curve and the critical run the page draws. Not the browser's drawing time.
 
     PYTHONPATH=src python bench/bench_explore.py [--moves 50] [--releases 20] [--tau 0,1e-3]
+        [--background 3] [--browser 50]
 """
 
 from __future__ import annotations
@@ -41,6 +49,35 @@ def row(name: str, server: list[float], direct: list[float]) -> dict:
     return out
 
 
+def browser_moves(base: str, preset: str, n: int) -> dict:
+    """The interpolated-chi tier in the page: n moves of the EI slider inside the map tile
+    (the tile computed first), each from the input event to the redrawn chi."""
+    from playwright.sync_api import sync_playwright
+
+    args = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"]
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path="/usr/bin/chromium", args=args)
+        page = b.new_page(viewport={"width": 1500, "height": 1000})
+        page.goto(f"{base}/?preset={preset}&EI=2.2e10&kD=140")
+        page.wait_for_function("() => document.getElementById('tile-status').dataset.status"
+                               " === 'done'", timeout=900_000)
+        times = []
+        for k in range(n):
+            step = 510 + (k % 20)  # EI within +-10 % of 2.2e10: inside the tile
+            times.append(page.evaluate("""async (k) => {
+                const t0 = performance.now(), before = S.seq;
+                const el = document.getElementById('slider-EI');
+                el.value = String(k); el.dispatchEvent(new Event('input'));
+                while (S.shown.quick <= before) await new Promise((r) => setTimeout(r, 0));
+                if (document.getElementById('chi-interp').dataset.state !== 'interpolated')
+                    throw new Error('not interpolated');
+                return performance.now() - t0; }""", step) / 1e3)
+        b.close()
+    return {"tier": "slider move, chi interpolated (browser)", "n": n,
+            "server_median_s": statistics.median(times), "server_p95_s": pct(times, 95),
+            "direct_median_s": math.nan, "direct_p95_s": math.nan, "ratio_median": math.nan}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--moves", type=int, default=50)
@@ -48,6 +85,10 @@ def main() -> None:
     ap.add_argument("--tau", default="0,1e-3",
                     help="the delays, comma-separated (s; 0: without a delay)")
     ap.add_argument("--preset", default="turnout-soft")
+    ap.add_argument("--background", type=int, default=0,
+                    help="jobs per background tier (0: not measured)")
+    ap.add_argument("--browser", type=int, default=0,
+                    help="moves of the interpolated-chi tier in the browser (0: not measured)")
     args = ap.parse_args()
 
     from maglev_match import api
@@ -70,6 +111,23 @@ def main() -> None:
     def timed(fn) -> float:
         t = time.perf_counter()
         fn()
+        return time.perf_counter() - t
+
+    def post(path: str) -> dict:
+        seq[0] += 1
+        req = urllib.request.Request(f"{base}{path}&seq={seq[0]}", method="POST")
+        with urllib.request.urlopen(req, timeout=600) as r:
+            return json.loads(r.read())
+
+    def job_time(kind: str, kd: float) -> float:
+        t = time.perf_counter()
+        job = post(f"/api/job?kind={kind}&preset={args.preset}&kD={kd!r}&v=60")
+        while job["status"] in ("queued", "running"):
+            time.sleep(0.05)
+            with urllib.request.urlopen(f"{base}/api/job/{job['id']}", timeout=600) as r:
+                job = json.loads(r.read())
+        if job["status"] != "done":
+            raise RuntimeError(job)
         return time.perf_counter() - t
 
     rows = []
@@ -100,6 +158,24 @@ def main() -> None:
         rows.append(row(f"slider move ({label})", s_quick, d_quick))
         rows.append(row(f"release ({label})", s_rel, d_rel))
         print(json.dumps(rows[-2:]), flush=True)  # each delay's rows as they finish
+    if args.background:
+        from maglev_match.core.params import load_params
+        from maglev_match.explore.background import KINDS
+
+        for kind, extra in (("tile", {}), ("speed", {"v": 60.0}), ("cycle_branch", {})):
+            job_time(kind, 150.0)  # warm-up: the child compiles this kind's kernels
+            KINDS[kind](load_params(args.preset, None, {"kD": 150.0}), "unit",
+                        lambda _: None, **extra)
+            kds = [150.0 * 1.01 ** k for k in range(1, args.background + 1)]
+            s_bg = [job_time(kind, kd) for kd in kds]
+            d_bg = [timed(lambda kd=kd, kind=kind, extra=extra: KINDS[kind](
+                load_params(args.preset, None, {"kD": kd * 1.005}), "unit", lambda _: None,
+                **extra)) for kd in kds]
+            rows.append(row(f"background: {kind} (tau = 0)", s_bg, d_bg))
+            print(json.dumps(rows[-1]), flush=True)
+    if args.browser:
+        rows.append(browser_moves(base, args.preset, args.browser))
+        print(json.dumps(rows[-1]), flush=True)
     server.stop()
     load_after = open("/proc/loadavg").read().split()[:3]
     print(f"load average before: {' '.join(load_before)}; after: {' '.join(load_after)}")

@@ -6,6 +6,7 @@ background job is cancelled for real. (The page itself: tests/test_explore_brows
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -20,6 +21,7 @@ import urllib.request
 from pathlib import Path
 
 import pytest
+import xarray as xr
 
 from maglev_match import api
 from maglev_match.cli import main
@@ -208,6 +210,15 @@ def test_the_exports_reproduce_the_view(server, tmp_path):
     assert code == 200 and png.startswith(b"\x89PNG")
     code, svg = _get(server, f"/api/export/svg?what=run&{DESIGN}")
     assert code == 200 and b"<svg" in svg[:500]
+    # netCDF: the result objects' own .to_xarray()
+    code, body = _json(server, f"/api/release?{DESIGN}&seq=4001")
+    code, nc = _get(server, "/api/export/netcdf?what=index")
+    ds = xr.open_dataset(io.BytesIO(nc), engine="h5netcdf")
+    assert code == 200 and float(ds["chi"]) == body["index"]["chi"]
+    code, nc = _get(server, "/api/export/netcdf?what=run")
+    run = xr.open_dataset(io.BytesIO(nc), engine="h5netcdf")
+    assert code == 200 and run.sizes["time"] == len(body["run"]["t"])
+    assert _get(server, "/api/export/netcdf?what=nothing")[0] == 404
 
 
 def test_a_background_job_is_cancelled_for_real_and_the_next_one_runs(server):
@@ -229,6 +240,10 @@ def test_a_background_job_is_cancelled_for_real_and_the_next_one_runs(server):
     curves = api.hopf_curve("turnout-soft")
     assert len(res["branches"]) == len(curves)
     assert math.isclose(res["design"][0], load_preset("turnout-soft").omega1)
+    # its netCDF: the first branch's dataset, one entry per point of the curve
+    code, nc = _get(server, "/api/export/netcdf?what=hopf_curve")
+    ds = xr.open_dataset(io.BytesIO(nc), engine="h5netcdf")
+    assert code == 200 and len(res["branches"][0]["x"]) in ds.sizes.values()
 
 
 # ----- the command ----------------------------------------------------------------------

@@ -7,14 +7,18 @@ No assertion depends on timing: the test waits for states of the page."""
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
+import urllib.request
 from pathlib import Path
 from urllib.parse import parse_qs, urlparse
 
+import numpy as np
 import pytest
 
 from maglev_match import api
+from maglev_match.core.params import load_params
 from maglev_match.explore.server import ExploreServer
 
 playwright_api = pytest.importorskip(
@@ -64,6 +68,11 @@ def _settled(page) -> str:
     return page.locator("#chi").inner_text()
 
 
+def _http(server, path: str) -> tuple[int, bytes]:
+    with urllib.request.urlopen(f"http://127.0.0.1:{server.port}{path}", timeout=300) as r:
+        return r.status, r.read()
+
+
 def _index_chi(query: dict[str, list[str]]) -> str:
     """chi as `maglev-match index` prints its headline, to three decimals."""
     sets = {k: float(v[0]) for k, v in query.items() if k != "preset"}
@@ -107,15 +116,19 @@ def test_a_released_slider_gives_the_index_there_and_the_url_round_trips(server,
 def test_cancel_stops_a_background_job(server, page):
     page.goto(_base(server) + "?preset=turnout-soft")
     _settled(page)
-    # a new job replaces the running one (its worker process is ended, so the new job
-    # waits for a fresh worker to start: it is running when cancel is pressed)
+    # the curve the release started is drawn first (so that the job cancelled below is
+    # the one started here); the new job may wait behind the map tile, then runs
+    page.wait_for_function("() => ['done', 'error'].includes(document.getElementById("
+                           "'job-status').dataset.status)", timeout=WAIT)
     page.locator("#job-start").click()
     page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
                            "'running'", timeout=WAIT)
     page.locator("#job-cancel").click()
     page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
                            "'cancelled'", timeout=WAIT)
-    assert server.jobs.process is None
+    # the process that ran it has ended (a job waiting behind it starts a fresh one)
+    job = server.jobs.job(page.evaluate("() => JOBS.hopf_curve.job.id"))
+    assert job.status == "cancelled" and not job.process.is_alive()
     # the next job runs to its end and draws the curve
     page.locator("#job-start").click()
     page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
@@ -140,3 +153,72 @@ def test_a_bad_value_shows_the_message_and_changes_nothing(server, page):
                            timeout=WAIT)
     assert "must be a finite number" in page.locator("#err-EI").inner_text()
     assert page.locator("#chi").inner_text() == "–"
+
+
+def _job_done(page, prefix: str) -> None:
+    page.wait_for_function(f"() => document.getElementById('{prefix}-status').dataset.status "
+                           "=== 'done'", timeout=WAIT)
+
+
+def _move(page, name: str, k: int) -> None:
+    """Move a slider to step k without letting it go (input, no change)."""
+    page.locator(f"#slider-{name}").evaluate(
+        f"(el) => {{ el.value = '{k}'; el.dispatchEvent(new Event('input')); }}")
+
+
+def test_a_moving_slider_shows_chi_interpolated_from_the_map_tile(server, page):
+    import xarray as xr
+
+    page.goto(_base(server) + "?preset=turnout-soft&EI=2.2e10&kD=140")
+    _settled(page)
+    _job_done(page, "tile")  # started by the release: the design lies on no tile yet
+    tile = server.jobs.latest("tile").result
+    design = load_params("turnout-soft", None, {"EI": 2.2e10, "kD": 140.0})
+    # the tile is centred on the design; its centre is the index at the design
+    assert tile["x"][2] == pytest.approx(design.omega1, rel=1e-12)
+    assert tile["y"][2] == pytest.approx(design.sigma, rel=1e-12)
+    exact = float(page.locator("#chi").get_attribute("data-value"))
+    assert tile["chi"][2][2] == pytest.approx(exact, rel=2e-2)
+    # the tile as netCDF: the map's dataset, the same numbers
+    code, data = _http(server, "/api/export/netcdf?what=tile")
+    ds = xr.open_dataset(io.BytesIO(data), engine="h5netcdf")
+    assert code == 200 and np.allclose(ds["chi"].values, np.array(tile["chi"], float),
+                                       equal_nan=True)
+    # EI moves (omega1 with it): chi interpolated, marked so, between the tile's values
+    _move(page, "EI", 530)
+    page.wait_for_function("() => document.getElementById('chi-mark').textContent"
+                           ".includes('interpolated')", timeout=WAIT)
+    assert page.locator("#chi-interp").get_attribute("data-state") == "interpolated"
+    assert "interpolated" in page.locator("#chi-interp").inner_text()
+    value = float(page.locator("#chi-interp").get_attribute("data-value"))
+    w = design.omega1 * (float(page.locator("#field-EI").input_value()) / 2.2e10) ** 0.5
+    i = int(np.searchsorted(tile["x"], w)) - 1
+    cells = [tile["chi"][j][k] for j in (2, 3) for k in (i, i + 1)]
+    assert tile["x"][i] < w < tile["x"][i + 1]
+    assert min(cells) <= value <= max(cells)
+    # a gain moves: the tile does not hold it, no number
+    page.locator("#slider-EI").dispatch_event("change")
+    _settled(page)
+    _move(page, "kD", 300)
+    page.wait_for_function("() => document.getElementById('chi-interp').textContent"
+                           ".startsWith('no tile here')", timeout=WAIT)
+    assert page.locator("#chi-interp").get_attribute("data-state") == "none"
+
+
+def test_the_speed_sweep_shows_chi_at_speed_beside_the_standstill_headline(server, page):
+    page.goto(_base(server) + "?preset=turnout-soft&kD=140&v=60")
+    chi = _settled(page)
+    _job_done(page, "speed")
+    assert float(page.locator("#chi-v").get_attribute("data-value")) > 0
+    assert "at 60 km/h" in page.locator("#chi-v").inner_text()
+    # the sweep's own standstill headline is the index the page released
+    assert page.locator("#chi-0").inner_text() == chi
+    assert parse_qs(urlparse(page.url).query)["v"] == ["60"]
+    # a speed that is refused: the rule next to the field, no job started
+    field = page.locator("#field-v")
+    field.fill("-3")
+    field.press("Enter")
+    page.wait_for_function("() => document.getElementById('err-v').textContent !== ''",
+                           timeout=WAIT)
+    assert page.locator("#err-v").inner_text() == ("parameter 'v' = -3.0: must be 0 "
+                                                   "(standstill) or from 3 to 900 km/h")

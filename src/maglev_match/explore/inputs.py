@@ -71,8 +71,9 @@ CONTROLS: tuple[Control, ...] = (
 CONTROL_NAMES = tuple(c.name for c in CONTROLS)
 #: query keys of a request that are not parameters: the page and its sequence number, what
 #: to export,
-#: the kind of background job (the model is chosen on the command line only)
-REQUEST_KEYS = ("preset", "seq", "client", "what", "kind", "model")
+#: the kind of background job (the model is chosen on the command line only), the page's
+#: speed v (km/h; checked by the speed job's own rule)
+REQUEST_KEYS = ("preset", "seq", "client", "what", "kind", "model", "v")
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,11 @@
-"""The explorer's background tier: long computations (the Hopf curve in the design plane)
-in one long-lived child process, with progress lines and a cancel that really stops the
-work (the child is terminated; a fresh one starts on the next job).
+"""The explorer's background tier: long computations (the kinds of :mod:`.background`:
+the Hopf curve, the map tile, the speed sweep, the cycle branch) in one long-lived child
+process, with progress lines and a cancel that really stops the work (the child is
+terminated; a fresh one starts on the next job).
 
-The child keeps its compiled kernels between jobs. One job runs at a time: starting a new
-job cancels the one running (the page only shows the latest design's curve)."""
+The child keeps its compiled kernels between jobs. One job runs at a time: starting a job
+cancels the running or waiting one of the same kind (the page only shows the latest
+design's curve); a job of another kind waits ("queued") until the running one ends."""
 
 from __future__ import annotations
 
@@ -14,40 +16,10 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
+from maglev_match.explore.background import KINDS, NETCDF, hopf_curve_job
 from maglev_match.explore.inputs import State, params_of
 
 __all__ = ["JobRunner", "Job", "KINDS", "hopf_curve_job"]
-
-
-def hopf_curve_job(params: Any, model: str, say) -> dict[str, Any]:
-    """The Hopf curve(s) in the model's default plane (`api.hopf_curve`), as JSON-ready
-    branches: the two parameters along each branch, l1 along it (l1 > 0 subcritical,
-    drawn dashed; l1 < 0 supercritical, solid), and its codimension-two points with their
-    AUTO/MatCont labels."""
-    import numpy as np
-
-    from maglev_match import api
-
-    say("continuing the Hopf curve ...")
-    curves = api.hopf_curve(params, model=model, stage=say)
-    branches = []
-    for c in curves:
-        vals = np.asarray(c.values(), float)
-        branches.append({
-            "params": list(c.params), "x": vals[:, 0].tolist(), "y": vals[:, 1].tolist(),
-            "l1": np.asarray(c.l1(), float).tolist(), "converged": bool(c.converged),
-            "message": c.message,
-            "special": [{"label": sp.label, "type": str(sp.type),
-                         "x": float(sp.values[0]), "y": float(sp.values[1])}
-                        for sp in c.special_points if getattr(sp, "values", None) is not None],
-        })
-    names = branches[0]["params"] if branches else []
-    design = [float(getattr(params, n)) for n in names] if names else []
-    return {"branches": branches, "names": names, "design": design}
-
-
-#: the kinds of background job: name -> function(params, model, say) -> JSON-ready dict
-KINDS = {"hopf_curve": hopf_curve_job}
 
 
 def _worker(tasks: Any, events: Any) -> None:  # pragma: no cover - runs in the child
@@ -56,14 +28,14 @@ def _worker(tasks: Any, events: Any) -> None:  # pragma: no cover - runs in the 
         task = tasks.get()
         if task is None:
             return
-        job_id, kind, preset, values, model = task
+        job_id, kind, preset, values, model, extra = task
 
         def say(text: str, job_id=job_id) -> None:
             events.put((job_id, "progress", str(text)))
 
         try:
             params = params_of(State(preset, tuple(values)))
-            events.put((job_id, "done", KINDS[kind](params, model, say)))
+            events.put((job_id, "done", KINDS[kind](params, model, say, **extra)))
         except Exception as e:  # noqa: BLE001 - reported to the page, the child lives on
             events.put((job_id, "error", f"{type(e).__name__}: {e}"))
 
@@ -75,10 +47,15 @@ class Job:
     id: int
     kind: str
     seq: int
-    status: str = "running"  # running, done, error, cancelled
+    status: str = "queued"  # queued, running, done, error, cancelled
     progress: list[str] = field(default_factory=list)
     result: Any = None
     error: str | None = None
+    #: the result as a netCDF file (bytes; not sent with the JSON)
+    netcdf: bytes | None = field(default=None, repr=False)
+    #: the child process that ran it (its exit code tells a cancel ended it)
+    process: Any = field(default=None, repr=False)
+    task: tuple = field(default=(), repr=False)
 
     def as_json(self) -> dict[str, Any]:
         return {"id": self.id, "kind": self.kind, "seq": self.seq, "status": self.status,
@@ -97,6 +74,7 @@ class JobRunner:
         self._events: Any = None
         self._ids = itertools.count(1)
         self._jobs: dict[int, Job] = {}
+        self._running: Job | None = None
         self._lock = threading.Lock()
 
     @property
@@ -113,19 +91,25 @@ class JobRunner:
                                        daemon=True, name="maglev-match-explore-worker")
         self._proc.start()
 
-    def start(self, kind: str, state: State, seq: int) -> Job:
-        """Start a job (cancelling the one running)."""
+    def start(self, kind: str, state: State, seq: int, **extra: Any) -> Job:
+        """Start a job, cancelling the running or waiting one of the same kind; while a
+        job of another kind runs it waits ("queued") and starts when that one ends."""
         if kind not in KINDS:
             raise KeyError(kind)
         with self._lock:
-            for job in self._jobs.values():
-                if job.status == "running":
+            self._drain()
+            for job in list(self._jobs.values()):
+                if job.kind == kind and job.status in ("running", "queued"):
                     self._cancel_locked(job)
-            self._ensure()
-            job = Job(next(self._ids), kind, seq)
+            job = Job(next(self._ids), kind, seq, status="queued")
+            job.task = (job.id, kind, state.preset, list(state.values), self.model, extra)
             self._jobs[job.id] = job
-            self._tasks.put((job.id, kind, state.preset, list(state.values), self.model))
+            self._dispatch()
             return job
+
+    def job(self, job_id: int) -> Job | None:
+        """The job as last seen (no events applied)."""
+        return self._jobs.get(job_id)
 
     def poll(self, job_id: int) -> Job | None:
         """The job with every event received so far applied."""
@@ -133,48 +117,77 @@ class JobRunner:
             self._drain()
             return self._jobs.get(job_id)
 
+    def latest(self, kind: str) -> Job | None:
+        """The newest finished job of a kind (its result and netCDF)."""
+        with self._lock:
+            self._drain()
+            done = [j for j in self._jobs.values() if j.kind == kind and j.status == "done"]
+            return max(done, key=lambda j: j.id) if done else None
+
     def cancel(self, job_id: int) -> Job | None:
         with self._lock:
             self._drain()
             job = self._jobs.get(job_id)
-            if job is not None and job.status == "running":
+            if job is not None and job.status in ("running", "queued"):
                 self._cancel_locked(job)
+            self._dispatch()
             return job
 
     def _cancel_locked(self, job: Job) -> None:
-        """Stop the child (the computation with it); the next job starts a fresh one."""
+        """A waiting job leaves the queue; a running one stops with the child (the
+        computation with it): the next job starts a fresh child."""
+        was_running = job.status == "running"
         job.status = "cancelled"
         job.progress.append("cancelled")
-        if self._proc is not None:
+        if was_running and self._proc is not None:
             self._proc.terminate()
             self._proc.join(5)
             if self._proc.is_alive():  # pragma: no cover - terminate ignored
                 self._proc.kill()
                 self._proc.join(5)
-        self._proc = None
+            self._proc = None
+            self._running = None
+
+    def _dispatch(self) -> None:
+        """Hand the oldest waiting job to the child when none runs."""
+        if self._running is not None:
+            return
+        waiting = sorted((j for j in self._jobs.values() if j.status == "queued"),
+                         key=lambda j: j.id)
+        if not waiting:
+            return
+        job = waiting[0]
+        self._ensure()
+        job.status, job.process = "running", self._proc
+        self._running = job
+        self._tasks.put(job.task)
 
     def _drain(self) -> None:
-        if self._events is None:
-            return
-        while True:
-            try:
-                job_id, what, payload = self._events.get_nowait()
-            except (queue.Empty, OSError, EOFError, ValueError):
-                break
-            job = self._jobs.get(job_id)
-            if job is None or job.status != "running":
-                continue
-            if what == "progress":
-                job.progress.append(payload)
-            elif what == "done":
-                job.status, job.result = "done", payload
-            else:
-                job.status, job.error = "error", payload
+        if self._events is not None:
+            while True:
+                try:
+                    job_id, what, payload = self._events.get_nowait()
+                except (queue.Empty, OSError, EOFError, ValueError):
+                    break
+                job = self._jobs.get(job_id)
+                if job is None or job.status != "running":
+                    continue
+                if what == "progress":
+                    job.progress.append(payload)
+                    continue
+                if what == "done":
+                    job.netcdf = payload.pop(NETCDF, None)
+                    job.status, job.result = "done", payload
+                else:
+                    job.status, job.error = "error", payload
+                if self._running is job:
+                    self._running = None
         if self._proc is not None and not self._proc.is_alive():
             for job in self._jobs.values():
                 if job.status == "running":
                     job.status, job.error = "error", "the background process ended"
-            self._proc = None
+            self._proc, self._running = None, None
+        self._dispatch()
 
     def close(self) -> None:
         with self._lock:
@@ -182,3 +195,4 @@ class JobRunner:
                 self._proc.terminate()
                 self._proc.join(5)
                 self._proc = None
+            self._running = None

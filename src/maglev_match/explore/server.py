@@ -26,6 +26,7 @@ import tornado.netutil
 import tornado.web
 
 from maglev_match.core.params import DEFAULT_PRESET, ParameterError, available_presets
+from maglev_match.explore.background import KINDS, check_speed
 from maglev_match.explore.inputs import (
     State,
     command_line,
@@ -149,8 +150,22 @@ class JobHandler(_Base):
                 self.send({"errors": errors}, 400)
                 return
             kind = self.get_argument("kind", "hopf_curve")
+            extra = {}
+            if kind == "speed":  # the page's speed (km/h), checked before anything starts
+                raw = self.get_argument("v", "0")
+                try:
+                    v = float(raw)
+                except ValueError:
+                    v = None
+                try:
+                    if v is None:
+                        raise ParameterError("v", raw, "must be a number (km/h)")
+                    extra["v"] = check_speed(v)
+                except ParameterError as e:
+                    self.send({"errors": {"v": str(e)}}, 400)
+                    return
             try:
-                job = await asyncio.to_thread(runner.start, kind, state, self.seq())
+                job = await asyncio.to_thread(runner.start, kind, state, self.seq(), **extra)
             except KeyError:
                 self.send({"error": f"no background job '{kind}'"}, 400)
                 return
@@ -175,7 +190,8 @@ class JobHandler(_Base):
 
 class ExportHandler(_Base):
     """``/api/export/KIND``: command, toml, csv (what=cycle|run), png or svg (what=index|
-    run: the product's figure through the result's ``.plot()``)."""
+    run: the product's figure through the result's ``.plot()``), netcdf (what=index|run|
+    hopf_curve|tile|speed|cycle_branch: the result object's ``.to_xarray()``)."""
 
     async def get(self, kind: str) -> None:
         state, errors = parse_query(self.query())
@@ -198,6 +214,8 @@ class ExportHandler(_Base):
             w.writerow(rows["header"])
             w.writerows(zip(*rows["columns"], strict=True))
             self._text(buf.getvalue(), "text/csv", f"{what}.csv")
+        elif kind == "netcdf":
+            await self._netcdf(self.get_argument("what", "index"))
         elif kind in ("png", "svg"):
             what = self.get_argument("what", "index")
             loop = asyncio.get_running_loop()
@@ -212,6 +230,30 @@ class ExportHandler(_Base):
             self.finish(data)
         else:
             self.send({"error": f"no export '{kind}'"}, 404)
+
+    async def _netcdf(self, what: str) -> None:
+        """The result object's ``.to_xarray()`` as netCDF-4: the last release's index or
+        critical run, or the last finished background job of a kind."""
+        if what in ("index", "run"):
+            loop = asyncio.get_running_loop()
+            try:
+                data = await loop.run_in_executor(self.server.executor,
+                                                  self.server.session.netcdf, what)
+            except LookupError as e:
+                self.send({"error": str(e)}, 404)
+                return
+        elif what in KINDS:
+            job = await asyncio.to_thread(self.server.jobs.latest, what)
+            data = None if job is None else job.netcdf
+            if data is None:
+                self.send({"error": f"no {what} result yet: run it first"}, 404)
+                return
+        else:
+            self.send({"error": f"no netCDF export '{what}'"}, 404)
+            return
+        self.set_header("Content-Type", "application/x-netcdf")
+        self.set_header("Content-Disposition", f'attachment; filename="{what}.nc"')
+        self.finish(data)
 
     def _text(self, text: str, ctype: str, name: str) -> None:
         self.set_header("Content-Type", f"{ctype}; charset=utf-8")

@@ -169,6 +169,15 @@ class Session:
                 "outcome": sim.outcome}
 
     # ----- exports ----------------------------------------------------------------------
+    def netcdf(self, kind: str) -> bytes:
+        """The last release's index (``index``) or critical run (``run``) as netCDF-4
+        bytes: the result object's ``.to_xarray()``."""
+        with self._lock:
+            obj = {"index": self._last, "run": self._last_run}.get(kind)
+            if obj is None:
+                raise LookupError(f"no {kind} result yet: release a design first")
+            return bytes(obj.to_xarray().to_netcdf(engine="h5netcdf"))
+
     def figure(self, kind: str, fmt: str) -> bytes:
         """The product's own figure of the last release (``index``: the index result's
         ``.plot()``; ``run``: the critical run's ``.plot()``) as PNG or SVG bytes."""
