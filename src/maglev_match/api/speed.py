@@ -27,7 +27,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
                 config: str | Path | None = None,
                 stage: Callable[[str], None] | None = None,
                 irregularity: str | None = None, irregular_spans: int = 20,
-                **overrides: Any) -> SpeedSweep:
+                critical_delay: bool = False, **overrides: Any) -> SpeedSweep:
     """The vehicle at speed over identical spans, swept over speed (`maglev-match speed`).
 
     At every speed the periodic response (one span passage, found as the fixed point of
@@ -74,6 +74,12 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         DAF, the probability of contact with its interval, the linear rms of the unit).
     irregular_spans : int
         The length of those runs in spans (the distance of the probability of contact).
+    critical_delay : bool
+        Also compute at every speed the critical delay of the outer loop tau_c(v): the
+        smallest delay at which the periodic response loses stability, solved in tau
+        (`SpeedPoint.tau_c`; at v = 0 the vehicle standing at mid-span), and its low-speed
+        limit (`tau_c_frozen`). A delay of its own (`tau=...` in the overrides) gives the
+        periodic response and multipliers of the delayed model at every speed.
     **overrides : float
         Parameter values applied on top.
 
@@ -92,7 +98,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     p = resolve_params(params, config=config, **overrides)
     if speeds is None:
         speeds = list(speeds_kmh(*kmh) * KMH)
-    opts = SpeedOptions(critical=critical, spans=spans)
+    opts = SpeedOptions(critical=critical, spans=spans, critical_delay=critical_delay)
     check_speed_setup(p, model, list(speeds), spans)
     prof = None
     if irregularity is not None:

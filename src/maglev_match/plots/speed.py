@@ -36,17 +36,20 @@ def speed_figure(sweep):
     chi(v) = h(v) / w0; resonance speeds and located stability changes marked. Unstable
     speeds are drawn as crosses; open triangles mark chi(v) where every jump up to the gap
     range returned in the deciding direction (h(v) is that range); the standstill headline
-    index, chi(v)'s limit as v -> 0, is a dashed line. Returns the figure."""
+    index, chi(v)'s limit as v -> 0, is a dashed line. With the critical delay computed a
+    sixth panel shows tau_c(v) (ms) with its low-speed limit dashed and the delay set, if
+    any, dotted. Returns the figure."""
     v = sweep.speeds * KMH
     stable = np.array([p.stable is not False for p in sweep.points])
-    fig, axes = new_figure(5, 1, figsize=(7.5, 11.0), sharex=True)
+    delay = bool(getattr(sweep.options, "critical_delay", False))
+    fig, axes = new_figure(5 + delay, 1, figsize=(7.5, 11.0 + 2.2 * delay), sharex=True)
     panels = [
         ("daf", "DAF", 1.0),
         ("gap_dev_abs_max", "largest |gap deviation| (mm)", 1e3),
         ("wz", "Sperling Wz (vertical)", 1.0),
         ("largest_multiplier", "largest |multiplier|", 1.0),
         ("chi", "chi(v) = h(v) / w0", 1.0),
-    ]
+    ] + ([("tau_c", "critical delay tau_c(v) (ms)", 1e3)] if delay else [])
     for ax, (name, label, factor) in zip(axes, panels, strict=True):
         y = sweep.column(name) * factor
         ax.plot(v, y, "-", color="C0", lw=1.2)
@@ -66,6 +69,15 @@ def speed_figure(sweep):
             if st:
                 extra.append((ax.axhline(st["chi"], color="C2", ls="--", lw=1.0),
                               f"standstill index {st['chi']:.3f} (the limit v -> 0)"))
+        if name == "tau_c":
+            fr = sweep.column("tau_c_frozen") * 1e3
+            if np.isfinite(fr).any():
+                extra = [(ax.axhline(float(np.nanmax(fr)), color="C2", ls="--", lw=1.0),
+                          f"low-speed limit {np.nanmax(fr):.4g} ms (position-averaged "
+                          "frozen spectrum)")]
+            if sweep.params.tau > 0:
+                extra.append((ax.axhline(sweep.params.tau * 1e3, color="k", ls=":", lw=1.0),
+                              f"the delay set, {sweep.params.tau * 1e3:g} ms"))
         handles = _mark(ax, sweep, ax is axes[0]) + extra
         if handles:
             ax.legend([h for h, _ in handles], [t for _, t in handles], fontsize=7,
@@ -73,7 +85,9 @@ def speed_figure(sweep):
     axes[-1].set_xlabel("speed (km/h)")
     model = {"unit": "levitation unit", "vehicle": "full vehicle",
              "force": "moving force"}.get(sweep.model, sweep.model)
-    axes[0].set_title(f"At speed over identical spans (L = {sweep.params.L:g} m): {model}")
+    axes[0].set_title(f"At speed over identical spans (L = {sweep.params.L:g} m): {model}"
+                      + (f", delay tau = {sweep.params.tau * 1e3:g} ms" if sweep.params.tau > 0
+                         else ""))
     fig.tight_layout()
     return fig
 
