@@ -142,7 +142,10 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
               **overrides: Any) -> Any:
     """The read-outs at speed over a grid of the speed v (km/h) and another parameter
     (`maglev-match map --x v=START:STOP:COUNT --y NAME=...`): at every grid point the
-    periodic response with its stability, DAF, ride index and chi(v).
+    periodic response with its stability, DAF, ride index and chi(v). With the delay `tau`
+    (s) on the other axis: the stability of the delayed periodic response (largest
+    |multiplier|; chi(v) is not computed) and the critical delay tau_c(v) at every speed,
+    solved from the grid's first crossing (variables `tau_c`, `tau_c_grid`).
 
     Parameters
     ----------
@@ -168,11 +171,13 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
     """
     import tempfile
 
-    from maglev_match.analyses.speed.maps import parse_speed_axes, run_speed_map
+    from maglev_match.analyses.speed.maps import DELAY_AXIS, parse_speed_axes, run_speed_map
     from maglev_match.analyses.speed.sweep import SpeedOptions
 
     p = resolve_params(params, config=config, **overrides)
-    spec = parse_speed_axes(p, model, x, y, SpeedOptions())
+    over_delay = DELAY_AXIS in (a.split("=", 1)[0].strip() for a in (x, y))
+    # over the delay: the stability of the delayed periodic response and tau_c(v), no chi(v)
+    spec = parse_speed_axes(p, model, x, y, SpeedOptions(critical=not over_delay))
     if stage is not None:
         nx, ny = (a.split("=", 1)[0].strip() for a in (x, y))
         stage(f"map {nx} x {ny} at speed, model {model} ...")

@@ -38,7 +38,7 @@ from maglev_match.maglev import moving as mv
 from maglev_match.maglev.moving import MovingModel
 
 __all__ = ["DELAY_NAME", "delayed_vector", "rate_at_speed", "max_delay_at_speed",
-           "check_delay_at_speed", "moving_delay_system"]
+           "check_delay_at_speed", "moving_delay_system", "gap_events_for"]
 
 #: The delay parameter appended to a moving model's parameter vector.
 DELAY_NAME = "tau"
@@ -132,3 +132,24 @@ def _drop_last(g):
 
     h.__name__ = getattr(g, "__name__", "observable")
     return h
+
+
+def gap_events_for(system, kind: MovingModel, n_modes: int):
+    """The gap events of :func:`maglev_match.maglev.moving.gap_events` for the states and
+    parameters of ``system``: unchanged for a delay-free moving model; for the delayed one
+    (:class:`~maglev_match.dynamics.delay.clocked.ClockedDelaySystem`) read on its current
+    state (clock last) and its parameter vector without tau."""
+    ev = mv.gap_events(kind, n_modes)
+    if not isinstance(system, ClockedDelaySystem):
+        return ev
+    return _delayed_events(ev, int(system.n_state), int(system.dim))
+
+
+@cache
+def _delayed_events(ev, n: int, dim: int):
+    import jax.numpy as jnp
+
+    def events(X, p, limits):
+        return ev(jnp.concatenate([X[:n - 1], X[dim - 1:]]), p[:-1], limits)
+
+    return events

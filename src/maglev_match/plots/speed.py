@@ -159,10 +159,12 @@ def speed_map_figure(ds):
         y, yl = y * KMH, "speed v (km/h)"
     chi = np.ma.masked_invalid(ds["chi"].values)
     fig, ax = new_figure(figsize=(8.0, 5.5))
-    if chi.count():
+    X, Y = np.meshgrid(x, y)
+    if "tau_c" in ds:  # a map over the delay: the leading multiplier and tau_c(v)
+        _delay_map(fig, ax, ds, xname, x, y, X, Y)
+    elif chi.count():
         mesh = ax.pcolormesh(x, y, chi, shading="nearest", cmap="viridis")
         fig.colorbar(mesh, ax=ax, label="chi(v) = h(v) / w0")
-    X, Y = np.meshgrid(x, y)
     unstable = ds["stable"].values == 0
     if unstable.any():
         ax.plot(X[unstable], Y[unstable], "rx", ms=7, label="periodic response unstable")
@@ -171,13 +173,35 @@ def speed_map_figure(ds):
     if ceiling.any():
         ax.plot(X[ceiling], Y[ceiling], "^", mfc="none", color="w", ms=6,
                 label="every jump up to the gap range returned (h(v) = gap range)")
-    if unstable.any() or ceiling.any():
+    if unstable.any() or ceiling.any() or "tau_c" in ds:
         ax.legend(fontsize=8)
     ax.set_xlabel(xl)
     ax.set_ylabel(yl)
-    ax.set_title(f"At speed ({ds.attrs.get('model', '')}): chi(v) over {xname} and {yname}")
+    what = "max|multiplier| and tau_c(v)" if "tau_c" in ds else "chi(v)"
+    ax.set_title(f"At speed ({ds.attrs.get('model', '')}): {what} over {xname} and {yname}")
     fig.tight_layout()
     return fig
+
+
+def _delay_map(fig, ax, ds, xname, x, y, X, Y) -> None:
+    """The largest |multiplier| (log colour scale) over (v, tau), its unit-circle contour
+    on the grid and the solved tau_c(v) (a line over the speeds)."""
+    from matplotlib.colors import LogNorm
+
+    mu = np.ma.masked_invalid(ds["largest_multiplier"].values)
+    if mu.count():
+        mesh = ax.pcolormesh(x, y, mu, shading="nearest", cmap="coolwarm",
+                             norm=LogNorm(vmin=max(float(mu.min()), 1e-6),
+                                          vmax=max(float(mu.max()), 1.0 + 1e-9)))
+        fig.colorbar(mesh, ax=ax, label="largest |multiplier| of the span map")
+    v = ds["v"].values.astype(float) * KMH
+    tc = ds["tau_c"].values.astype(float)
+    ok = np.isfinite(tc)
+    if ok.any():
+        if xname == "v":
+            ax.plot(v[ok], tc[ok], "k.-", lw=1.5, label="critical delay tau_c(v) (solved)")
+        else:
+            ax.plot(tc[ok], v[ok], "k.-", lw=1.5, label="critical delay tau_c(v) (solved)")
 
 
 @figure.register(SpeedSweep)

@@ -264,9 +264,11 @@ def _multiplier_pairs(values: np.ndarray, k: int = 8) -> tuple[tuple[float, floa
 
 
 def speed_point(params: Params, model: str, v: float,
-                options: SpeedOptions | None = None) -> SpeedPoint:
+                options: SpeedOptions | None = None, *,
+                tau_max: float | None = None) -> SpeedPoint:
     """All read-outs at one speed v (m/s; v = 0 gives the standstill values,
-    :func:`standstill_point`). Failures are reported in the point (``converged`` False and a
+    :func:`standstill_point`; ``tau_max``: a delay's discretisation sized for delays up to
+    this, as in a map over the delay). Failures are reported in the point (``converged`` False and a
     warning), never raised."""
     opts = options or SpeedOptions()
     kind = MovingModel(model)
@@ -274,7 +276,7 @@ def speed_point(params: Params, model: str, v: float,
     if v == 0:
         return standstill_point(params, kind)
     try:
-        sol = periodic_response(params, kind, v, opts)
+        sol = periodic_response(params, kind, v, opts, tau_max=tau_max)
     except FloatingPointError as exc:
         return _failed_point(v, params, kind, f"no periodic response: {exc}", n_pts)
     if not sol.converged or sol.multipliers is None:
