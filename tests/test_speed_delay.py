@@ -115,3 +115,93 @@ def test_critical_delay_at_speed_is_solved_where_the_multiplier_reaches_one():
     below = periodic_response(UNIT1.replace(tau=0.98 * cd.value), "unit", 60 * KMH)
     above = periodic_response(UNIT1.replace(tau=1.02 * cd.value), "unit", 60 * KMH)
     assert below.multipliers.largest < 1.0 < above.multipliers.largest
+
+
+def _doc_commands() -> list[list[str]]:
+    """The commands of the code block under 'The delayed controller at speed' in
+    docs/speed.md."""
+    import re
+    import shlex
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "speed.md").read_text()
+    section = text.split("## The delayed controller at speed", 1)[1].split("\n## ", 1)[0]
+    block = re.search(r"```bash\n(.*?)```", section, re.S).group(1)
+    return [shlex.split(line)[1:] for line in block.splitlines() if line.strip()]
+
+
+def test_the_documented_commands_run_as_written(tmp_path, monkeypatch, capsys):
+    import json
+
+    import xarray as xr
+
+    from maglev_match.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    cmds = _doc_commands()
+    assert [c[0] for c in cmds] == ["speed", "speed", "map"]
+    # the delayed sweep: tau in the text, the CSV and the netCDF
+    assert main([*cmds[0], "--out", "delayed"]) == 0
+    out = capsys.readouterr().out
+    assert "outer-loop delay tau = 1 ms" in out
+    csv = (tmp_path / "delayed" / "speed_unit.csv").read_text().splitlines()
+    assert csv[0].split(",")[-3:] == ["tau (s)", "tau_c (s)", "tau_c_frozen (s)"]
+    assert csv[1].split(",")[-3] == "0.001"
+    with xr.open_dataset(tmp_path / "delayed" / "speed_unit.nc") as ds:
+        assert ds.attrs["tau"] == 0.001
+    # the critical delay at speed, in the JSON
+    assert main([*cmds[1], "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    (cd,) = js["critical_delay"]
+    assert cd["status"] == "solved" and cd["tau_c"] > cd["frozen_limit"] > 0
+    assert js["tau"] == 0.0
+
+
+def test_the_documented_map_over_speed_and_delay_draws_the_solved_curve(tmp_path,
+                                                                       monkeypatch):
+    import xarray as xr
+
+    from maglev_match.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    cmd = _doc_commands()[2]
+    assert main([*cmd, "--out", "m"]) == 0
+    with xr.open_dataset(tmp_path / "m" / "map_v_tau.nc") as ds:
+        tc = ds["tau_c"].values
+        mu = ds["largest_multiplier"].values  # (tau, v)
+        taus = ds["tau"].values
+        assert np.all(np.isfinite(tc))
+        for j in range(tc.size):  # the solved tau_c(v) separates the stable grid points
+            for i, t in enumerate(taus):
+                assert (mu[i, j] < 1.0) == (t < tc[j])
+
+
+def test_at_low_speed_the_delayed_growth_follows_the_tracked_frozen_roots():
+    """The low-speed limit of the critical delay. For a slowly varying system every
+    multiplier follows one frozen root: ln|mu| = T x (that root's mean real part over the
+    span) + C + o(1), C independent of T, so the growth between two low speeds (20 and
+    30 km/h: slower, the controller's root grows by e^15 and more within one passage near
+    mid-span at these delays, and a run from the quasi-static start blows up),
+    (ln|mu|(T1) - ln|mu|(T2)) / (T1 - T2), is the largest mean real part of a root branch
+    followed along the span (discretised delay system frozen at v = 0). It is not the mean
+    of the spectral abscissa: on the unit different roots are rightmost at different
+    positions, and the delay where that mean crosses 0 is far from the limit. A wrong delay
+    at speed (a second delay model, a history that jumps at the hand-over, a clock out of
+    place) breaks the agreement."""
+    limit = frozen_critical_delay(UNIT1, "unit")
+    abscissa = frozen_critical_delay(UNIT1, "unit", tracked=False)
+    mid = frozen_critical_delay(UNIT1, "unit", positions=None)
+    assert limit.status == abscissa.status == mid.status == "solved"
+    assert mid.value < abscissa.value < 0.9 * limit.value
+    for tau in (abscissa.value, limit.value):
+        logs, periods = [], []
+        for kmh in (20.0, 30.0):
+            sol = periodic_response(UNIT1.replace(tau=tau), "unit", kmh * KMH, QUICK,
+                                    tau_max=limit.value)
+            logs.append(sol.multipliers.log_abs[0])
+            periods.append(sol.problem.period)
+        growth = (logs[0] - logs[1]) / (periods[0] - periods[1])
+        assert growth == pytest.approx(frozen_rate(UNIT1, "unit", tau), abs=0.02)
+        if tau == abscissa.value:  # there the abscissa's mean is 0, the growth is not
+            assert frozen_rate(UNIT1, "unit", tau, tracked=False) == pytest.approx(0, abs=1e-7)
+            assert growth < -0.2

@@ -132,6 +132,19 @@ def _summary_lines(sweep) -> list[str]:
             what = "loses" if c.becomes_unstable else "regains"
             out.append(f"  it {what} stability at {c.speed / KMH:.4f} km/h ({c.kind}, "
                        f"multiplier {complex(*c.multiplier):.4g})")
+    cds = sweep.critical_delays()
+    if cds:
+        ok = [c for c in cds if c["status"] == "solved"]
+        if ok:
+            low = min(ok, key=lambda c: c["tau_c"])
+            out.append(f"critical delay of the outer loop: smallest tau_c(v) "
+                       f"{low['tau_c'] * 1e3:.6g} ms at {low['speed'] / KMH:g} km/h; its "
+                       f"low-speed limit (position-averaged frozen roots) "
+                       f"{cds[0]['frozen_limit'] * 1e3:.6g} ms")
+        for c in cds:
+            if c["status"] != "solved":
+                out.append(f"  critical delay at {c['speed'] / KMH:g} km/h NOT SOLVED: "
+                           f"{c['status']}")
     st = sweep.standstill
     if st:
         out.append(f"standstill headline index chi = {st['chi']:.3f} (h = {st['h'] * 1e3:.4f} "

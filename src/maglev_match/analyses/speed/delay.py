@@ -11,24 +11,30 @@ Method (:func:`critical_delay_at_speed`): g(tau) = ln max|mu|(tau), the logarith
 leading multiplier's modulus (zero exactly where |mu| = 1, and better scaled than |mu| - 1
 at low speed, where |mu| = exp(T x a mean growth rate) spans many decades). A first guess
 is the low-speed estimate below; the bracket [a, b] with g(a) < 0 < g(b) is grown from it by
-factors of 1.25 (down to :data:`TAU_FLOOR`, up to the longest delay the discretisation
-resolves at that speed), then Brent's method solves g = 0 to a relative tolerance of
-1e-9 in tau. One discretisation (its number of Chebyshev intervals sized for the bracket's
-top) serves the whole solve, so the function solved is smooth in tau.
+steps of 1 %, each step's factor squared (down to :data:`TAU_FLOOR`, up to the longest delay
+the discretisation resolves at that speed), then Brent's method solves g = 0 to a relative
+tolerance of 1e-9 in tau. One discretisation (its number of Chebyshev intervals sized for
+the bracket's top) serves the whole solve, so the function solved is smooth in tau.
 
 Low-speed limit (:func:`frozen_rate`, :func:`frozen_critical_delay`). As v -> 0 the vehicle
-crosses a span slowly compared with its own dynamics, and ln|mu| / T tends to the mean over
-the vehicle's positions in the span of the spectral abscissa (the largest real part of the
-characteristic roots) of the vehicle frozen at each position (the adiabatic limit of a slowly
-varying linear system, exact as v -> 0 while that root stays simple). So tau_c(v) tends to
-the tau at which the *position-averaged* frozen spectral abscissa crosses 0, computed here
-independently of any periodic solve: quasi-static states at 40 positions, the eigenvalues of
-the discretised delay system's Jacobian there (v = 0), averaged, and that mean solved for 0
-in tau. It is not the mid-span standstill value: near a support the vehicle straddles two
-spans and feels a smaller modal coupling than at mid-span, so its frozen spectrum differs
-there (:func:`frozen_critical_delay` with ``positions=None`` gives the mid-span value; with
-one mode per span, at mid-span the unit at speed is model A, and that value is model A's
-critical delay).
+crosses a span slowly compared with its own dynamics, and every multiplier follows one root
+of the vehicle frozen at each position (the adiabatic limit of a slowly varying linear
+system): ln|mu| / T tends to the mean over the positions of that root's real part. The
+leading multiplier is then the root *branch* with the largest mean real part, followed
+continuously along the span, which is not the mean of the spectral abscissa (the rightmost
+root at each position, whichever it is) when different roots are rightmost at different
+positions: the mean of a maximum exceeds the maximum of the means. On the unit with a delay
+this is the case: near mid-span the controller's fast root (about 140 rad/s) is rightmost,
+near the supports the slow suspension root (-0.389 1/s) is, and the delay at which the
+abscissa's mean crosses 0 (1.599 ms on turnout-soft with one mode per span) lies far below
+the crossing of the controller's branch mean (1.947 ms), which is the true limit (the tests
+check the growth between two low speeds against both). Computed here independently of any
+periodic solve: quasi-static states at 40 positions, the roots of the discretised delay
+system's Jacobian there (v = 0), the :data:`TRACKED` rightmost ones at the first position
+followed from position to position by a one-to-one assignment to the closest roots, their
+mean real parts, and the largest solved for 0 in tau. The mid-span value
+(``positions=None``) is the vehicle standing at mid-span; with one mode per span the unit
+there is model A, and its critical delay is model A's.
 """
 
 from __future__ import annotations
@@ -56,6 +62,8 @@ __all__ = ["TAU_FLOOR", "SpeedCriticalDelay", "frozen_positions", "frozen_rate",
 TAU_FLOOR = 1e-5
 #: relative tolerance of the solve in tau
 TAU_RTOL = 1e-9
+#: root branches followed along the span for the low-speed limit
+TRACKED = 8
 
 
 @dataclass(frozen=True)
@@ -125,32 +133,60 @@ class _Frozen:
                                              tau=tau_max, tau_max=tau_max)
         self.evaluations = 0
 
-    def abscissae(self, tau: float) -> np.ndarray:
-        """The spectral abscissa (1/s) at every position for the delay tau (s)."""
+    def spectra(self, tau: float) -> list[np.ndarray]:
+        """The characteristic roots (1/s) of the discretised system at every position for
+        the delay tau (s), those with Im >= 0, rightmost first."""
         out = []
         for x, p in self.items:
             pd = md.delayed_vector(p, tau)
             J = self.system.jacobian(self.system.lift(x, pd), pd)[:-1, :-1]
-            out.append(float(np.max(np.linalg.eigvals(J).real)))
+            lam = np.linalg.eigvals(J)
+            lam = lam[lam.imag >= -1e-9 * np.maximum(1.0, np.abs(lam))]
+            out.append(lam[np.argsort(-lam.real)])
         self.evaluations += 1
-        return np.array(out)
+        return out
+
+    def abscissae(self, tau: float) -> np.ndarray:
+        """The spectral abscissa (1/s) at every position for the delay tau (s)."""
+        return np.array([float(s[0].real) for s in self.spectra(tau)])
+
+    def tracked(self, tau: float, branches: int = TRACKED) -> float:
+        """max over root branches of the branch's mean real part (1/s): the ``branches``
+        rightmost roots at the first position, each followed from position to position
+        (the closest root, one-to-one, by an assignment on the ``2 branches`` rightmost)."""
+        from scipy.optimize import linear_sum_assignment
+
+        spec = self.spectra(tau)
+        cur = spec[0][:branches]
+        total = cur.real.copy()
+        for lam in spec[1:]:
+            cand = lam[:2 * branches]
+            cost = np.abs(cur[:, None] - cand[None, :])
+            rows, cols = linear_sum_assignment(cost)
+            nxt = cur.copy()
+            nxt[rows] = cand[cols]
+            cur = nxt
+            total += cur.real
+        return float(np.max(total / len(spec)))
 
 
 def frozen_rate(params: Params, model: str, tau: float, positions: int | None = 40,
-                tau_max: float | None = None) -> float:
-    """The mean over ``positions`` frozen positions of the spectral abscissa (1/s) of the
-    discretised delay system with delay ``tau`` (s) (``positions=None``: the vehicle
-    centred at mid-span); the low-speed limit of ln max|mu| / T."""
+                tau_max: float | None = None, *, tracked: bool = True) -> float:
+    """The low-speed limit of ln max|mu| / T (1/s) at the delay ``tau`` (s), from the
+    discretised delay system frozen at ``positions`` positions (``positions=None``: the
+    vehicle centred at mid-span): with ``tracked``, the largest mean real part of a root
+    followed along the span (module docstring); otherwise the mean of the spectral
+    abscissa (the rightmost root at each position, whichever it is)."""
     kind = MovingModel(model)
     fr = _Frozen(params, kind, frozen_positions(params, kind, positions),
                  tau if tau_max is None else tau_max)
-    return float(np.mean(fr.abscissae(tau)))
+    return fr.tracked(tau) if tracked else float(np.mean(fr.abscissae(tau)))
 
 
-def _bracket_and_solve(g, guess: float, top: float, grow: float = 1.25):
+def _bracket_and_solve(g, guess: float, top: float, grow: float = 1.01):
     """Grow a bracket of a sign change of g (negative below) from ``guess`` within
-    [TAU_FLOOR, top] and solve it by Brent's method. Returns (root or None, (a, b), status,
-    message)."""
+    [TAU_FLOOR, top] (steps of a factor ``grow``, squared after every step) and solve it by
+    Brent's method. Returns (root or None, (a, b), status, message)."""
     import scipy.optimize
 
     a = b = min(max(guess, TAU_FLOOR), top)
@@ -163,6 +199,7 @@ def _bracket_and_solve(g, guess: float, top: float, grow: float = 1.25):
                     "resolves")
             a, ga = b, gb
             b = min(b * grow, top)
+            grow = min(grow * grow, 2.0)
             gb = g(b)
     else:
         while ga >= 0:
@@ -171,17 +208,20 @@ def _bracket_and_solve(g, guess: float, top: float, grow: float = 1.25):
                     f"unstable down to {TAU_FLOOR:g} s")
             b, gb = a, ga
             a = max(a / grow, TAU_FLOOR)
+            grow = min(grow * grow, 2.0)
             ga = g(a)
     root = scipy.optimize.brentq(g, a, b, xtol=1e-15, rtol=TAU_RTOL, maxiter=100)
     return float(root), (float(a), float(b)), "solved", ""
 
 
 def frozen_critical_delay(params: Params, model: str, positions: int | None = 40,
-                          guess: float = 1e-3) -> SpeedCriticalDelay:
-    """The delay (s) at which the mean frozen spectral abscissa (:func:`frozen_rate`)
-    crosses 0: the v -> 0 limit of the critical delay at speed (``positions=None``: the
-    vehicle frozen at mid-span, the critical delay standing still there). Speed 0 in the
-    result; ``multiplier`` holds the rightmost root at mid-span (re, im; 1/s)."""
+                          guess: float = 1e-3, *, tracked: bool = True
+                          ) -> SpeedCriticalDelay:
+    """The delay (s) at which the low-speed growth rate (:func:`frozen_rate`, ``tracked``
+    or the mean spectral abscissa) crosses 0: the v -> 0 limit of the critical delay at
+    speed (``positions=None``: the vehicle frozen at mid-span, the critical delay standing
+    still there). Speed 0 in the result; ``multiplier`` holds the rightmost root at the
+    middle position (re, im; 1/s)."""
     kind = MovingModel(model)
     top = md.max_delay_at_speed(params, kind, 0.0)
     fronts = frozen_positions(params, kind, positions)
@@ -189,6 +229,8 @@ def frozen_critical_delay(params: Params, model: str, positions: int | None = 40
     fr = _Frozen(params, kind, fronts, tau_max)
 
     def g(tau: float) -> float:
+        if tracked and positions is not None:
+            return fr.tracked(tau)
         return float(np.mean(fr.abscissae(tau)))
 
     try:
