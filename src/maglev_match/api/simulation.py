@@ -248,7 +248,9 @@ def simulate_over_spans(params: Params | str | None = None, *, model: str = "uni
                              "run over spans (slower, one span passage lasts longer than a "
                              "run at speed can integrate)")
     p = resolve_params(params, config=config, **overrides)
-    check_speed_setup(p, model, [kmh * KMH], spans)
+    check_speed_setup(p, model, [kmh * KMH], spans, delay=False,
+                      refuse_delay="a run over a finite number of spans has no delay of the "
+                      "outer loop yet")
     if spans > SPANS_MAX:
         raise ParameterError("spans", spans, f"must be at most {SPANS_MAX} for a run over "
                              "spans")

@@ -27,7 +27,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
                 config: str | Path | None = None,
                 stage: Callable[[str], None] | None = None,
                 irregularity: str | None = None, irregular_spans: int = 20,
-                **overrides: Any) -> SpeedSweep:
+                critical_delay: bool = False, **overrides: Any) -> SpeedSweep:
     """The vehicle at speed over identical spans, swept over speed (`maglev-match speed`).
 
     At every speed the periodic response (one span passage, found as the fixed point of
@@ -74,6 +74,12 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         DAF, the probability of contact with its interval, the linear rms of the unit).
     irregular_spans : int
         The length of those runs in spans (the distance of the probability of contact).
+    critical_delay : bool
+        Also compute at every speed the critical delay of the outer loop tau_c(v): the
+        smallest delay at which the periodic response loses stability, solved in tau
+        (`SpeedPoint.tau_c`; at v = 0 the vehicle standing at mid-span), and its low-speed
+        limit (`tau_c_frozen`). A delay of its own (`tau=...` in the overrides) gives the
+        periodic response and multipliers of the delayed model at every speed.
     **overrides : float
         Parameter values applied on top.
 
@@ -92,7 +98,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     p = resolve_params(params, config=config, **overrides)
     if speeds is None:
         speeds = list(speeds_kmh(*kmh) * KMH)
-    opts = SpeedOptions(critical=critical, spans=spans)
+    opts = SpeedOptions(critical=critical, spans=spans, critical_delay=critical_delay)
     check_speed_setup(p, model, list(speeds), spans)
     prof = None
     if irregularity is not None:
@@ -136,7 +142,10 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
               **overrides: Any) -> Any:
     """The read-outs at speed over a grid of the speed v (km/h) and another parameter
     (`maglev-match map --x v=START:STOP:COUNT --y NAME=...`): at every grid point the
-    periodic response with its stability, DAF, ride index and chi(v).
+    periodic response with its stability, DAF, ride index and chi(v). With the delay `tau`
+    (s) on the other axis: the stability of the delayed periodic response (largest
+    |multiplier|; chi(v) is not computed) and the critical delay tau_c(v) at every speed,
+    solved from the grid's first crossing (variables `tau_c`, `tau_c_grid`).
 
     Parameters
     ----------
@@ -162,11 +171,13 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
     """
     import tempfile
 
-    from maglev_match.analyses.speed.maps import parse_speed_axes, run_speed_map
+    from maglev_match.analyses.speed.maps import DELAY_AXIS, parse_speed_axes, run_speed_map
     from maglev_match.analyses.speed.sweep import SpeedOptions
 
     p = resolve_params(params, config=config, **overrides)
-    spec = parse_speed_axes(p, model, x, y, SpeedOptions())
+    over_delay = DELAY_AXIS in (a.split("=", 1)[0].strip() for a in (x, y))
+    # over the delay: the stability of the delayed periodic response and tau_c(v), no chi(v)
+    spec = parse_speed_axes(p, model, x, y, SpeedOptions(critical=not over_delay))
     if stage is not None:
         nx, ny = (a.split("=", 1)[0].strip() for a in (x, y))
         stage(f"map {nx} x {ny} at speed, model {model} ...")

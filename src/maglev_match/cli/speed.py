@@ -42,7 +42,7 @@ SPEED_OPTIONS = {"model": "--model", "speeds": "--from/--to/--step", "critical":
                  "spans": "--spans", "workers": "--workers", "scheduler": "--scheduler",
                  "resume": "--resume", "config": "--config", "kmh": "--speed",
                  "x": "--x", "y": "--y", "irregularity": "--irregularity",
-                 "irregular_spans": "--irregular-spans"}
+                 "irregular_spans": "--irregular-spans", "critical_delay": "--critical-delay"}
 
 SpeedModelOpt = Annotated[str, typer.Option(
     "--model", help="'unit' (model A's unit, the vehicle's k units spread over its length), "
@@ -92,16 +92,20 @@ def _table(sweep) -> Table:
     t = Table(box=box.SIMPLE_HEAD, pad_edge=False)
     cols = ["km/h", "stable", "max|mu|", "DAF", "max|gap dev| mm", "min current A",
             "Wz", "acc m/s^2", "down mm", "up mm", "chi(v)", "decided at", "chi entry"]
+    delay = sweep.options.critical_delay
+    if delay:
+        cols += ["tau_c ms"]
     for c in cols:
         t.add_column(c, justify="right")
     for p in sweep.points:
         stable = "-" if p.stable is None else ("yes" if p.stable else "NO")
+        extra = [_fmt(p.tau_c * 1e3, ".6g")] if delay else []
         imin = min(p.current_min) if p.current_min else float("nan")
         t.add_row(f"{p.speed_kmh:g}", stable, _fmt(p.largest_multiplier, ".4f"),
                   _fmt(p.daf, ".4f"), _fmt(p.gap_dev_abs_max * 1e3, ".4f"),
                   _fmt(imin, ".2f"), _fmt(p.wz, ".3f"), _fmt(p.body_acc_peak, ".4f"),
                   _side(p, +1), _side(p, -1), _fmt(p.chi, ".3f"), _decides(p),
-                  _fmt(p.chi_entry, ".3f"))
+                  _fmt(p.chi_entry, ".3f"), *extra)
     return t
 
 
@@ -128,6 +132,19 @@ def _summary_lines(sweep) -> list[str]:
             what = "loses" if c.becomes_unstable else "regains"
             out.append(f"  it {what} stability at {c.speed / KMH:.4f} km/h ({c.kind}, "
                        f"multiplier {complex(*c.multiplier):.4g})")
+    cds = sweep.critical_delays()
+    if cds:
+        ok = [c for c in cds if c["status"] == "solved"]
+        if ok:
+            low = min(ok, key=lambda c: c["tau_c"])
+            out.append(f"critical delay of the outer loop: smallest tau_c(v) "
+                       f"{low['tau_c'] * 1e3:.6g} ms at {low['speed'] / KMH:g} km/h; its "
+                       f"low-speed limit (position-averaged frozen roots) "
+                       f"{cds[0]['frozen_limit'] * 1e3:.6g} ms")
+        for c in cds:
+            if c["status"] != "solved":
+                out.append(f"  critical delay at {c['speed'] / KMH:g} km/h NOT SOLVED: "
+                           f"{c['status']}")
     st = sweep.standstill
     if st:
         out.append(f"standstill headline index chi = {st['chi']:.3f} (h = {st['h'] * 1e3:.4f} "
@@ -174,6 +191,11 @@ def speed_command(
     irregular_spans: Annotated[int, typer.Option(
         "--irregular-spans", help="With --irregularity: spans per run over the irregular "
         "guideway (the distance of the probability of contact).")] = 20,
+    critical_delay: Annotated[bool, typer.Option(
+        "--critical-delay", help="Also solve at every speed for the critical delay of the "
+        "outer loop tau_c(v), the smallest delay at which the periodic response loses "
+        "stability (at 0 km/h: the vehicle standing at mid-span), with its low-speed "
+        "limit.")] = False,
 ) -> None:
     """The vehicle at speed over identical simply supported spans: the periodic response at
     every speed from --from to --to (km/h), its stability (span-map multipliers), gap
@@ -202,7 +224,8 @@ def speed_command(
                                 resume=resume, scheduler=scheduler, workers=workers,
                                 progress=lambda d, t: prog.tiles(d, t, "speeds"),
                                 stage=prog.stage, irregularity=irregularity,
-                                irregular_spans=irregular_spans)
+                                irregular_spans=irregular_spans,
+                                critical_delay=critical_delay)
         elapsed = time.perf_counter() - started
         prog.stage(f"sweep done in {elapsed:.1f} s; writing files ...")
         files = _write_sweep(sweep, folder, stem)
@@ -219,7 +242,9 @@ def speed_command(
             print_warnings(sweep.irregular.warnings)
         return
     console.print(f"maglev-match speed — model {model}, preset {preset}, L = {params.L:g} m, "
-                  f"omega1 = {params.omega1:.4g} rad/s", highlight=False)
+                  f"omega1 = {params.omega1:.4g} rad/s"
+                  + (f", outer-loop delay tau = {params.tau * 1e3:g} ms" if params.tau > 0
+                     else ""), highlight=False)
     console.print(_table(sweep))
     if sweep.resonances:
         console.print("resonance speeds (an excitation frequency meets a natural frequency):",
@@ -254,6 +279,9 @@ _CSV_COLUMNS = (
     ("every_size_returned", lambda p, st: int(p.every_size_returned)),
     ("h_entry (m)", lambda p, st: p.h_entry),
     ("chi_entry", lambda p, st: p.chi_entry),
+    ("tau (s)", lambda p, st: p.tau),
+    ("tau_c (s)", lambda p, st: p.tau_c),
+    ("tau_c_frozen (s)", lambda p, st: p.tau_c_frozen),
 )
 
 

@@ -84,6 +84,8 @@ __all__ = [
     "KINEMATIC_NAMES",
     "layout_of",
     "moving_system",
+    "moving_delay_rhs",
+    "moving_command",
     "moving_param_names",
     "moving_param_vector",
     "rigid_equilibrium",
@@ -320,11 +322,12 @@ def _vehicle_offsets(s, s0):
     return b, a, off - jnp.max(off)
 
 
-def _unit_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None):
+def _unit_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None, command=None):
     """The unit at speed (module docstring): model A's unit equations with the beam
     deflection x5 = w (the mean deflection under the vehicle) and x6 = w'. With ``waves``
     the parameter vector carries a guideway profile (:mod:`maglev_match.maglev.irregularity`)
-    whose mean under the footprint adds to w and w' in the gap."""
+    whose mean under the footprint adds to w and w' in the gap. ``command``: the outer
+    loop's command read late (1-element array; :mod:`maglev_match.maglev.moving_delay`)."""
     q_ = _named(p[:_NA], unit_model.PARAM_NAMES)
     L, mbar, length, k = p[_NA], p[_NA + 1], p[_NA + 2], p[_NA + 3]
     pk = _kin(p, _NB_UNIT, 1)
@@ -348,14 +351,15 @@ def _unit_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None):
                                   jnp.reshape(force, (1,)), n_modes, pk[2:4])
     xa = jnp.stack([x[0], x[1], x[2], x[3], w, wd[0] if waves is None else wd[0] + zrd,
                     x[4], x[5], x[6]])
-    fa = unit_model._rhs(xa, p[:_NA], limited)
+    fa = unit_model._rhs(xa, p[:_NA], limited, None if command is None else command[0])
     veh = jnp.stack([fa[0], fa[1], fa[2], fa[3], fa[6], fa[7], fa[8]])
     return jnp.concatenate([veh, dq[0], ddq[0], dq[1], ddq[1], jnp.ones(1)])
 
 
-def _vehicle_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None):
+def _vehicle_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None, command=None):
     """Model B at speed: six levitation points, each acting on the span under it (with
-    ``waves``: and the guideway profile under each point added to its deflection)."""
+    ``waves``: and the guideway profile under each point added to its deflection;
+    ``command``: the six outer loops' commands read late)."""
     q_ = _named(p[:_NB_VEH], VEHICLE_PARAM_NAMES)
     pk = _kin(p, _NB_VEH, 6)
     b, a, front = _vehicle_offsets(q_["s"], q_["s0"])
@@ -383,7 +387,8 @@ def _vehicle_rhs(x, p, n_modes: int, limited: bool, waves: int | None = None):
                                   Gdot, K * r**2, n_modes, pk[2:4])
     cd = ud - wd if waves is None else ud - wd - zrd
     body_acc = vehicle_model.body_accelerations(q_, b, body, body_dot, f)
-    di, dy1, dv = vehicle_model.loop_rates(q_, K, i0, r, c, cd, ud, i, y1, vv, limited)
+    di, dy1, dv = vehicle_model.loop_rates(q_, K, i0, r, c, cd, ud, i, y1, vv, limited,
+                                           command)
     return jnp.concatenate([body_dot, body_acc, di, dy1, dv, dq[0], ddq[0], dq[1], ddq[1],
                             jnp.ones(1)])
 
@@ -427,6 +432,51 @@ def moving_rhs(kind: MovingModel, n_modes: int, limited: bool = False,
     rhs.__name__ = (f"moving_rhs_{kind.value}_{n_modes}{'_limited' if limited else ''}"
                     + ("" if waves is None else f"_irregular{waves}"))
     return rhs
+
+
+@cache
+def moving_delay_rhs(kind: MovingModel, n_modes: int, limited: bool = False,
+                     waves: int | None = None):
+    """The vector field of a model at speed with the outer loops' commands read late:
+    ``rhs(x, ud, p)`` with ``ud[0]`` the commands u(t - tau) (:func:`moving_command`) and
+    ``p`` the parameter vector of :func:`moving_rhs` followed by tau (the delay model of the
+    standstill models, :func:`maglev_match.maglev.unit.unit_dde` and
+    :func:`maglev_match.maglev.vehicle.vehicle_dde`: only the command is late)."""
+    kind = MovingModel(kind)
+    if kind is MovingModel.FORCE:
+        raise ValueError("the force model has no controller to delay")
+    field_ = _RHS[kind]
+    n_modes, limited = int(n_modes), bool(limited)
+    w = None if waves is None else int(waves)
+
+    def rhs(x, ud, p):
+        return field_(x, p[:-1], n_modes, limited, w, ud[0])
+
+    rhs.__name__ = (f"moving_delay_rhs_{kind.value}_{n_modes}{'_limited' if limited else ''}"
+                    + ("" if w is None else f"_irregular{w}"))
+    return rhs
+
+
+@cache
+def moving_command(kind: MovingModel):
+    """``u(x, p)``: the outer loops' commands of a model at speed (unit: 1 entry, vehicle:
+    6), the standstill models' own functions (:func:`maglev_match.maglev.unit.
+    outer_loop_command`, :func:`maglev_match.maglev.vehicle.outer_loop_commands`) applied
+    to the vehicle's states (the commands do not read the guideway)."""
+    kind = MovingModel(kind)
+    if kind is MovingModel.UNIT:
+        def command(x, p):
+            xa = jnp.stack([x[0], x[1], x[2], x[3], 0.0, 0.0, x[4], x[5], x[6]])
+            return unit_model.outer_loop_command(xa, p[:_NA])
+    elif kind is MovingModel.VEHICLE:
+        standstill = vehicle_model.outer_loop_commands(0)  # the vehicle's 34 states
+
+        def command(x, p):
+            return standstill(x[:34], p[:_NB_VEH])
+    else:
+        raise ValueError("the force model has no controller to delay")
+    command.__name__ = f"moving_command_{kind.value}"
+    return command
 
 
 # ---------------------------------------------------------------------------------------

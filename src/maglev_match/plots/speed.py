@@ -36,17 +36,20 @@ def speed_figure(sweep):
     chi(v) = h(v) / w0; resonance speeds and located stability changes marked. Unstable
     speeds are drawn as crosses; open triangles mark chi(v) where every jump up to the gap
     range returned in the deciding direction (h(v) is that range); the standstill headline
-    index, chi(v)'s limit as v -> 0, is a dashed line. Returns the figure."""
+    index, chi(v)'s limit as v -> 0, is a dashed line. With the critical delay computed a
+    sixth panel shows tau_c(v) (ms) with its low-speed limit dashed and the delay set, if
+    any, dotted. Returns the figure."""
     v = sweep.speeds * KMH
     stable = np.array([p.stable is not False for p in sweep.points])
-    fig, axes = new_figure(5, 1, figsize=(7.5, 11.0), sharex=True)
+    delay = bool(getattr(sweep.options, "critical_delay", False))
+    fig, axes = new_figure(5 + delay, 1, figsize=(7.5, 11.0 + 2.2 * delay), sharex=True)
     panels = [
         ("daf", "DAF", 1.0),
         ("gap_dev_abs_max", "largest |gap deviation| (mm)", 1e3),
         ("wz", "Sperling Wz (vertical)", 1.0),
         ("largest_multiplier", "largest |multiplier|", 1.0),
         ("chi", "chi(v) = h(v) / w0", 1.0),
-    ]
+    ] + ([("tau_c", "critical delay tau_c(v) (ms)", 1e3)] if delay else [])
     for ax, (name, label, factor) in zip(axes, panels, strict=True):
         y = sweep.column(name) * factor
         ax.plot(v, y, "-", color="C0", lw=1.2)
@@ -66,6 +69,15 @@ def speed_figure(sweep):
             if st:
                 extra.append((ax.axhline(st["chi"], color="C2", ls="--", lw=1.0),
                               f"standstill index {st['chi']:.3f} (the limit v -> 0)"))
+        if name == "tau_c":
+            fr = sweep.column("tau_c_frozen") * 1e3
+            if np.isfinite(fr).any():
+                extra = [(ax.axhline(float(np.nanmax(fr)), color="C2", ls="--", lw=1.0),
+                          f"low-speed limit {np.nanmax(fr):.4g} ms (position-averaged "
+                          "frozen spectrum)")]
+            if sweep.params.tau > 0:
+                extra.append((ax.axhline(sweep.params.tau * 1e3, color="k", ls=":", lw=1.0),
+                              f"the delay set, {sweep.params.tau * 1e3:g} ms"))
         handles = _mark(ax, sweep, ax is axes[0]) + extra
         if handles:
             ax.legend([h for h, _ in handles], [t for _, t in handles], fontsize=7,
@@ -73,7 +85,9 @@ def speed_figure(sweep):
     axes[-1].set_xlabel("speed (km/h)")
     model = {"unit": "levitation unit", "vehicle": "full vehicle",
              "force": "moving force"}.get(sweep.model, sweep.model)
-    axes[0].set_title(f"At speed over identical spans (L = {sweep.params.L:g} m): {model}")
+    axes[0].set_title(f"At speed over identical spans (L = {sweep.params.L:g} m): {model}"
+                      + (f", delay tau = {sweep.params.tau * 1e3:g} ms" if sweep.params.tau > 0
+                         else ""))
     fig.tight_layout()
     return fig
 
@@ -145,10 +159,12 @@ def speed_map_figure(ds):
         y, yl = y * KMH, "speed v (km/h)"
     chi = np.ma.masked_invalid(ds["chi"].values)
     fig, ax = new_figure(figsize=(8.0, 5.5))
-    if chi.count():
+    X, Y = np.meshgrid(x, y)
+    if "tau_c" in ds:  # a map over the delay: the leading multiplier and tau_c(v)
+        _delay_map(fig, ax, ds, xname, x, y, X, Y)
+    elif chi.count():
         mesh = ax.pcolormesh(x, y, chi, shading="nearest", cmap="viridis")
         fig.colorbar(mesh, ax=ax, label="chi(v) = h(v) / w0")
-    X, Y = np.meshgrid(x, y)
     unstable = ds["stable"].values == 0
     if unstable.any():
         ax.plot(X[unstable], Y[unstable], "rx", ms=7, label="periodic response unstable")
@@ -157,13 +173,35 @@ def speed_map_figure(ds):
     if ceiling.any():
         ax.plot(X[ceiling], Y[ceiling], "^", mfc="none", color="w", ms=6,
                 label="every jump up to the gap range returned (h(v) = gap range)")
-    if unstable.any() or ceiling.any():
+    if unstable.any() or ceiling.any() or "tau_c" in ds:
         ax.legend(fontsize=8)
     ax.set_xlabel(xl)
     ax.set_ylabel(yl)
-    ax.set_title(f"At speed ({ds.attrs.get('model', '')}): chi(v) over {xname} and {yname}")
+    what = "max|multiplier| and tau_c(v)" if "tau_c" in ds else "chi(v)"
+    ax.set_title(f"At speed ({ds.attrs.get('model', '')}): {what} over {xname} and {yname}")
     fig.tight_layout()
     return fig
+
+
+def _delay_map(fig, ax, ds, xname, x, y, X, Y) -> None:
+    """The largest |multiplier| (log colour scale) over (v, tau), its unit-circle contour
+    on the grid and the solved tau_c(v) (a line over the speeds)."""
+    from matplotlib.colors import LogNorm
+
+    mu = np.ma.masked_invalid(ds["largest_multiplier"].values)
+    if mu.count():
+        mesh = ax.pcolormesh(x, y, mu, shading="nearest", cmap="coolwarm",
+                             norm=LogNorm(vmin=max(float(mu.min()), 1e-6),
+                                          vmax=max(float(mu.max()), 1.0 + 1e-9)))
+        fig.colorbar(mesh, ax=ax, label="largest |multiplier| of the span map")
+    v = ds["v"].values.astype(float) * KMH
+    tc = ds["tau_c"].values.astype(float)
+    ok = np.isfinite(tc)
+    if ok.any():
+        if xname == "v":
+            ax.plot(v[ok], tc[ok], "k.-", lw=1.5, label="critical delay tau_c(v) (solved)")
+        else:
+            ax.plot(tc[ok], v[ok], "k.-", lw=1.5, label="critical delay tau_c(v) (solved)")
 
 
 @figure.register(SpeedSweep)

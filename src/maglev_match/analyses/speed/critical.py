@@ -20,6 +20,7 @@ from maglev_match.core.params import Params
 from maglev_match.dynamics.integrate.passage import run_passages_batch
 from maglev_match.dynamics.integrate.simulate import EventsWithArgs, SimulationOptions
 from maglev_match.maglev import moving as mv
+from maglev_match.maglev import moving_delay as md
 from maglev_match.maglev.moving import MovingModel
 
 __all__ = ["CriticalStatus", "SpeedCritical", "critical_disturbance_at_speed"]
@@ -85,7 +86,7 @@ def critical_disturbance_at_speed(params: Params, kind: MovingModel, v: float,
     ``critical_sizes + 1`` per round."""
     problem = passage_problem(params, kind, v, limited=True)
     sys_l = problem.system
-    events = EventsWithArgs(mv.gap_events(kind, params.n_modes),
+    events = EventsWithArgs(md.gap_events_for(sys_l, kind, params.n_modes),
                             (float(params.gap_min), float(params.gap_max)))
     sim = SimulationOptions(rtol=opts.critical_rtol, atol=opts.critical_rtol,
                             max_steps=1_000_000, unroll_stages=False)

@@ -45,6 +45,7 @@ from maglev_match.dynamics.integrate.simulate import (
     simulate_batch,
 )
 from maglev_match.maglev import moving as mv
+from maglev_match.maglev import moving_delay as md
 from maglev_match.maglev.moving import MovingModel
 
 __all__ = ["POSITIONS", "IndexDirection", "IndexPosition", "SpeedIndex", "index_at_speed",
@@ -441,7 +442,7 @@ def index_at_speed(params: Params, model: str, v: float, sol,
     kind = MovingModel(model)
     pos = check_positions(positions)
     problem_l = passage_problem(params, kind, v, limited=True)
-    events = EventsWithArgs(mv.gap_events(kind, params.n_modes),
+    events = EventsWithArgs(md.gap_events_for(problem_l.system, kind, params.n_modes),
                             (float(params.gap_min), float(params.gap_max)))
     sim = SimulationOptions(rtol=opts.critical_rtol, atol=opts.critical_rtol,
                             max_steps=1_000_000, unroll_stages=False)

@@ -271,7 +271,9 @@ def check_irregular_setup(params: Params, model: str, speeds, profile, spans: in
         raise ParameterError("--irregularity", profile, "must name a profile")
     if isinstance(spans, bool) or not isinstance(spans, int) or spans < 1:
         raise ParameterError("--irregular-spans", spans, "must be a whole number >= 1")
-    kind = check_speed_setup(params, model, list(speeds), spans)
+    kind = check_speed_setup(params, model, list(speeds), spans, delay=False,
+                             refuse_delay="the runs over an irregular guideway have no "
+                             "delay of the outer loop yet")
     if kind is MovingModel.FORCE:
         raise ParameterError("--model", model, "an irregular guideway needs a levitated "
                              "model ('unit' or 'vehicle')")

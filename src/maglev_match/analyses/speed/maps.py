@@ -26,6 +26,9 @@ __all__ = ["MAP_SPEED_VARIABLES", "SpeedMapSpec", "parse_speed_axes", "run_speed
 
 
 # ---------------------------------------------------------------------------------------
+#: the delay axis of a map at speed: then the stability of the delayed periodic response
+#: (chi(v) is not computed) and the critical delay tau_c(v) per speed
+DELAY_AXIS = "tau"
 MAP_SPEED_VARIABLES = ("converged", "stable", "largest_multiplier", "daf", "gap_dev_abs_max",
                        "wz", "body_acc_peak", "h", "every_size_returned", "chi")
 
@@ -51,6 +54,15 @@ class SpeedMapSpec:
     @property
     def tiles(self) -> list[tuple[int, int]]:
         return [(i, i + 1) for i in range(self.y.count)]
+
+    @property
+    def tau_max(self) -> float | None:
+        """The longest delay of a map over the delay ``tau`` (s; one discretisation sized
+        for it serves every point), None without a delay axis."""
+        for ax in (self.x, self.y):
+            if ax.name == DELAY_AXIS:
+                return float(np.max(ax.values))
+        return None
 
     def point(self, xv: float, yv: float) -> tuple[Params, float]:
         """(parameters, speed in m/s) of a grid point."""
@@ -110,10 +122,12 @@ def compute_speed_map_tile(spec: SpeedMapSpec, rows: tuple[int, int]
     :data:`MAP_SPEED_VARIABLES`."""
     opts = SpeedOptions(**spec.options)
     out = {k: np.full((rows[1] - rows[0], spec.x.count), np.nan) for k in MAP_SPEED_VARIABLES}
+    tau_max = spec.tau_max
     for r in range(*rows):
         for c, xv in enumerate(spec.x.values):
             p, v = spec.point(xv, spec.y.values[r])
-            pt = speed_point(p, spec.model, v, opts)
+            pt = speed_point(p, spec.model, v, opts,
+                             tau_max=tau_max if tau_max and p.tau > 0 else None)
             for k in MAP_SPEED_VARIABLES:
                 val = getattr(pt, k)
                 out[k][r - rows[0], c] = (np.nan if val is None else float(val))
@@ -157,6 +171,45 @@ def run_speed_map(spec: SpeedMapSpec, checkpoint: Path | None = None, *, resume:
     ds["converged"] = ds["converged"].fillna(0).astype(np.int8)
     ds.attrs.update({"title": "maglev-match map at speed", "model": spec.model,
                      "spec": spec.key()})
+    if spec.tau_max is not None:
+        _add_critical_delay(ds, spec, units, names)
     from maglev_match.core.params import make_params
 
     return annotate(ds, make_params(dict(spec.base)), units=units, long_names=names)
+
+
+def _add_critical_delay(ds, spec: SpeedMapSpec, units: dict, names: dict) -> None:
+    """The critical delay tau_c(v) at every speed of a map over (v, tau), solved
+    (:func:`~maglev_match.analyses.speed.delay.critical_delay_at_speed`) from the grid's
+    first crossing of the unit circle in tau (linear in ln max|mu| between rows) or, without
+    one, the low-speed limit; 1-D over v, with how each solve ended."""
+    from maglev_match.analyses.speed.delay import critical_delay_at_speed
+    from maglev_match.core.params import make_params
+
+    if DELAY_AXIS not in ds.dims or "v" not in ds.dims:
+        return
+    lm = np.log(ds["largest_multiplier"].transpose(DELAY_AXIS, "v").values)
+    taus = ds[DELAY_AXIS].values.astype(float)
+    base = make_params(dict(spec.base))
+    opts = SpeedOptions(**spec.options)
+    vals, status, grid = [], [], []
+    for j, v in enumerate(ds["v"].values.astype(float)):
+        col = lm[:, j]
+        guess = None
+        for k in range(taus.size - 1):
+            a, b = col[k], col[k + 1]
+            if np.isfinite(a) and np.isfinite(b) and a < 0 <= b:
+                guess = float(taus[k] + (taus[k + 1] - taus[k]) * (-a) / (b - a))
+                break
+        grid.append(np.nan if guess is None else guess)
+        cd = critical_delay_at_speed(base.replace(tau=0.0), spec.model, float(v), opts,
+                                     guess=guess)
+        vals.append(cd.value)
+        status.append(cd.status)
+    ds["tau_c"] = (("v",), np.array(vals, float))
+    ds["tau_c_grid"] = (("v",), np.array(grid, float))
+    ds["tau_c"].attrs.update({"units": "s", "long_name": SWEEP_NAMES["tau_c"]})
+    ds["tau_c_grid"].attrs.update({"units": "s", "long_name": "first crossing of max|mu| = 1 "
+                                   "in tau on the grid (linear in ln max|mu|), the solve's "
+                                   "start"})
+    ds.attrs["tau_c_status"] = json.dumps(status)

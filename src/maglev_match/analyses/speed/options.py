@@ -15,6 +15,7 @@ from maglev_match.analyses.speed.grid import KMH, SPEED_MAX, SPEED_MIN
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.dynamics.integrate.passage import PassageOptions
 from maglev_match.maglev import moving as mv
+from maglev_match.maglev import moving_delay as md
 from maglev_match.maglev.moving import MovingModel
 
 __all__ = ["SpeedOptions", "check_speed_setup", "w0_of"]
@@ -37,6 +38,8 @@ class SpeedOptions:
     return_tol : a disturbed run has returned when the state at a span hand-over is within
         this (scaled: 1 mm, 1 cm/s, 1 A) of the periodic response.
     spans : spans a disturbed run may take to return (the guideway's length in spans).
+    critical_delay : compute the critical delay of the outer loop at every speed
+        (:mod:`maglev_match.analyses.speed.delay`).
     """
 
     rtol: float = 1e-10
@@ -52,6 +55,7 @@ class SpeedOptions:
     critical_rtol: float = 1e-8
     return_tol: float = 0.05
     spans: int = 40
+    critical_delay: bool = False
 
     def __post_init__(self) -> None:
         for name in ("rtol", "atol", "tangent_rtol", "newton_tol", "critical_rtol",
@@ -69,6 +73,9 @@ class SpeedOptions:
                 raise ParameterError(name if name != "spans" else "--spans", v,
                                      f"must be a whole number in [{lo}, {hi}]")
 
+        if not isinstance(self.critical_delay, bool):
+            raise ParameterError("critical_delay", self.critical_delay, "must be true or false")
+
     def passage(self) -> PassageOptions:
         return PassageOptions(rtol=self.rtol, atol=self.atol, tangent_rtol=self.tangent_rtol,
                               tangent_atol=self.tangent_rtol, newton_tol=self.newton_tol)
@@ -78,21 +85,23 @@ class SpeedOptions:
 
 
 def check_speed_setup(params: Params, model: str, speeds: Sequence[float] = (),
-                      spans: int | None = None) -> MovingModel:
+                      spans: int | None = None, *, delay: bool = True,
+                      refuse_delay: str = "") -> MovingModel:
     """Validate a computation at speed before any work: the model name, the parameters the
-    models at speed need, the speeds (m/s; finite, >= 0 and at most 900 km/h) and the number
-    of spans. Raises :class:`~maglev_match.core.params.ParameterError` naming the field, the value
-    and the rule."""
+    models at speed need, the speeds (m/s; finite, >= 0 and at most 900 km/h), the number
+    of spans and the delay tau (one the discretisation resolves at every speed; with
+    ``delay`` False any tau > 0 is refused, ``refuse_delay`` saying for what). Raises
+    :class:`~maglev_match.core.params.ParameterError` naming the field, the value and the
+    rule."""
     try:
         kind = MovingModel(model)
     except ValueError:
         raise ParameterError("--model", model, "must be 'unit', 'vehicle' or 'force' at "
                              "speed") from None
-    if params.tau > 0:
-        raise ParameterError("tau", params.tau, "the models at speed have no delay of the "
-                             "outer loop yet: set tau = 0 for a computation at speed (the "
-                             "delay is analysed standing still: stability, hopf --param tau, "
-                             "index)")
+    if params.tau > 0 and not delay:
+        raise ParameterError("tau", params.tau, f"{refuse_delay}: set tau = 0 (the delay at "
+                             "speed is analysed on the periodic response over identical "
+                             "spans: speed --set tau=...)")
     if kind is not MovingModel.VEHICLE and "sigma" in params.explicit:
         raise ParameterError(
             "sigma", params.sigma, "is set directly, but at speed the unit's coupling to the "
@@ -125,6 +134,8 @@ def check_speed_setup(params: Params, model: str, speeds: Sequence[float] = (),
                                  f"{SPEED_MIN:g} m/s ({SPEED_MIN / KMH:g} km/h): slower, one "
                                  "span passage lasts longer than a run at speed can "
                                  "integrate, and the answer is the standstill one")
+    if params.tau > 0:
+        md.check_delay_at_speed(params, kind, speeds)
     return kind
 
 

@@ -35,10 +35,11 @@ from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.integrate.passage import SAVE_SLOTS, PassageProblem, Segment
 from maglev_match.dynamics.integrate.simulate import SimulationOptions, simulate
 from maglev_match.maglev import moving as mv
+from maglev_match.maglev import moving_delay as md
 from maglev_match.maglev.moving import MovingModel
 
-__all__ = ["CHUNK", "slot_flags", "passage_problem", "quasi_static_state", "observe_all",
-           "sample_times", "integrate_saving", "passage_states", "PassageSamples",
+__all__ = ["CHUNK", "slot_flags", "passage_problem", "lift_state", "quasi_static_state",
+           "observe_all", "sample_times", "integrate_saving", "passage_states", "PassageSamples",
            "sample_passage", "observe_samples", "PassageReadouts", "passage_readouts"]
 
 CHUNK = SAVE_SLOTS  # saved times per integrator call: one compiled kernel for every run
@@ -54,7 +55,7 @@ def slot_flags(params: Params, kind: MovingModel, x_front: float) -> tuple[np.nd
 
 def passage_problem(params: Params, model: str, v: float, *, limited: bool = False,
                     approach_rigid: bool = False, exit_rigid: bool = False,
-                    profile=None) -> PassageProblem:
+                    profile=None, tau_max: float | None = None) -> PassageProblem:
     """One span passage at speed v (m/s > 0) as a
     :class:`~maglev_match.dynamics.integrate.passage.PassageProblem`: segments between the support
     crossings of the loads' edges, each with its slot flags; the jump hands slot B over to
@@ -62,7 +63,10 @@ def passage_problem(params: Params, model: str, v: float, *, limited: bool = Fal
     (the abutment before the first span); ``exit_rigid``: slot B is (after the last).
     ``profile``: an :class:`~maglev_match.maglev.irregularity.Irregularity`; the segments'
     parameter vectors then end with its (zero) entries, which a run over the spans sets per
-    passage (:meth:`~maglev_match.maglev.irregularity.Irregularity.vector`)."""
+    passage (:meth:`~maglev_match.maglev.irregularity.Irregularity.vector`). With a delay
+    ``params.tau`` > 0 (or ``tau_max``, the discretisation then sized for delays up to it)
+    the system is the discretised delayed model (:mod:`maglev_match.maglev.moving_delay`),
+    every segment's vector ends with tau, and the hand-over keeps the commands' history."""
     kind = MovingModel(model)
     if not v > 0:
         raise ParameterError("speed", v, "a passage needs a speed > 0")
@@ -82,8 +86,15 @@ def passage_problem(params: Params, model: str, v: float, *, limited: bool = Fal
         if profile is not None:
             p = np.concatenate([p, profile.zero_vector()])
         segs.append(Segment(float(b - a), p))
-    system = mv.moving_system(params, kind, segs[0].p, limited=limited, period=T,
-                              waves=None if profile is None else profile.n_waves)
+    waves = None if profile is None else profile.n_waves
+    if params.tau > 0 or tau_max is not None:
+        system = md.moving_delay_system(params, kind, segs[0].p, tau=float(params.tau),
+                                        limited=limited, period=T, waves=waves,
+                                        tau_max=tau_max)
+        segs = [Segment(s.duration, md.delayed_vector(s.p, params.tau)) for s in segs]
+    else:
+        system = mv.moving_system(params, kind, segs[0].p, limited=limited, period=T,
+                                  waves=waves)
     sl = mv.slot_slices(kind, params.n_modes)
     n = system.dim - 1
     R = np.eye(n)
@@ -93,6 +104,16 @@ def passage_problem(params: Params, model: str, v: float, *, limited: bool = Fal
     R[sl["qA"], sl["qB"]] = np.eye(m)
     R[sl["qA_dot"], sl["qB_dot"]] = np.eye(m)
     return PassageProblem(system, tuple(segs), R)
+
+
+def lift_state(problem: PassageProblem, x: np.ndarray) -> np.ndarray:
+    """A moving model's state (clock last) as a state of ``problem``'s system: unchanged
+    for a delay-free model; with the delayed model, the constant past of the commands
+    (every history node holds the commands of ``x``)."""
+    x = np.asarray(x, float)
+    if x.shape[-1] == problem.system.dim:
+        return x
+    return problem.system.lift(x, problem.segments[0].p)
 
 
 def quasi_static_state(params: Params, model: str, x_front: float, *, tol: float = 1e-12,

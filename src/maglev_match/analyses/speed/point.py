@@ -50,6 +50,7 @@ from maglev_match.analyses.speed.grid import KMH
 from maglev_match.analyses.speed.index import SpeedIndex, index_at_speed
 from maglev_match.analyses.speed.options import SpeedOptions, w0_of
 from maglev_match.analyses.speed.passage import (
+    lift_state,
     passage_problem,
     passage_readouts,
     quasi_static_state,
@@ -59,6 +60,7 @@ from maglev_match.core.params import Params
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.integrate.passage import PeriodicPassage, solve_periodic_passage
 from maglev_match.maglev import moving as mv
+from maglev_match.maglev import moving_delay as md
 from maglev_match.maglev.moving import MovingModel
 
 __all__ = ["SpeedPoint", "speed_point", "standstill_point", "periodic_response",
@@ -121,6 +123,16 @@ class SpeedPoint:
     index: SpeedIndex | None = None
     h_entry: float = math.nan
     chi_entry: float = math.nan
+    #: the delay of the outer loop this point was computed with (s)
+    tau: float = 0.0
+    #: the critical delay at this speed (:mod:`maglev_match.analyses.speed.delay`; NaN when
+    #: not computed): tau_c (s), how its solve ended, the leading multiplier there (re, im;
+    #: at v = 0 the rightmost root, 1/s), and its low-speed limit (the delay at which the
+    #: position-averaged frozen spectral abscissa crosses 0, s)
+    tau_c: float = math.nan
+    tau_c_status: str = ""
+    tau_c_multiplier: tuple[float, float] = (math.nan, math.nan)
+    tau_c_frozen: float = math.nan
 
     @property
     def speed_kmh(self) -> float:
@@ -169,6 +181,8 @@ class SpeedPoint:
         for k in ("gap_dev_max", "gap_dev_min", "current_max", "current_min", "warnings"):
             d[k] = tuple(d[k])
         d["critical_multiplier"] = tuple(d["critical_multiplier"])
+        if "tau_c_multiplier" in d:
+            d["tau_c_multiplier"] = tuple(d["tau_c_multiplier"])
         d["multipliers"] = tuple(tuple(m) for m in d["multipliers"])
         return cls(**d)
 
@@ -180,7 +194,7 @@ def _nan_point(v: float, params: Params, kind: MovingModel, message: str,
     return SpeedPoint(v, params.L / v if v > 0 else math.inf, False, None, nan, (nan, nan), (),
                       "", nan, (nan,) * n_pts, (nan,) * n_pts, (nan,) * n_pts, (nan,) * n_pts,
                       False, nan, st, nan, nan, nan, None, None, nan, w0_of(params, kind), nan,
-                      nan, nan, 0, 0, 0, (message,))
+                      nan, nan, 0, 0, 0, (message,), tau=float(params.tau))
 
 
 def adiabatic_rate(params: Params, model: str, v: float, positions: int = 40) -> float:
@@ -227,18 +241,21 @@ def _failed_point(v: float, params: Params, kind: MovingModel, message: str,
 
 
 def periodic_response(params: Params, model: str, v: float,
-                      options: SpeedOptions | None = None) -> PeriodicPassage:
+                      options: SpeedOptions | None = None, *,
+                      tau_max: float | None = None) -> PeriodicPassage:
     """The periodic response at speed v (m/s > 0): the fixed point of the span map from the
     quasi-static state at the hand-over, with its multipliers
-    (:func:`~maglev_match.dynamics.integrate.passage.solve_periodic_passage`)."""
+    (:func:`~maglev_match.dynamics.integrate.passage.solve_periodic_passage`). With a delay
+    ``params.tau`` > 0 that of the delayed model (``tau_max``: its discretisation sized for
+    delays up to this, :func:`~maglev_match.analyses.speed.passage.passage_problem`)."""
     opts = options or SpeedOptions()
     kind = MovingModel(model)
-    problem = passage_problem(params, kind, v)
+    problem = passage_problem(params, kind, v, tau_max=tau_max)
     guess = quasi_static_state(params, kind, float(params.L))
     sl = mv.slot_slices(kind, params.n_modes)
     guess[sl["qB"]] = 0.0  # the span ahead is at rest at the hand-over
     guess[sl["qB_dot"]] = 0.0
-    return solve_periodic_passage(problem, guess, opts.passage())
+    return solve_periodic_passage(problem, lift_state(problem, guess), opts.passage())
 
 
 def _multiplier_pairs(values: np.ndarray, k: int = 8) -> tuple[tuple[float, float], ...]:
@@ -247,9 +264,11 @@ def _multiplier_pairs(values: np.ndarray, k: int = 8) -> tuple[tuple[float, floa
 
 
 def speed_point(params: Params, model: str, v: float,
-                options: SpeedOptions | None = None) -> SpeedPoint:
+                options: SpeedOptions | None = None, *,
+                tau_max: float | None = None) -> SpeedPoint:
     """All read-outs at one speed v (m/s; v = 0 gives the standstill values,
-    :func:`standstill_point`). Failures are reported in the point (``converged`` False and a
+    :func:`standstill_point`; ``tau_max``: a delay's discretisation sized for delays up to
+    this, as in a map over the delay). Failures are reported in the point (``converged`` False and a
     warning), never raised."""
     opts = options or SpeedOptions()
     kind = MovingModel(model)
@@ -257,7 +276,7 @@ def speed_point(params: Params, model: str, v: float,
     if v == 0:
         return standstill_point(params, kind)
     try:
-        sol = periodic_response(params, kind, v, opts)
+        sol = periodic_response(params, kind, v, opts, tau_max=tau_max)
     except FloatingPointError as exc:
         return _failed_point(v, params, kind, f"no periodic response: {exc}", n_pts)
     if not sol.converged or sol.multipliers is None:
@@ -339,7 +358,7 @@ def speed_point(params: Params, model: str, v: float,
         w0=float(w0), chi=chi, integration_error=float(sol.integration_error),
         residual=float(sol.residual), passages=int(sol.passages), jacobians=int(sol.jacobians),
         samples=int(ro.samples), warnings=tuple(warnings), index=index, h_entry=h_entry,
-        chi_entry=chi_entry)
+        chi_entry=chi_entry, tau=float(params.tau))
 
 
 def standstill_point(params: Params, model: str) -> SpeedPoint:
@@ -358,8 +377,12 @@ def standstill_point(params: Params, model: str) -> SpeedPoint:
     p = mv.moving_param_vector(params, kind, v=0.0, x_front=x_front, front_on_B=fb,
                                rear_on_B=rb)
     system = mv.moving_system(params, kind, p)
-    n = system.dim - 1
-    J = system.jacobian(x, p)[:n, :n]
+    if params.tau > 0 and kind is not MovingModel.FORCE:  # the delayed model's roots
+        delayed = md.moving_delay_system(params, kind, p, tau=float(params.tau))
+        pd = md.delayed_vector(p, params.tau)
+        J = delayed.jacobian(delayed.lift(x, pd), pd)[:-1, :-1]
+    else:
+        J = system.jacobian(x, p)[:-1, :-1]
     lam = np.linalg.eigvals(J)
     mr = float(np.max(lam.real))
     st, _ = mv.static_midspan_deflection(params, kind)
@@ -381,4 +404,4 @@ def standstill_point(params: Params, model: str) -> SpeedPoint:
         integration_error=nan, residual=0.0, passages=0, jacobians=0, samples=0,
         warnings=("v = 0: the vehicle standing at mid-span (no span is entered, so the "
                   "entry disturbance is not defined there; chi(v) tends to the standstill "
-                  "index, `maglev-match index`, as v -> 0)",))
+                  "index, `maglev-match index`, as v -> 0)",), tau=float(params.tau))

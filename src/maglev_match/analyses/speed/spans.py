@@ -178,7 +178,9 @@ def simulate_over_spans(params: Params, model: str, v: float, spans: int, *,
     (:class:`~maglev_match.maglev.irregularity.Irregularity`, drawn with ``seed`` if
     random) under every levitation point; then no overlay."""
     opts = options or SpeedOptions()
-    kind = check_speed_setup(params, model, [v], spans)
+    kind = check_speed_setup(params, model, [v], spans, delay=False,
+                             refuse_delay="a run over a finite number of spans has no "
+                             "delay of the outer loop yet")
     if not v > 0:
         raise ParameterError("--speed", v, "must be > 0 for a run over spans")
     L = float(params.L)

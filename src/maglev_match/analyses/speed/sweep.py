@@ -44,6 +44,7 @@ from maglev_match.analyses.speed.critical import (
     SpeedCritical,
     critical_disturbance_at_speed,
 )
+from maglev_match.analyses.speed.delay import with_critical_delay
 from maglev_match.analyses.speed.grid import KMH, SPEED_MAX, speeds_kmh
 from maglev_match.analyses.speed.options import SpeedOptions, check_speed_setup, w0_of
 from maglev_match.analyses.speed.passage import (
@@ -296,6 +297,8 @@ def compute_speed_tile(spec: SweepSpec, rows: tuple[int, int]) -> dict[str, np.n
     params = spec.params()
     opts = SpeedOptions(**spec.options)
     pts = [speed_point(params, spec.model, spec.speeds[i], opts) for i in range(*rows)]
+    if opts.critical_delay and MovingModel(spec.model) is not MovingModel.FORCE:
+        pts = [with_critical_delay(p, params, spec.model, opts) for p in pts]
     return {"speed": np.array([[p.speed] for p in pts]),
             "point": np.array([json.dumps(p.to_json()) for p in pts])}
 
@@ -400,8 +403,18 @@ class SpeedSweep(Plottable):
             "largest_multiplier": best("largest_multiplier"),
             "smallest_chi": self.smallest_chi(),
             "standstill": self.standstill,
+            "tau": float(self.params.tau),
+            "critical_delay": self.critical_delays(),
             "warnings": list(self.warnings),
         }
+
+    def critical_delays(self) -> list[dict[str, Any]] | None:
+        """The critical delay per speed (speed m/s, tau_c s, status, low-speed limit s);
+        None when not computed."""
+        if not self.options.critical_delay:
+            return None
+        return [{"speed": float(p.speed), "tau_c": float(p.tau_c), "status": p.tau_c_status,
+                 "frozen_limit": float(p.tau_c_frozen)} for p in self.points]
 
     def smallest_chi(self) -> dict[str, Any] | None:
         """The smallest chi(v) of the sweep: value, speed (m/s), the position of the
@@ -501,7 +514,7 @@ SWEEP_UNITS = {
     "wz": "1", "h": "m", "h_down": "m", "h_up": "m", "every_size_returned": "1", "w0": "m",
     "chi": "1", "index_fraction": "1", "index_direction": "1", "h_entry": "m",
     "h_entry_down": "m", "h_entry_up": "m", "entry_at_ceiling": "1", "chi_entry": "1",
-    "integration_error": "1", "point": "1",
+    "integration_error": "1", "point": "1", "tau_c": "s", "tau_c_frozen": "s",
 }
 SWEEP_NAMES = {
     "speed": "vehicle speed",
@@ -542,6 +555,10 @@ SWEEP_NAMES = {
     "w0": "static deflection of the standstill index (same model)",
     "chi": "matching index at speed chi(v) = h(v) / w0 (the standstill index as v -> 0)",
     "integration_error": "variational solve against state run, scaled",
+    "tau_c": "critical delay of the outer loop: smallest tau at which the periodic response "
+             "loses stability (v = 0: standing at mid-span)",
+    "tau_c_frozen": "low-speed limit of tau_c: position-averaged frozen spectral abscissa "
+                    "crosses 0",
     "point": "levitation point number (1-based)",
 }
 
@@ -612,6 +629,9 @@ def sweep_dataset(sweep: SpeedSweep):
         "chi_entry": (("speed",), sweep.column("chi_entry")),
         "integration_error": (("speed",), sweep.column("integration_error")),
     }
+    if sweep.options.critical_delay:
+        data["tau_c"] = (("speed",), sweep.column("tau_c"))
+        data["tau_c_frozen"] = (("speed",), sweep.column("tau_c_frozen"))
     if n_pts:
         for name in ("gap_dev_max", "gap_dev_min", "current_max", "current_min"):
             data[name] = per_point(name)
@@ -637,6 +657,7 @@ def sweep_dataset(sweep: SpeedSweep):
         "chi_standstill": (float("nan") if not sweep.standstill
                            else float(sweep.standstill["chi"])),
         "options": json.dumps(sweep.options.key()),
+        "tau": float(sweep.params.tau),
         "points": json.dumps([p.to_json() for p in pts], default=float),
     })
     return annotate(ds, sweep.params)
