@@ -19,15 +19,17 @@ R2 = 0.5  # the paper part of the toy: chi_paper = 10 (p1^2 + p2^2), = 5 on p1^2
 SWITCH = (1.0 / 3.0, math.sqrt(R2 - 1.0 / 9.0))  # chi_paper = chi_sim = 5 there
 
 
-def toy(p1: float, p2: float, bracketed_below: float = -math.inf) -> Sample:
+def toy(p1: float, p2: float, bracketed_below: float = -math.inf,
+        rounded: bool = True) -> Sample:
     """chi_paper = 10 (p1^2 + p2^2), chi_simulation = 4 + 3 p1 (= 5 on p1 = 1/3), the
     headline their minimum; the simulated part's mechanism is grazing above p2 = 0.8 and a
     basin boundary below; below ``bracketed_below`` in p2 the simulated part is only a
-    bisection bracket (its value rounded to 0.01)."""
+    bisection bracket (its value rounded to 0.01, or, ``rounded`` False, exact but still
+    marked as bracketed)."""
     cp, cs = 10.0 * (p1 * p1 + p2 * p2), 4.0 + 3.0 * p1
     status = "solved"
     if p2 < bracketed_below:
-        cs, status = round(cs, 2) + 0.003, "bracketed"
+        cs, status = (round(cs, 2) + 0.003 if rounded else cs), "bracketed"
     basis = "simulation" if cs < cp else "paper"
     return Sample(min(cp, cs), cp, cs, basis, "grazing" if p2 > 0.8 else "basin_boundary",
                   "up", "cycle", status)
@@ -85,6 +87,90 @@ def test_toy_curve_that_cannot_start_says_why():
     tr = trace_iso(toy, BOX, 50.0, fixed=1, value=0.0)
     assert not tr.points and tr.start is None
     assert "no sign change" in tr.warnings[0] and "chi from" in tr.warnings[0]
+
+
+class ToyWithGradient:
+    """:func:`toy` with the exact gradient of both parts (the tracer uses it instead of a
+    forward difference); ``calls`` counts the evaluations."""
+
+    def __init__(self, bracketed_below: float = -math.inf, rounded: bool = True) -> None:
+        self.below, self.rounded, self.calls = bracketed_below, rounded, 0
+
+    def __call__(self, p1: float, p2: float) -> Sample:
+        self.calls += 1
+        return toy(p1, p2, self.below, self.rounded)
+
+    def gradient(self, p1: float, p2: float, sample: Sample):
+        parts = {"paper": np.array([20.0 * p1, 20.0 * p2])}
+        if sample.simulation_status == "solved":
+            parts["simulation"] = np.array([3.0, 0.0])
+        return parts, "" if "simulation" in parts else "simulated part bracketed"
+
+
+def test_toy_curve_with_the_exact_gradient_is_the_same_curve_with_fewer_evaluations():
+    fd = trace_iso(toy, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    ev = ToyWithGradient()
+    tr = trace_iso(ev, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    assert tr.evaluations == ev.calls < fd.evaluations
+    assert {p.gradient for p in tr.points} == {"exact"}
+    assert {p.gradient for p in fd.points} == {"difference: the evaluator gives no "
+                                               "derivative"}
+    for pt in tr.points:  # on the same closed-form curve
+        assert pt.status == "solved" and abs(pt.sample.chi - 5.0) <= 1e-7 * 5.0
+        if pt.sample.basis == "paper":
+            assert abs(pt.p1 ** 2 + pt.p2 ** 2 - R2) < 1e-7
+        else:
+            assert abs(pt.p1 - 1.0 / 3.0) < 1e-7
+    assert tr.ends == fd.ends
+    switches = [s for s in tr.specials if s.kind == "basis switch"]
+    assert len(switches) == 2 and all(s.located for s in switches)
+    for s, sign in zip(switches, (-1, 1), strict=True):  # located with the exact Jacobian
+        assert s.p1 == pytest.approx(SWITCH[0], abs=1e-7)
+        assert s.p2 == pytest.approx(sign * SWITCH[1], abs=1e-7)
+
+
+def test_toy_gradient_falls_back_to_a_difference_only_where_the_part_is_bracketed():
+    # the simulated part is marked bracketed below p2 = -0.2 (its values exact, so the
+    # corrector converges there): the points there that the simulation decides have no
+    # derivative and say so; all others use the exact gradient
+    ev = ToyWithGradient(bracketed_below=-0.2, rounded=False)
+    tr = trace_iso(ev, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    fallbacks = 0
+    for pt in tr.points:
+        s = pt.sample
+        assert pt.status in ("solved", "bracketed")
+        if s.basis == "simulation" and s.simulation_status == "bracketed":
+            fallbacks += 1
+            assert pt.status == "bracketed" and abs(pt.p1 - 1.0 / 3.0) < 1e-7
+            assert pt.gradient == ("difference: the deciding simulated part is only "
+                                   "bracketed: no derivative"), pt
+        else:
+            assert pt.gradient == "exact", pt
+    assert fallbacks >= 2 and sum(p.gradient == "exact" for p in tr.points) > 10
+
+
+def test_maglev_gradient_equals_a_central_difference_of_chi():
+    # the tracer's gradient on model A: the analytic sensitivities of the deciding part,
+    # against a central difference of independent index evaluations (no warm start), where
+    # the paper decides (no simulation) and where the simulation (grazing) does (kD = 150)
+    from maglev_match.analyses.iso import MaglevChi
+    from maglev_match.api.inputs import resolve_params
+
+    base = resolve_params("turnout-soft")
+    for simulate, kd, basis in ((False, 150.0, "paper"), (True, 150.0, "simulation")):
+        ev = MaglevChi(base, ("EI", "kD"), simulate=simulate, warm=False)
+        v = np.array([2.0e10, kd])
+        smp = ev(*v)
+        assert smp.basis == basis and smp.exact
+        parts, why = ev.gradient(*v, smp)
+        g = parts[basis]
+        for i in range(2):
+            h = np.zeros(2)
+            h[i] = 1e-5 * v[i]
+            cd = (ev(*(v + h)).chi - ev(*(v - h)).chi) / (2 * h[i])
+            assert g[i] == pytest.approx(cd, rel=2e-6), (simulate, kd, i, g[i], cd)
+        if simulate:  # both parts differentiated where both were solved
+            assert set(parts) == {"paper", "simulation"} and why == ""
 
 
 # ---------------------------------------------------------------------------------------

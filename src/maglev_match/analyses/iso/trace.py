@@ -2,23 +2,31 @@
 headline index and its two parts.
 
 Method (pseudo-arclength continuation of a scalar level set, Allgower & Georg 1990, ch. 2
-and 10): the unknowns are the two parameters scaled to their ranges, u_i = (p_i - lo_i) /
-(hi_i - lo_i), so that a step means the same fraction of either range. With
-F(u) = chi(u) - target and g its gradient (a forward difference on warm-started
-evaluations), the tangent t is g turned by 90 degrees; the predictor steps ds along t and
-the corrector solves F = 0 on the line through the predicted point along the normal g
-(Newton with the gradient's slope, then secant steps), to |F| <= tol * target. Steps grow
-after easy corrections (at most 2 iterations) and halve after a failed one or a turn of the
-tangent by more than about 37 degrees; below the smallest step the curve ends with its
-reason and a warning. Both directions are followed from the start; a curve that leaves the
-ranges ends on their edge (the last point solved on the edge line).
+and 10): the unknowns are the two parameters scaled to their ranges,
+u_i = (p_i - lo_i) / (hi_i - lo_i), so that a step means the same fraction of either range.
+With F(u) = chi(u) - target and g its gradient, the tangent t is g turned by 90 degrees;
+the predictor steps ds along t and the corrector solves F = 0 on the line through the
+predicted point along the normal g (Newton with the gradient's slope, then secant steps),
+to |F| <= tol * target. Steps grow after easy corrections (at most 2 iterations) and halve
+after a failed one or a turn of the tangent by more than about 37 degrees; below the
+smallest step the curve ends with its reason and a warning. Both directions are followed
+from the start; a curve that leaves the ranges ends on their edge (the last point solved on
+the edge line).
+
+The gradient is the exact one of the deciding part where the evaluator gives it (a
+``gradient(p1, p2, sample)`` method returning each part's gradient, e.g. the index's
+analytic sensitivities): no extra evaluation. Where the deciding part has no derivative
+(a simulated part only bracketed by its bisection, a parameter without an analytic
+derivative) or the evaluator gives none, it is a forward difference of two more
+evaluations; every point records which (``IsoPoint.gradient``).
 
 Between two neighbouring points where the deciding part switches (paper <-> simulation)
 the switch is the point where both parts equal the target: started where D = chi_paper -
 chi_simulation interpolates to 0 on the chord (corrected onto the curve), located by Newton
-on (chi_paper - target, chi_simulation - target) = 0 with a forward-difference Jacobian, to
-10 tol * target in both; a change of the simulated part's mechanism (a discrete label) is
-located by bisection of the same kind to 1/32 of the step. Both are special points.
+on (chi_paper - target, chi_simulation - target) = 0 with the two parts' exact gradients
+as its Jacobian (a forward difference where one has none), to 10 tol * target in both; a
+change of the simulated part's mechanism (a discrete label) is located by bisection of the
+same kind to 1/32 of the step. Both are special points.
 
 Every point records which parts were solved: the simulated part's critical size may only
 be bracketed by its bisection (no solved condition, chi known only to the bisection's
@@ -28,6 +36,7 @@ converge because of it, the curve ends there and says why.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -89,6 +98,9 @@ class IsoPoint:
     iterations: int
     status: str
     branch: int = 0  # 0 the start, +1 / -1 the direction followed
+    # how the gradient of chi there was obtained: "exact" (the deciding part's analytic
+    # derivative) or "difference: <why not exact>" ('' where none was computed)
+    gradient: str = ""
 
 
 @dataclass(frozen=True)
@@ -143,6 +155,9 @@ class _Tracer:
         self.cache: dict[tuple[float, float], Sample] = {}
         self.evaluations = 0
         self.warnings: list[str] = []
+        self.exact = getattr(evaluate, "gradient", None)
+        self.part_cache: dict[tuple[float, float], tuple[dict[str, np.ndarray], str]] = {}
+        self.grad_how: dict[tuple[float, float], str] = {}
 
     # -- evaluation ------------------------------------------------------------------
     def params(self, u: np.ndarray) -> tuple[float, float]:
@@ -159,7 +174,35 @@ class _Tracer:
     def F(self, u: np.ndarray) -> float:
         return self.sample(u).chi - self.target
 
+    def part_gradients(self, u: np.ndarray) -> tuple[dict[str, np.ndarray], str]:
+        """The evaluator's exact gradients of the two parts at u, in the scaled unknowns
+        ({} and why not, where it has none)."""
+        if self.exact is None:
+            return {}, "the evaluator gives no derivative"
+        key = self.params(u)
+        if key not in self.part_cache:
+            parts, why = self.exact(*key, self.sample(u))
+            self.part_cache[key] = ({k: np.asarray(v, float) * self.width
+                                     for k, v in parts.items()}, why)
+        return self.part_cache[key]
+
     def gradient(self, u: np.ndarray, f0: float) -> np.ndarray | None:
+        """The gradient of F at u: the deciding part's exact gradient where there is one,
+        else a forward difference (how: ``self.grad_how``)."""
+        key = self.params(u)
+        smp = self.sample(u)
+        if self.exact is None:
+            why = "the evaluator gives no derivative"
+        elif not smp.exact:
+            why = "the deciding simulated part is only bracketed: no derivative"
+        else:
+            parts, why = self.part_gradients(u)
+            g = parts.get(smp.basis)
+            if g is not None and np.all(np.isfinite(g)) and np.linalg.norm(g) > 0:
+                self.grad_how[key] = "exact"
+                return g
+            why = why or f"the {smp.basis} part has no derivative"
+        self.grad_how[key] = f"difference: {why}"
         g = np.zeros(2)
         for i in range(2):
             h = self.s.fd_step if u[i] + self.s.fd_step <= 1.0 + 1e-12 else -self.s.fd_step
@@ -340,7 +383,7 @@ class _Tracer:
             smp = self.sample(new)
             p1, p2 = self.params(new)
             point = IsoPoint(p1, p2, smp, f, its, "solved" if smp.exact else "bracketed",
-                             sign)
+                             sign, self.grad_how.get((p1, p2), ""))
             specials += self.specials_between(prev, point, g, g_new)
             pts.append(point)
             prev = point
@@ -418,11 +461,26 @@ class _Tracer:
         sim = float("nan") if smp.chi_simulation is None else smp.chi_simulation
         return np.array([smp.chi_paper, sim]) - self.target
 
+    def _parts_jacobian(self, u: np.ndarray, G: np.ndarray) -> np.ndarray:
+        """d (chi_paper, chi_simulation) / du: the exact gradients of both parts where the
+        evaluator gives them, else a forward difference."""
+        parts, _ = self.part_gradients(u) if self.sample(u).simulation_status == "solved" \
+            else ({}, "")
+        if "paper" in parts and "simulation" in parts:
+            return np.vstack([parts["paper"], parts["simulation"]])
+        J = np.empty((2, 2))
+        for k in range(2):
+            e = np.zeros(2)
+            e[k] = self.s.fd_step
+            J[:, k] = (self._parts(u + e) - G) / self.s.fd_step
+        return J
+
     def locate_switch(self, ua, ub, sa: Sample, sb: Sample, g) -> IsoSpecial:
         """Where both parts equal the target between the points a and b: Newton on
-        (chi_paper - target, chi_simulation - target) = 0 (forward-difference Jacobian of
-        the two parts), from the chord point where chi_paper - chi_simulation interpolates
-        to 0, corrected onto the curve."""
+        (chi_paper - target, chi_simulation - target) = 0 (the Jacobian of the two parts:
+        their exact gradients where the evaluator gives them, else a forward difference),
+        from the chord point where chi_paper - chi_simulation interpolates to 0, corrected
+        onto the curve."""
         self.say("locating the switch of the deciding part ...")
         kind = "basis switch"
         da, db = self._difference(sa), self._difference(sb)
@@ -438,11 +496,7 @@ class _Tracer:
         for _ in range(8):
             if not np.all(np.isfinite(G)) or np.max(np.abs(G)) <= tol:
                 break
-            J = np.empty((2, 2))
-            for k in range(2):
-                e = np.zeros(2)
-                e[k] = self.s.fd_step
-                J[:, k] = (self._parts(u + e) - G) / self.s.fd_step
+            J = self._parts_jacobian(u, G)
             try:
                 du = np.linalg.solve(J, -G)
             except np.linalg.LinAlgError:
@@ -524,6 +578,7 @@ def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: fl
         why = "one point asked: the start alone"
         return done([first], 0, [], (why, why))
     g0 = tr.gradient(u0, f0)
+    first = dataclasses.replace(first, gradient=tr.grad_how.get((p1, p2), ""))
     if g0 is None:
         why = "the gradient of chi could not be computed at the start" + tr._why(u0)
         tr.warnings.append(why)
