@@ -45,6 +45,13 @@ from typing import Any
 
 import numpy as np
 
+from maglev_match.dynamics.continuation import (
+    ContinuationOptions,
+    Correction,
+    StopReason,
+    continuation,
+)
+
 __all__ = ["Sample", "IsoPoint", "IsoSpecial", "TraceSettings", "DEFAULT_SETTINGS", "Traced",
            "trace_iso"]
 
@@ -339,67 +346,37 @@ class _Tracer:
     # -- the curve -------------------------------------------------------------------
     def branch(self, u0: np.ndarray, g0: np.ndarray, sign: int, n_max: int,
                first: list[IsoPoint]) -> tuple[list[IsoPoint], list[IsoSpecial], str]:
+        """One direction of the curve from the start, by the package's continuation driver
+        (:func:`~maglev_match.dynamics.continuation.continuation`) on the scalar equation
+        F(u) = 0 (:class:`_LevelSet`): its predictor, bordered corrector (solved here on the
+        line normal to the tangent), tangent and step control. Returns the points (without
+        the start), the special points between neighbours and why the direction ended."""
+        t0 = sign * np.array([-g0[1], g0[0]]) / np.linalg.norm(g0)
+        if self._step(u0, t0, self.s.ds) is None:  # on the edge, pointing out of the box
+            return [], [], "reached the edge of the ranges"
+        problem = _LevelSet(self, u0, g0, sign)
+        res = continuation(problem, u0, t0, problem.options(n_max),
+                           first=problem.correction(u0, g0, None, 0))
         pts: list[IsoPoint] = []
+        grads = [g0]
+        for bp in res.points[1:]:
+            p1, p2 = self.params(bp.u)
+            smp = self.sample(bp.u)
+            pts.append(IsoPoint(p1, p2, smp, self.F(bp.u), bp.correction.iterations,
+                                "solved" if smp.exact else "bracketed", sign,
+                                self.grad_how.get((p1, p2), "")))
+            grads.append(bp.correction.data)
         specials: list[IsoSpecial] = []
-        u, g = u0.copy(), g0.copy()
-        t = sign * np.array([-g[1], g[0]]) / np.linalg.norm(g)
-        ds = self.s.ds
-        prev = first[0]
-        while len(pts) < n_max:
-            gn = np.linalg.norm(g)
-            step = self._step(u, t, ds)
-            if step is None:
-                return pts, specials, "reached the edge of the ranges"
-            ds_used, edge = step
-            pred = u + ds_used * t
-            if edge is None:
-                new, f, its = self.line_solve(pred, g / gn, gn)
-            else:  # on the edge: solve along it
-                d = np.zeros(2)
-                d[1 - edge] = 1.0
-                slope = g[1 - edge] if abs(g[1 - edge]) > 1e-12 * gn else gn
-                new, f, its = self.line_solve(pred, d, slope)
-            ok = self.converged(f) and bool(np.all(new >= -1e-9) and np.all(new <= 1 + 1e-9))
-            g_new = self.gradient(new, f) if ok else None
-            t_new = None
-            if g_new is not None:
-                t_new = np.array([-g_new[1], g_new[0]]) / np.linalg.norm(g_new)
-                if t_new @ (new - u) < 0:  # onwards: away from the previous point
-                    t_new = -t_new
-                corner = self.sample(new).basis != self.sample(u).basis
-                if (t_new @ t < self.s.min_cos and ds_used > self.s.ds_min
-                        and not corner):  # (a switch of the deciding part is a corner)
-                    g_new = None  # turned too fast: a shorter step
-            if g_new is None or t_new is None:
-                if ds_used / 2 >= self.s.ds_min:
-                    ds = ds_used / 2
-                    continue
-                why = self._fail_reason(new, f, ok)
-                smp = self.sample(new)
-                if math.isfinite(f):
-                    p1, p2 = self.params(new)
-                    pts.append(IsoPoint(p1, p2, smp, f, its, "not converged", sign))
-                return pts, specials, why
-            smp = self.sample(new)
-            p1, p2 = self.params(new)
-            point = IsoPoint(p1, p2, smp, f, its, "solved" if smp.exact else "bracketed",
-                             sign, self.grad_how.get((p1, p2), ""))
-            specials += self.specials_between(prev, point, g, g_new)
-            pts.append(point)
-            prev = point
-            if edge is not None:
-                name = ("p1", "p2")[edge]
-                return pts, specials, f"reached the end of the {name} range"
-            closed = (len(first) + len(pts) > 3
-                      and np.linalg.norm(new - u0) < 0.75 * ds_used and sign > 0
-                      and len(pts) > 2)
-            if closed:
-                return pts, specials, "the curve closed on its start"
-            u, g, t = new, g_new, t_new
-            if its <= 2:
-                ds = min(1.5 * ds_used, self.s.ds_max)
-            else:
-                ds = ds_used
+        for a, b, ga, gb in zip([first[0], *pts], pts, grads, grads[1:], strict=False):
+            specials += self.specials_between(a, b, ga, gb)
+        if problem.ended:
+            return pts, specials, problem.ended
+        if res.stop_reason == StopReason.STEP_TOO_SMALL and problem.failed is not None:
+            new, f, its, ok = problem.failed
+            if math.isfinite(f):
+                p1, p2 = self.params(new)
+                pts.append(IsoPoint(p1, p2, self.sample(new), f, its, "not converged", sign))
+            return pts, specials, self._fail_reason(new, f, ok)
         return pts, specials, f"the number of points ({n_max} in this direction) reached"
 
     def _step(self, u: np.ndarray, t: np.ndarray, ds: float
@@ -535,6 +512,112 @@ class _Tracer:
                    f"{b - a:.3g} of the step)")
         return IsoSpecial("mechanism change", *self.params(u), str(sa.mechanism),
                           str(sb.mechanism), self.sample(u), located, float("nan"), msg)
+
+
+class _LevelSet:
+    """The level set F(u) = chi(u) - target as a problem of the continuation driver
+    (:class:`~maglev_match.dynamics.continuation.ContinuationProblem`): unknowns u (the two
+    scaled parameters, one equation), unit weights. Its corrector solves F = 0 on the line
+    {row . u = target} through the predicted point (:meth:`_Tracer.line_solve`, along the
+    last gradient, the normal of the tangent), or, where the step would leave the box, on
+    the box's edge from the point where the tangent meets it (the direction then ends
+    there). The bordered matrix [g; row], g the gradient at the solution, gives the driver
+    its next tangent. A corrected point whose tangent turned by more than acos(min_cos)
+    is not admissible (the driver halves the step), except at the smallest step, on the
+    edge, and where the deciding part switches (a corner of the level set of a
+    minimum)."""
+
+    def __init__(self, tr: _Tracer, u0: np.ndarray, g0: np.ndarray, sign: int) -> None:
+        self.tr, self.u0, self.sign = tr, u0, sign
+        self.weights = np.ones(2)
+        self.anchor, self.anchor_gradient = u0, g0  # the last accepted point, its gradient
+        self.edge: int | None = None  # the box edge the last correction was solved on
+        self.ended = ""  # why the direction ended (the box's edge, closed)
+        self.failed: tuple[np.ndarray, float, int, bool] | None = None  # the last failure
+        self.steps = 0
+        self.s_last = 0.0
+
+    def options(self, n_max: int) -> ContinuationOptions:
+        st = self.tr.s
+        return ContinuationOptions(
+            ds=st.ds, ds_min=st.ds_min, ds_max=st.ds_max, max_steps=max(1, n_max),
+            newton_max_iter=st.max_iter, grow=1.5, shrink=0.5, fast_iterations=2,
+            slow_iterations=10 ** 9)
+
+    def correction(self, u: np.ndarray, g: np.ndarray, row: np.ndarray | None,
+                   its: int) -> Correction:
+        """The corrected point u with gradient g; its bordered solve gives the tangent
+        (t . g = 0, t . row = 1; at the start, without a row, g turned by 90 degrees)."""
+        def solve(b: np.ndarray) -> np.ndarray:
+            if row is None:
+                return np.array([-g[1], g[0]]) / np.linalg.norm(g)
+            return np.linalg.solve(np.vstack([g, row]), b)
+
+        return Correction(u=u, iterations=its, residual=abs(self.tr.F(u)), solve=solve,
+                          data=g)
+
+    def correct(self, u_pred: np.ndarray, row: np.ndarray, target: float,
+                max_iter: int) -> Correction | None:
+        tr = self.tr
+        if self.ended:
+            return None
+        t = np.asarray(row, float)  # (unit weights: the row is the last tangent)
+        step = tr._step(self.anchor, t, float(target - row @ self.anchor))
+        if step is None:  # already on the edge, the tangent pointing out of the box
+            self.ended = "reached the edge of the ranges"
+            return None
+        g_old = self.anchor_gradient
+        gn = np.linalg.norm(g_old)
+        limit, self.edge = step
+        if self.edge is None:
+            new, f, its = tr.line_solve(np.asarray(u_pred, float), g_old / gn, gn)
+        else:  # the step leaves the box: solve along its edge
+            d = np.zeros(2)
+            d[1 - self.edge] = 1.0
+            slope = g_old[1 - self.edge] if abs(g_old[1 - self.edge]) > 1e-12 * gn else gn
+            new, f, its = tr.line_solve(self.anchor + limit * t, d, slope)
+        ok = tr.converged(f) and bool(np.all(new >= -1e-9) and np.all(new <= 1 + 1e-9))
+        g_new = tr.gradient(new, f) if ok else None
+        if g_new is None:
+            self.failed = (new, f, its, ok)
+            return None
+        return self.correction(new, g_new, t, its)
+
+    def admissible(self, a, u: np.ndarray, s: float) -> bool:
+        tr = self.tr
+        self.s_last = s
+        g = tr.gradient(u, tr.F(u))  # (cached: the correction's)
+        t_new = np.array([-g[1], g[0]]) / np.linalg.norm(g)
+        if t_new @ (u - a.u) < 0:  # onwards: away from the previous point
+            t_new = -t_new
+        corner = tr.sample(u).basis != tr.sample(a.u).basis
+        if (t_new @ a.t < tr.s.min_cos and s > tr.s.ds_min and not corner
+                and self.edge is None):
+            self.failed = (u, tr.F(u), 0, True)  # turned too fast: a shorter step
+            return False
+        return True
+
+    def parameter(self, u: np.ndarray) -> float:
+        return self.tr.params(u)[1]
+
+    def test_functions(self, point) -> dict[str, float]:
+        return {}  # (the special points are located between neighbours afterwards)
+
+    def event_kind(self, name: str) -> str:
+        return name
+
+    def after_accept(self, point):
+        self.anchor, self.anchor_gradient = point.u, point.correction.data
+        self.steps += 1
+        return point
+
+    def stop(self, point) -> str | None:
+        if self.edge is not None:
+            self.ended = f"reached the end of the {('p1', 'p2')[self.edge]} range"
+        elif (self.sign > 0 and self.steps > 2
+              and np.linalg.norm(point.u - self.u0) < 0.75 * self.s_last):
+            self.ended = "the curve closed on its start"
+        return self.ended or None
 
 
 @dataclass(frozen=True)
