@@ -349,7 +349,7 @@ def test_map_overlay_is_the_level_set_of_the_grid_labelled_interpolated(paper_cu
 
 def test_map_iso_options_are_checked_before_the_map(tmp_path, paper_curve):
     from maglev_match.cli.common import UserError
-    from maglev_match.cli.index import iso_overlay
+    from maglev_match.cli.iso_curve import iso_overlay
 
     path = tmp_path / "c.nc"
     paper_curve.to_xarray().to_netcdf(path)
@@ -377,3 +377,58 @@ def test_the_curve_crosses_the_design_kd_at_the_design_ei():
     (pt,) = c.points
     assert pt.p2 == 150.0 and pt.status == "solved"
     assert pt.p1 == pytest.approx(ei, rel=1e-4)
+
+
+def _fake_design(names=("EI", "kD")):
+    """What the design figure reads of a DesignResult: a 3 x 3 start grid, no optimiser
+    path, the design point."""
+    from types import SimpleNamespace
+
+    x, y = np.linspace(1.5e10, 3e10, 3), np.linspace(120.0, 180.0, 3)
+    gv = np.array([[a, b] for a in x for b in y])
+    problem = SimpleNamespace(names=names, requirements=(), goal="minimize",
+                              objective=names[0])
+    return SimpleNamespace(problem=problem, grid_shape=(3, 3), grid_values=gv,
+                           grid_chi=gv[:, 0] / 2e9 - gv[:, 1] / 40.0, candidates=(),
+                           values=dict(zip(names, gv[4], strict=False)), status="optimal")
+
+
+def test_design_figure_draws_the_iso_curve_as_given(paper_curve, tmp_path):
+    # the curve drawn on the design figure is the curve's own data, point for point, from
+    # the result object and from its netCDF file (names in either order)
+    import matplotlib
+    import xarray as xr
+
+    matplotlib.use("Agg")
+    from maglev_match.plots.design import design_path_figure
+
+    path = tmp_path / "c.nc"
+    paper_curve.to_xarray().to_netcdf(path)
+    for iso, source in ((paper_curve, ""), (xr.load_dataset(path), "c.nc")):
+        fig = design_path_figure(_fake_design(), iso=iso, iso_source=source)
+        (line,) = [ln for ln in fig.axes[0].get_lines() if "(solved)" in str(ln.get_label())]
+        np.testing.assert_array_equal(line.get_xdata(), [p.p1 for p in paper_curve.points])
+        np.testing.assert_array_equal(line.get_ydata(), [p.p2 for p in paper_curve.points])
+        assert line.get_label().endswith(f"from {source}") == bool(source)
+    fig = design_path_figure(_fake_design(("kD", "EI")), iso=paper_curve)  # axes swapped
+    (line,) = [ln for ln in fig.axes[0].get_lines() if "(solved)" in str(ln.get_label())]
+    np.testing.assert_array_equal(line.get_xdata(), [p.p2 for p in paper_curve.points])
+    for names in (("EI", "omega0"), ("EI",)):
+        with pytest.raises(ParameterError, match=r"iso.*design's two varied parameters"):
+            design_path_figure(_fake_design(names), iso=paper_curve)
+
+
+def test_design_iso_curve_option_is_checked_before_the_search(paper_curve, tmp_path):
+    import contextlib
+    import io
+
+    from maglev_match.cli import main
+
+    path = tmp_path / "c.nc"
+    paper_curve.to_xarray().to_netcdf(path)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = main(["design", "--vary", "EI=5e9:4e10", "--minimize", "EI", "--require",
+                     "chi>=5", "--iso-curve", str(path), "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert "a curve in (EI, kD), the design is in (EI)" in " ".join(err.getvalue().split())
