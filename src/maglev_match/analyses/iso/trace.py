@@ -139,6 +139,7 @@ class TraceSettings:
     max_points: int = 30
     fd_step: float = 1e-4
     max_iter: int = 12
+    scan: int = 7  # the start's scan along the free parameter (points, >= 2)
     max_inexact: int = 3  # the corrector gives up after this many bracketed iterates
     min_cos: float = 0.8
 
@@ -301,12 +302,13 @@ class _Tracer:
         return theta, f, False
 
     # -- the start -------------------------------------------------------------------
-    def start(self, fixed: int, value: float, scan: int = 7
+    def start(self, fixed: int, value: float, scan: int | None = None
               ) -> tuple[np.ndarray | None, str]:
         """Solve chi = target along the free parameter with parameter ``fixed`` at
         ``value`` (its range fraction): a scan of ``scan`` points, then regula falsi on
         the sign change nearest the middle of the range."""
         free = 1 - fixed
+        scan = max(2, int(scan or self.s.scan))
         grid = np.linspace(0.0, 1.0, scan)
         us = []
         for c in grid:
