@@ -438,3 +438,40 @@ def test_design_iso_curve_option_is_checked_before_the_search(paper_curve, tmp_p
                      "chi>=5", "--iso-curve", str(path), "--out", str(tmp_path / "o")])
     assert code == 2
     assert "a curve in (EI, kD), the design is in (EI)" in " ".join(err.getvalue().split())
+
+
+@pytest.mark.slow  # 6 vehicle indices (354 s wall at load 11.6 on 2 cores)
+
+def test_vehicle_paper_curve_is_the_closed_form_of_the_case_rule():
+    # model B (the vehicle), the paper's chi alone (its headline needs the simulated part,
+    # minutes per point): at turnout-soft its bounding cycle does not fit the gap range
+    # (case rule, h = gap_max - c0), so chi = h / w0(EI) does not depend on kD and the
+    # curve chi = 9 is the line EI = EI* where the static mid-span deflection w0 of the
+    # beam formulas (derived_map, no index) gives h / w0 = 9
+    import jax.numpy as jnp
+    from scipy.optimize import brentq
+
+    from maglev_match.analyses.iso import iso_chi_curve
+    from maglev_match.analyses.sensitivity import derived_map, engineering_names
+    from maglev_match.api.inputs import resolve_params
+
+    base = resolve_params("turnout-soft")
+    names = engineering_names(base, "vehicle")
+    fmap = derived_map(base, "vehicle")
+
+    def chi_rule(ei):
+        q = jnp.asarray([ei if n == "EI" else float(getattr(base, n)) for n in names])
+        _, w0, hmax = fmap(q)
+        return float(hmax) / float(w0)
+
+    ei_star = brentq(lambda e: chi_rule(e) - 9.0, 1.5e10, 3e10, xtol=1e-3, rtol=1e-14)
+    c = iso_chi_curve(base, ("EI", "kD"), {"EI": (1.5e10, 3e10), "kD": (120.0, 180.0)}, 9.0,
+                      at=("kD", 150.0), model="vehicle", simulate=False,
+                      settings=TraceSettings(max_points=3, ds=0.2, scan=3))
+    assert c.model == "vehicle" and len(c.points) == 3 and c.ok
+    for r in c.rows():
+        assert r["paper_part"] == "rule" and r["gradient"] == "exact"
+        assert abs(r["chi"] - 9.0) <= 1e-7 * 9.0
+        assert r["EI"] == pytest.approx(ei_star, rel=1e-7)
+    kd = [p.p2 for p in c.points]
+    assert kd == sorted(kd) and kd[-1] - kd[0] > 20.0
