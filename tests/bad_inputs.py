@@ -449,6 +449,12 @@ CASES: tuple[Case, ...] = (
     Case("iso-curve --range outside the valid range", "options", (
         "iso-curve", "chi=5", "--range", "kD=-5:10"), 2,
          "parameter '--range' = 'kD=-5:10': must lie inside the valid range of kD"),
+    Case("iso-curve --model vehicle, a parameter not of the vehicle", "options", (
+        "iso-curve", "chi=5", "--model", "vehicle", "--params", "EI,sigma"), 2,
+         "parameter '--params' = 'sigma': changes no parameter of model 'vehicle'"),
+    Case("iso-curve --model FILE.py", "options", (
+        "iso-curve", "chi=5", "--model", "{dir}/good.py"), 2,
+         "iso-chi curves are computed for the maglev models unit and vehicle"),
     # ---- the environment (a usable run with one line naming the variable)
     Case("JAX_PLATFORMS=gpu", "environment", ("stability", "--json"), 0,
          "JAX_PLATFORMS=gpu", env={"JAX_PLATFORMS": "gpu"}, fresh=True, json_stdout=True),

@@ -19,15 +19,17 @@ R2 = 0.5  # the paper part of the toy: chi_paper = 10 (p1^2 + p2^2), = 5 on p1^2
 SWITCH = (1.0 / 3.0, math.sqrt(R2 - 1.0 / 9.0))  # chi_paper = chi_sim = 5 there
 
 
-def toy(p1: float, p2: float, bracketed_below: float = -math.inf) -> Sample:
+def toy(p1: float, p2: float, bracketed_below: float = -math.inf,
+        rounded: bool = True) -> Sample:
     """chi_paper = 10 (p1^2 + p2^2), chi_simulation = 4 + 3 p1 (= 5 on p1 = 1/3), the
     headline their minimum; the simulated part's mechanism is grazing above p2 = 0.8 and a
     basin boundary below; below ``bracketed_below`` in p2 the simulated part is only a
-    bisection bracket (its value rounded to 0.01)."""
+    bisection bracket (its value rounded to 0.01, or, ``rounded`` False, exact but still
+    marked as bracketed)."""
     cp, cs = 10.0 * (p1 * p1 + p2 * p2), 4.0 + 3.0 * p1
     status = "solved"
     if p2 < bracketed_below:
-        cs, status = round(cs, 2) + 0.003, "bracketed"
+        cs, status = (round(cs, 2) + 0.003 if rounded else cs), "bracketed"
     basis = "simulation" if cs < cp else "paper"
     return Sample(min(cp, cs), cp, cs, basis, "grazing" if p2 > 0.8 else "basin_boundary",
                   "up", "cycle", status)
@@ -85,6 +87,90 @@ def test_toy_curve_that_cannot_start_says_why():
     tr = trace_iso(toy, BOX, 50.0, fixed=1, value=0.0)
     assert not tr.points and tr.start is None
     assert "no sign change" in tr.warnings[0] and "chi from" in tr.warnings[0]
+
+
+class ToyWithGradient:
+    """:func:`toy` with the exact gradient of both parts (the tracer uses it instead of a
+    forward difference); ``calls`` counts the evaluations."""
+
+    def __init__(self, bracketed_below: float = -math.inf, rounded: bool = True) -> None:
+        self.below, self.rounded, self.calls = bracketed_below, rounded, 0
+
+    def __call__(self, p1: float, p2: float) -> Sample:
+        self.calls += 1
+        return toy(p1, p2, self.below, self.rounded)
+
+    def gradient(self, p1: float, p2: float, sample: Sample):
+        parts = {"paper": np.array([20.0 * p1, 20.0 * p2])}
+        if sample.simulation_status == "solved":
+            parts["simulation"] = np.array([3.0, 0.0])
+        return parts, "" if "simulation" in parts else "simulated part bracketed"
+
+
+def test_toy_curve_with_the_exact_gradient_is_the_same_curve_with_fewer_evaluations():
+    fd = trace_iso(toy, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    ev = ToyWithGradient()
+    tr = trace_iso(ev, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    assert tr.evaluations == ev.calls < fd.evaluations
+    assert {p.gradient for p in tr.points} == {"exact"}
+    assert {p.gradient for p in fd.points} == {"difference: the evaluator gives no "
+                                               "derivative"}
+    for pt in tr.points:  # on the same closed-form curve
+        assert pt.status == "solved" and abs(pt.sample.chi - 5.0) <= 1e-7 * 5.0
+        if pt.sample.basis == "paper":
+            assert abs(pt.p1 ** 2 + pt.p2 ** 2 - R2) < 1e-7
+        else:
+            assert abs(pt.p1 - 1.0 / 3.0) < 1e-7
+    assert tr.ends == fd.ends
+    switches = [s for s in tr.specials if s.kind == "basis switch"]
+    assert len(switches) == 2 and all(s.located for s in switches)
+    for s, sign in zip(switches, (-1, 1), strict=True):  # located with the exact Jacobian
+        assert s.p1 == pytest.approx(SWITCH[0], abs=1e-7)
+        assert s.p2 == pytest.approx(sign * SWITCH[1], abs=1e-7)
+
+
+def test_toy_gradient_falls_back_to_a_difference_only_where_the_part_is_bracketed():
+    # the simulated part is marked bracketed below p2 = -0.2 (its values exact, so the
+    # corrector converges there): the points there that the simulation decides have no
+    # derivative and say so; all others use the exact gradient
+    ev = ToyWithGradient(bracketed_below=-0.2, rounded=False)
+    tr = trace_iso(ev, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    fallbacks = 0
+    for pt in tr.points:
+        s = pt.sample
+        assert pt.status in ("solved", "bracketed")
+        if s.basis == "simulation" and s.simulation_status == "bracketed":
+            fallbacks += 1
+            assert pt.status == "bracketed" and abs(pt.p1 - 1.0 / 3.0) < 1e-7
+            assert pt.gradient == ("difference: the deciding simulated part is only "
+                                   "bracketed: no derivative"), pt
+        else:
+            assert pt.gradient == "exact", pt
+    assert fallbacks >= 2 and sum(p.gradient == "exact" for p in tr.points) > 10
+
+
+def test_maglev_gradient_equals_a_central_difference_of_chi():
+    # the tracer's gradient on model A: the analytic sensitivities of the deciding part,
+    # against a central difference of independent index evaluations (no warm start), where
+    # the paper decides (no simulation) and where the simulation (grazing) does (kD = 150)
+    from maglev_match.analyses.iso import MaglevChi
+    from maglev_match.api.inputs import resolve_params
+
+    base = resolve_params("turnout-soft")
+    for simulate, kd, basis in ((False, 150.0, "paper"), (True, 150.0, "simulation")):
+        ev = MaglevChi(base, ("EI", "kD"), simulate=simulate, warm=False)
+        v = np.array([2.0e10, kd])
+        smp = ev(*v)
+        assert smp.basis == basis and smp.exact
+        parts, why = ev.gradient(*v, smp)
+        g = parts[basis]
+        for i in range(2):
+            h = np.zeros(2)
+            h[i] = 1e-5 * v[i]
+            cd = (ev(*(v + h)).chi - ev(*(v - h)).chi) / (2 * h[i])
+            assert g[i] == pytest.approx(cd, rel=2e-6), (simulate, kd, i, g[i], cd)
+        if simulate:  # both parts differentiated where both were solved
+            assert set(parts) == {"paper", "simulation"} and why == ""
 
 
 # ---------------------------------------------------------------------------------------
@@ -263,7 +349,7 @@ def test_map_overlay_is_the_level_set_of_the_grid_labelled_interpolated(paper_cu
 
 def test_map_iso_options_are_checked_before_the_map(tmp_path, paper_curve):
     from maglev_match.cli.common import UserError
-    from maglev_match.cli.index import iso_overlay
+    from maglev_match.cli.iso_curve import iso_overlay
 
     path = tmp_path / "c.nc"
     paper_curve.to_xarray().to_netcdf(path)
@@ -279,15 +365,113 @@ def test_map_iso_options_are_checked_before_the_map(tmp_path, paper_curve):
 def test_the_curve_crosses_the_design_kd_at_the_design_ei():
     # independent methods: `design` (SLSQP on exact gradients, the cheapest EI with the
     # headline chi >= 5 at the base kD = 150) and the curve's point at kD = 150 (chi = 5
-    # solved along EI by regula falsi on index evaluations)
+    # solved along EI by regula falsi on index evaluations). The curve's start scans EI
+    # over +-15 % of the design at 3 points (the scan only brackets the root; the root is
+    # solved to tol 1e-7 either way): 5 index evaluations instead of the 11 of the API's
+    # default scan of 7 points over EI = 1.2e10..3.6e10 (the same root to 3e-8).
     from maglev_match import api
+    from maglev_match.analyses.iso import iso_chi_curve
+    from maglev_match.api.inputs import resolve_params
 
     design = api.design_search("turnout-soft", vary={"EI": (5e9, 4e10)}, minimize="EI",
                                require={"chi": 5.0}, stage=False)
     assert "chi" in " ".join(design.active), design.active  # chi = 5 holds there
     ei = design.values["EI"]
-    c = api.iso_curve("turnout-soft", 5.0, names=("EI", "kD"), at="kD=150", points=1,
-                      ranges={"EI": (1.2e10, 3.6e10), "kD": (100.0, 200.0)}, stage=False)
+    c = iso_chi_curve(resolve_params("turnout-soft"), ("EI", "kD"),
+                      {"EI": (0.85 * ei, 1.15 * ei), "kD": (100.0, 200.0)}, 5.0,
+                      at=("kD", 150.0), settings=TraceSettings(max_points=1, scan=3))
     (pt,) = c.points
     assert pt.p2 == 150.0 and pt.status == "solved"
     assert pt.p1 == pytest.approx(ei, rel=1e-4)
+
+
+def _fake_design(names=("EI", "kD")):
+    """What the design figure reads of a DesignResult: a 3 x 3 start grid, no optimiser
+    path, the design point."""
+    from types import SimpleNamespace
+
+    x, y = np.linspace(1.5e10, 3e10, 3), np.linspace(120.0, 180.0, 3)
+    gv = np.array([[a, b] for a in x for b in y])
+    problem = SimpleNamespace(names=names, requirements=(), goal="minimize",
+                              objective=names[0])
+    return SimpleNamespace(problem=problem, grid_shape=(3, 3), grid_values=gv,
+                           grid_chi=gv[:, 0] / 2e9 - gv[:, 1] / 40.0, candidates=(),
+                           values=dict(zip(names, gv[4], strict=False)), status="optimal")
+
+
+def test_design_figure_draws_the_iso_curve_as_given(paper_curve, tmp_path):
+    # the curve drawn on the design figure is the curve's own data, point for point, from
+    # the result object and from its netCDF file (names in either order)
+    import matplotlib
+    import xarray as xr
+
+    matplotlib.use("Agg")
+    from maglev_match.plots.design import design_path_figure
+
+    path = tmp_path / "c.nc"
+    paper_curve.to_xarray().to_netcdf(path)
+    for iso, source in ((paper_curve, ""), (xr.load_dataset(path), "c.nc")):
+        fig = design_path_figure(_fake_design(), iso=iso, iso_source=source)
+        (line,) = [ln for ln in fig.axes[0].get_lines() if "(solved)" in str(ln.get_label())]
+        np.testing.assert_array_equal(line.get_xdata(), [p.p1 for p in paper_curve.points])
+        np.testing.assert_array_equal(line.get_ydata(), [p.p2 for p in paper_curve.points])
+        assert line.get_label().endswith(f"from {source}") == bool(source)
+    fig = design_path_figure(_fake_design(("kD", "EI")), iso=paper_curve)  # axes swapped
+    (line,) = [ln for ln in fig.axes[0].get_lines() if "(solved)" in str(ln.get_label())]
+    np.testing.assert_array_equal(line.get_xdata(), [p.p2 for p in paper_curve.points])
+    for names in (("EI", "omega0"), ("EI",)):
+        with pytest.raises(ParameterError, match=r"iso.*design's two varied parameters"):
+            design_path_figure(_fake_design(names), iso=paper_curve)
+
+
+def test_design_iso_curve_option_is_checked_before_the_search(paper_curve, tmp_path):
+    import contextlib
+    import io
+
+    from maglev_match.cli import main
+
+    path = tmp_path / "c.nc"
+    paper_curve.to_xarray().to_netcdf(path)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = main(["design", "--vary", "EI=5e9:4e10", "--minimize", "EI", "--require",
+                     "chi>=5", "--iso-curve", str(path), "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert "a curve in (EI, kD), the design is in (EI)" in " ".join(err.getvalue().split())
+
+
+@pytest.mark.slow  # 6 vehicle indices (354 s wall at load 11.6 on 2 cores)
+
+def test_vehicle_paper_curve_is_the_closed_form_of_the_case_rule():
+    # model B (the vehicle), the paper's chi alone (its headline needs the simulated part,
+    # minutes per point): at turnout-soft its bounding cycle does not fit the gap range
+    # (case rule, h = gap_max - c0), so chi = h / w0(EI) does not depend on kD and the
+    # curve chi = 9 is the line EI = EI* where the static mid-span deflection w0 of the
+    # beam formulas (derived_map, no index) gives h / w0 = 9
+    import jax.numpy as jnp
+    from scipy.optimize import brentq
+
+    from maglev_match.analyses.iso import iso_chi_curve
+    from maglev_match.analyses.sensitivity import derived_map, engineering_names
+    from maglev_match.api.inputs import resolve_params
+
+    base = resolve_params("turnout-soft")
+    names = engineering_names(base, "vehicle")
+    fmap = derived_map(base, "vehicle")
+
+    def chi_rule(ei):
+        q = jnp.asarray([ei if n == "EI" else float(getattr(base, n)) for n in names])
+        _, w0, hmax = fmap(q)
+        return float(hmax) / float(w0)
+
+    ei_star = brentq(lambda e: chi_rule(e) - 9.0, 1.5e10, 3e10, xtol=1e-3, rtol=1e-14)
+    c = iso_chi_curve(base, ("EI", "kD"), {"EI": (1.5e10, 3e10), "kD": (120.0, 180.0)}, 9.0,
+                      at=("kD", 150.0), model="vehicle", simulate=False,
+                      settings=TraceSettings(max_points=3, ds=0.2, scan=3))
+    assert c.model == "vehicle" and len(c.points) == 3 and c.ok
+    for r in c.rows():
+        assert r["paper_part"] == "rule" and r["gradient"] == "exact"
+        assert abs(r["chi"] - 9.0) <= 1e-7 * 9.0
+        assert r["EI"] == pytest.approx(ei_star, rel=1e-7)
+    kd = [p.p2 for p in c.points]
+    assert kd == sorted(kd) and kd[-1] - kd[0] > 20.0

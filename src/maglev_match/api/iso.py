@@ -150,10 +150,12 @@ def iso_curve(params: Params | str | None = None, target: float = 5.0, *,
     (`maglev-match iso-curve chi=5 --params EI,kD`).
 
     The level set is continued by pseudo-arclength (predictor along the tangent, corrector
-    along the gradient of chi, a forward difference on index evaluations warm-started from
-    the previous point), both ways from the start, inside the ranges. At every point: chi,
-    its two parts, the deciding part, the simulated part's mechanism and direction, and
-    whether each part was solved or only bracketed (status per point). Where the deciding
+    along the gradient of chi: the exact one of the deciding part from the index's analytic
+    sensitivities, a forward difference where that part is only bracketed; index evaluations
+    warm-started from the previous point), both ways from the start, inside the ranges. At
+    every point: chi, its two parts, the deciding part, the simulated part's mechanism and
+    direction, whether each part was solved or only bracketed (status per point) and how
+    the gradient was obtained. Where the deciding
     part switches (paper <-> simulation) the switch is located (both parts equal the
     target there); a change of the simulated part's mechanism is located by bisection.
 

@@ -5,6 +5,7 @@ chi_simulation)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -351,6 +352,9 @@ def design_command(
     out: OutOpt = None,
     no_simulation: NoSimOpt = False,
     json_out: JsonOpt = False,
+    iso_curve: Annotated[Path | None, typer.Option(
+        "--iso-curve", help="Draw this iso-chi curve (the netCDF file of `iso-curve`, in "
+        "the two varied parameters) on the design figure.")] = None,
 ) -> None:
     """The cheapest design (or the largest chi) meeting the requirements on the headline
     chi (both the paper's chi and chi_simulation; --no-simulation: the paper's chi alone):
@@ -372,6 +376,13 @@ def design_command(
     check_index_params(base)
     sc = scatter_options(base, scatter, monte_carlo, model)
     check_monte_carlo_folder(out, "design", "design-path", monte_carlo)
+    overlay = {}
+    if iso_curve is not None:  # checked before the search: a curve in the varied pair
+        from maglev_match.cli.iso_curve import iso_overlay
+
+        got = iso_overlay(None, iso_curve, [v.split("=", 1)[0].strip() for v in vary],
+                          what="design")
+        overlay = {"iso": got["iso_curve"], "iso_source": got["iso_source"]}
     with api_options(DESIGN_OPTIONS):  # every input checked before the progress starts
         api.design_problem(base, vary=list(vary), minimize=minimize, maximize=maximize,
                            require=list(require or []), simulate=not no_simulation,
@@ -384,7 +395,7 @@ def design_command(
                                 stage=prog.stage)
     design_params = base.replace(**{n: float(v) for n, v in res.values.items()})
     folder, stem = output_target(out, "design", "design-path")
-    figs = res.plot(folder / stem)
+    figs = res.plot(folder / stem, **overlay)
     sp = _spread(design_params, sc, monte_carlo, folder, workers, resume, seed, model,
                  "design", index=res.index)
     spread, mc = (None, None) if sp is None else (sp.linearised, sp.sampled)

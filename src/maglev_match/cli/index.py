@@ -15,7 +15,6 @@ from maglev_match.cli.common import (
     ModelOpt,
     PresetOpt,
     SetOpt,
-    UserError,
     api_options,
     check_index_params,
     check_model,
@@ -33,6 +32,7 @@ from maglev_match.cli.common import (
     write_result_json,
 )
 from maglev_match.cli.design import McOpt, ResumeOpt, ScatterOpt, SeedOpt, WorkersOpt
+from maglev_match.cli.iso_curve import iso_overlay
 from maglev_match.cli.models import is_model_file, refuse_model_file
 from maglev_match.core.params import ParameterError
 from maglev_match.maglev.catalog import model_info
@@ -331,37 +331,6 @@ def map_command(
         emit_json(summary)
         return
     _print_map(summary)
-
-
-def iso_overlay(iso: float | None, iso_curve: Path | None, names: list[str]) -> dict:
-    """The figure options of ``map --iso VALUE`` / ``--iso-curve FILE``, checked before the
-    map is computed: a level (finite, > 0), or an iso-chi curve file of the map's two
-    parameters (its level must equal ``--iso`` when both are given)."""
-    import math
-
-    if iso is not None and not (math.isfinite(iso) and iso > 0):
-        raise ParameterError("--iso", iso, "must be a finite number > 0 (a level of chi)")
-    if iso_curve is None:
-        return {} if iso is None else {"iso": iso}
-    import xarray as xr
-
-    try:
-        curve = xr.load_dataset(iso_curve)
-    except (OSError, ValueError) as exc:
-        raise UserError(f"--iso-curve {iso_curve}: not a readable netCDF file ({exc})") \
-            from None
-    if not str(curve.attrs.get("title", "")).startswith("maglev-match iso-chi curve"):
-        raise UserError(f"--iso-curve {iso_curve}: not an iso-chi curve file (written by "
-                        "`maglev-match iso-curve`)")
-    pair = str(curve.attrs.get("curve_params", "")).split(",")
-    if sorted(pair) != sorted(names):
-        raise UserError(f"--iso-curve {iso_curve}: a curve in ({', '.join(pair)}), the map "
-                        f"is in ({', '.join(names)})")
-    target = float(curve.attrs["target"])
-    if iso is not None and iso != target:
-        raise UserError(f"--iso {iso:g} and --iso-curve {iso_curve} (chi = {target:g}) "
-                        "name different levels")
-    return {"iso_curve": curve, "iso_source": Path(iso_curve).name}
 
 
 def _map_summary(ds, names, simulate, out, figs, warnings, tiles, log) -> dict:

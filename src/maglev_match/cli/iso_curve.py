@@ -31,6 +31,7 @@ from maglev_match.cli.common import (
     print_warnings,
     progress_report,
 )
+from maglev_match.core.params import ParameterError
 
 #: API keyword -> option, for `iso-curve`
 ISO_CURVE_OPTIONS = {"target": "TARGET", "names": "--params", "ranges": "--range",
@@ -61,6 +62,39 @@ def _ranges(items: list[str] | None) -> dict[str, tuple[float, float]]:
             raise UserError(f"--range {name}: given twice")
         out[name] = parse_range(text, f"--range {name}")
     return out
+
+
+def iso_overlay(iso: float | None, iso_curve: Path | None, names: list[str],
+                what: str = "map") -> dict:
+    """The figure options of ``map --iso VALUE`` / ``--iso-curve FILE``, checked before the
+    map is computed: a level (finite, > 0), or an iso-chi curve file of the map's two
+    parameters (its level must equal ``--iso`` when both are given). ``what`` names the
+    figure in the messages (``design`` uses it for its varied parameters)."""
+    import math
+
+    if iso is not None and not (math.isfinite(iso) and iso > 0):
+        raise ParameterError("--iso", iso, "must be a finite number > 0 (a level of chi)")
+    if iso_curve is None:
+        return {} if iso is None else {"iso": iso}
+    import xarray as xr
+
+    try:
+        curve = xr.load_dataset(iso_curve)
+    except (OSError, ValueError) as exc:
+        raise UserError(f"--iso-curve {iso_curve}: not a readable netCDF file ({exc})") \
+            from None
+    if not str(curve.attrs.get("title", "")).startswith("maglev-match iso-chi curve"):
+        raise UserError(f"--iso-curve {iso_curve}: not an iso-chi curve file (written by "
+                        "`maglev-match iso-curve`)")
+    pair = str(curve.attrs.get("curve_params", "")).split(",")
+    if sorted(pair) != sorted(names):
+        raise UserError(f"--iso-curve {iso_curve}: a curve in ({', '.join(pair)}), the "
+                        f"{what} is in ({', '.join(names)})")
+    target = float(curve.attrs["target"])
+    if iso is not None and iso != target:
+        raise UserError(f"--iso {iso:g} and --iso-curve {iso_curve} (chi = {target:g}) "
+                        "name different levels")
+    return {"iso_curve": curve, "iso_source": Path(iso_curve).name}
 
 
 @app.command("iso-curve")

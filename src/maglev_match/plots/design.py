@@ -1,10 +1,12 @@
 """Figures of the sensitivity analysis and of the design search: a tornado chart of the
 elasticities (p / chi) d chi / d p, and the optimiser's path over the chi map of the first
-two varied parameters (chi against the parameter when only one is varied)."""
+two varied parameters (chi against the parameter when only one is varied), with an iso-chi
+curve of the same two parameters drawn on it when one is given (``iso=``)."""
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -12,6 +14,7 @@ from maglev_match.analyses.design import DesignResult
 from maglev_match.analyses.sensitivity import IndexSensitivity
 from maglev_match.core.results import figure
 from maglev_match.plots.base import new_figure
+from maglev_match.plots.iso import draw_iso_dataset
 
 
 def tornado_figure(sens, top: int = 15, title: str = ""):
@@ -50,11 +53,32 @@ def _axis_label(name: str) -> str:
     return name if unit == "-" else f"{name} ({unit})"
 
 
-def design_path_figure(result, title: str = ""):
+def iso_dataset(iso: Any, names: tuple[str, ...]) -> Any:
+    """The iso-chi curve ``iso`` (an :class:`~maglev_match.analyses.iso.IsoChiCurve` or its
+    netCDF form, :meth:`~maglev_match.analyses.iso.IsoChiCurve.to_xarray`) as a dataset,
+    checked to be a curve in the design's two varied parameters ``names``."""
+    from maglev_match.analyses.iso import IsoChiCurve
+    from maglev_match.core.params import ParameterError
+
+    ds = iso.to_xarray() if isinstance(iso, IsoChiCurve) else iso
+    pair = str(getattr(ds, "attrs", {}).get("curve_params", "")).split(",")
+    if len(pair) != 2:
+        raise ParameterError("iso", type(iso).__name__, "must be an iso-chi curve (an "
+                             "IsoChiCurve or the netCDF file `iso-curve` writes)")
+    if len(names) != 2 or sorted(pair) != sorted(names):
+        raise ParameterError("iso", f"a curve in ({', '.join(pair)})", "must be a curve in "
+                             f"the design's two varied parameters ({', '.join(names)})")
+    return ds
+
+
+def design_path_figure(result, title: str = "", iso: Any = None, iso_source: str = ""):
     """The coarse chi map used for the starts and every optimiser path, the design marked.
-    ``result``: a :class:`~maglev_match.analyses.design.DesignResult`."""
+    ``result``: a :class:`~maglev_match.analyses.design.DesignResult`. ``iso``: an iso-chi
+    curve in the two varied parameters (:func:`iso_dataset`), drawn as solved, its points
+    not solved marked (``iso_source`` names its file in the legend)."""
     prob = result.problem
     names = prob.names
+    iso_ds = None if iso is None else iso_dataset(iso, tuple(names))
     chi_req = [r.bound for r in prob.requirements if r.quantity == "chi"]
     if len(names) == 1:
         fig, ax = new_figure()
@@ -96,6 +120,8 @@ def design_path_figure(result, title: str = ""):
             ax.plot(c.path[:, 0], c.path[:, 1], ".-", color="w", alpha=0.9)
             ax.plot(c.path[0, 0], c.path[0, 1], "o", color="w", markeredgecolor="k",
                     label="start" if k == 0 else None)
+        if iso_ds is not None:
+            draw_iso_dataset(ax, iso_ds, names[0], iso_source)
         ax.plot([result.values[names[0]]], [result.values[names[1]]], "*", ms=16,
                 color="gold", markeredgecolor="k", label=f"design ({result.status})")
         ax.set_xlabel(_axis_label(names[0]))

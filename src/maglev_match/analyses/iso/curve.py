@@ -80,7 +80,8 @@ class IsoChiCurve(Plottable):
     def rows(self) -> list[dict[str, Any]]:
         """One dict per point (SI units): the two parameters, chi, chi_paper,
         chi_simulation, the deciding part, the simulated part's mechanism and direction,
-        the status of each part and of the point, the residual chi - target."""
+        the status of each part and of the point, the residual chi - target, and how the
+        gradient of chi there was obtained ("exact", or "difference: " and why not)."""
         a, b = self.names
         out = []
         for k, pt in enumerate(self.points):
@@ -91,7 +92,7 @@ class IsoChiCurve(Plottable):
                         "paper_part": s.paper_status, "simulation_part": s.simulation_status,
                         "status": pt.status, "residual": pt.residual,
                         "iterations": pt.iterations,
-                        "start": int(k == self.start)})
+                        "start": int(k == self.start), "gradient": pt.gradient})
         return out
 
     def special_rows(self) -> list[dict[str, Any]]:
@@ -118,7 +119,7 @@ class IsoChiCurve(Plottable):
     def to_xarray(self) -> Any:
         """The curve as an :class:`xarray.Dataset` over ``point`` (the two parameters,
         chi, chi_paper, chi_simulation, residual, iterations as numbers; basis, mechanism,
-        direction, paper_part, simulation_part and status as strings) and over ``special``
+        direction, paper_part, simulation_part, status and gradient as strings) and over ``special``
         (kind, position, parts, before/after, located); the target, names, ends and
         warnings as attributes, the base parameter set and the version as well."""
         import json
@@ -147,6 +148,7 @@ class IsoChiCurve(Plottable):
             "paper_part": ("point", col("paper_part", str)),
             "simulation_part": ("point", col("simulation_part", str)),
             "status": ("point", col("status", str)),
+            "gradient": ("point", col("gradient", str)),
             "special_kind": ("special", scol("kind", str)),
             f"special_{a}": ("special", scol(a)), f"special_{b}": ("special", scol(b)),
             "special_chi_paper": ("special", scol("chi_paper")),
@@ -159,7 +161,8 @@ class IsoChiCurve(Plottable):
         units = {a: ua, b: ub, "chi": "1", "chi_paper": "1", "chi_simulation": "1",
                  "residual": "1", "iterations": "1", "basis": "1", "mechanism": "1",
                  "direction": "1", "paper_part": "1", "simulation_part": "1",
-                 "status": "1", "special_kind": "1", f"special_{a}": ua, f"special_{b}": ub,
+                 "status": "1", "gradient": "1", "special_kind": "1", f"special_{a}": ua,
+                 f"special_{b}": ub,
                  "special_chi_paper": "1", "special_chi_simulation": "1",
                  "special_before": "1", "special_after": "1", "special_located": "1",
                  "point": "1", "special": "1"}
@@ -178,6 +181,8 @@ class IsoChiCurve(Plottable):
             "simulation_part": "the simulated part: solved, bracketed, inconclusive, "
                                "skipped or off",
             "status": "the point: solved, bracketed or not converged",
+            "gradient": "how the gradient of chi was obtained: exact (analytic "
+                        "sensitivities) or difference (and why)",
             "special_kind": "basis switch or mechanism change",
             f"special_{a}": f"{a} at the special point",
             f"special_{b}": f"{b} at the special point",

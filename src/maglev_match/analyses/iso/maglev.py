@@ -1,11 +1,17 @@
 """The headline index of a maglev model as the evaluator of an iso-chi curve: one
 :func:`~maglev_match.analyses.matching.matching_index` per (p1, p2), warm-started from the
 previous evaluation (``near=``: its solved critical disturbances are continued instead of
-searched again), read into a :class:`~maglev_match.analyses.iso.trace.Sample`."""
+searched again), read into a :class:`~maglev_match.analyses.iso.trace.Sample`; and the
+exact gradient of each part there (:meth:`MaglevChi.gradient`), from the index's analytic
+sensitivities (:func:`~maglev_match.analyses.sensitivity.index_sensitivity`: the paper
+part through the cycle's parameter derivative, the simulated part through the implicit
+derivative of the solved grazing or basin-boundary condition)."""
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from maglev_match.analyses.iso.trace import Sample
 from maglev_match.analyses.matching import Case, MatchingIndex, matching_index
@@ -74,4 +80,52 @@ class MaglevChi:
         if math.isfinite(smp.chi) and idx.critical_up is not None:
             self.last = idx
         return smp
+
+    def gradient(self, v1: float, v2: float, sample: Sample
+                 ) -> tuple[dict[str, np.ndarray], str]:
+        """The exact gradient (d/dp1, d/dp2, per unit of each parameter) of each part of
+        the index in ``sample`` (this evaluator's answer at (v1, v2)) that has one:
+        {"paper": ..., "simulation": ...} (a part without a derivative is left out), and a
+        text saying why a part has none ('' when both have one or the part is not
+        computed)."""
+        from maglev_match.analyses.matching import MatchingIndex
+        from maglev_match.analyses.sensitivity import (
+            DerivativeStatus,
+            engineering_names,
+            index_sensitivity,
+        )
+
+        idx = sample.state
+        if not isinstance(idx, MatchingIndex) or not idx.converged:
+            return {}, "the index did not converge there"
+        known = engineering_names(self.base, self.model)
+        missing = [n for n in self.names if n not in known]
+        if missing:
+            return {}, (f"{', '.join(missing)} has no analytic derivative of the index "
+                        "(not one of the model's engineering parameters)")
+        try:
+            p = self.base.replace(**{self.names[0]: v1, self.names[1]: v2})
+            sens = index_sensitivity(p, idx, boundaries=False, model=self.model)
+        except (ArithmeticError, ValueError, RuntimeError) as exc:  # (LinAlgError too)
+            return {}, f"the sensitivity run failed: {exc}"
+        rows = [sens.row(n) for n in self.names]
+        out: dict[str, np.ndarray] = {}
+        why = []
+        if sens.paper_status not in (None, DerivativeStatus.UNDEFINED,
+                                     DerivativeStatus.UNAVAILABLE):
+            g = np.array([r.dchi_paper for r in rows], float)
+            if np.all(np.isfinite(g)):
+                out["paper"] = g
+        if "paper" not in out:
+            why.append(f"paper part: no derivative ({sens.paper_status})")
+        if idx.chi_simulation is not None:
+            if all(r.dchi_simulation is not None for r in rows):
+                g = np.array([r.dchi_simulation for r in rows], float)
+                if np.all(np.isfinite(g)):
+                    out["simulation"] = g
+            if "simulation" not in out:
+                why.append("simulated part: no derivative (its critical size is only "
+                           "bracketed" + (f"; {sens.simulation_status}" if
+                                          sens.simulation_status else "") + ")")
+        return out, "; ".join(why)
 

@@ -2,23 +2,31 @@
 headline index and its two parts.
 
 Method (pseudo-arclength continuation of a scalar level set, Allgower & Georg 1990, ch. 2
-and 10): the unknowns are the two parameters scaled to their ranges, u_i = (p_i - lo_i) /
-(hi_i - lo_i), so that a step means the same fraction of either range. With
-F(u) = chi(u) - target and g its gradient (a forward difference on warm-started
-evaluations), the tangent t is g turned by 90 degrees; the predictor steps ds along t and
-the corrector solves F = 0 on the line through the predicted point along the normal g
-(Newton with the gradient's slope, then secant steps), to |F| <= tol * target. Steps grow
-after easy corrections (at most 2 iterations) and halve after a failed one or a turn of the
-tangent by more than about 37 degrees; below the smallest step the curve ends with its
-reason and a warning. Both directions are followed from the start; a curve that leaves the
-ranges ends on their edge (the last point solved on the edge line).
+and 10): the unknowns are the two parameters scaled to their ranges,
+u_i = (p_i - lo_i) / (hi_i - lo_i), so that a step means the same fraction of either range.
+With F(u) = chi(u) - target and g its gradient, the tangent t is g turned by 90 degrees;
+the predictor steps ds along t and the corrector solves F = 0 on the line through the
+predicted point along the normal g (Newton with the gradient's slope, then secant steps),
+to |F| <= tol * target. Steps grow after easy corrections (at most 2 iterations) and halve
+after a failed one or a turn of the tangent by more than about 37 degrees; below the
+smallest step the curve ends with its reason and a warning. Both directions are followed
+from the start; a curve that leaves the ranges ends on their edge (the last point solved on
+the edge line).
+
+The gradient is the exact one of the deciding part where the evaluator gives it (a
+``gradient(p1, p2, sample)`` method returning each part's gradient, e.g. the index's
+analytic sensitivities): no extra evaluation. Where the deciding part has no derivative
+(a simulated part only bracketed by its bisection, a parameter without an analytic
+derivative) or the evaluator gives none, it is a forward difference of two more
+evaluations; every point records which (``IsoPoint.gradient``).
 
 Between two neighbouring points where the deciding part switches (paper <-> simulation)
 the switch is the point where both parts equal the target: started where D = chi_paper -
 chi_simulation interpolates to 0 on the chord (corrected onto the curve), located by Newton
-on (chi_paper - target, chi_simulation - target) = 0 with a forward-difference Jacobian, to
-10 tol * target in both; a change of the simulated part's mechanism (a discrete label) is
-located by bisection of the same kind to 1/32 of the step. Both are special points.
+on (chi_paper - target, chi_simulation - target) = 0 with the two parts' exact gradients
+as its Jacobian (a forward difference where one has none), to 10 tol * target in both; a
+change of the simulated part's mechanism (a discrete label) is located by bisection of the
+same kind to 1/32 of the step. Both are special points.
 
 Every point records which parts were solved: the simulated part's critical size may only
 be bracketed by its bisection (no solved condition, chi known only to the bisection's
@@ -28,6 +36,7 @@ converge because of it, the curve ends there and says why.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -35,6 +44,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from maglev_match.dynamics.continuation import (
+    ContinuationOptions,
+    Correction,
+    StopReason,
+    continuation,
+)
 
 __all__ = ["Sample", "IsoPoint", "IsoSpecial", "TraceSettings", "DEFAULT_SETTINGS", "Traced",
            "trace_iso"]
@@ -89,6 +105,9 @@ class IsoPoint:
     iterations: int
     status: str
     branch: int = 0  # 0 the start, +1 / -1 the direction followed
+    # how the gradient of chi there was obtained: "exact" (the deciding part's analytic
+    # derivative) or "difference: <why not exact>" ('' where none was computed)
+    gradient: str = ""
 
 
 @dataclass(frozen=True)
@@ -120,6 +139,7 @@ class TraceSettings:
     max_points: int = 30
     fd_step: float = 1e-4
     max_iter: int = 12
+    scan: int = 7  # the start's scan along the free parameter (points, >= 2)
     max_inexact: int = 3  # the corrector gives up after this many bracketed iterates
     min_cos: float = 0.8
 
@@ -143,6 +163,9 @@ class _Tracer:
         self.cache: dict[tuple[float, float], Sample] = {}
         self.evaluations = 0
         self.warnings: list[str] = []
+        self.exact = getattr(evaluate, "gradient", None)
+        self.part_cache: dict[tuple[float, float], tuple[dict[str, np.ndarray], str]] = {}
+        self.grad_how: dict[tuple[float, float], str] = {}
 
     # -- evaluation ------------------------------------------------------------------
     def params(self, u: np.ndarray) -> tuple[float, float]:
@@ -159,7 +182,35 @@ class _Tracer:
     def F(self, u: np.ndarray) -> float:
         return self.sample(u).chi - self.target
 
+    def part_gradients(self, u: np.ndarray) -> tuple[dict[str, np.ndarray], str]:
+        """The evaluator's exact gradients of the two parts at u, in the scaled unknowns
+        ({} and why not, where it has none)."""
+        if self.exact is None:
+            return {}, "the evaluator gives no derivative"
+        key = self.params(u)
+        if key not in self.part_cache:
+            parts, why = self.exact(*key, self.sample(u))
+            self.part_cache[key] = ({k: np.asarray(v, float) * self.width
+                                     for k, v in parts.items()}, why)
+        return self.part_cache[key]
+
     def gradient(self, u: np.ndarray, f0: float) -> np.ndarray | None:
+        """The gradient of F at u: the deciding part's exact gradient where there is one,
+        else a forward difference (how: ``self.grad_how``)."""
+        key = self.params(u)
+        smp = self.sample(u)
+        if self.exact is None:
+            why = "the evaluator gives no derivative"
+        elif not smp.exact:
+            why = "the deciding simulated part is only bracketed: no derivative"
+        else:
+            parts, why = self.part_gradients(u)
+            g = parts.get(smp.basis)
+            if g is not None and np.all(np.isfinite(g)) and np.linalg.norm(g) > 0:
+                self.grad_how[key] = "exact"
+                return g
+            why = why or f"the {smp.basis} part has no derivative"
+        self.grad_how[key] = f"difference: {why}"
         g = np.zeros(2)
         for i in range(2):
             h = self.s.fd_step if u[i] + self.s.fd_step <= 1.0 + 1e-12 else -self.s.fd_step
@@ -251,12 +302,13 @@ class _Tracer:
         return theta, f, False
 
     # -- the start -------------------------------------------------------------------
-    def start(self, fixed: int, value: float, scan: int = 7
+    def start(self, fixed: int, value: float, scan: int | None = None
               ) -> tuple[np.ndarray | None, str]:
         """Solve chi = target along the free parameter with parameter ``fixed`` at
         ``value`` (its range fraction): a scan of ``scan`` points, then regula falsi on
         the sign change nearest the middle of the range."""
         free = 1 - fixed
+        scan = max(2, int(scan or self.s.scan))
         grid = np.linspace(0.0, 1.0, scan)
         us = []
         for c in grid:
@@ -296,67 +348,37 @@ class _Tracer:
     # -- the curve -------------------------------------------------------------------
     def branch(self, u0: np.ndarray, g0: np.ndarray, sign: int, n_max: int,
                first: list[IsoPoint]) -> tuple[list[IsoPoint], list[IsoSpecial], str]:
+        """One direction of the curve from the start, by the package's continuation driver
+        (:func:`~maglev_match.dynamics.continuation.continuation`) on the scalar equation
+        F(u) = 0 (:class:`_LevelSet`): its predictor, bordered corrector (solved here on the
+        line normal to the tangent), tangent and step control. Returns the points (without
+        the start), the special points between neighbours and why the direction ended."""
+        t0 = sign * np.array([-g0[1], g0[0]]) / np.linalg.norm(g0)
+        if self._step(u0, t0, self.s.ds) is None:  # on the edge, pointing out of the box
+            return [], [], "reached the edge of the ranges"
+        problem = _LevelSet(self, u0, g0, sign)
+        res = continuation(problem, u0, t0, problem.options(n_max),
+                           first=problem.correction(u0, g0, None, 0))
         pts: list[IsoPoint] = []
+        grads = [g0]
+        for bp in res.points[1:]:
+            p1, p2 = self.params(bp.u)
+            smp = self.sample(bp.u)
+            pts.append(IsoPoint(p1, p2, smp, self.F(bp.u), bp.correction.iterations,
+                                "solved" if smp.exact else "bracketed", sign,
+                                self.grad_how.get((p1, p2), "")))
+            grads.append(bp.correction.data)
         specials: list[IsoSpecial] = []
-        u, g = u0.copy(), g0.copy()
-        t = sign * np.array([-g[1], g[0]]) / np.linalg.norm(g)
-        ds = self.s.ds
-        prev = first[0]
-        while len(pts) < n_max:
-            gn = np.linalg.norm(g)
-            step = self._step(u, t, ds)
-            if step is None:
-                return pts, specials, "reached the edge of the ranges"
-            ds_used, edge = step
-            pred = u + ds_used * t
-            if edge is None:
-                new, f, its = self.line_solve(pred, g / gn, gn)
-            else:  # on the edge: solve along it
-                d = np.zeros(2)
-                d[1 - edge] = 1.0
-                slope = g[1 - edge] if abs(g[1 - edge]) > 1e-12 * gn else gn
-                new, f, its = self.line_solve(pred, d, slope)
-            ok = self.converged(f) and bool(np.all(new >= -1e-9) and np.all(new <= 1 + 1e-9))
-            g_new = self.gradient(new, f) if ok else None
-            t_new = None
-            if g_new is not None:
-                t_new = np.array([-g_new[1], g_new[0]]) / np.linalg.norm(g_new)
-                if t_new @ (new - u) < 0:  # onwards: away from the previous point
-                    t_new = -t_new
-                corner = self.sample(new).basis != self.sample(u).basis
-                if (t_new @ t < self.s.min_cos and ds_used > self.s.ds_min
-                        and not corner):  # (a switch of the deciding part is a corner)
-                    g_new = None  # turned too fast: a shorter step
-            if g_new is None or t_new is None:
-                if ds_used / 2 >= self.s.ds_min:
-                    ds = ds_used / 2
-                    continue
-                why = self._fail_reason(new, f, ok)
-                smp = self.sample(new)
-                if math.isfinite(f):
-                    p1, p2 = self.params(new)
-                    pts.append(IsoPoint(p1, p2, smp, f, its, "not converged", sign))
-                return pts, specials, why
-            smp = self.sample(new)
-            p1, p2 = self.params(new)
-            point = IsoPoint(p1, p2, smp, f, its, "solved" if smp.exact else "bracketed",
-                             sign)
-            specials += self.specials_between(prev, point, g, g_new)
-            pts.append(point)
-            prev = point
-            if edge is not None:
-                name = ("p1", "p2")[edge]
-                return pts, specials, f"reached the end of the {name} range"
-            closed = (len(first) + len(pts) > 3
-                      and np.linalg.norm(new - u0) < 0.75 * ds_used and sign > 0
-                      and len(pts) > 2)
-            if closed:
-                return pts, specials, "the curve closed on its start"
-            u, g, t = new, g_new, t_new
-            if its <= 2:
-                ds = min(1.5 * ds_used, self.s.ds_max)
-            else:
-                ds = ds_used
+        for a, b, ga, gb in zip([first[0], *pts], pts, grads, grads[1:], strict=False):
+            specials += self.specials_between(a, b, ga, gb)
+        if problem.ended:
+            return pts, specials, problem.ended
+        if res.stop_reason == StopReason.STEP_TOO_SMALL and problem.failed is not None:
+            new, f, its, ok = problem.failed
+            if math.isfinite(f):
+                p1, p2 = self.params(new)
+                pts.append(IsoPoint(p1, p2, self.sample(new), f, its, "not converged", sign))
+            return pts, specials, self._fail_reason(new, f, ok)
         return pts, specials, f"the number of points ({n_max} in this direction) reached"
 
     def _step(self, u: np.ndarray, t: np.ndarray, ds: float
@@ -418,11 +440,26 @@ class _Tracer:
         sim = float("nan") if smp.chi_simulation is None else smp.chi_simulation
         return np.array([smp.chi_paper, sim]) - self.target
 
+    def _parts_jacobian(self, u: np.ndarray, G: np.ndarray) -> np.ndarray:
+        """d (chi_paper, chi_simulation) / du: the exact gradients of both parts where the
+        evaluator gives them, else a forward difference."""
+        parts, _ = self.part_gradients(u) if self.sample(u).simulation_status == "solved" \
+            else ({}, "")
+        if "paper" in parts and "simulation" in parts:
+            return np.vstack([parts["paper"], parts["simulation"]])
+        J = np.empty((2, 2))
+        for k in range(2):
+            e = np.zeros(2)
+            e[k] = self.s.fd_step
+            J[:, k] = (self._parts(u + e) - G) / self.s.fd_step
+        return J
+
     def locate_switch(self, ua, ub, sa: Sample, sb: Sample, g) -> IsoSpecial:
         """Where both parts equal the target between the points a and b: Newton on
-        (chi_paper - target, chi_simulation - target) = 0 (forward-difference Jacobian of
-        the two parts), from the chord point where chi_paper - chi_simulation interpolates
-        to 0, corrected onto the curve."""
+        (chi_paper - target, chi_simulation - target) = 0 (the Jacobian of the two parts:
+        their exact gradients where the evaluator gives them, else a forward difference),
+        from the chord point where chi_paper - chi_simulation interpolates to 0, corrected
+        onto the curve."""
         self.say("locating the switch of the deciding part ...")
         kind = "basis switch"
         da, db = self._difference(sa), self._difference(sb)
@@ -438,11 +475,7 @@ class _Tracer:
         for _ in range(8):
             if not np.all(np.isfinite(G)) or np.max(np.abs(G)) <= tol:
                 break
-            J = np.empty((2, 2))
-            for k in range(2):
-                e = np.zeros(2)
-                e[k] = self.s.fd_step
-                J[:, k] = (self._parts(u + e) - G) / self.s.fd_step
+            J = self._parts_jacobian(u, G)
             try:
                 du = np.linalg.solve(J, -G)
             except np.linalg.LinAlgError:
@@ -481,6 +514,112 @@ class _Tracer:
                    f"{b - a:.3g} of the step)")
         return IsoSpecial("mechanism change", *self.params(u), str(sa.mechanism),
                           str(sb.mechanism), self.sample(u), located, float("nan"), msg)
+
+
+class _LevelSet:
+    """The level set F(u) = chi(u) - target as a problem of the continuation driver
+    (:class:`~maglev_match.dynamics.continuation.ContinuationProblem`): unknowns u (the two
+    scaled parameters, one equation), unit weights. Its corrector solves F = 0 on the line
+    {row . u = target} through the predicted point (:meth:`_Tracer.line_solve`, along the
+    last gradient, the normal of the tangent), or, where the step would leave the box, on
+    the box's edge from the point where the tangent meets it (the direction then ends
+    there). The bordered matrix [g; row], g the gradient at the solution, gives the driver
+    its next tangent. A corrected point whose tangent turned by more than acos(min_cos)
+    is not admissible (the driver halves the step), except at the smallest step, on the
+    edge, and where the deciding part switches (a corner of the level set of a
+    minimum)."""
+
+    def __init__(self, tr: _Tracer, u0: np.ndarray, g0: np.ndarray, sign: int) -> None:
+        self.tr, self.u0, self.sign = tr, u0, sign
+        self.weights = np.ones(2)
+        self.anchor, self.anchor_gradient = u0, g0  # the last accepted point, its gradient
+        self.edge: int | None = None  # the box edge the last correction was solved on
+        self.ended = ""  # why the direction ended (the box's edge, closed)
+        self.failed: tuple[np.ndarray, float, int, bool] | None = None  # the last failure
+        self.steps = 0
+        self.s_last = 0.0
+
+    def options(self, n_max: int) -> ContinuationOptions:
+        st = self.tr.s
+        return ContinuationOptions(
+            ds=st.ds, ds_min=st.ds_min, ds_max=st.ds_max, max_steps=max(1, n_max),
+            newton_max_iter=st.max_iter, grow=1.5, shrink=0.5, fast_iterations=2,
+            slow_iterations=10 ** 9)
+
+    def correction(self, u: np.ndarray, g: np.ndarray, row: np.ndarray | None,
+                   its: int) -> Correction:
+        """The corrected point u with gradient g; its bordered solve gives the tangent
+        (t . g = 0, t . row = 1; at the start, without a row, g turned by 90 degrees)."""
+        def solve(b: np.ndarray) -> np.ndarray:
+            if row is None:
+                return np.array([-g[1], g[0]]) / np.linalg.norm(g)
+            return np.linalg.solve(np.vstack([g, row]), b)
+
+        return Correction(u=u, iterations=its, residual=abs(self.tr.F(u)), solve=solve,
+                          data=g)
+
+    def correct(self, u_pred: np.ndarray, row: np.ndarray, target: float,
+                max_iter: int) -> Correction | None:
+        tr = self.tr
+        if self.ended:
+            return None
+        t = np.asarray(row, float)  # (unit weights: the row is the last tangent)
+        step = tr._step(self.anchor, t, float(target - row @ self.anchor))
+        if step is None:  # already on the edge, the tangent pointing out of the box
+            self.ended = "reached the edge of the ranges"
+            return None
+        g_old = self.anchor_gradient
+        gn = np.linalg.norm(g_old)
+        limit, self.edge = step
+        if self.edge is None:
+            new, f, its = tr.line_solve(np.asarray(u_pred, float), g_old / gn, gn)
+        else:  # the step leaves the box: solve along its edge
+            d = np.zeros(2)
+            d[1 - self.edge] = 1.0
+            slope = g_old[1 - self.edge] if abs(g_old[1 - self.edge]) > 1e-12 * gn else gn
+            new, f, its = tr.line_solve(self.anchor + limit * t, d, slope)
+        ok = tr.converged(f) and bool(np.all(new >= -1e-9) and np.all(new <= 1 + 1e-9))
+        g_new = tr.gradient(new, f) if ok else None
+        if g_new is None:
+            self.failed = (new, f, its, ok)
+            return None
+        return self.correction(new, g_new, t, its)
+
+    def admissible(self, a, u: np.ndarray, s: float) -> bool:
+        tr = self.tr
+        self.s_last = s
+        g = tr.gradient(u, tr.F(u))  # (cached: the correction's)
+        t_new = np.array([-g[1], g[0]]) / np.linalg.norm(g)
+        if t_new @ (u - a.u) < 0:  # onwards: away from the previous point
+            t_new = -t_new
+        corner = tr.sample(u).basis != tr.sample(a.u).basis
+        if (t_new @ a.t < tr.s.min_cos and s > tr.s.ds_min and not corner
+                and self.edge is None):
+            self.failed = (u, tr.F(u), 0, True)  # turned too fast: a shorter step
+            return False
+        return True
+
+    def parameter(self, u: np.ndarray) -> float:
+        return self.tr.params(u)[1]
+
+    def test_functions(self, point) -> dict[str, float]:
+        return {}  # (the special points are located between neighbours afterwards)
+
+    def event_kind(self, name: str) -> str:
+        return name
+
+    def after_accept(self, point):
+        self.anchor, self.anchor_gradient = point.u, point.correction.data
+        self.steps += 1
+        return point
+
+    def stop(self, point) -> str | None:
+        if self.edge is not None:
+            self.ended = f"reached the end of the {('p1', 'p2')[self.edge]} range"
+        elif (self.sign > 0 and self.steps > 2
+              and np.linalg.norm(point.u - self.u0) < 0.75 * self.s_last):
+            self.ended = "the curve closed on its start"
+        return self.ended or None
 
 
 @dataclass(frozen=True)
@@ -524,6 +663,7 @@ def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: fl
         why = "one point asked: the start alone"
         return done([first], 0, [], (why, why))
     g0 = tr.gradient(u0, f0)
+    first = dataclasses.replace(first, gradient=tr.grad_how.get((p1, p2), ""))
     if g0 is None:
         why = "the gradient of chi could not be computed at the start" + tr._why(u0)
         tr.warnings.append(why)
