@@ -175,7 +175,10 @@ def continue_critical(params: Params | MaglevModel, start: CriticalStart, *,
         return None, None, Fallback(c.direction, str(c.mechanism), why)
 
     if m.params.tau > 0:
-        return fail("a delay (tau > 0): the solves are of the delay-free model")
+        # (tried: the discretised past is stiff, its flows need more than GRAZING_STEPS
+        # steps to the tangency, and the corrector does not converge)
+        return fail("a delay (tau > 0): the continuation's short flows do not reach the "
+                    "contact on the stiff delay system; searched point-wise")
     if c.model != m.name:
         return fail(f"the start is of model {c.model}")
     line = disturbance_line(m, c.direction)
