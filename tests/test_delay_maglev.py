@@ -286,3 +286,26 @@ def test_delay_grazing_is_solved_and_agrees_with_the_simulation(soft):
                                      cd).size for s in (-1, 1)]
     assert dres.dsize_dp[names.index("tau")] == pytest.approx(
         (sizes[1] - sizes[0]) / (2 * h), rel=1e-6)
+
+
+def test_delay_grazing_is_continued_to_a_neighbouring_design(soft):
+    """The solved grazing size at tau = 1 ms continued to kD + 1 % (Newton from the
+    neighbour's size, two check runs) equals the size solved from that design's own search
+    (1e-12 relative)."""
+    from dataclasses import replace
+
+    from maglev_match.analyses.continued import CriticalStart, continue_critical
+    from maglev_match.analyses.critical import Mechanism, critical_from_bisection
+    from maglev_match.analyses.simulation import critical_disturbance
+    from maglev_match.maglev.models import maglev_model
+
+    m0 = maglev_model(soft.replace(tau=1e-3), "unit")
+    c0 = critical_from_bisection(m0, critical_disturbance(m0, direction=1))
+    c0 = replace(c0, at=np.asarray(m0.param_vector()))
+    m1 = maglev_model(soft.replace(tau=1e-3, kD=soft.kD * 1.01), "unit")
+    size, check, fallback = continue_critical(m1, CriticalStart(c0.at, c0), model="unit")
+    assert fallback is None and size.mechanism == Mechanism.GRAZING
+    point = critical_from_bisection(m1, critical_disturbance(m1, direction=1))
+    assert point.mechanism == Mechanism.GRAZING
+    assert size.size == pytest.approx(point.size, rel=1e-12) and size.size != c0.size
+    assert check.largest_return < size.size < check.smallest_collision
