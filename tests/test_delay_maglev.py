@@ -222,3 +222,90 @@ def test_a_delayed_map_row_simulates_the_delay_system(monkeypatch):
     np.testing.assert_array_equal(row["h_down"][:2], [2.5e-3, 8e-3])
     assert np.isnan(row["h_down"][2]) and np.isnan(row["h_down"][3])
     assert row["reason"].tolist() == [0, 0, maps.REASON_SIM_UNDECIDED, 0]
+
+
+# ---------------------------------------------------------------------------------------
+# the critical disturbance's grazing solve on the delay system
+def test_delay_clamp_is_the_limited_discretised_field(soft):
+    """The clamp of model A with a delay (a hybrid system on the discretised state) is the
+    limited discretised field: in the free mode wherever the current flows, in the held mode
+    at i = 0 with the delayed demand negative (current held, no force); its held mode is
+    left where the delayed command asks for current (guard = -(u(t - tau) + i0))."""
+    from maglev_match.maglev.models import maglev_model
+
+    m = maglev_model(soft.replace(tau=1e-3), "unit")
+    hs, lim = m.clamped(), m.system(limited=True)
+    assert hs.dim == lim.dim == 9 + lim.nodes and hs.p.tolist() == lim.p.tolist()
+    rng = np.random.default_rng(3)
+    import jax.numpy as jnp
+
+    i0 = float(m.levitation_current)
+    for _ in range(5):
+        X = lim.x_guess + 0.05 * rng.standard_normal(lim.dim) * lim.state_scale
+        X[6] = abs(X[6])  # current above i0: flowing
+        np.testing.assert_allclose(np.asarray(hs.rhs(jnp.asarray(X), hs.p, np.zeros(1))),
+                                   np.asarray(lim.rhs(X, lim.p)), rtol=1e-13, atol=1e-300)
+        Xh = X.copy()
+        Xh[6], Xh[-1] = -i0, -2.0 * i0  # i = 0 and the delayed demand u + i0 < 0
+        np.testing.assert_allclose(np.asarray(hs.rhs(jnp.asarray(Xh), hs.p, np.ones(1))),
+                                   np.asarray(lim.rhs(Xh, lim.p)), rtol=1e-13, atol=1e-300)
+        assert float(hs.guards(jnp.asarray(Xh), hs.p, np.ones(1))[0]) == pytest.approx(i0)
+
+
+def test_delay_grazing_is_solved_and_agrees_with_the_simulation(soft):
+    """At tau = 1 ms the critical disturbance (beam pressed down) is *solved* as a grazing
+    contact on the delay system, not left at the bisection's midpoint: the size lies in the
+    bracket of the search, and the limited discretised system's own runs at 1e-7 below it
+    return without a collision while those 1e-7 above collide (the two independent
+    computations agree to ~3e-10 m); d size / d tau equals the central difference (measured
+    -0.5671720634 both ways, 1e-9 apart)."""
+    from maglev_match.analyses.critical import Mechanism, critical_from_bisection
+    from maglev_match.analyses.simulation import critical_disturbance
+    from maglev_match.dynamics.integrate.simulate import simulate_batch
+    from maglev_match.maglev.models import maglev_model
+
+    m = maglev_model(soft.replace(tau=1e-3), "unit")
+    cd = critical_disturbance(m, direction=1)
+    res = critical_from_bisection(m, cd)
+    assert res.mechanism == Mechanism.GRAZING and res.solved, res.reason
+    lo, hi = res.bracket
+    assert lo <= res.size <= hi and hi - lo <= 1e-5
+    assert res.limit == "lower" and res.t_star > 0
+    sys_ = m.system(limited=True)
+    sizes = res.size * (1 + np.array([-1e-7, 1e-7]))
+    b = simulate_batch(sys_, sys_.lift(m.disturbance(1).x0_of(sizes)), 20.0,
+                       event_fn=m.gap_events(), x_ref=sys_.lift(m.equilibrium()))
+    assert b.outcome.tolist() == ["converged", "collision"]
+    # its derivative in the delay (implicit function theorem on the grazing conditions, with
+    # the sensitivities of the discretised past) is the central difference of solved sizes
+    dres = critical_from_bisection(m, cd, derivative=True)
+    names = list(m.clamped().param_names)
+    assert dres.derivative_available and len(dres.dsize_dp) == len(names)
+    h = 1e-7
+    sizes = [critical_from_bisection(maglev_model(soft.replace(tau=1e-3 + s * h), "unit"),
+                                     cd).size for s in (-1, 1)]
+    assert dres.dsize_dp[names.index("tau")] == pytest.approx(
+        (sizes[1] - sizes[0]) / (2 * h), rel=1e-6)
+
+
+def test_delay_grazing_is_continued_to_a_neighbouring_design(soft):
+    """The solved grazing size at tau = 1 ms continued to kD + 1 % (Newton from the
+    neighbour's size, two check runs) equals the size solved from that design's own search
+    (1e-12 relative)."""
+    from dataclasses import replace
+
+    from maglev_match.analyses.continued import CriticalStart, continue_critical
+    from maglev_match.analyses.critical import Mechanism, critical_from_bisection
+    from maglev_match.analyses.simulation import critical_disturbance
+    from maglev_match.maglev.models import maglev_model
+
+    m0 = maglev_model(soft.replace(tau=1e-3), "unit")
+    c0 = critical_from_bisection(m0, critical_disturbance(m0, direction=1))
+    c0 = replace(c0, at=np.asarray(m0.param_vector()))
+    m1 = maglev_model(soft.replace(tau=1e-3, kD=soft.kD * 1.01), "unit")
+    size, check, fallback = continue_critical(m1, CriticalStart(c0.at, c0), model="unit")
+    assert fallback is None and size.mechanism == Mechanism.GRAZING
+    point = critical_from_bisection(m1, critical_disturbance(m1, direction=1))
+    assert point.mechanism == Mechanism.GRAZING
+    assert size.size == pytest.approx(point.size, rel=1e-12) and size.size != c0.size
+    assert check.largest_return < size.size < check.smallest_collision

@@ -65,6 +65,9 @@ BRACKET = 0.02
 #: goes through a singular limit (gap 0, where the magnet force grows without bound) is
 #: cut here instead of at FLOW's 100 000 (it counts as "no extremum" either way)
 GRAZING_STEPS = 500
+#: the same on a discretised delay system, whose stiff past holds the step near 1e-4 s
+#: (tau = 1 ms: 500 steps do not reach the contact at t* ~ 0.06-0.09 s; 20 000 do)
+GRAZING_STEPS_DELAY = 20_000
 
 
 @dataclass(frozen=True)
@@ -143,7 +146,8 @@ def _key(c: CriticalSize) -> tuple[str, str | None, int]:
 def _predict(start: CriticalStart, p: np.ndarray) -> float:
     c = start.critical
     d = float(c.size)
-    if c.dsize_dp is not None and np.all(np.isfinite(c.dsize_dp)):
+    if (c.dsize_dp is not None and np.size(c.dsize_dp) == p.size
+            and np.all(np.isfinite(c.dsize_dp))):
         step = float(np.asarray(c.dsize_dp, float) @ (p - start.p))
         return d + step
     prev = start.previous
@@ -174,12 +178,12 @@ def continue_critical(params: Params | MaglevModel, start: CriticalStart, *,
     def fail(why: str) -> tuple[None, None, Fallback]:
         return None, None, Fallback(c.direction, str(c.mechanism), why)
 
-    if m.params.tau > 0:
-        return fail("a delay (tau > 0): the solves are of the delay-free model")
+    line = disturbance_line(m, c.direction)
+    if m.params.tau > 0 and line.hs.dim != m.system().dim:
+        return fail("a delay (tau > 0): this model's solves are of its delay-free form")
     if c.model != m.name:
         return fail(f"the start is of model {c.model}")
-    line = disturbance_line(m, c.direction)
-    p = np.asarray(line.hs.p, float)
+    p = np.asarray(m.param_vector(), float)  # (without the delay)
     if p.shape != start.p.shape:
         return fail("the parameter vectors differ in size")
     d0 = _predict(start, p)
@@ -213,7 +217,8 @@ def _grazing(m: MaglevModel, line: Any, c: CriticalSize, d0: float) -> CriticalS
     half = max(BRACKET * d0, 4.0 * abs(d0 - float(c.size)))
     sol = solve_grazing(line.hs, line.x0_of, line.dx0_dd, line.W[j], L, side, d0, win[0],
                         win[1], p=line.hs.p, bracket=(d0 - half, d0 + half),
-                        options=replace(FLOW, max_steps=GRAZING_STEPS))[0]
+                        options=replace(FLOW, max_steps=GRAZING_STEPS_DELAY if m.params.tau > 0
+                                        else GRAZING_STEPS))[0]
     if not sol.converged:
         return f"grazing not continued: {sol.message}"
     if sol.singular:
@@ -298,8 +303,10 @@ def _check(m: MaglevModel, res: CriticalSize) -> Any:
     d = float(res.size)
     sizes = np.array([d * (1 - CHECK_STEP), d * (1 + CHECK_STEP)])
     horizon = float(m.critical_search.as_kwargs()["t_max"])
-    b = simulate_batch(m.system(limited=True), dist.x0_of(sizes), horizon,
-                       event_fn=m.gap_events(), x_ref=m.equilibrium(),
+    system, x0, x_ref = m.system(limited=True), dist.x0_of(sizes), m.equilibrium()
+    if x0.shape[-1] != system.dim:
+        x0, x_ref = system.lift(x0), system.lift(x_ref)
+    b = simulate_batch(system, x0, horizon, event_fn=m.gap_events(), x_ref=x_ref,
                        options=SimulationOptions(stop_on_converged=True))
     entry = 2 * ((res.point or 1) - 1) + (1 if res.limit == "upper" else 0)
     code = [int(v) for v in b.outcome_code]

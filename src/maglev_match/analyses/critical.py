@@ -238,7 +238,11 @@ def disturbance_line(params: Params | MaglevModel, direction: int, model: str = 
     W = np.atleast_2d(np.asarray(jax.jacfwd(lambda x: jnp.atleast_1d(g(x, pj)))(
         jnp.zeros(n))))
     g0 = np.atleast_1d(np.asarray(g(jnp.zeros(n), pj)))
-    return _Line(hs=hs, base=dist.base, dirn=dist.step, W=W, g0=g0,
+    base, dirn = np.asarray(dist.base, float), np.asarray(dist.step, float)
+    if base.size < n:  # a delay: the line's states with a constant past (lift is affine)
+        lift = m.system(limited=True).lift
+        base, dirn = lift(base), lift(base + dirn) - lift(base)
+    return _Line(hs=hs, base=base, dirn=dirn, W=W, g0=g0,
                  upper=float(params.gap_max - params.c0),
                  lower=float(params.gap_min - params.c0))
 
@@ -600,7 +604,7 @@ def _dlimit_dp(m: MaglevModel, j: int) -> np.ndarray:
     g = hs.observables["gap_deviation"]
     n = hs.dim
     dg0 = np.atleast_2d(np.asarray(jax.jacfwd(
-        lambda p: jnp.atleast_1d(g(jnp.zeros(n), p)))(jnp.asarray(m.param_vector()))))
+        lambda p: jnp.atleast_1d(g(jnp.zeros(n), p)))(jnp.asarray(hs.p))))
     names = list(hs.param_names)
     dc0 = np.zeros(len(names))
     dc0[names.index("c0")] = 1.0

@@ -43,7 +43,7 @@ from maglev_match.dynamics.hybrid import HybridSystem
 from maglev_match.maglev import unit as unit_model
 from maglev_match.maglev import vehicle as vehicle_model
 
-__all__ = ["unit_clamped", "vehicle_clamped"]
+__all__ = ["unit_clamped", "unit_delay_clamped", "vehicle_clamped"]
 
 _I = 6  # model A: x7 = i - i0
 
@@ -150,4 +150,55 @@ def vehicle_clamped(params: Params) -> HybridSystem:
         p=system.p, param_names=system.param_names, state_names=system.state_names,
         state_scale=np.asarray(system.state_scale), observables=dict(system.observables),
         name=f"vehicle ({n} modes, current clamp)",
+    )
+
+
+# ------------------------------------------------------------------ model A with a delay
+@cache
+def _unit_delay_functions(smooth_rhs):
+    """The clamp on the discretised delay system X = (x, Y) of model A whose smooth field is
+    ``smooth_rhs`` (:func:`~maglev_match.dynamics.delay.discretise` of the delayed model, its
+    last state the delayed command u(t - tau)): the held mode is the smooth field at the
+    current x7 = -i0 with that component removed; the past Y is carried in both modes (the
+    command u = kP x8 + kD (x9 + x2) it records does not depend on the current)."""
+    n = len(unit_model.STATE_NAMES)
+
+    def rhs(X, p, s):
+        held = s[0] > 0.5
+        f_free = smooth_rhs(X, p)
+        f_held = smooth_rhs(X.at[:n].set(_unit_at_zero_current(X[:n], p)), p).at[_I].set(0.0)
+        return jnp.where(held, f_held, f_free)
+
+    def guards(X, p, s):
+        # held: minus the demand the current rate at i = 0 follows, now the delayed command
+        # u(t - tau) + i0 (the last node of the past); free: the current
+        held = s[0] > 0.5
+        i0 = unit_model.levitation_current(p)
+        return jnp.reshape(jnp.where(held, -(X[-1] + i0), X[_I] + i0), (1,))
+
+    def project(X, p, s):
+        return jnp.where(s[0] > 0.5, X.at[:n].set(_unit_at_zero_current(X[:n], p)), X)
+
+    def domain(X, p, s):
+        return unit_domain(X[:n], p, s)
+
+    name = getattr(smooth_rhs, "__name__", "rhs")
+    rhs.__qualname__ = f"unit_delay_clamped_rhs_{name}"
+    guards.__qualname__ = f"unit_delay_clamp_guards_{name}"
+    project.__qualname__ = f"unit_delay_clamp_project_{name}"
+    domain.__qualname__ = f"unit_delay_clamp_domain_{name}"
+    return rhs, guards, project, domain
+
+
+def unit_delay_clamped(system) -> HybridSystem:
+    """Model A with a delayed outer loop and the current clamp as a :class:`HybridSystem`:
+    ``system`` is the *smooth* discretised delay system of model A (``unit_system(params)``
+    with tau > 0); the state is its (x, past), one switch. The same modes and surfaces as
+    :func:`unit_clamped`, with the controller's demand read ``tau`` late."""
+    rhs, guards, project, domain = _unit_delay_functions(system.rhs)
+    return HybridSystem(
+        rhs=rhs, guards=guards, project=project, n_switches=1, p=system.p,
+        param_names=system.param_names, state_names=system.state_names,
+        state_scale=np.asarray(system.state_scale), observables=dict(system.observables),
+        name=f"{system.name} (current clamp)", domain=domain,
     )

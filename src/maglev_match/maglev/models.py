@@ -56,6 +56,8 @@ class UnitModel(MaglevModel):
         return unit.unit_dde(self.params, limited)
 
     def _build_clamped(self):
+        if self.params.tau > 0:  # the clamp on the discretised delay system
+            return clamp.unit_delay_clamped(self.system())
         return clamp.unit_clamped(self.params)
 
     @property
