@@ -35,6 +35,7 @@ from maglev_match.dynamics.cycle_curves.codim2 import (
 )
 from maglev_match.dynamics.cycle_curves.cusp import solve_cusp
 from maglev_match.dynamics.cycle_curves.flip import flip_coefficient
+from maglev_match.dynamics.cycle_curves.illinois import illinois
 from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem, critical_angle
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit, orbit_extrema
@@ -412,20 +413,8 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
     flo, fhi = at(lo)[1], at(hi)[1]
     if not (np.isfinite(flo) and np.isfinite(fhi)) or flo * fhi >= 0:
         return sp
-    best, f = None, np.nan
-    for _ in range(60):  # Illinois: the false position with the stale end's value halved
-        s = hi - fhi * (hi - lo) / (fhi - flo)
-        best, f = at(s)
-        if best is None or not np.isfinite(f):
-            return sp
-        if f * fhi < 0:
-            lo, flo = hi, fhi
-        else:
-            flo *= 0.5
-        hi, fhi = s, f
-        if f == 0.0 or abs(hi - lo) < tol or abs(f) < 1e-13:
-            break
-    else:
+    best, f, done = illinois(at, lo, hi, flo, fhi, tol, 1e-13)
+    if not done:
         return sp
     if aug.kind != CurveKind.NS and sp.type in ("LPNS", "PDNS") and not torus_pair(
             codim2_rest(aug.kind, best.multipliers), 1e-4):
@@ -454,28 +443,19 @@ def _contact(limits: LimitFn, system: System, aug, newton: _Newton, last, z: np.
         z0 = z + (s / span) * (z_new - z)
         out = newton(z0, row, float(row @ z0), U_prev)
         if out is None:
-            return None, np.nan, ""
+            return None, np.nan
         pt = make_point(out[0], out[1], out[3], out[4], "contact")
         m, name = limit_margin(limits, system, pt.orbit)
-        return (pt, out[0]), m, name
+        return (pt, out[0], name), m
 
-    end, fb, name = at(hi)
+    end, fb = at(hi)
     if not (fa >= 0 and np.isfinite(fb) and fb < 0):
         return None
-    flo, fhi = fa, fb
-    best, f = end, fb
-    for _ in range(60):  # Illinois, as _solve
-        s = hi - fhi * (hi - lo) / (fhi - flo)
-        best, f, name = at(s)
-        if best is None or not np.isfinite(f):
-            break
-        if f * fhi < 0:
-            lo, flo = hi, fhi
-        else:
-            flo *= 0.5
-        hi, fhi = s, f
-        if abs(f) < 1e-12 or abs(hi - lo) < tol:
-            break
+    name = end[2]
+    found, f, _ = illinois(at, lo, hi, fa, fb, tol, 1e-12)
+    best = found[:2] if found is not None else None
+    if found is not None:
+        name = found[2]
     if best is None or not abs(f) < 1e-8:
         return None if end is None else (end[0], end[1], SpecialPoint(
             type="contact", value=end[0].values[0], values=end[0].values, step=0,

@@ -9,8 +9,8 @@ plane: its projection on (p1, p2) turns back with a cusp there. So the CPC is th
 the parameter part of the curve's unit tangent (scaled as the continuation's arclength)
 projected on d, the curve's direction in the scaled parameter plane before the cusp: phi
 changes sign there and nowhere near (where the projected tangent does not vanish it keeps
-pointing along +-d). It is solved by Illinois iterations on the arclength of the step
-over which phi changes sign, each a point corrected onto the curve with its tangent from
+pointing along +-d). It is solved by Illinois iterations (:mod:`.illinois`) on the arclength of the
+step over which phi changes sign, each a point corrected onto the curve with its tangent from
 the factorised Newton matrix; the solution is accepted where the whole projected tangent
 (both components, relative to the tangent's norm) is below 1e-6.
 """
@@ -22,6 +22,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+
+from maglev_match.dynamics.cycle_curves.illinois import illinois
 
 __all__ = ["solve_cusp"]
 
@@ -56,29 +58,19 @@ def solve_cusp(sp: Any, states: list, aug: Any, newton: Callable, make_point: Ca
         z0 = za + s * ta
         out = newton(z0, row, float(row @ z0), Ua)
         if out is None:
-            return None, np.nan, np.nan
+            return None, np.nan
         t = tangent(out[2], W, ta)
-        return out, float(t[ip] @ d), float(np.linalg.norm(t[ip]))
+        return (out, float(np.linalg.norm(t[ip]))), float(t[ip] @ d)
 
     lo, hi = 0.0, float(row @ (zb - za))
-    _, flo, _ = at(lo)
-    _, fhi, _ = at(hi)
+    flo, fhi = at(lo)[1], at(hi)[1]
     if not (np.isfinite(flo) and np.isfinite(fhi)) or flo * fhi >= 0:
         return sp
-    best, f, size = None, np.nan, np.nan
-    for _ in range(60):  # Illinois: false position with the stale end's value halved
-        s = hi - fhi * (hi - lo) / (fhi - flo)
-        best, f, size = at(s)
-        if best is None or not np.isfinite(f):
-            return sp
-        if f * fhi < 0:
-            lo, flo = hi, fhi
-        else:
-            flo *= 0.5
-        hi, fhi = s, f
-        if abs(f) < 1e-12 or abs(hi - lo) < tol:
-            break
-    if best is None or not size < 1e-6:
+    found, f, _ = illinois(at, lo, hi, flo, fhi, tol, 1e-12)
+    if found is None or not np.isfinite(f):
+        return sp
+    best, size = found
+    if not size < 1e-6:
         return sp
     pt = make_point(best[0], best[1], best[3], best[4], "CPC")
     return dataclasses.replace(sp, value=pt.values[0], values=pt.values, located="solved",
