@@ -251,5 +251,10 @@ def atomic_write_netcdf(path: str | Path, dataset: Any, engine: str = "h5netcdf"
     driver (which crashed the process). Gridded results of this package are at most a few
     megabytes, so the copy in memory costs nothing worth keeping a second path for.
     """
-    data = dataset.to_netcdf(engine=engine)
-    return atomic_write_bytes(path, bytes(data))
+    return atomic_write_bytes(path, netcdf_bytes(dataset, engine))
+
+
+def netcdf_bytes(dataset: Any, engine: str = "h5netcdf") -> bytes:
+    """An :class:`xarray.Dataset` as netCDF-4 bytes (what `atomic_write_netcdf` writes, and
+    what the design explorer hands to the browser as a download)."""
+    return bytes(dataset.to_netcdf(engine=engine))

@@ -42,7 +42,9 @@ def _f(v: Any) -> float | None:
 
 
 def _netcdf(ds: Any) -> bytes:
-    return bytes(ds.to_netcdf(engine="h5netcdf"))
+    from maglev_match.core.io import netcdf_bytes
+
+    return netcdf_bytes(ds)
 
 
 def hopf_curve_job(params: Any, model: str, say: Callable[[str], None]) -> dict[str, Any]:

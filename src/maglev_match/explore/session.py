@@ -176,7 +176,9 @@ class Session:
             obj = {"index": self._last, "run": self._last_run}.get(kind)
             if obj is None:
                 raise LookupError(f"no {kind} result yet: release a design first")
-            return bytes(obj.to_xarray().to_netcdf(engine="h5netcdf"))
+            from maglev_match.core.io import netcdf_bytes
+
+            return netcdf_bytes(obj.to_xarray())
 
     def figure(self, kind: str, fmt: str) -> bytes:
         """The product's own figure of the last release (``index``: the index result's
