@@ -65,7 +65,7 @@ def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan"),
     solved by secant iterations)."""
     mult = np.asarray(mult, complex)
     if CurveKind(kind) == CurveKind.NS:
-        return _ns_tests(mult, angle)
+        return _ns_tests(mult, angle, coefficient, error)
     if mult.size == 0:
         return {}
     rest = codim2_rest(kind, mult)
@@ -91,7 +91,8 @@ def torus_pair(mult: np.ndarray, tol: float) -> bool:
     return bool(cplx.size and np.min(np.abs(np.abs(cplx) - 1.0)) <= tol)
 
 
-def _ns_tests(mult: np.ndarray, angle: float) -> dict[str, float]:
+def _ns_tests(mult: np.ndarray, angle: float, coefficient: float = np.nan,
+              error: float = np.nan) -> dict[str, float]:
     out = {}
     if np.isfinite(angle):
         kappa = float(np.cos(angle))
@@ -102,6 +103,8 @@ def _ns_tests(mult: np.ndarray, angle: float) -> dict[str, float]:
         if rest.size:
             out["LPNS"] = float(np.real(np.prod((rest - 1.0) / (1.0 + np.abs(rest)))))
             out["PDNS"] = float(np.real(np.prod((rest + 1.0) / (1.0 + np.abs(rest)))))
+    if mult.size >= 2 and abs(coefficient) > error:  # CH: where d is nonzero within its
+        out["CH"] = float(coefficient)  # accuracy (nan compares False: not evaluated)
     return out
 
 
@@ -122,9 +125,10 @@ def detect_codim2(kind: str, points: Sequence, params: tuple[str, str]
     out: list[SpecialPoint] = []
     ns = CurveKind(kind) == CurveKind.NS
     # unreliable points carry no multipliers: only the NS curve's angle tests remain there
+    coef, err = ("ns_coefficient", "ns_error") if ns else ("flip", "flip_error")
     tests = [codim2_tests(kind, c.multipliers if c.reliable else np.zeros(0, complex),
-                          getattr(c, "angle", np.nan), getattr(c, "flip", np.nan),
-                          getattr(c, "flip_error", np.nan)) for c in points]
+                          getattr(c, "angle", np.nan), getattr(c, coef, np.nan),
+                          getattr(c, err, np.nan)) for c in points]
     for ka in range(len(points) - 1):
         a, b = points[ka], points[ka + 1]
         ta, tb = tests[ka], tests[ka + 1]

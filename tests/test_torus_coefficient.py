@@ -1,0 +1,91 @@
+"""The Neimark-Sacker normal-form coefficient on NS curves of cycles, the Chenciner point
+(CH) and the fold-Neimark-Sacker point (LPNS) on them, against a system whose normal form
+is known in closed form (:mod:`torus_system`).
+
+The system: a cycle x = (cos 2 pi t, sin 2 pi t) (period T = 1, radial multiplier
+e^{-2}), a transverse pair y rotating at omega_t = 0.6 pi with w = y1 + i y2,
+
+    w' = (mu + s + a |w|^2 + i omega_t) w,    s' = nu - s^2 + c |w|^2,
+
+so on the cycle (y = 0, s = s* = sqrt(nu)) the multipliers are e^{mu + s* +- i omega_t}
+(theta = 0.6 pi) and e^{-2 s*}: the NS curve is mu = -sqrt(nu). Its normal form: s
+relaxes at the rate 2 s* to the slow manifold s - s* = c |w|^2 / (2 s*) + O(|w|^4) (|w|^2
+changes at O(|w|^4) on the NS curve), so |w|' = |w| (a + c / (2 s*)) |w|^2 + O(|w|^5)
+there, and over one period (at mu + s* = 0) |w| -> |w| / sqrt(1 - 2 a_e T |w|^2) = |w| (1
++ a_e T |w|^2 + ...), a_e = a + c / (2 s*), while the angle turns by theta. With the
+critical eigenvector of unit norm in the section, q = (e_y1 - i e_y2) / sqrt 2 (up to a
+phase), w = sqrt 2 z: z -> e^{i theta} z (1 + 2 a_e T |z|^2): d = 2 T (a + c / (2 s*)).
+(The c term checks the formula's B(q, (I - A)^{-1} B(q, qbar)) term; a the C term.)
+
+CH: d = 0 on the NS curve at a = -c / (2 s*). LPNS: on the curve continued in (nu, mu)
+it is nu = mu^2 (s* = -mu: past mu = 0 the cycle is the one with s* = -sqrt(nu) < 0), and
+the multiplier e^{-2 s*} passes 1 at mu = nu = 0 while the pair stays on the circle.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from torus_system import OMEGA_T, torus_cycle, torus_system
+
+from maglev_match.dynamics.cycle_curves import cycle_curve
+from maglev_match.dynamics.cycle_curves.torus import torus_coefficient
+
+
+@pytest.mark.parametrize("a, c, s", [(0.3, 0.1, 0.5), (-0.2, 0.3, 0.5), (0.05, -0.1, 0.8)])
+def test_torus_coefficient_is_the_closed_form(a, c, s):
+    tc = torus_coefficient(torus_system(), torus_cycle(s, mu=-s, a=a, c=c))
+    assert tc.ok, tc.message
+    assert tc.multiplier == pytest.approx(complex(math.cos(OMEGA_T), math.sin(OMEGA_T)),
+                                          abs=1e-7)
+    d = 2.0 * (a + c / (2.0 * s))
+    assert tc.d == pytest.approx(d, rel=1e-6)
+    assert np.sign(tc.d) == np.sign(d)
+    assert tc.error < 1e-3 * abs(d)
+
+
+def test_coefficient_along_the_ns_curve_and_the_ch_point():
+    """Started off the curve (mu = -0.45 at a = 0.3, c = 0.1, s* = 0.5), corrected onto
+    mu = -0.5 and followed down to a = -0.3: d = 2 (a + 0.1) at every point, one CH,
+    solved, at a = -0.1 (mu = -0.5)."""
+    S = torus_system()
+    cv = cycle_curve(S, torus_cycle(0.5, mu=-0.45, a=0.3, c=0.1), "NS", ("mu", "a"),
+                     ranges={"a": (-0.3, 0.3)}, direction=-1, ds_max=0.5, max_steps=100)
+    assert cv.ok, cv.warnings
+    mu, a = cv.p1, cv.p2
+    assert a[0] == pytest.approx(0.3) and a[-1] == pytest.approx(-0.3, abs=1e-12)
+    assert np.max(np.abs(mu + 0.5)) < 1e-8
+    d = np.array([pt.ns_coefficient for pt in cv.points])
+    np.testing.assert_allclose(d, 2.0 * (a + 0.1), atol=1e-6)
+    assert [s.type for s in cv.special_points] == ["CH"]
+    sp = cv.special_points[0]
+    assert sp.label == "CH1" and sp.located == "solved"
+    assert sp.values[0] == pytest.approx(-0.5, abs=1e-8)
+    assert sp.values[1] == pytest.approx(-0.1, abs=1e-8)
+    ds = cv.to_xarray()
+    np.testing.assert_array_equal(ds["ns_coefficient"].values, d)
+    assert ds["ns_error"].attrs["units"] == "1"
+
+
+def test_lpns_on_the_ns_curve():
+    """The NS curve in (nu, mu) is nu = mu^2; the fold multiplier e^{-2 s*} = e^{2 mu}
+    passes 1 at (0, 0): LPNS, solved there. d = 2 a (c = 0) stays 0.6: no CH."""
+    S = torus_system()
+    cv = cycle_curve(S, torus_cycle(0.5, mu=-0.5, a=0.3), "NS", ("nu", "mu"),
+                     ranges={"mu": (-0.5, 0.5)}, direction=1, ds_max=0.5, max_steps=100,
+                     scales=(0.05, 0.05))
+    assert cv.ok, cv.warnings
+    nu, mu = cv.p1, cv.p2
+    assert mu[-1] == pytest.approx(0.5, abs=1e-12)
+    assert np.max(np.abs(nu - mu ** 2)) < 1e-8
+    assert [s.type for s in cv.special_points] == ["LPNS"]
+    sp = cv.special_points[0]
+    assert sp.located == "solved"
+    assert sp.values[0] == pytest.approx(0.0, abs=1e-8)
+    assert sp.values[1] == pytest.approx(0.0, abs=1e-8)
+    # the multipliers there: the pair on the circle and the fold's at 1
+    rest = np.sort_complex(sp.point.multipliers)
+    assert np.min(np.abs(rest - 1.0)) < 1e-7
+    assert np.min(np.abs(rest - np.exp(1j * OMEGA_T))) < 1e-7
