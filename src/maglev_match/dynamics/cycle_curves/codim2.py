@@ -35,9 +35,12 @@ means, so that they are smooth where they vanish):
   bracketed, :func:`~maglev_match.dynamics.cycle_curves.curve.cycle_curve`); these four read
   the solved angle, so they are evaluated at every point; LPNS (fold-NS), prod (mu_i - 1) /
   (1 + |mu_i|), and PDNS (flip-NS), prod (mu_i + 1) / (1 + |mu_i|), of the remaining
-  multipliers, only where the Floquet data are reliable.
+  multipliers, only where the Floquet data are reliable; CH (Chenciner), the critical
+  coefficient d of the NS normal form z -> e^{i theta} z (1 + d |z|^2)
+  (:mod:`~maglev_match.dynamics.cycle_curves.torus`), evaluated only where the Floquet
+  data are reliable and |d| exceeds its estimated error.
 
-The driver solves the multiplier points and GPD on the curve (``located`` "solved");
+The driver solves the multiplier points, GPD and CH on the curve (``located`` "solved");
 where it cannot, and for R1 on NS and R2 on PD, the point stays bracketed: the linear
 interpolation of the test function's zero between the two points, CPC (if its solve
 fails) the point where the direction reverses (``located`` says so).
@@ -61,8 +64,8 @@ def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan"),
     """The test functions of the module docstring at one point (nontrivial multipliers
     ``mult``, the critical one still among them, empty where unreliable; ``angle`` theta of
     an NS curve's point; ``coefficient`` and ``error`` a PD curve's flip coefficient
-    and its estimated error). Plain products (smooth along the curve, so their zeros are
-    solved by secant iterations)."""
+    or an NS curve's coefficient d, and its estimated error). Plain products (smooth along
+    the curve, so their zeros are solved by secant iterations)."""
     mult = np.asarray(mult, complex)
     if CurveKind(kind) == CurveKind.NS:
         return _ns_tests(mult, angle, coefficient, error)

@@ -37,8 +37,8 @@ from maglev_match.dynamics.cycle_curves.cusp import solve_cusp
 from maglev_match.dynamics.cycle_curves.flip import flip_coefficient
 from maglev_match.dynamics.cycle_curves.illinois import illinois
 from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem, critical_angle
-from maglev_match.dynamics.cycle_curves.torus import torus_coefficient
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
+from maglev_match.dynamics.cycle_curves.torus import torus_coefficient
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit, orbit_extrema
 from maglev_match.dynamics.cycles.problem import LimitFn, limit_margin
 from maglev_match.dynamics.cycles.stability import floquet_multipliers, split_trivial
