@@ -89,3 +89,26 @@ def test_lpns_on_the_ns_curve():
     rest = np.sort_complex(sp.point.multipliers)
     assert np.min(np.abs(rest - 1.0)) < 1e-7
     assert np.min(np.abs(rest - np.exp(1j * OMEGA_T))) < 1e-7
+
+
+def test_torus_coefficient_of_the_ns_system_from_a_branch():
+    """systems.ns_system (6-D, rotated by a fixed orthogonal matrix, which keeps unit
+    eigenvectors unit): its (u, w) block u' = a u - w / 2 - (u^2 + w^2) u, ... is the
+    normal form above with a = -1, c = 0 and the period T = 2 pi / (1 + beta): d = -2 T =
+    -4 pi / (1 + beta) at the NS point beta = 0.6 that a one-parameter branch locates
+    (from its collocated cycle, ntst 20)."""
+    from systems import ns_plane_vector, ns_system
+
+    from maglev_match.dynamics.cycle_curves import start_from
+    from maglev_match.dynamics.cycles import cycle_branch, hopf_start
+
+    S = ns_system()
+    p = S.params_with(beta=0.0, gamma=0.36)
+    br = cycle_branch(S, hopf_start(S, np.zeros(6), p, "beta", 1.0, ns_plane_vector(), None),
+                      "beta", stop_at=0.8, ntst=20, ncol=4, max_steps=200)
+    orbit = start_from(br, "NS1")
+    beta = float(orbit.p[S.param_index("beta")])
+    tc = torus_coefficient(S, orbit)
+    assert tc.ok, tc.message
+    assert abs(tc.multiplier) == pytest.approx(1.0, abs=1e-6)
+    assert tc.d == pytest.approx(-4.0 * math.pi / (1.0 + beta), rel=1e-6)

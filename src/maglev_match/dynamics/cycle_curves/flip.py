@@ -107,9 +107,12 @@ def _kernels(rhs):
         f = lambda u: poincare(u, *args)  # noqa: E731
         return f(y), jax.jacfwd(f)(y)
 
+    def jacobians(ys, args):  # DP at a batch of points (one dispatch for the stencils)
+        return jax.vmap(lambda u: jax.jacfwd(lambda v: poincare(v, *args))(u))(ys)
+
     return jax.jit(value_jac), jax.jit(
         jax.vmap(lambda x, p: jnp.max(jnp.abs(jnp.linalg.eigvals(jax.jacfwd(rhs)(x, p)))),
-                 in_axes=(0, None)))
+                 in_axes=(0, None))), jax.jit(jacobians)
 
 
 def _differences(D, y, r, eps, D0):
@@ -155,6 +158,7 @@ class PoincareMap:
     the finite differences' step (1 % of the cycle's amplitude in scaled states)."""
 
     value_jac: object
+    jacobians: object
     args: tuple
     y: np.ndarray
     A: np.ndarray
@@ -166,12 +170,16 @@ class PoincareMap:
         """DP(x) at a point x of the section (section coordinates)."""
         return np.asarray(self.value_jac(jnp.asarray(x), self.args)[1])
 
+    def jacobians_at(self, xs: np.ndarray) -> np.ndarray:
+        """DP(x) at the rows x of ``xs`` (one batched evaluation)."""
+        return np.asarray(self.jacobians(jnp.asarray(xs), self.args))
+
 
 def poincare_map(system: System, orbit: PeriodicOrbit, *, per_interval: int = 8,
                  tol: float = 1e-12) -> PoincareMap | tuple[str, float, int]:
     """The :class:`PoincareMap` of ``orbit`` (its fixed point solved by Newton's method to
     ``tol``), or (why it failed, the residual, the RK4 steps)."""
-    value_jac, spectral = _kernels(system.rhs)
+    value_jac, spectral, jacobians = _kernels(system.rhs)
     p = jnp.asarray(np.asarray(orbit.p, float))
     x0 = np.asarray(orbit.states[0], float)
     S = np.asarray(system.state_scale, float)
@@ -211,7 +219,7 @@ def poincare_map(system: System, orbit: PeriodicOrbit, *, per_interval: int = 8,
     amp = float(np.max(np.linalg.norm((orbit.states - orbit.states.mean(axis=0)) / S,
                                       axis=1)))
     eps = 1e-2 * (amp if amp > 0 else 1.0)
-    return PoincareMap(value_jac, args, y, DP, res, hs.size, eps)
+    return PoincareMap(value_jac, jacobians, args, y, DP, res, hs.size, eps)
 
 
 def flip_coefficient(system: System, orbit: PeriodicOrbit, *, per_interval: int = 8,

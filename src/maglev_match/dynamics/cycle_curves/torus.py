@@ -100,9 +100,10 @@ def torus_coefficient(system: System, orbit: PeriodicOrbit, angle: float | None 
     y, eps = pm.y, pm.eps
     a, b = q.real, q.imag
     # DP(x) at y +- eps r, y +- 2 eps r for r = a, b (unit-free: |a|^2 + |b|^2 = 1)
-    mats = {r_name: [pm.jacobian(y + k * eps * r) for k in (1, -1, 2, -2)]
-            for r_name, r in (("a", a), ("b", b))}
-    sa, sb = _stencil(*mats["a"], A, eps), _stencil(*mats["b"], A, eps)
+    steps = np.array([1.0, -1.0, 2.0, -2.0])
+    mats = pm.jacobians_at(np.concatenate([y + eps * steps[:, None] * a,
+                                           y + eps * steps[:, None] * b]))
+    sa, sb = _stencil(*mats[:4], A, eps), _stencil(*mats[4:], A, eps)
     I = np.eye(n)
     e2 = cmath.exp(2j * theta)
     ds = []
