@@ -112,3 +112,44 @@ def test_torus_coefficient_of_the_ns_system_from_a_branch():
     assert tc.ok, tc.message
     assert abs(tc.multiplier) == pytest.approx(1.0, abs=1e-6)
     assert tc.d == pytest.approx(-4.0 * math.pi / (1.0 + beta), rel=1e-6)
+
+
+def test_ns_coefficient_in_the_command_answers(tmp_path, capsys):
+    """`cycle-curve --kind NS` on the user model of tests/test_ns_curves.py (the (u, w)
+    block of ns_system unrotated: d = -4 pi / (1 + beta) too): the column `ns coefficient`
+    of the table, `ns_coefficient` / `ns_error` in the CSV, the netCDF (with units and
+    long_name) and the JSON."""
+    import csv
+    import json
+
+    import xarray as xr
+    from test_ns_curves import NS_FILE
+
+    from maglev_match.cli import main
+
+    model = tmp_path / "ns.py"
+    model.write_text(NS_FILE)
+    out = tmp_path / "out"
+    args = ["cycle-curve", "--model", str(model), "--kind", "NS", "--params", "beta,gamma",
+            "--from", "-0.5", "--to", "0.5", "--ntst", "20", "--range", "gamma=0.3:0.45"]
+    assert main(args + ["--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "ns coefficient" in text
+    with open(next(p for p in out.glob("*.csv") if "special" not in p.name)) as f:
+        rows = list(csv.DictReader(f))
+    beta = np.array([float(r["beta"]) for r in rows])
+    d = np.array([float(r["ns_coefficient"]) for r in rows])
+    np.testing.assert_allclose(d, -4.0 * math.pi / (1.0 + beta), rtol=1e-6)
+    # the estimate (the second-order differences' distance) is conservative: d is right
+    # to 1e-6 relative, the estimate says a few 1e-4
+    assert all(0 < float(r["ns_error"]) < 1e-3 * abs(float(r["ns_coefficient"]))
+               for r in rows)
+    ds = xr.load_dataset(next(out.glob("*.nc")), engine="h5netcdf")
+    np.testing.assert_allclose(ds["ns_coefficient"].values, -4.0 * math.pi / (1.0 + beta),
+                               rtol=1e-6)
+    assert ds["ns_coefficient"].attrs["units"] == "1"
+    assert "Neimark-Sacker" in ds["ns_coefficient"].attrs["long_name"]
+    assert main(args + ["--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert all(p["ns_coefficient"] == pytest.approx(-4.0 * math.pi / (1.0 + p["beta"]),
+                                                    rel=1e-6) for p in res["points"])
