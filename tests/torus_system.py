@@ -17,18 +17,20 @@ OMEGA_T = 0.6 * math.pi  # the transverse rotation per unit time: theta = 0.6 pi
 
 
 def _rhs(x, p):
-    mu, a, nu, c = p[0], p[1], p[2], p[3]
+    mu, a, nu, c, b, k = p[0], p[1], p[2], p[3], p[4], p[5]
     x1, x2, y1, y2, s = x[0], x[1], x[2], x[3], x[4]
     r2 = x1 * x1 + x2 * x2
     w2 = y1 * y1 + y2 * y2
     g = mu + s + a * w2
     return jnp.stack([x1 * (1 - r2) - OMEGA * x2, OMEGA * x1 + x2 * (1 - r2),
-                      g * y1 - OMEGA_T * y2, OMEGA_T * y1 + g * y2, nu - s * s + c * w2])
+                      g * y1 - OMEGA_T * y2 + b * (y1 * y1 - y2 * y2),
+                      OMEGA_T * y1 + g * y2 + 2.0 * b * y1 * y2 + k * w2,
+                      nu - s * s + c * w2])
 
 
 def torus_system() -> System:
-    return System(rhs=_rhs, p=np.array([-0.5, 0.3, 0.25, 0.0]),
-                  param_names=("mu", "a", "nu", "c"),
+    return System(rhs=_rhs, p=np.array([-0.5, 0.3, 0.25, 0.0, 0.0, 0.0]),
+                  param_names=("mu", "a", "nu", "c", "b", "k"),
                   state_names=("x1", "x2", "y1", "y2", "s"), name="torus normal form")
 
 
