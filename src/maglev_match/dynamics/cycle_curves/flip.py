@@ -32,6 +32,10 @@ amplitude in scaled states; nested forward-mode derivatives through the integrat
 return-time iterations compiled for over a minute, the differences reuse the one compiled
 Jacobian).
 
+The map, its fixed point and Jacobian (:func:`poincare_map`, :class:`PoincareMap`) and the
+difference stencils (:func:`_stencil`) are shared with the Neimark-Sacker coefficient
+(:mod:`~maglev_match.dynamics.cycle_curves.torus`).
+
 Accuracy: the RK4 global error, O(h^4) with h the substep, and the differences' O(eps^4)
 (checked against a system whose Poincare map is known in closed form,
 tests/test_flip_coefficient.py); the multiplier of A nearest -1 is returned with the

@@ -27,7 +27,11 @@ C(q, q, qbar) = C(q, a, a) + C(q, b, b) (the trilinear form's polarisation), B(q
 B(h, a) + i B(h, b) and B(qbar, h) = B(h, a) - i B(h, b). The same with the second-order
 differences gives a second estimate; their distance, plus the rounding of a second
 difference, is the error estimate (as for the flip coefficient). Cost: the fixed point's
-Newton iterations (from the collocated cycle, one or two Jacobians) and eight Jacobians.
+Newton iterations (from the collocated cycle, one or two Jacobians) and eight Jacobians in
+one batched (vmapped) evaluation; measured 6.8 ms CPU per point on the 6-state test
+system of tests/systems.py (ns_system, 160 RK4 steps; 2 cores, load 0.6), its NS curve's
+113 points 2.9 s instead of 2.0 s warm (the first curve of a model also compiles the map,
+about 4 s).
 """
 
 from __future__ import annotations
