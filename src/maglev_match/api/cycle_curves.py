@@ -65,7 +65,9 @@ class CycleCurveStudy(Plottable):
     def rows(self) -> list[dict[str, Any]]:
         """One row per curve point: x, y, period, amplitude, extrema, the largest
         non-critical multiplier, reliability, kind; on an NS curve also kappa = cos theta
-        of the critical pair e^{+-i theta}; on a PD curve the flip coefficient c of the
+        of the critical pair e^{+-i theta} and the NS coefficient d of the normal form
+        z -> e^{i theta} z (1 + d |z|^2) (d < 0 supercritical) with its estimated error;
+        on a PD curve the flip coefficient c of the
         normal form eta -> -eta + c eta^3 (c > 0 supercritical) and its estimated error."""
         import numpy as np
 
@@ -81,6 +83,7 @@ class CycleCurveStudy(Plottable):
             r["kind"] = c.kind
             if self.kind == "NS":
                 r["kappa"] = c.kappa
+                r["ns_coefficient"], r["ns_error"] = c.ns_coefficient, c.ns_error
             if self.kind == "PD":
                 r["flip_coefficient"], r["flip_error"] = c.flip, c.flip_error
             out.append(r)

@@ -184,12 +184,14 @@ def _print_text(st) -> None:
     ns = st.kind == "NS"  # the critical pair's kappa = cos theta as one more column
     pd = st.kind == "PD"  # the flip coefficient c (c > 0 supercritical) as one more
     head = f"  {st.x:>14}  {st.y:>14}  {'T (s)':>10}  {'amplitude':>10}  {'max|mu|':>9}  " \
-        + (f"{'kappa':>10}  " if ns else "") + (f"{'flip c':>11}  " if pd else "") + "kind"
+        + (f"{'kappa':>10}  {'ns coefficient':>14}  " if ns else "") \
+        + (f"{'flip c':>11}  " if pd else "") + "kind"
     console.print(head, highlight=False, markup=False)
     for r in shown:
         console.print(f"  {r[st.x]:>14.8g}  {r[st.y]:>14.8g}  {r['period']:>10.6g}  "
                       f"{r['amplitude']:>10.4g}  {r['max_abs_multiplier']:>9.4g}  "
-                      + (f"{r['kappa']:>10.6f}  " if ns else "")
+                      + (f"{r['kappa']:>10.6f}  {r['ns_coefficient']:>14.4g}  " if ns
+                         else "")
                       + (f"{r['flip_coefficient']:>11.4g}  " if pd else "") + r["kind"],
                       highlight=False, markup=False)
     for s in st.special_rows():

@@ -22,11 +22,14 @@ conditioned along the curve.
 * :mod:`~maglev_match.dynamics.cycle_curves.curve`: the driver :func:`cycle_curve`
   (pseudo-arclength in (p1, p2), Newton, step control, mesh adaptation, the multipliers);
 * :mod:`~maglev_match.dynamics.cycle_curves.codim2`: codimension-two points on the curve
-  (CPC, LPPD, LPNS on LPC; LPPD, PDNS, R2, GPD on PD; R1-R4, LPNS, PDNS on NS);
+  (CPC, LPPD, LPNS on LPC; LPPD, PDNS, R2, GPD on PD; R1-R4, LPNS, PDNS, CH on NS);
 * :mod:`~maglev_match.dynamics.cycle_curves.cusp`: the CPC solved (the curve's tangent in
   the parameter plane vanishes);
 * :mod:`~maglev_match.dynamics.cycle_curves.flip`: the period doubling's normal-form
   coefficient (:func:`flip_coefficient`), read out along PD curves (GPD where it vanishes);
+* :mod:`~maglev_match.dynamics.cycle_curves.torus`: the Neimark-Sacker normal-form
+  coefficient (:func:`torus_coefficient`) on the same Poincare map, read out along NS
+  curves (CH, the Chenciner point, where it vanishes);
 * :mod:`~maglev_match.dynamics.cycle_curves.gh`: the LPC curve born at a generalised Hopf
   point of a Hopf curve (branch switching, :func:`lpc_from_generalised_hopf`);
 * :mod:`~maglev_match.dynamics.cycle_curves.results`: :class:`CycleCurve`,
@@ -43,6 +46,7 @@ from maglev_match.dynamics.cycle_curves.flip import FlipCoefficient, flip_coeffi
 from maglev_match.dynamics.cycle_curves.gh import lpc_from_generalised_hopf
 from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
+from maglev_match.dynamics.cycle_curves.torus import TorusCoefficient, torus_coefficient
 
 __all__ = [
     "AugmentedCycleSystem",
@@ -52,10 +56,12 @@ __all__ = [
     "CycleCurvePoint",
     "FlipCoefficient",
     "NSCycleSystem",
+    "TorusCoefficient",
     "codim2_tests",
     "cycle_curve",
     "detect_codim2",
     "flip_coefficient",
     "lpc_from_generalised_hopf",
     "start_from",
+    "torus_coefficient",
 ]

@@ -35,9 +35,15 @@ means, so that they are smooth where they vanish):
   bracketed, :func:`~maglev_match.dynamics.cycle_curves.curve.cycle_curve`); these four read
   the solved angle, so they are evaluated at every point; LPNS (fold-NS), prod (mu_i - 1) /
   (1 + |mu_i|), and PDNS (flip-NS), prod (mu_i + 1) / (1 + |mu_i|), of the remaining
-  multipliers, only where the Floquet data are reliable.
+  multipliers, only where the Floquet data are reliable; CH (Chenciner), the critical
+  coefficient d of the NS normal form z -> e^{i theta} z (1 + d |z|^2)
+  (:mod:`~maglev_match.dynamics.cycle_curves.torus`), computed only where the Floquet
+  data are reliable: CH where d has opposite signs at two points where |d| exceeds its
+  estimated error, d computed at every point between them (these need not be
+  consecutive: a point near CH has |d| within its error), bracketed on the step where d
+  itself changes sign.
 
-The driver solves the multiplier points and GPD on the curve (``located`` "solved");
+The driver solves the multiplier points, GPD and CH on the curve (``located`` "solved");
 where it cannot, and for R1 on NS and R2 on PD, the point stays bracketed: the linear
 interpolation of the test function's zero between the two points, CPC (if its solve
 fails) the point where the direction reverses (``located`` says so).
@@ -61,8 +67,8 @@ def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan"),
     """The test functions of the module docstring at one point (nontrivial multipliers
     ``mult``, the critical one still among them, empty where unreliable; ``angle`` theta of
     an NS curve's point; ``coefficient`` and ``error`` a PD curve's flip coefficient
-    and its estimated error). Plain products (smooth along the curve, so their zeros are
-    solved by secant iterations)."""
+    or an NS curve's coefficient d, and its estimated error). Plain products (smooth along
+    the curve, so their zeros are solved by secant iterations)."""
     mult = np.asarray(mult, complex)
     if CurveKind(kind) == CurveKind.NS:
         return _ns_tests(mult, angle)
@@ -147,6 +153,8 @@ def detect_codim2(kind: str, points: Sequence, params: tuple[str, str]
                 period=float(a.period + f * (b.period - a.period)), point=near))
     if CurveKind(kind) == CurveKind.LPC:
         out.extend(_cusps(points))
+    if ns:
+        out.extend(_chenciner(points))
     out.sort(key=lambda s: s.step)
     return label_points(out)
 
@@ -170,4 +178,33 @@ def _cusps(points: Sequence) -> list[SpecialPoint]:
                 type="CPC", value=float(P[k, 0]), values=tuple(map(float, P[k])), step=k,
                 located="bracketed at a point of the curve (it turns back in the "
                 "parameter plane there; not solved)", period=c.period, point=c))
+    return out
+
+
+def _chenciner(points: Sequence) -> list[SpecialPoint]:
+    """CH on an NS curve: d changes sign between two points where |d| exceeds its
+    estimated error (``ns_error``), with d computed (finite) at every point between them
+    (where |d| is within its error the sign is not trusted, so the two points need not be
+    consecutive); the bracket is the step between them over which d itself changes sign
+    (the first, if noise near zero makes several)."""
+    d = np.array([getattr(c, "ns_coefficient", np.nan) for c in points], float)
+    err = np.array([getattr(c, "ns_error", np.nan) for c in points], float)
+    sure = np.flatnonzero(np.abs(d) > err)  # nan compares False: not evaluated there
+    out = []
+    for i, j in zip(sure[:-1], sure[1:], strict=True):
+        if d[i] * d[j] >= 0 or not np.all(np.isfinite(d[i:j + 1])):
+            continue
+        k = i + int(np.flatnonzero(d[i:j] * d[i + 1:j + 1] <= 0)[0])
+        a, b = points[k], points[k + 1]
+        fa, fb = d[k], d[k + 1]
+        f = fa / (fa - fb) if fa != fb else 0.5
+        vals = tuple(float(x + f * (y - x)) for x, y in zip(a.values, b.values, strict=True))
+        out.append(SpecialPoint(
+            type="CH", value=vals[0], values=vals, step=int(k),
+            located="bracketed between two consecutive points of the curve (linear "
+            "interpolation of the NS coefficient, not solved)",
+            detail=f"NS coefficient {d[i]:.3g} and {d[j]:.3g} (beyond their estimated errors "
+            f"{err[i]:.2g}, {err[j]:.2g})",
+            period=float(a.period + f * (b.period - a.period)),
+            point=a if abs(fa) <= abs(fb) else b))
     return out

@@ -38,6 +38,7 @@ from maglev_match.dynamics.cycle_curves.flip import flip_coefficient
 from maglev_match.dynamics.cycle_curves.illinois import illinois
 from maglev_match.dynamics.cycle_curves.ns import NSCycleSystem, critical_angle
 from maglev_match.dynamics.cycle_curves.results import CurveStop, CycleCurve, CycleCurvePoint
+from maglev_match.dynamics.cycle_curves.torus import torus_coefficient
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit, orbit_extrema
 from maglev_match.dynamics.cycles.problem import LimitFn, limit_margin
 from maglev_match.dynamics.cycles.stability import floquet_multipliers, split_trivial
@@ -211,6 +212,10 @@ def cycle_curve(
         amp = float(np.max(np.linalg.norm((U - U[:-1].mean(axis=0)) / prob.scale, axis=1)))
         fc = flip_coefficient(system, orb) if kind == CurveKind.PD and reliable else None
         flip = dict(flip=fc.c, flip_error=fc.error) if fc is not None and fc.ok else {}
+        if kind == CurveKind.NS and reliable:  # the NS coefficient d (CH where it vanishes)
+            tc = torus_coefficient(system, orb, aug.angle(z))
+            if tc.ok:
+                flip = dict(ns_coefficient=tc.d, ns_error=tc.error)
         return CycleCurvePoint(values=(v1, v2), period=T, amplitude=amp, orbit=orb,
                                multipliers=rest if reliable else np.zeros(0, complex),
                                trivial_multiplier=triv, reliable=reliable, test=ev.g,
@@ -384,7 +389,7 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
     k = sp.step
     if sp.type == "CPC":
         return solve_cusp(sp, states, aug, newton, make_point, W, tol, _tangent)
-    if sp.type not in ("LPPD", "LPNS", "PDNS", "R2", "R3", "R4", "GPD") \
+    if sp.type not in ("LPPD", "LPNS", "PDNS", "R2", "R3", "R4", "GPD", "CH") \
             or (sp.type == "R2" and aug.kind != CurveKind.NS) or k + 1 >= len(states):
         return sp
     (za, ta, mesh_a), (zb, _, mesh_b) = states[k], states[k + 1]
@@ -406,6 +411,8 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
             return pt, codim2_tests(aug.kind, np.zeros(0, complex), pt.angle)[sp.type]
         if sp.type == "GPD":  # the coefficient itself, however small (its zero is sought)
             return pt, pt.flip
+        if sp.type == "CH":  # the NS coefficient d, however small
+            return pt, pt.ns_coefficient
         return pt, codim2_tests(aug.kind, pt.multipliers, pt.angle).get(sp.type, np.nan) \
             if pt.reliable else np.nan
 
@@ -421,6 +428,8 @@ def _solve(sp, states, aug: AugmentedCycleSystem, newton: _Newton, make_point: C
         return None  # a neutral saddle, no torus bifurcation
     if sp.type == "GPD" and not abs(f) <= max(best.flip_error, 1e-9 * max(abs(flo), 1.0)):
         return None  # the coefficient changed sign through a pole (a second -1: R2)
+    if sp.type == "CH" and not abs(f) <= max(best.ns_error, 1e-9 * max(abs(flo), 1.0)):
+        return None  # d changed sign through a pole (a strong resonance)
     return dataclasses.replace(sp, value=best.values[0], values=best.values, located="solved",
                                detail=f"test function {f:.2e} there", period=best.period,
                                point=best)

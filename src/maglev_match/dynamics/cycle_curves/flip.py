@@ -32,6 +32,10 @@ amplitude in scaled states; nested forward-mode derivatives through the integrat
 return-time iterations compiled for over a minute, the differences reuse the one compiled
 Jacobian).
 
+The map, its fixed point and Jacobian (:func:`poincare_map`, :class:`PoincareMap`) and the
+difference stencils (:func:`_stencil`) are shared with the Neimark-Sacker coefficient
+(:mod:`~maglev_match.dynamics.cycle_curves.torus`).
+
 Accuracy: the RK4 global error, O(h^4) with h the substep, and the differences' O(eps^4)
 (checked against a system whose Poincare map is known in closed form,
 tests/test_flip_coefficient.py); the multiplier of A nearest -1 is returned with the
@@ -51,7 +55,7 @@ import numpy as np
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit
 from maglev_match.dynamics.system import System
 
-__all__ = ["FlipCoefficient", "flip_coefficient"]
+__all__ = ["FlipCoefficient", "PoincareMap", "flip_coefficient", "poincare_map"]
 
 _NEWTON_DELTA = 3  # Newton iterations on the return time's correction (unrolled): from
 # delta = 0 the k-th iterate's error is O(|x - x*|^(2^k)), so 3 make its derivatives up to
@@ -107,9 +111,12 @@ def _kernels(rhs):
         f = lambda u: poincare(u, *args)  # noqa: E731
         return f(y), jax.jacfwd(f)(y)
 
+    def jacobians(ys, args):  # DP at a batch of points (one dispatch for the stencils)
+        return jax.vmap(lambda u: jax.jacfwd(lambda v: poincare(v, *args))(u))(ys)
+
     return jax.jit(value_jac), jax.jit(
         jax.vmap(lambda x, p: jnp.max(jnp.abs(jnp.linalg.eigvals(jax.jacfwd(rhs)(x, p)))),
-                 in_axes=(0, None)))
+                 in_axes=(0, None))), jax.jit(jacobians)
 
 
 def _differences(D, y, r, eps, D0):
@@ -118,8 +125,14 @@ def _differences(D, y, r, eps, D0):
     these are B(q, r) and C(q, r, r) (truncation O(eps^4), rounding O(1e-16 / eps^2));
     then the same by the second-order differences (step eps), whose distance from the
     former estimates the error."""
-    Dp1, Dm1 = D(y + eps * r), D(y - eps * r)
-    Dp2, Dm2 = D(y + 2 * eps * r), D(y - 2 * eps * r)
+    return _stencil(D(y + eps * r), D(y - eps * r), D(y + 2 * eps * r), D(y - 2 * eps * r),
+                    D0, eps)
+
+
+def _stencil(Dp1, Dm1, Dp2, Dm2, D0, eps):
+    """:func:`_differences` from the values at y + eps r, y - eps r, y + 2 eps r, y - 2 eps r
+    and y (these may be matrices DP(x), applied to vectors afterwards: the stencils are
+    linear)."""
     first = (8.0 * (Dp1 - Dm1) - (Dp2 - Dm2)) / (12.0 * eps)
     second = (-Dp2 + 16.0 * Dp1 - 30.0 * D0 + 16.0 * Dm1 - Dm2) / (12.0 * eps ** 2)
     first2 = (Dp1 - Dm1) / (2.0 * eps)
@@ -141,20 +154,43 @@ def _steps(orbit: PeriodicOrbit, spectral: np.ndarray, per_interval: int) -> np.
     return np.repeat(dt / k, k)
 
 
-def flip_coefficient(system: System, orbit: PeriodicOrbit, *, per_interval: int = 8,
-                     tol: float = 1e-12) -> FlipCoefficient:
-    """The flip coefficient c of the cycle ``orbit`` at (or near) a period doubling
-    (module docstring). ``per_interval``: RK4 substeps per mesh interval at least.
-    Never raises on a numerical failure: ``ok`` False and ``message`` say what failed."""
-    value_jac, spectral = _kernels(system.rhs)
+@dataclass(frozen=True)
+class PoincareMap:
+    """The RK4 Poincare map of a collocated cycle at its fixed point (module docstring):
+    ``value_jac(y, args)`` -> (P(y), DP(y)) in section coordinates y, ``y`` the fixed
+    point, ``A`` = DP(y), ``residual`` of the fixed point, ``steps`` the RK4 steps, ``eps``
+    the finite differences' step (1 % of the cycle's amplitude in scaled states)."""
+
+    value_jac: object
+    jacobians: object
+    args: tuple
+    y: np.ndarray
+    A: np.ndarray
+    residual: float
+    steps: int
+    eps: float
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        """DP(x) at a point x of the section (section coordinates)."""
+        return np.asarray(self.value_jac(jnp.asarray(x), self.args)[1])
+
+    def jacobians_at(self, xs: np.ndarray) -> np.ndarray:
+        """DP(x) at the rows x of ``xs`` (one batched evaluation)."""
+        return np.asarray(self.jacobians(jnp.asarray(xs), self.args))
+
+
+def poincare_map(system: System, orbit: PeriodicOrbit, *, per_interval: int = 8,
+                 tol: float = 1e-12) -> PoincareMap | tuple[str, float, int]:
+    """The :class:`PoincareMap` of ``orbit`` (its fixed point solved by Newton's method to
+    ``tol``), or (why it failed, the residual, the RK4 steps)."""
+    value_jac, spectral, jacobians = _kernels(system.rhs)
     p = jnp.asarray(np.asarray(orbit.p, float))
     x0 = np.asarray(orbit.states[0], float)
     S = np.asarray(system.state_scale, float)
     f0s = np.asarray(system.rhs(jnp.asarray(x0), p), float) / S
     nrm = float(np.linalg.norm(f0s))
     if not nrm > 0:
-        return FlipCoefficient(math.nan, math.nan, math.nan, 0, False,
-                               "the vector field vanishes at the cycle's first node")
+        return "the vector field vanishes at the cycle's first node", math.nan, 0
     f0s = f0s / nrm
     n = x0.size
     # an orthonormal basis of the section's tangent space (the complement of f0s)
@@ -171,23 +207,36 @@ def flip_coefficient(system: System, orbit: PeriodicOrbit, *, per_interval: int 
         F = Py - y
         res = float(np.max(np.abs(F)))
         if not np.all(np.isfinite(DP)) or not np.isfinite(res):
-            return FlipCoefficient(math.nan, math.nan, res, hs.size, False,
-                                   "the Poincare map is not finite (the RK4 integration "
-                                   "diverged)")
+            return ("the Poincare map is not finite (the RK4 integration diverged)", res,
+                    hs.size)
         if res < tol:
             break
         try:
             y = y - np.linalg.solve(DP - np.eye(n - 1), F)
         except np.linalg.LinAlgError:
-            return FlipCoefficient(math.nan, math.nan, res, hs.size, False,
-                                   "the Poincare map's fixed point is singular (a multiplier "
-                                   "1 besides the trivial one)")
+            return ("the Poincare map's fixed point is singular (a multiplier 1 besides the "
+                    "trivial one)", res, hs.size)
     else:
         if res > 1e-9:
-            return FlipCoefficient(math.nan, math.nan, res, hs.size, False,
-                                   f"the Poincare map's fixed point did not converge "
-                                   f"(residual {res:.2e})")
-    A = DP
+            return (f"the Poincare map's fixed point did not converge (residual {res:.2e})",
+                    res, hs.size)
+    amp = float(np.max(np.linalg.norm((orbit.states - orbit.states.mean(axis=0)) / S,
+                                      axis=1)))
+    eps = 1e-2 * (amp if amp > 0 else 1.0)
+    return PoincareMap(value_jac, jacobians, args, y, DP, res, hs.size, eps)
+
+
+def flip_coefficient(system: System, orbit: PeriodicOrbit, *, per_interval: int = 8,
+                     tol: float = 1e-12) -> FlipCoefficient:
+    """The flip coefficient c of the cycle ``orbit`` at (or near) a period doubling
+    (module docstring). ``per_interval``: RK4 substeps per mesh interval at least.
+    Never raises on a numerical failure: ``ok`` False and ``message`` say what failed."""
+    pm = poincare_map(system, orbit, per_interval=per_interval, tol=tol)
+    if not isinstance(pm, PoincareMap):
+        message, res, steps = pm
+        return FlipCoefficient(math.nan, math.nan, res, steps, False, message)
+    value_jac, args, y, A, res, eps = pm.value_jac, pm.args, pm.y, pm.A, pm.residual, pm.eps
+    hs_size = pm.steps
     ev, V = np.linalg.eig(A)
     i = int(np.argmin(np.abs(ev + 1.0)))
     mult = float(ev[i].real)
@@ -198,13 +247,10 @@ def flip_coefficient(system: System, orbit: PeriodicOrbit, *, per_interval: int 
     pa = np.real(Vl[:, j])
     pq = float(pa @ q)
     if abs(pq) < 1e-12 or abs(ev[i].imag) > 1e-8:
-        return FlipCoefficient(math.nan, mult, res, hs.size, False,
+        return FlipCoefficient(math.nan, mult, res, hs_size, False,
                                "the multiplier -1 is not simple (a second multiplier at -1: "
                                "R2)")
     pa = pa / pq
-    amp = float(np.max(np.linalg.norm((orbit.states - orbit.states.mean(axis=0)) / S,
-                                      axis=1)))
-    eps = 1e-2 * (amp if amp > 0 else 1.0)
 
     def dq(x):  # DP(x) q
         return np.asarray(value_jac(jnp.asarray(x), args)[1]) @ q
@@ -217,9 +263,9 @@ def flip_coefficient(system: System, orbit: PeriodicOrbit, *, per_interval: int 
     rounding = 1e-15 * float(np.abs(pa) @ np.abs(A @ q)) / eps ** 2
     error = abs(c - c2) + rounding
     if not math.isfinite(c):
-        return FlipCoefficient(math.nan, mult, res, hs.size, False,
+        return FlipCoefficient(math.nan, mult, res, hs_size, False,
                                "the coefficient is not finite")
-    return FlipCoefficient(c, mult, res, hs.size, error=error)
+    return FlipCoefficient(c, mult, res, hs_size, error=error)
 
 
 def _coefficient(A, pa, Bqq, Cqqq, y, q, eps, args, value_jac, k) -> float:

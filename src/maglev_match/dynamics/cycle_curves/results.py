@@ -49,6 +49,10 @@ class CycleCurvePoint:
     doubling's normal form eta -> -eta + c eta^3 (:mod:`~maglev_match.dynamics.
     cycle_curves.flip`; c > 0 supercritical, c < 0 subcritical; nan also where the
     Floquet data are unreliable or it could not be computed), ``flip_error`` its
+    estimated error; ``ns_coefficient`` (NS curves only, else nan) the critical
+    coefficient d of the Neimark-Sacker normal form z -> e^{i theta} z (1 + d |z|^2)
+    (:mod:`~maglev_match.dynamics.cycle_curves.torus`; d < 0 supercritical, d > 0
+    subcritical; nan also where the Floquet data are unreliable), ``ns_error`` its
     estimated error."""
 
     __repr__ = compact_repr
@@ -68,6 +72,8 @@ class CycleCurvePoint:
     angle: float = float("nan")
     flip: float = float("nan")
     flip_error: float = float("nan")
+    ns_coefficient: float = float("nan")
+    ns_error: float = float("nan")
 
     @property
     def kappa(self) -> float:
@@ -165,6 +171,12 @@ def curve_to_xarray(curve: CycleCurve, units: Mapping[str, str] | None = None) -
     if curve.kind == "NS":
         data["kappa"] = (("point",), np.array([c.kappa for c in pts]), {"units": "1",
                          "long_name": "cos theta of the critical multipliers e^(+-i theta)"})
+        data["ns_coefficient"] = (("point",), np.array([c.ns_coefficient for c in pts]), {
+            "units": "1", "long_name": "critical coefficient d of the Neimark-Sacker normal "
+            "form z -> e^(i theta) z (1 + d |z|^2) (d < 0 supercritical; states in units of "
+            "the system's state scale)"})
+        data["ns_error"] = (("point",), np.array([c.ns_error for c in pts]), {
+            "units": "1", "long_name": "estimated error of the NS coefficient"})
     if curve.kind == "PD":
         data["flip_coefficient"] = (("point",), np.array([c.flip for c in pts]), {
             "units": "1", "long_name": "critical coefficient c of the period doubling's "
