@@ -186,3 +186,22 @@ def test_ch_needs_d_beyond_its_error_on_both_sides():
     assert sps[0].values[1] == pytest.approx(1.0 + 0.1 / (0.1 + 1e-5))
     assert detect_codim2("NS", pts([2e-4, -3e-4, 1e-4], 1e-3), ("p", "q")) == []
     assert detect_codim2("NS", pts([0.3, math.nan, -0.2], 1e-3), ("p", "q")) == []
+
+
+def test_gpd_follows_the_same_rule_as_ch():
+    """GPD on a PD curve is read from the flip coefficient c with the same rule: a point
+    next to GPD whose |c| is within its error does not hide it (it did when only
+    consecutive points with |c| beyond the error were compared)."""
+    from types import SimpleNamespace
+
+    from maglev_match.dynamics.cycle_curves import detect_codim2
+
+    def pts(cs, err):
+        return [SimpleNamespace(values=(0.0, float(i)), period=1.0, reliable=False,
+                                multipliers=np.zeros(0, complex), flip=c, flip_error=err)
+                for i, c in enumerate(cs)]
+
+    sps = detect_codim2("PD", pts([0.3, 1e-5, -0.1, -0.2], 1e-3), ("p", "q"))
+    assert [s.type for s in sps] == ["GPD"] and sps[0].step == 1
+    assert sps[0].values[1] == pytest.approx(1.0 + 1e-5 / (1e-5 + 0.1))
+    assert detect_codim2("PD", pts([2e-4, -3e-4, 1e-4], 1e-3), ("p", "q")) == []

@@ -24,9 +24,10 @@ means, so that they are smooth where they vanish):
   second order, (mu_1 + 1)(mu_2 + 1) with the Jordan block of the pair, so the system is
   singular and the point stays bracketed, the curve passing it); GPD (generalised period
   doubling), the critical coefficient c of the flip's normal form eta -> -eta + c eta^3
-  (:mod:`~maglev_match.dynamics.cycle_curves.flip`), evaluated only where |c| exceeds
-  its estimated error (a c that is zero within its accuracy all along, as for a flip that is
-  linear in the critical direction, reports no GPD).
+  (:mod:`~maglev_match.dynamics.cycle_curves.flip`), reported where c changes sign
+  between two points at which |c| exceeds its estimated error, the points between them
+  within their error not counting (as for CH below; a c that is zero within its accuracy
+  all along, as for a flip that is linear in the critical direction, reports no GPD).
 * on NS (the critical pair e^{+-i theta} removed, theta an unknown of the augmented system,
   :mod:`~maglev_match.dynamics.cycle_curves.ns`, kappa = cos theta): the strong resonances
   R3, kappa + 1/2 (theta = 2 pi / 3), and R4, kappa (theta = pi / 2); R2, cos(theta / 2),
@@ -61,14 +62,13 @@ from maglev_match.dynamics.cycle_curves.augmented import CurveKind
 __all__ = ["detect_codim2", "codim2_rest", "codim2_tests", "torus_pair"]
 
 
-def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan"),
-                 coefficient: float = float("nan"), error: float = float("nan")
+def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan")
                  ) -> dict[str, float]:
     """The test functions of the module docstring at one point (nontrivial multipliers
     ``mult``, the critical one still among them, empty where unreliable; ``angle`` theta of
-    an NS curve's point; ``coefficient`` and ``error`` a PD curve's flip coefficient
-    or an NS curve's coefficient d, and its estimated error). Plain products (smooth along
-    the curve, so their zeros are solved by secant iterations)."""
+    an NS curve's point). Plain products (smooth along the curve, so their zeros are
+    solved by secant iterations). GPD and CH, read from the normal-form coefficients with
+    their error estimates, are detected over the whole curve (`detect_codim2`)."""
     mult = np.asarray(mult, complex)
     if CurveKind(kind) == CurveKind.NS:
         return _ns_tests(mult, angle)
@@ -84,8 +84,7 @@ def codim2_tests(kind: str, mult: np.ndarray, angle: float = float("nan"),
     if CurveKind(kind) == CurveKind.LPC:
         return {"LPPD": flip, "LPNS": ns}
     fold = float(np.real(np.prod((rest - 1.0) / (1.0 + np.abs(rest)))))
-    gpd = coefficient if abs(coefficient) > error else np.nan  # nan if not evaluated
-    return {"LPPD": fold, "PDNS": ns, "R2": flip, "GPD": gpd}
+    return {"LPPD": fold, "PDNS": ns, "R2": flip}
 
 
 def torus_pair(mult: np.ndarray, tol: float) -> bool:
@@ -129,8 +128,7 @@ def detect_codim2(kind: str, points: Sequence, params: tuple[str, str]
     ns = CurveKind(kind) == CurveKind.NS
     # unreliable points carry no multipliers: only the NS curve's angle tests remain there
     tests = [codim2_tests(kind, c.multipliers if c.reliable else np.zeros(0, complex),
-                          getattr(c, "angle", np.nan), getattr(c, "flip", np.nan),
-                          getattr(c, "flip_error", np.nan)) for c in points]
+                          getattr(c, "angle", np.nan)) for c in points]
     for ka in range(len(points) - 1):
         a, b = points[ka], points[ka + 1]
         ta, tb = tests[ka], tests[ka + 1]
@@ -154,7 +152,11 @@ def detect_codim2(kind: str, points: Sequence, params: tuple[str, str]
     if CurveKind(kind) == CurveKind.LPC:
         out.extend(_cusps(points))
     if ns:
-        out.extend(_chenciner(points))
+        out.extend(_coefficient_sign_changes(points, "CH", "ns_coefficient", "ns_error",
+                                             "NS coefficient"))
+    if CurveKind(kind) == CurveKind.PD:
+        out.extend(_coefficient_sign_changes(points, "GPD", "flip", "flip_error",
+                                             "flip coefficient"))
     out.sort(key=lambda s: s.step)
     return label_points(out)
 
@@ -181,14 +183,17 @@ def _cusps(points: Sequence) -> list[SpecialPoint]:
     return out
 
 
-def _chenciner(points: Sequence) -> list[SpecialPoint]:
-    """CH on an NS curve: d changes sign between two points where |d| exceeds its
-    estimated error (``ns_error``), with d computed (finite) at every point between them
-    (where |d| is within its error the sign is not trusted, so the two points need not be
-    consecutive); the bracket is the step between them over which d itself changes sign
-    (the first, if noise near zero makes several)."""
-    d = np.array([getattr(c, "ns_coefficient", np.nan) for c in points], float)
-    err = np.array([getattr(c, "ns_error", np.nan) for c in points], float)
+def _coefficient_sign_changes(points: Sequence, name: str, coef: str, error: str,
+                              what: str) -> list[SpecialPoint]:
+    """CH on an NS curve (the NS coefficient d, attribute ``ns_coefficient``) and GPD on a
+    PD curve (the flip coefficient c, ``flip``): the coefficient changes sign between two
+    points where its modulus exceeds its estimated error (``ns_error``, ``flip_error``),
+    with it computed (finite) at every point between them (where it is within its error
+    the sign is not trusted, so the two points need not be consecutive); the bracket is the
+    step between them over which the coefficient itself changes sign (the first, if noise
+    near zero makes several)."""
+    d = np.array([getattr(c, coef, np.nan) for c in points], float)
+    err = np.array([getattr(c, error, np.nan) for c in points], float)
     sure = np.flatnonzero(np.abs(d) > err)  # nan compares False: not evaluated there
     out = []
     for i, j in zip(sure[:-1], sure[1:], strict=True):
@@ -200,10 +205,10 @@ def _chenciner(points: Sequence) -> list[SpecialPoint]:
         f = fa / (fa - fb) if fa != fb else 0.5
         vals = tuple(float(x + f * (y - x)) for x, y in zip(a.values, b.values, strict=True))
         out.append(SpecialPoint(
-            type="CH", value=vals[0], values=vals, step=int(k),
+            type=name, value=vals[0], values=vals, step=int(k),
             located="bracketed between two consecutive points of the curve (linear "
-            "interpolation of the NS coefficient, not solved)",
-            detail=f"NS coefficient {d[i]:.3g} and {d[j]:.3g} (beyond their estimated errors "
+            f"interpolation of the {what}, not solved)",
+            detail=f"{what} {d[i]:.3g} and {d[j]:.3g} (beyond their estimated errors "
             f"{err[i]:.2g}, {err[j]:.2g})",
             period=float(a.period + f * (b.period - a.period)),
             point=a if abs(fa) <= abs(fb) else b))
