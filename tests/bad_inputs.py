@@ -88,6 +88,23 @@ MODEL_FILES: dict[str, bytes] = {
 }
 
 
+#: --config files with a bad [irregularity] table (issue 33): the same rules as the option
+IRREGULARITY_TOMLS: dict[str, str] = {
+    "irr_negative.toml": ('kD = 120\n[irregularity]\nkind = "sine"\nwavelength = 25.0\n'
+                          'amplitude = -1e-3\n'),
+    "irr_nan.toml": '[irregularity]\nkind = "sine"\nwavelength = nan\namplitude = 1e-3\n',
+    "irr_inf.toml": '[irregularity]\nkind = "camber"\namplitude = inf\n',
+    "irr_seed.toml": '[irregularity]\nkind = "random"\nclass = "low"\nseeds = 1.5\n',
+    "irr_seed_text.toml": '[irregularity]\nkind = "random"\nclass = "low"\nseed0 = "one"\n',
+    "irr_kind.toml": '[irregularity]\nkind = "bumps"\nheight = 1.0\n',
+    "irr_field.toml": '[irregularity]\nkind = "joint"\nstep = 1e-3\nsize = 2e-3\n',
+    "irr_no_kind.toml": '[irregularity]\namplitude = 1e-3\n',
+    "irr_two.toml": ('[[irregularity]]\nkind = "joint"\nstep = 1e-3\n'
+                     '[[irregularity]]\nkind = "camber"\namplitude = 1e-3\n'),
+    "irr_not_table.toml": 'irregularity = "joint:step=1e-3"\n',
+}
+
+
 def _fake_dataset(kind: str):
     import numpy as np
     import xarray as xr
@@ -167,6 +184,8 @@ def make_fixtures(folder: Path, branch: Path | None = None) -> None:
     if hasattr(os, "mkfifo"):
         os.mkfifo(folder / "rfifo.nc")
     (folder / "model.toml").write_text("kD = 120\n")
+    for name, text in IRREGULARITY_TOMLS.items():
+        (folder / name).write_text(text)
     import h5py
     import numpy as np
 
@@ -437,6 +456,40 @@ CASES: tuple[Case, ...] = (
     Case("simulate --speed --irregularity seeds=1.5", "irregularity", (
         "simulate", "--speed", "100", "--irregularity", "random:class=low,seeds=1.5"), 2,
          "must be a whole number"),
+    # ---- the same rules in a --config file's [irregularity] table (issue 33)
+    Case("speed --config: [irregularity] with a negative amplitude", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_negative.toml"), 2, "[irregularity] amplitude' = -0.001: must be >= 0"),
+    Case("speed --config: [irregularity] wavelength = nan", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_nan.toml"), 2, "[irregularity] wavelength' = nan: must be finite"),
+    Case("simulate --speed --config: [irregularity] amplitude = inf", "irregularity", (
+        "simulate", "--speed", "100", "--config", "{dir}/irr_inf.toml"), 2,
+         "[irregularity] amplitude' = inf: must be finite"),
+    Case("speed --config: [irregularity] seeds = 1.5", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_seed.toml"), 2, "[irregularity] seeds' = 1.5: must be a whole number"),
+    Case("speed --config: [irregularity] seed0 as text", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_seed_text.toml"), 2,
+         "[irregularity] seed0' = 'one': must be a whole number"),
+    Case("speed --config: [irregularity] of an unknown kind", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_kind.toml"), 2,
+         "[irregularity] kind' = 'bumps': the kind must be one of sine, joint"),
+    Case("speed --config: [irregularity] with an unknown field", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_field.toml"), 2,
+         "[irregularity] size' = 0.002: unknown field: 'joint' takes kind, step"),
+    Case("speed --config: [irregularity] without a kind", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_no_kind.toml"), 2, "[irregularity] kind' = None: missing"),
+    Case("speed --config: two [[irregularity]] entries", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_two.toml"), 2, "a run takes one guideway irregularity"),
+    Case("speed --config: irregularity given as a string", "irregularity", (
+        "speed", "--from", "60", "--to", "60", "--workers", "0", "--config",
+        "{dir}/irr_not_table.toml"), 2, "[irregularity]' = 'joint:step=1e-3': must be a table"),
     Case("iso-curve chi=0", "options", ("iso-curve", "chi=0"), 2,
          "parameter 'TARGET' = 0.0: must be a finite number > 0"),
     Case("iso-curve chi=inf", "options", ("iso-curve", "chi=inf"), 2,

@@ -255,6 +255,10 @@ def simulate_over_spans(params: Params | str | None = None, *, model: str = "uni
         raise ParameterError("spans", spans, f"must be at most {SPANS_MAX} for a run over "
                              "spans")
     prof = None
+    if irregularity is None and config is not None:
+        from maglev_match.maglev.irregularity import irregularity_in_config
+
+        irregularity = irregularity_in_config(config)
     if irregularity is not None:
         from maglev_match.analyses.speed.irregular import check_irregular_setup
 

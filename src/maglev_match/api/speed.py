@@ -61,7 +61,8 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         local Dask cluster, None one worker per core; `checkpoint` keeps a tile per speed
         (then `resume` reuses them).
     config : str or Path, optional
-        A TOML file applied on top of the preset.
+        A TOML file applied on top of the preset (its `[irregularity]` table, if any, is
+        the guideway irregularity unless `irregularity` is given).
     stage : callable, optional
         Called with a line of text once the inputs are checked and the work starts.
     irregularity : str, optional
@@ -72,6 +73,7 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         over `irregular_spans` spans of that guideway with the limits on, once per seed,
         and the result's `irregular` holds the read-outs (gap deviation, current, ride,
         DAF, the probability of contact with its interval, the linear rms of the unit).
+        Without it, the `config` file's `[irregularity]` table if it has one.
     irregular_spans : int
         The length of those runs in spans (the distance of the probability of contact).
     critical_delay : bool
@@ -101,6 +103,10 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     opts = SpeedOptions(critical=critical, spans=spans, critical_delay=critical_delay)
     check_speed_setup(p, model, list(speeds), spans)
     prof = None
+    if irregularity is None and config is not None:
+        from maglev_match.maglev.irregularity import irregularity_in_config
+
+        irregularity = irregularity_in_config(config)
     if irregularity is not None:
         from maglev_match.analyses.speed.irregular import check_irregular_setup
 
@@ -158,7 +164,8 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
     workers, scheduler, checkpoint, resume, progress
         As for [`speed_sweep`][maglev_match.api.speed.speed_sweep] (a tile per row).
     config : str or Path, optional
-        A TOML file applied on top of the preset.
+        A TOML file applied on top of the preset (its `[irregularity]` table, if any, is
+        the guideway irregularity unless `irregularity` is given).
     stage : callable, optional
         Called with a line of text once the axes are checked and the work starts.
     **overrides : float

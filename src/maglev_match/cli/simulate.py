@@ -121,7 +121,8 @@ def simulate_command(
         "--spans", help="With --speed: the number of spans (default 10).")] = None,
     irregularity: Annotated[str | None, typer.Option(
         "--irregularity", help="With --speed: a guideway irregularity under every "
-        "levitation point, KIND:NAME=VALUE,... in m (as for `speed --irregularity`).")] = None,
+        "levitation point, KIND:NAME=VALUE,... in m (as for `speed --irregularity`; "
+        "replaces a --config file's [irregularity] table).")] = None,
     seed: Annotated[int | None, typer.Option(
         "--seed", help="With --speed and a random --irregularity: its seed.")] = None,
 ) -> None:
@@ -129,12 +130,13 @@ def simulate_command(
     (time, limit, levitation point), convergence or neither by the horizon. With --speed V
     --spans N: the vehicle at speed over N spans."""
     if speed is not None or spans is not None or irregularity is not None or seed is not None:
-        from maglev_match.cli.speed import simulate_at_speed
+        from maglev_match.cli.speed import irregularity_option, simulate_at_speed
 
         if speed is None:
             raise UserError("--spans, --irregularity and --seed go with --speed V (km/h)")
-        return simulate_at_speed(params_from_options(preset, config, set_), model, speed,
-                                 spans, limits, out, plot, json_out, irregularity, seed)
+        params = params_from_options(preset, config, set_)
+        return simulate_at_speed(params, model, speed, spans, limits, out, plot, json_out,
+                                 irregularity_option(irregularity, config), seed)
 
     if not is_model_file(model):
         check_model(model)

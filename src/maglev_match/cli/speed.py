@@ -54,7 +54,18 @@ IrregularityOpt = Annotated[str | None, typer.Option(
     "--irregularity", help="A guideway irregularity under every levitation point, "
     "KIND:NAME=VALUE,... in m: sine:wavelength=W,amplitude=A; joint:step=S; "
     "settlement:depth=S[,support=J]; camber:amplitude=A; random:class=low|high[,seeds=N,"
-    "seed0=K,lmin=..,lmax=..,waves=..] (the German track spectrum).")]
+    "seed0=K,lmin=..,lmax=..,waves=..] (the German track spectrum). Replaces a --config "
+    "file's [irregularity] table.")]
+
+
+def irregularity_option(irregularity: str | None, config: Path | None):
+    """The guideway irregularity of a run: --irregularity if given (it replaces the
+    config's), else the --config file's [irregularity] table, else None."""
+    if irregularity is not None:
+        return irregularity
+    from maglev_match.maglev.irregularity import irregularity_in_config
+
+    return irregularity_in_config(config)
 
 
 def _check_model(model: str) -> str:
@@ -211,6 +222,8 @@ def speed_command(
     params = params_from_options(preset, config, set_)
     kmh = speeds_kmh(from_, to, step)
     from maglev_match import api  # (the numerics, and JAX, once the options are good)
+
+    irregularity = irregularity_option(irregularity, config)
 
     folder, stem = output_target(out, "speed", f"speed_{model}")
     nc = folder / f"{stem}.nc"

@@ -37,6 +37,7 @@ __all__ = [
     "load_params",
     "load_preset",
     "load_toml",
+    "load_toml_table",
     "parse_assignment",
 ]
 
@@ -480,10 +481,10 @@ def make_params(values: dict[str, Any]) -> Params:
     return Params(**clean)
 
 
-def _flatten(doc: dict[str, Any], source: str) -> dict[str, Any]:
+def _flatten(doc: dict[str, Any], source: str, skip: tuple[str, ...] = ()) -> dict[str, Any]:
     flat: dict[str, Any] = {}
     for key, value in doc.items():
-        if key in META_KEYS:
+        if key in META_KEYS or key in skip:
             continue
         if isinstance(value, dict):
             if key not in SECTIONS:
@@ -561,7 +562,27 @@ def load_toml(path: str | Path) -> dict[str, Any]:
     The file must be a regular file of at most :data:`CONFIG_MAX_BYTES` bytes of UTF-8 text,
     nested at most :data:`CONFIG_MAX_DEPTH` levels deep; anything else (a folder, a device
     such as /dev/null, a FIFO, binary or UTF-16 data) is a :class:`ParameterError`.
+    The ``[irregularity]`` table (:data:`CONFIG_TABLES`) is not a parameter: the commands
+    at speed read it (:func:`load_toml_table`), the others leave it alone.
     """
+    return _flatten(_read_toml(path), str(path), skip=CONFIG_TABLES)
+
+
+#: Tables of a user TOML file that are inputs of some commands, not parameters: the guideway
+#: irregularity of `speed` and `simulate --speed` (maglev_match.maglev.irregularity).
+CONFIG_TABLES = ("irregularity",)
+
+
+def load_toml_table(path: str | Path, name: str) -> Any:
+    """The raw value of the top-level key ``name`` (one of :data:`CONFIG_TABLES`) of a
+    user TOML file, None if absent; the file is checked as by :func:`load_toml`, its
+    parameters included."""
+    doc = _read_toml(path)
+    _flatten(doc, str(path), skip=CONFIG_TABLES)
+    return doc.get(name)
+
+
+def _read_toml(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     try:
         st = os.stat(path)
@@ -602,7 +623,7 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ParameterError("config", str(path), f"not valid TOML: {exc}") from None
     except RecursionError:
         raise ParameterError("config", str(path), "nested too deeply") from None
-    return _flatten(doc, str(path))
+    return doc
 
 
 def _max_nesting(text: str) -> int:

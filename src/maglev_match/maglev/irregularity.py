@@ -38,15 +38,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64 on)
-from maglev_match.core.params import ParameterError
+from maglev_match.core.params import ParameterError, load_toml_table
 
 __all__ = ["Irregularity", "PSD_CLASSES", "parse_irregularity", "target_psd",
+           "irregularity_from_table", "irregularity_in_config",
            "PROFILE_NAMES", "profile_names", "profile_under", "KINDS"]
 
 KINDS = ("sine", "joint", "settlement", "camber", "random")
@@ -91,6 +94,9 @@ class Irregularity:
     lmax: float = 200.0
     waves: int = 400
     text: str = field(default="", compare=False)
+    #: where it was given, the prefix of the field in an error: '--irregularity' or
+    #: 'FILE [irregularity]' (a --config TOML file)
+    source: str = field(default="--irregularity", compare=False)
 
     @property
     def n_waves(self) -> int:
@@ -179,33 +185,33 @@ class Irregularity:
         for name, val in (("amplitude", self.amplitude), ("wavelength", self.wavelength),
                           ("lmin", self.lmin), ("lmax", self.lmax)):
             if not math.isfinite(val):
-                raise ParameterError(f"--irregularity {name}", val, "must be finite")
+                raise ParameterError(f"{self.source} {name}", val, "must be finite")
             if val < 0:
-                raise ParameterError(f"--irregularity {name}", val, "must be >= 0")
+                raise ParameterError(f"{self.source} {name}", val, "must be >= 0")
         if self.kind == "sine" and not self.wavelength > 0:
-            raise ParameterError("--irregularity wavelength", self.wavelength, "must be > 0")
+            raise ParameterError(f"{self.source} wavelength", self.wavelength, "must be > 0")
         if self.kind == "random":
             if not 0 < self.lmin < self.lmax:
-                raise ParameterError("--irregularity lmin", self.lmin,
+                raise ParameterError(f"{self.source} lmin", self.lmin,
                                      f"must be > 0 and below lmax = {self.lmax:g} m")
             if not 1 <= self.waves <= 5000:
-                raise ParameterError("--irregularity waves", self.waves,
+                raise ParameterError(f"{self.source} waves", self.waves,
                                      "must be a whole number from 1 to 5000")
             if not 1 <= self.seeds <= 1000:
-                raise ParameterError("--irregularity seeds", self.seeds,
+                raise ParameterError(f"{self.source} seeds", self.seeds,
                                      "must be a whole number from 1 to 1000")
             if self.seed0 < 0:
-                raise ParameterError("--irregularity seed0", self.seed0, "must be >= 0")
+                raise ParameterError(f"{self.source} seed0", self.seed0, "must be >= 0")
         if self.kind == "settlement" and spans is not None and self.support is not None \
                 and not 0 <= self.support <= spans:
-            raise ParameterError("--irregularity support", self.support,
+            raise ParameterError(f"{self.source} support", self.support,
                                  f"must be a support of the guideway, 0 to {spans}")
         if dx_resolved is not None:
             short = self.wavelength if self.kind == "sine" else (
                 self.lmin if self.kind == "random" else None)
             if short is not None and short < dx_resolved:
                 field_ = "wavelength" if self.kind == "sine" else "lmin"
-                raise ParameterError(f"--irregularity {field_}", short,
+                raise ParameterError(f"{self.source} {field_}", short,
                                      f"is shorter than the {dx_resolved:.4g} m the sampling "
                                      "resolves at this speed (8 samples per wavelength)")
         return self
@@ -233,41 +239,109 @@ def parse_irregularity(text: str | Irregularity | None) -> Irregularity | None:
     if not s:
         return None
     kind, _, rest = s.partition(":")
-    kind = kind.strip().lower()
-    if kind not in _FIELDS:
-        raise ParameterError("--irregularity", s, "the kind must be one of "
-                             + ", ".join(KINDS) + " (KIND:NAME=VALUE,...)")
-    vals: dict = {}
+    items = []
     for item in (r for r in rest.split(",") if r.strip()):
         name, eq, value = item.partition("=")
-        name = name.strip().lower()
-        if not eq or name not in _FIELDS[kind]:
-            raise ParameterError("--irregularity", item.strip(),
-                                 f"'{kind}' takes " + ", ".join(
-                                     f"{n}=VALUE" for n in _FIELDS[kind]))
+        items.append((name.strip().lower(), value.strip(), item.strip(), bool(eq)))
+    return _build(kind.strip().lower(), items, s, "--irregularity", s)
+
+
+def irregularity_from_table(table: Any, source: str = "[irregularity]") -> Irregularity:
+    """The ``[irregularity]`` table of a TOML config (``kind = "sine"``, then the fields of
+    that kind by the names of the command line: ``wavelength = 25.0``, ``amplitude =
+    1e-3``, ``class = "low"``, ``seeds = 2`` ...) to an :class:`Irregularity`, through the
+    same checks as ``--irregularity`` (:func:`parse_irregularity`); ``source`` names the
+    table in errors. Its ``text`` is the equivalent ``KIND:NAME=VALUE,...``. A one-entry
+    array of tables (``[[irregularity]]``) is taken as that entry; a run has one profile."""
+    if isinstance(table, list):
+        if len(table) != 1:
+            raise ParameterError(source, f"{len(table)} entries",
+                                 "a run takes one guideway irregularity; give one table")
+        table = table[0]
+    if not isinstance(table, dict):
+        raise ParameterError(source, _short(table), "must be a table: [irregularity] with "
+                             "kind = \"...\" and the fields of that kind")
+    if "kind" not in table:
+        raise ParameterError(f"{source} kind", None, "missing; the kind must be one of "
+                             + ", ".join(KINDS))
+    kind = table["kind"]
+    if not isinstance(kind, str):
+        raise ParameterError(f"{source} kind", _short(kind), "must be a string, one of "
+                             + ", ".join(KINDS))
+    items = [(str(k).strip().lower(), v, None, True) for k, v in table.items() if k != "kind"]
+    text = kind.strip().lower() + ":" + ",".join(f"{k}={v}" for k, v, _, _ in items)
+    return _build(kind.strip().lower(), items, text, source, _short(dict(table)))
+
+
+def irregularity_in_config(config: str | Path | None) -> Irregularity | None:
+    """The guideway irregularity of a user TOML file's ``[irregularity]`` table (None
+    without a file or a table)."""
+    if config is None:
+        return None
+    table = load_toml_table(config, "irregularity")
+    if table is None:
+        return None
+    return irregularity_from_table(table, f"{config} [irregularity]")
+
+
+def _short(value: Any) -> Any:
+    r = repr(value)
+    return value if len(r) <= 80 else r[:77] + "..."
+
+
+def _build(kind: str, items: list, text: str, source: str, whole: Any) -> Irregularity:
+    """The one validation of a profile given as (kind, [(name, value, the item as typed,
+    whether it had a value)]): values are strings from the command line or TOML values
+    from a config file; ``source`` prefixes the field in errors."""
+    if kind not in _FIELDS:
+        raise ParameterError(source if source == "--irregularity" else f"{source} kind",
+                             whole if source == "--irregularity" else kind,
+                             "the kind must be one of " + ", ".join(KINDS)
+                             + (" (KIND:NAME=VALUE,...)" if source == "--irregularity"
+                                else ""))
+    vals: dict = {}
+    for name, value, raw, has_value in items:
+        if not has_value or name not in _FIELDS[kind]:
+            takes = ", ".join((f"{n}=VALUE" if source == "--irregularity" else n)
+                              for n in _FIELDS[kind])
+            if source == "--irregularity":
+                raise ParameterError(source, raw, f"'{kind}' takes {takes}")
+            raise ParameterError(f"{source} {name}", _short(value),
+                                 f"unknown field: '{kind}' takes kind, {takes}")
         attr = _FIELDS[kind][name]
-        value = value.strip()
         if attr == "cls":
-            if value not in PSD_CLASSES:
-                raise ParameterError("--irregularity class", value,
+            if not isinstance(value, str) or value not in PSD_CLASSES:
+                raise ParameterError(f"{source} class", _short(value),
                                      "must be one of " + ", ".join(PSD_CLASSES))
             vals[attr] = value
         elif name in _INTS:
+            if isinstance(value, int) and not isinstance(value, bool):
+                vals[attr] = value
+                continue
             try:
+                if not isinstance(value, str):
+                    raise ValueError
                 vals[attr] = int(value)
             except ValueError:
-                raise ParameterError(f"--irregularity {name}", value,
+                raise ParameterError(f"{source} {name}", _short(value),
                                      "must be a whole number") from None
         else:
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                vals[attr] = float(value)
+                continue
             try:
+                if not isinstance(value, str):
+                    raise ValueError
                 vals[attr] = float(value)
             except ValueError:
-                raise ParameterError(f"--irregularity {name}", value,
+                raise ParameterError(f"{source} {name}", _short(value),
                                      "must be a number (m)") from None
     for need in _REQUIRED[kind]:
         if _FIELDS[kind][need] not in vals:
-            raise ParameterError("--irregularity", s, f"'{kind}' needs {need}=VALUE")
-    return Irregularity(kind=kind, text=s, **vals).check()
+            if source == "--irregularity":
+                raise ParameterError(source, text, f"'{kind}' needs {need}=VALUE")
+            raise ParameterError(f"{source} {need}", None, f"missing: '{kind}' needs {need}")
+    return Irregularity(kind=kind, text=text, source=source, **vals).check()
 
 
 # ---------------------------------------------------------------------------------------
