@@ -14,7 +14,8 @@ from maglev_match.core.params import Params
 if TYPE_CHECKING:  # pragma: no cover
     from maglev_match.analyses.speed.sweep import SpeedSweep
 
-__all__ = ['speed_sweep', 'speed_map', 'ride_reading', 'speeds_kmh', 'KMH']
+__all__ = ['speed_sweep', 'speed_map', 'ride_reading', 'speeds_kmh', 'KMH',
+           'config_irregularity']
 
 
 @reported("speeds")
@@ -167,7 +168,8 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
         A TOML file applied on top of the preset (its `[irregularity]` table, if any, is
         the guideway irregularity unless `irregularity` is given).
     stage : callable, optional
-        Called with a line of text once the axes are checked and the work starts.
+        Called with a line of text once the axes are checked and the work starts, and
+        (over the delay) before each speed's critical-delay solve, after the tiles.
     **overrides : float
         Parameter values applied on top.
 
@@ -191,9 +193,18 @@ def speed_map(params: Params | str | None = None, x: str = "v=0:150:16",
     if checkpoint is None:
         with tempfile.TemporaryDirectory(prefix="maglev-match-speed-map-") as tmp:
             return run_speed_map(spec, Path(tmp) / "tiles", resume=False,
-                                 scheduler=scheduler, workers=workers, progress=progress)
+                                 scheduler=scheduler, workers=workers, progress=progress,
+                                 stage=stage)
     return run_speed_map(spec, Path(checkpoint), resume=resume, scheduler=scheduler,
-                         workers=workers, progress=progress)
+                         workers=workers, progress=progress, stage=stage)
+
+
+def config_irregularity(config: str | Path | None) -> Any:
+    """The guideway irregularity of a `--config` TOML file's `[irregularity]` table,
+    validated like `--irregularity` (None without a file or a table)."""
+    from maglev_match.maglev.irregularity import irregularity_in_config
+
+    return irregularity_in_config(config)
 
 
 def ride_reading(wz: float) -> str:

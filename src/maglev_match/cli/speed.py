@@ -63,9 +63,9 @@ def irregularity_option(irregularity: str | None, config: Path | None):
     config's), else the --config file's [irregularity] table, else None."""
     if irregularity is not None:
         return irregularity
-    from maglev_match.maglev.irregularity import irregularity_in_config
+    from maglev_match.api.speed import config_irregularity
 
-    return irregularity_in_config(config)
+    return config_irregularity(config)
 
 
 def _check_model(model: str) -> str:

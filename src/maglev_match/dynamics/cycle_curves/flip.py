@@ -33,7 +33,7 @@ return-time iterations compiled for over a minute, the differences reuse the one
 Jacobian).
 
 The map, its fixed point and Jacobian (:func:`poincare_map`, :class:`PoincareMap`) and the
-difference stencils (:func:`_stencil`) are shared with the Neimark-Sacker coefficient
+difference stencils (:func:`difference_stencil`) are shared with the Neimark-Sacker coefficient
 (:mod:`~maglev_match.dynamics.cycle_curves.torus`).
 
 Accuracy: the RK4 global error, O(h^4) with h the substep, and the differences' O(eps^4)
@@ -125,11 +125,11 @@ def _differences(D, y, r, eps, D0):
     these are B(q, r) and C(q, r, r) (truncation O(eps^4), rounding O(1e-16 / eps^2));
     then the same by the second-order differences (step eps), whose distance from the
     former estimates the error."""
-    return _stencil(D(y + eps * r), D(y - eps * r), D(y + 2 * eps * r), D(y - 2 * eps * r),
-                    D0, eps)
+    return difference_stencil(D(y + eps * r), D(y - eps * r), D(y + 2 * eps * r),
+                              D(y - 2 * eps * r), D0, eps)
 
 
-def _stencil(Dp1, Dm1, Dp2, Dm2, D0, eps):
+def difference_stencil(Dp1, Dm1, Dp2, Dm2, D0, eps):
     """:func:`_differences` from the values at y + eps r, y - eps r, y + 2 eps r, y - 2 eps r
     and y (these may be matrices DP(x), applied to vectors afterwards: the stencils are
     linear)."""

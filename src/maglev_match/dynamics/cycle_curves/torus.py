@@ -44,7 +44,7 @@ import numpy as np
 
 from maglev_match.dynamics.cycle_curves.flip import (
     PoincareMap,
-    _stencil,
+    difference_stencil,
     poincare_map,
 )
 from maglev_match.dynamics.cycles.orbits import PeriodicOrbit
@@ -107,7 +107,7 @@ def torus_coefficient(system: System, orbit: PeriodicOrbit, angle: float | None 
     steps = np.array([1.0, -1.0, 2.0, -2.0])
     mats = pm.jacobians_at(np.concatenate([y + eps * steps[:, None] * a,
                                            y + eps * steps[:, None] * b]))
-    sa, sb = _stencil(*mats[:4], A, eps), _stencil(*mats[4:], A, eps)
+    sa, sb = difference_stencil(*mats[:4], A, eps), difference_stencil(*mats[4:], A, eps)
     I = np.eye(n)
     e2 = cmath.exp(2j * theta)
     ds = []
