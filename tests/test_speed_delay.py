@@ -162,7 +162,7 @@ def test_the_documented_commands_run_as_written(tmp_path, monkeypatch, capsys):
 
 
 def test_the_documented_map_over_speed_and_delay_draws_the_solved_curve(tmp_path,
-                                                                       monkeypatch):
+                                                                       monkeypatch, capsys):
     import xarray as xr
 
     from maglev_match.cli import main
@@ -170,6 +170,8 @@ def test_the_documented_map_over_speed_and_delay_draws_the_solved_curve(tmp_path
     monkeypatch.chdir(tmp_path)
     cmd = _doc_commands()[2]
     assert main([*cmd, "--out", "m"]) == 0
+    # the solves after the tiles say what they do (not "computing tiles" until the end)
+    assert "solving the critical delay tau_c(v)" in capsys.readouterr().err
     with xr.open_dataset(tmp_path / "m" / "map_v_tau.nc") as ds:
         tc = ds["tau_c"].values
         mu = ds["largest_multiplier"].values  # (tau, v)

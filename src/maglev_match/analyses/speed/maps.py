@@ -136,9 +136,11 @@ def compute_speed_map_tile(spec: SpeedMapSpec, rows: tuple[int, int]
 
 def run_speed_map(spec: SpeedMapSpec, checkpoint: Path | None = None, *, resume: bool = False,
                   scheduler: str | None = None, workers: int | None = 0,
-                  progress: Callable[[int, int], None] | None = None):
+                  progress: Callable[[int, int], None] | None = None,
+                  stage: Callable[[str], None] | None = None):
     """The speed map as an :class:`xarray.Dataset` over (y, x), computed row by row here or
-    on Dask with checkpoint tiles (:func:`run_tiles`)."""
+    on Dask with checkpoint tiles (:func:`run_tiles`); ``stage`` is told when the
+    critical-delay solves that follow the tiles start, one line per speed."""
     import xarray as xr
 
     from maglev_match.core.datasets import annotate
@@ -172,13 +174,14 @@ def run_speed_map(spec: SpeedMapSpec, checkpoint: Path | None = None, *, resume:
     ds.attrs.update({"title": "maglev-match map at speed", "model": spec.model,
                      "spec": spec.key()})
     if spec.tau_max is not None:
-        _add_critical_delay(ds, spec, units, names)
+        _add_critical_delay(ds, spec, units, names, stage)
     from maglev_match.core.params import make_params
 
     return annotate(ds, make_params(dict(spec.base)), units=units, long_names=names)
 
 
-def _add_critical_delay(ds, spec: SpeedMapSpec, units: dict, names: dict) -> None:
+def _add_critical_delay(ds, spec: SpeedMapSpec, units: dict, names: dict,
+                        stage: Callable[[str], None] | None = None) -> None:
     """The critical delay tau_c(v) at every speed of a map over (v, tau), solved
     (:func:`~maglev_match.analyses.speed.delay.critical_delay_at_speed`) from the grid's
     first crossing of the unit circle in tau (linear in ln max|mu| between rows) or, without
@@ -193,7 +196,11 @@ def _add_critical_delay(ds, spec: SpeedMapSpec, units: dict, names: dict) -> Non
     base = make_params(dict(spec.base))
     opts = SpeedOptions(**spec.options)
     vals, status, grid = [], [], []
-    for j, v in enumerate(ds["v"].values.astype(float)):
+    speeds = ds["v"].values.astype(float)
+    for j, v in enumerate(speeds):
+        if stage is not None:
+            stage(f"solving the critical delay tau_c(v) at {v * 3.6:g} km/h "
+                  f"({j + 1} of {speeds.size}) ...")
         col = lm[:, j]
         guess = None
         for k in range(taus.size - 1):
