@@ -103,12 +103,14 @@ def test_the_option_replaces_the_files_table_and_other_commands_ignore_it(tmp_pa
         irregularity_in_config(bad)
 
 
-def _speed_json(args) -> dict:
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+def _speed_json(args, log: list[str] | None = None) -> dict:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         code = main(["speed", "--from", "90", "--to", "90", "--no-critical", "--workers", "0",
                      "--set", "n_modes=1", "--irregular-spans", "3", "--json", *args])
     assert code == 0
+    if log is not None:
+        log.append(err.getvalue())
     doc = json.loads(out.getvalue())
     doc.pop("files")
     doc["irregular"].pop("seconds_per_speed")  # wall time, not a result
@@ -120,9 +122,14 @@ def test_a_config_table_gives_the_same_sweep_as_the_option(tmp_path):
     cfg.write_text('[irregularity]\nkind = "random"\nclass = "high"\nseeds = 2\n'
                    'waves = 16\nlmin = 4.0\n')
     from_file = _speed_json(["--config", str(cfg), "--out", str(tmp_path / "a")])
+    log: list[str] = []
     from_option = _speed_json(["--irregularity", "random:class=high,seeds=2,waves=16,lmin=4",
-                               "--out", str(tmp_path / "b")])
+                               "--out", str(tmp_path / "b")], log)
     assert from_file == from_option
+    # a progress line per finished run (issue 33: the runs are a job of their own), and
+    # the checkpoint of the sweep, its runs with it, is spent once the files are written
+    assert "1/2 irregular runs done" in log[0] and "2/2 irregular runs done" in log[0]
+    assert not (tmp_path / "b" / "speed_unit.nc.tiles").exists()
     assert from_file["irregular"]["seeds"] == [0, 1]
     # the option replaces the file's table
     replaced = _speed_json(["--config", str(cfg), "--irregularity", "joint:step=0.002",

@@ -17,6 +17,9 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ['speed_sweep', 'speed_map', 'ride_reading', 'speeds_kmh', 'KMH',
            'config_irregularity']
 
+#: the folder inside a sweep's checkpoint that keeps its runs over an irregular guideway
+IRREGULAR_FOLDER = "irregular"
+
 
 @reported("speeds")
 def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
@@ -28,7 +31,9 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
                 config: str | Path | None = None,
                 stage: Callable[[str], None] | None = None,
                 irregularity: str | None = None, irregular_spans: int = 20,
-                critical_delay: bool = False, **overrides: Any) -> SpeedSweep:
+                critical_delay: bool = False,
+                runs_progress: Callable[[int, int], None] | None = None,
+                **overrides: Any) -> SpeedSweep:
     """The vehicle at speed over identical spans, swept over speed (`maglev-match speed`).
 
     At every speed the periodic response (one span passage, found as the fixed point of
@@ -60,7 +65,9 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     workers, scheduler, checkpoint, resume, progress
         As for [`design_map`][maglev_match.api.maps.design_map]: 0 computes here, n > 0 on a
         local Dask cluster, None one worker per core; `checkpoint` keeps a tile per speed
-        (then `resume` reuses them).
+        (then `resume` reuses them). The runs over an irregular guideway go the same way,
+        one task per (speed, seed), each kept in the folder `irregular` inside
+        `checkpoint`; `progress` counts them too unless `runs_progress` is given.
     config : str or Path, optional
         A TOML file applied on top of the preset (its `[irregularity]` table, if any, is
         the guideway irregularity unless `irregularity` is given).
@@ -83,6 +90,9 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
         (`SpeedPoint.tau_c`; at v = 0 the vehicle standing at mid-span), and its low-speed
         limit (`tau_c_frozen`). A delay of its own (`tau=...` in the overrides) gives the
         periodic response and multipliers of the delayed model at every speed.
+    runs_progress : callable, optional
+        Called as `runs_progress(done, total)` before the first run over the irregular
+        guideway and after each (default: `progress`).
     **overrides : float
         Parameter values applied on top.
 
@@ -129,9 +139,14 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     moving = [v for v in speeds if v > 0]
     if stage is not None:
         stage(f"{len(moving)} speeds over the irregular guideway ({prof.describe()}), "
-              f"{len(prof.seed_list)} run(s) of {irregular_spans} spans each ...")
+              f"{len(prof.seed_list)} run(s) of {irregular_spans} spans each per speed, "
+              f"{len(moving) * len(prof.seed_list)} runs ...")
     irr = irregular_sweep(p, model, moving, prof, spans=irregular_spans,
-                          warmup=_warmup(irregular_spans), progress=progress)
+                          warmup=_warmup(irregular_spans),
+                          progress=progress if runs_progress is None else runs_progress,
+                          checkpoint=None if checkpoint is None
+                          else Path(checkpoint) / IRREGULAR_FOLDER,
+                          resume=resume, scheduler=scheduler, workers=workers)
     return dataclasses.replace(sweep, irregular=irr)
 
 

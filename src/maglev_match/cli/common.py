@@ -512,6 +512,7 @@ class ProgressReport:
         self._stop = threading.Event()
         self._thread: Any = None
         self._finished: list[tuple[int, float]] = []  # (units done, when), as they grew
+        self._what = ""  # what the units are (tiles, speeds, ...)
 
     def __enter__(self) -> ProgressReport:
         import threading
@@ -615,7 +616,13 @@ class ProgressReport:
 
     def tiles(self, done: int, total: int, what: str = "tiles") -> None:
         """``done`` of ``total`` units finished (one line per finished unit off a
-        terminal, with the estimated time left)."""
+        terminal, with the estimated time left). Units of another ``what`` (the runs
+        over an irregular guideway after a sweep's speeds) start their own count: the
+        estimate of the time left is made from their finishing times alone."""
+        if what != self._what:
+            self._what = what
+            self._finished = []
+            self._last_done = -1
         left = self.eta(done, total)
         self._stage = f"computing {what} ({done}/{total} done)"
         self._detail = ""

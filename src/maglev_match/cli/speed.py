@@ -189,10 +189,12 @@ def speed_command(
     out: Annotated[Path | None, typer.Option(
         "--out", help="Folder for speed_MODEL.nc and .png/.svg, or a file name whose stem "
         "names them (default: maglev-match-out/speed/).")] = None,
-    resume: Annotated[bool, typer.Option("--resume", help="Reuse the finished speeds of an "
-                                         "interrupted sweep (<out>.tiles/).")] = False,
+    resume: Annotated[bool, typer.Option(
+        "--resume", help="Reuse the finished speeds of an interrupted sweep and its "
+        "finished runs over an irregular guideway (<out>.tiles/).")] = False,
     workers: Annotated[int | None, typer.Option(
-        "--workers", help="Local Dask workers (default: one per core; 0: in this process).",
+        "--workers", help="Local Dask workers for the speeds and the runs over an "
+        "irregular guideway (default: one per core; 0: in this process).",
         callback=workers_option)] = None,
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", help="Existing Dask scheduler, tcp://host:port.",
@@ -238,7 +240,8 @@ def speed_command(
                                 progress=lambda d, t: prog.tiles(d, t, "speeds"),
                                 stage=prog.stage, irregularity=irregularity,
                                 irregular_spans=irregular_spans,
-                                critical_delay=critical_delay)
+                                critical_delay=critical_delay,
+                                runs_progress=lambda d, t: prog.tiles(d, t, "irregular runs"))
         elapsed = time.perf_counter() - started
         prog.stage(f"sweep done in {elapsed:.1f} s; writing files ...")
         files = _write_sweep(sweep, folder, stem)

@@ -28,9 +28,11 @@ over the profile's waves of |H_j(Omega_k)|^2 a_k^2 / 2, the midpoint rule of the
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -48,7 +50,8 @@ from maglev_match.maglev import unit as unit_model
 from maglev_match.maglev.irregularity import Irregularity, parse_irregularity
 from maglev_match.maglev.moving import MovingModel
 
-__all__ = ["IrregularSweep", "irregular_sweep", "check_irregular_setup", "profile_gap_response",
+__all__ = ["IrregularSweep", "IrregularSpec", "irregular_sweep", "compute_irregular_runs",
+           "RUN_READOUTS", "check_irregular_setup", "profile_gap_response",
            "rigid_gap_response", "wilson_interval", "linear_gap_rms", "resolved_wavelength",
            "READOUTS"]
 
@@ -286,14 +289,132 @@ def check_irregular_setup(params: Params, model: str, speeds, profile, spans: in
     return prof
 
 
+#: the read-outs of one run, in the order of a piece's ``values`` row (``gap_rms_linear``:
+#: the linear route's rms at the run's speed, in the first seed's run of a random profile,
+#: else NaN; ``contact``: 1 if the run hit a gap limit; ``seconds``: the run's wall time,
+#: with the smooth run's where this process computed it)
+RUN_READOUTS = ("gap_rms", "gap_max", "gap_rms_profile", "current_rms", "current_max",
+                "reverses", "acc_rms", "wz", "daf", "contact", "gap_rms_linear", "seconds")
+
+
+@dataclass(frozen=True)
+class IrregularSpec:
+    """What the runs over an irregular guideway compute: the base parameters, the model,
+    the speeds (m/s > 0), the profile, the length of a run and its run-in (spans) and the
+    numerical settings (:meth:`SpeedOptions.key`). One piece per run (speed, seed), the
+    piece of run ``n`` holding speed ``n // len(seeds)`` with seed ``n % len(seeds)``;
+    ``key()`` fingerprints the checkpoint pieces."""
+
+    base: dict[str, Any]
+    model: str
+    speeds: tuple[float, ...]
+    profile: Irregularity
+    spans: int
+    warmup: int
+    options: dict[str, Any]
+
+    def key(self) -> str:
+        prof = {f.name: getattr(self.profile, f.name)
+                for f in dataclasses.fields(self.profile) if f.compare}
+        d = {"kind": "irregular-runs", "base": {k: self.base[k] for k in sorted(self.base)},
+             "model": self.model, "speeds": list(self.speeds), "profile": prof,
+             "spans": self.spans, "warmup": self.warmup, "options": self.options}
+        return json.dumps(d, sort_keys=True, default=float)
+
+    @property
+    def seeds(self) -> tuple[int, ...]:
+        return self.profile.seed_list
+
+    @property
+    def pieces(self) -> list[tuple[int, int]]:
+        return [(n, n + 1) for n in range(len(self.speeds) * len(self.seeds))]
+
+    def params(self) -> Params:
+        from maglev_match.core.params import make_params
+
+        return make_params(dict(self.base))
+
+    def shapes(self, rows: tuple[int, int]) -> dict[str, tuple[int, ...]]:
+        """The variables of the piece of runs rows[0]..rows[1]-1 and their shapes."""
+        n = rows[1] - rows[0]
+        return {"values": (n, len(RUN_READOUTS)), "notes": (n,)}
+
+
+#: the smooth run this process made last: (spec key, speed index) -> SpanRun; the runs of
+#: the seeds of a speed share it (a process that runs them one after the other makes it once)
+_SMOOTH: dict[tuple[str, int], Any] = {}
+
+
+def _smooth_run(spec: IrregularSpec, key: str, i: int, params: Params, kind: MovingModel,
+                opts: SpeedOptions):
+    run = _SMOOTH.get((key, i))
+    if run is None:
+        run = simulate_over_spans(params, kind, float(spec.speeds[i]), spec.spans,
+                                  limited=True, options=opts, overlay=False)
+        _SMOOTH.clear()
+        _SMOOTH[(key, i)] = run
+    return run
+
+
+def compute_irregular_runs(spec: IrregularSpec, rows: tuple[int, int]
+                           ) -> dict[str, np.ndarray]:
+    """The runs rows[0]..rows[1]-1 of ``spec`` (a checkpoint piece): ``values`` (runs,
+    :data:`RUN_READOUTS`) and ``notes``, each run's warnings as a JSON list (the first seed
+    of a speed also says when the smooth run did not end 'ok')."""
+    import time
+
+    params = spec.params()
+    opts = SpeedOptions(**spec.options)
+    kind = MovingModel(spec.model)
+    prof = spec.profile
+    key = spec.key()
+    static, _ = mv.static_midspan_deflection(params, kind)
+    i0 = float(params.i0_vehicle) if kind is MovingModel.VEHICLE else float(
+        unit_model.levitation_current(unit_model.param_vector(params)))
+    n_seeds = len(spec.seeds)
+    values, notes = [], []
+    for n in range(*rows):
+        i, j = divmod(n, n_seeds)
+        v, seed = float(spec.speeds[i]), spec.seeds[j]
+        t0 = time.perf_counter()
+        smooth = _smooth_run(spec, key, i, params, kind, opts)
+        said: list[str] = []
+        if j == 0 and smooth.outcome != "ok":
+            said.append(f"{v * 3.6:g} km/h: the smooth run ended in a {smooth.outcome}")
+        run = simulate_over_spans(params, kind, v, spec.spans, limited=True, options=opts,
+                                  profile=prof, seed=seed)
+        r = _run_readouts(run, smooth, params, spec.warmup, static, i0)
+        if run.outcome == "collision":
+            said.append(f"{v * 3.6:g} km/h, seed {seed}: contact with the "
+                        f"{run.collision_limit} gap limit at point {run.collision_point}, "
+                        f"t = {run.collision_time:.3f} s")
+        r["gap_rms_linear"] = (linear_gap_rms(params, v, prof, kind.value)
+                               if j == 0 and prof.kind == "random" else math.nan)
+        r["seconds"] = time.perf_counter() - t0
+        values.append([r[k] for k in RUN_READOUTS])
+        notes.append(json.dumps(said))
+    return {"values": np.array(values, float), "notes": np.array(notes)}
+
+
 def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | str, *,
                     spans: int = 20, warmup: int = 1,
                     options: SpeedOptions | None = None,
-                    progress=None) -> IrregularSweep:
+                    progress=None, checkpoint: Path | None = None, resume: bool = False,
+                    scheduler: str | None = None, workers: int | None = 0
+                    ) -> IrregularSweep:
     """The read-outs over an irregular guideway at every speed (m/s > 0) (module
-    docstring): one run per seed of ``spans`` spans with the limits on, and the smooth run;
-    ``progress(done, total)`` after every speed."""
-    import time
+    docstring): one run per seed of ``spans`` spans with the limits on, and the smooth run.
+
+    The runs (one per speed and seed, :class:`IrregularSpec`) go through the package's job
+    runner (:func:`maglev_match.core.jobs.run_job`) as the sweep's speeds do: in this process
+    (``workers == 0`` and no ``scheduler``) or on Dask (a local cluster of ``workers``
+    processes, None: one per core, or an existing ``scheduler``), each run saved into the
+    ``checkpoint`` folder as it finishes (``resume`` reuses them; a resumed sweep equals the
+    uninterrupted one bit for bit); ``progress(done, total)`` before the first run and
+    after each. The read-outs of a speed are formed here from its runs, in seed order, so
+    where the runs were computed does not change a bit of them."""
+    from maglev_match.core.checkpoint import Checkpoint
+    from maglev_match.core.jobs import Job, run_job
 
     speeds = np.asarray(list(speeds), float)
     for v in speeds:
@@ -302,44 +423,56 @@ def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | 
                                  "km/h")
     prof = check_irregular_setup(params, model, speeds, profile, spans, warmup, options)
     kind = MovingModel(model)
-    static, _ = mv.static_midspan_deflection(params, kind)
-    i0 = float(params.i0_vehicle) if kind is MovingModel.VEHICLE else float(
-        unit_model.levitation_current(unit_model.param_vector(params)))
+    spec = IrregularSpec(base=params.as_input_dict(), model=kind.value,
+                         speeds=tuple(float(v) for v in speeds), profile=prof,
+                         spans=int(spans), warmup=int(warmup),
+                         options=(options or SpeedOptions()).key())
+    job = Job(pieces=spec.pieces, compute=compute_irregular_runs,
+              args_of=lambda rows: (spec, rows),
+              store=lambda folder: Checkpoint(Path(folder), spec.key(), spec.shapes,
+                                              what="set of runs over an irregular guideway",
+                                              noun="run"),
+              noun="runs over the irregular guideway", run="speed sweep")
+    pieces = run_job(job, None if checkpoint is None else Path(checkpoint), resume=resume,
+                     scheduler=scheduler, workers=workers, progress=progress,
+                     scratch_prefix="maglev-match-irregular-")
+    values = np.concatenate([np.asarray(pc["values"], float) for pc in pieces])
+    notes = [str(t) for pc in pieces for t in np.ravel(pc["notes"])]
+    return _gathered(params, spec, values, notes)
+
+
+def _gathered(params: Params, spec: IrregularSpec, values: np.ndarray, notes: list[str]
+              ) -> IrregularSweep:
+    """The read-outs per speed from the runs' (:data:`RUN_READOUTS` rows in piece order):
+    means over the seeds, the largest values, the contacts and their interval."""
+    speeds = np.asarray(spec.speeds, float)
+    n_seeds = len(spec.seeds)
     vals = {k: np.full(speeds.size, math.nan) for k in READOUTS}
     secs = np.zeros(speeds.size)
     warnings: list[str] = []
-    for n, v in enumerate(speeds):
-        t0 = time.perf_counter()
-        smooth = simulate_over_spans(params, kind, float(v), spans, limited=True,
-                                     options=options, overlay=False)
-        if smooth.outcome != "ok":
-            warnings.append(f"{v * 3.6:g} km/h: the smooth run ended in a {smooth.outcome}")
-        per = []
-        for seed in prof.seed_list:
-            run = simulate_over_spans(params, kind, float(v), spans, limited=True,
-                                      options=options, profile=prof, seed=seed)
-            per.append(_run_readouts(run, smooth, params, warmup, static, i0))
-            if run.outcome == "collision":
-                warnings.append(f"{v * 3.6:g} km/h, seed {seed}: contact with the "
-                                f"{run.collision_limit} gap limit at point "
-                                f"{run.collision_point}, t = {run.collision_time:.3f} s")
+    for n in range(speeds.size):
+        per = values[n * n_seeds:(n + 1) * n_seeds]
+
+        def col(k, per=per):
+            return np.ascontiguousarray(per[:, RUN_READOUTS.index(k)])
+
+        for said in notes[n * n_seeds:(n + 1) * n_seeds]:
+            warnings.extend(json.loads(said))
         for k in ("gap_rms", "gap_rms_profile", "current_rms", "acc_rms", "wz"):
-            vals[k][n] = float(np.nanmean([r[k] for r in per]))
+            vals[k][n] = float(np.nanmean(col(k)))
         for k in ("gap_max", "current_max", "reverses", "daf"):
-            vals[k][n] = float(np.nanmax([r[k] for r in per]))
-        prs = np.array([r["gap_rms_profile"] for r in per])
+            vals[k][n] = float(np.nanmax(col(k)))
+        prs = col("gap_rms_profile")
         vals["gap_rms_profile_se"][n] = (float(np.std(prs, ddof=1) / math.sqrt(prs.size))
                                          if prs.size > 1 else math.nan)
-        k_hit = int(sum(r["contact"] for r in per))
-        vals["contacts"][n], vals["runs"][n] = k_hit, len(per)
-        vals["p_contact"][n] = k_hit / len(per)
-        vals["p_contact_low"][n], vals["p_contact_high"][n] = wilson_interval(k_hit, len(per))
-        if prof.kind == "random":
-            vals["gap_rms_linear"][n] = linear_gap_rms(params, float(v), prof, kind.value)
-        secs[n] = time.perf_counter() - t0
-        if progress is not None:
-            progress(n + 1, speeds.size)
-    return IrregularSweep(params=params, model=kind.value, profile=prof, speeds=speeds,
-                          spans=int(spans), warmup=int(warmup),
-                          distance=float(spans * params.L), seeds=prof.seed_list,
+        k_hit = int(sum(float(c) for c in col("contact")))
+        vals["contacts"][n], vals["runs"][n] = k_hit, n_seeds
+        vals["p_contact"][n] = k_hit / n_seeds
+        vals["p_contact_low"][n], vals["p_contact_high"][n] = wilson_interval(k_hit, n_seeds)
+        if spec.profile.kind == "random":
+            vals["gap_rms_linear"][n] = float(col("gap_rms_linear")[0])
+        secs[n] = float(np.sum(col("seconds")))
+    return IrregularSweep(params=params, model=spec.model, profile=spec.profile,
+                          speeds=speeds, spans=spec.spans, warmup=spec.warmup,
+                          distance=float(spec.spans * params.L), seeds=spec.seeds,
                           values=vals, seconds=secs, warnings=tuple(warnings))
