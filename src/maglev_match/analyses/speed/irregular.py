@@ -32,6 +32,7 @@ import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -137,38 +138,56 @@ def profile_gap_response(params: Params, model: str, v: float, kappa) -> np.ndar
     steady response is (i kappa v I - A)^-1 times that. Any model at speed; for the unit it
     equals :func:`rigid_gap_response` times :func:`footprint_factor` in magnitude (tested)."""
     kind = MovingModel(model)
-    n_modes = int(params.n_modes)
+    nv = mv.n_vehicle_states(kind)
+    pb = jnp.asarray(mv.moving_param_vector(params, kind, v=float(v), active=(0.0, 0.0)))
+    x0 = jnp.asarray(mv.rigid_equilibrium(params, kind))
+    matrices, forcing = _linearisation(kind, int(params.n_modes))
+    A, C = (np.asarray(m) for m in matrices(pb, x0))
+    kap = np.atleast_1d(np.asarray(kappa, float))
+    out = np.empty((C.shape[0], kap.size), complex)
+    eye = np.eye(nv)
+    for k, kk in enumerate(kap):
+        F, G = forcing(pb, x0, jnp.asarray(kk))
+        x_hat = np.linalg.solve(1j * kk * float(v) * eye - A, np.asarray(F))
+        out[:, k] = C @ x_hat + np.asarray(G)
+    return out
+
+
+@cache
+def _linearisation(kind: MovingModel, n_modes: int):
+    """(matrices, forcing) of the moving model on a guideway profile of one wave:
+    ``matrices(pb, x0)`` the Jacobians of the vehicle's vector field (A) and of the gap
+    deviation (C) by the vehicle's states at the state x0 with the base parameter vector
+    pb; ``forcing(pb, x0, kappa)`` the derivatives of the vector field and of the gap deviation
+    by the wave's amplitude at 0, at phase 0 and -pi/2 (real and imaginary parts), at the
+    state x0. Compiled once per model and number of modes
+    (the parameters and the state are arguments, not constants: every speed shares it)."""
     nv = mv.n_vehicle_states(kind)
     rhs = mv.moving_rhs(kind, n_modes, False, 1)
     gap = mv.observables(kind, n_modes, 1)["gap_deviation"]
-    pb = jnp.asarray(mv.moving_param_vector(params, kind, v=float(v), active=(0.0, 0.0)))
-    x0 = jnp.asarray(mv.rigid_equilibrium(params, kind))
-
-    def pv(a, kap, phi):
-        return jnp.concatenate([pb, jnp.zeros(7), jnp.stack([a, kap, phi])])
-
-    A = np.asarray(jax.jacfwd(lambda x: rhs(x, pv(0.0, 1.0, 0.0)))(x0))[:nv, :nv]
-    C = np.asarray(jax.jacfwd(lambda x: gap(x, pv(0.0, 1.0, 0.0)))(x0))[:, :nv]
 
     @jax.jit
-    def forcing(kap):
+    def forcing(pb, x0, kap):
+        def pv(a, phi):
+            return jnp.concatenate([pb, jnp.zeros(7), jnp.stack([a, kap, phi])])
+
         def d(phi):
-            fa = jax.jacfwd(lambda a: rhs(x0, pv(a, kap, phi)))(0.0)[:nv]
-            ga = jax.jacfwd(lambda a: gap(x0, pv(a, kap, phi)))(0.0)
+            fa = jax.jacfwd(lambda a: rhs(x0, pv(a, phi)))(0.0)[:nv]
+            ga = jax.jacfwd(lambda a: gap(x0, pv(a, phi)))(0.0)
             return fa, ga
 
         f0, g0 = d(0.0)
         f1, g1 = d(-jnp.pi / 2)
         return f0 + 1j * f1, g0 + 1j * g1
 
-    kap = np.atleast_1d(np.asarray(kappa, float))
-    out = np.empty((C.shape[0], kap.size), complex)
-    eye = np.eye(nv)
-    for k, kk in enumerate(kap):
-        F, G = forcing(jnp.asarray(kk))
-        x_hat = np.linalg.solve(1j * kk * float(v) * eye - A, np.asarray(F))
-        out[:, k] = C @ x_hat + np.asarray(G)
-    return out
+    @jax.jit
+    def matrices(pb, x0):
+        p0 = jnp.concatenate([pb, jnp.zeros(7), jnp.array([0.0, 1.0, 0.0])])
+        A = jax.jacfwd(lambda x: rhs(x, p0))(x0)[:nv, :nv]
+        C = jax.jacfwd(lambda x: gap(x, p0))(x0)[:, :nv]
+        return A, C
+
+    return matrices, forcing
 
 
 def linear_gap_rms(params: Params, v: float, profile: Irregularity,
