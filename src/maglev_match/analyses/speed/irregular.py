@@ -206,7 +206,8 @@ class IrregularSweep(Plottable):
     """Read-outs over an irregular guideway per speed (SI units; :data:`READOUTS`): each a
     (speeds,) array in ``values``. ``distance`` (m) the length of one run's spans (the
     distance of the probability of contact); ``warmup`` spans of run-in left out of the
-    rms values; ``seeds`` the seeds drawn; ``seconds`` the time per speed."""
+    rms values; ``seeds`` the seeds drawn; ``seconds`` the time per speed (the wall times
+    of its runs, summed, wherever they ran)."""
 
     __repr__ = compact_repr
 
