@@ -361,7 +361,8 @@ class IrregularSpec:
 
 
 #: the smooth run this process made last: (spec key, speed index) -> SpanRun; the runs of
-#: the seeds of a speed share it (a process that runs them one after the other makes it once)
+#: the seeds of a speed share it (a process that runs them one after the other makes it once;
+#: it goes after the speed's last seed, and when the sweep ends here)
 _SMOOTH: dict[tuple[str, int], Any] = {}
 
 
@@ -411,6 +412,8 @@ def compute_irregular_runs(spec: IrregularSpec, rows: tuple[int, int]
         r["gap_rms_linear"] = (linear_gap_rms(params, v, prof, kind.value)
                                if j == 0 and prof.kind == "random" else math.nan)
         r["seconds"] = time.perf_counter() - t0
+        if j == n_seeds - 1:  # the speed's last seed: its smooth run is not kept (memory)
+            _SMOOTH.pop((key, i), None)
         values.append([r[k] for k in RUN_READOUTS])
         notes.append(json.dumps(said))
     return {"values": np.array(values, float), "notes": np.array(notes)}
@@ -453,9 +456,12 @@ def irregular_sweep(params: Params, model: str, speeds, profile: Irregularity | 
                                               what="set of runs over an irregular guideway",
                                               noun="run"),
               noun="runs over the irregular guideway", run="speed sweep")
-    pieces = run_job(job, None if checkpoint is None else Path(checkpoint), resume=resume,
-                     scheduler=scheduler, workers=workers, progress=progress,
-                     scratch_prefix="maglev-match-irregular-")
+    try:
+        pieces = run_job(job, None if checkpoint is None else Path(checkpoint),
+                         resume=resume, scheduler=scheduler, workers=workers,
+                         progress=progress, scratch_prefix="maglev-match-irregular-")
+    finally:
+        _SMOOTH.clear()
     values = np.concatenate([np.asarray(pc["values"], float) for pc in pieces])
     notes = [str(t) for pc in pieces for t in np.ravel(pc["notes"])]
     return _gathered(params, spec, values, notes)
