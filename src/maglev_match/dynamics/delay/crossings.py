@@ -79,9 +79,9 @@ __all__ = [
 def _one_thread():
     """Small dense eigenproblems in a loop: BLAS threads only contend for the cores there
     (as in :mod:`maglev_match.analyses.matching`)."""
-    from threadpoolctl import threadpool_limits
+    from maglev_match.core.threads import blas_threads
 
-    return threadpool_limits(1)
+    return blas_threads(1)
 
 
 
