@@ -12,6 +12,7 @@ import pytest
 from maglev_match.analyses.continued import (
     CriticalStart,
     continue_critical,
+    continue_criticals,
     follow_critical,
     follow_grid,
 )
@@ -102,6 +103,23 @@ def test_the_predictor_uses_the_derivative(soft):
     assert why is None and check.runs == 2 and check.status == "bracketed"
     predicted = float(res.reason.split("predicted ")[1].split(" mm")[0]) * 1e-3
     assert abs(predicted - res.size) < 0.1 * abs(sa.size - res.size)
+
+
+def test_both_directions_batched_equal_each_continued_alone(soft):
+    """``continue_criticals`` runs the two directions' correctors as one batched Newton and
+    their four check runs as one batch: each size equals the one continued alone (the
+    batch changes at most the last bits), with the same check outcome."""
+    a, b = soft, soft.replace(EI=soft.EI * 1.01)
+    starts = [CriticalStart.of(a, solve_critical(a, d)) for d in (-1, 1)]
+    both = continue_criticals(b, starts)
+    for start, (res, check, why) in zip(starts, both, strict=True):
+        alone, check1, why1 = continue_critical(b, start)
+        assert why is None and why1 is None
+        assert res.direction == start.critical.direction
+        assert res.size == pytest.approx(alone.size, rel=1e-12, abs=0)
+        assert abs(res.size - start.critical.size) > 1e3 * TOL  # it moved with EI
+        assert (check.largest_return, check.smallest_collision) == pytest.approx(
+            (check1.largest_return, check1.smallest_collision), rel=1e-12, abs=0)
 
 
 def test_the_index_at_a_neighbouring_design_equals_the_pointwise_index(soft):

@@ -53,7 +53,8 @@ from maglev_match.maglev.base import MaglevModel
 from maglev_match.maglev.models import maglev_model
 
 __all__ = ["CriticalStart", "Fallback", "MechanismChange", "FollowedCritical",
-           "continue_critical", "follow_critical", "follow_grid", "describe", "CHECK_STEP",
+           "continue_critical", "continue_criticals", "follow_critical", "follow_grid",
+           "describe", "CHECK_STEP",
            "BRACKET", "continue_cycle", "CYCLE_STEP", "CYCLE_CHANGE"]
 
 #: the relative offset of the two check runs below and above a continued size
@@ -172,67 +173,121 @@ def continue_critical(params: Params | MaglevModel, start: CriticalStart, *,
     (status 'bracketed', 2 runs); or (None, None, :class:`Fallback`) saying why the
     continuation does not hold here (then the full search is due).
     """
+    return continue_criticals(params, [start], model=model, derivative=derivative)[0]
+
+
+def continue_criticals(params: Params | MaglevModel, starts: Sequence[CriticalStart], *,
+                       model: str = "unit", derivative: bool = False
+                       ) -> list[tuple[CriticalSize | None, Any, Fallback | None]]:
+    """:func:`continue_critical` for several neighbouring solved sizes at the same design
+    (the two directions of an index): the grazing correctors of all of them run as one
+    batched Newton (one flow per iteration) and all their check runs as one batch of
+    simulations, so the pair costs about what one direction did."""
     m = maglev_model(params, model)
-    c = start.critical
-
-    def fail(why: str) -> tuple[None, None, Fallback]:
-        return None, None, Fallback(c.direction, str(c.mechanism), why)
-
-    line = disturbance_line(m, c.direction)
-    if m.params.tau > 0 and line.hs.dim != m.system().dim:
-        return fail("a delay (tau > 0): this model's solves are of its delay-free form")
-    if c.model != m.name:
-        return fail(f"the start is of model {c.model}")
     p = np.asarray(m.param_vector(), float)  # (without the delay)
-    if p.shape != start.p.shape:
-        return fail("the parameter vectors differ in size")
-    d0 = _predict(start, p)
-    gap_range = float(m.disturbance(c.direction).gap_range)
-    if not (0.0 < d0 < gap_range):
-        return fail(f"the predicted size {d0 * 1e3:.6g} mm leaves the gap range")
-    if c.mechanism == Mechanism.GRAZING:
-        res = _grazing(m, line, c, d0)
-    else:
-        res = _basin(m, line, c, d0)
-    if isinstance(res, str):
-        return fail(res)
-    check = _check(m, res)
-    if isinstance(check, str):
-        return fail(check)
-    res = replace(res, bracket=(check.largest_return, check.smallest_collision))
-    if derivative:
-        res = critical_derivative(m, res)
-    return res, check, None
+    out: list[Any] = [None] * len(starts)
+    work: list[tuple[int, Any, CriticalSize, float]] = []
+    for i, start in enumerate(starts):
+        c = start.critical
+        why = None
+        line = disturbance_line(m, c.direction)
+        if m.params.tau > 0 and line.hs.dim != m.system().dim:
+            why = "a delay (tau > 0): this model's solves are of its delay-free form"
+        elif c.model != m.name:
+            why = f"the start is of model {c.model}"
+        elif p.shape != start.p.shape:
+            why = "the parameter vectors differ in size"
+        else:
+            d0 = _predict(start, p)
+            gap_range = float(m.disturbance(c.direction).gap_range)
+            if not (0.0 < d0 < gap_range):
+                why = f"the predicted size {d0 * 1e3:.6g} mm leaves the gap range"
+        if why is not None:
+            out[i] = (None, None, Fallback(c.direction, str(c.mechanism), why))
+        else:
+            work.append((i, line, c, d0))
+    grazing = [w for w in work if w[2].mechanism == Mechanism.GRAZING]
+    solved: dict[int, CriticalSize | str] = dict(zip(
+        [w[0] for w in grazing], _grazing(m, grazing), strict=True))
+    for i, line, c, d0 in work:
+        if i not in solved:
+            solved[i] = _basin(m, line, c, d0)
+    ready = []
+    for i, _, c, _ in work:
+        if isinstance(solved[i], str):
+            out[i] = (None, None, Fallback(c.direction, str(c.mechanism), solved[i]))
+        else:
+            ready.append(i)
+    checks = _check(m, [solved[i] for i in ready])
+    for i, check in zip(ready, checks, strict=True):
+        res = solved[i]
+        c = starts[i].critical
+        if isinstance(check, str):
+            out[i] = (None, None, Fallback(c.direction, str(c.mechanism), check))
+            continue
+        res = replace(res, bracket=(check.largest_return, check.smallest_collision))
+        if derivative:
+            res = critical_derivative(m, res)
+        out[i] = (res, check, None)
+    return out
 
 
-def _grazing(m: MaglevModel, line: Any, c: CriticalSize, d0: float) -> CriticalSize | str:
+def _grazing(m: MaglevModel, work: list[tuple[int, Any, CriticalSize, float]]
+             ) -> list[CriticalSize | str]:
+    """The grazing correctors of ``work`` ((index, line, neighbour's size, predicted
+    size) per direction, all at the design ``m``), as one batched Newton."""
     from maglev_match.dynamics.escape import solve_grazing
 
-    j = (c.point or 1) - 1
-    side = 1 if c.limit == "upper" else -1
-    L = (line.upper if side > 0 else line.lower) - line.g0[j]
-    win = c.window
+    if not work:
+        return []
+    lines = [w[1] for w in work]
+    cs = [w[2] for w in work]
+    d0 = np.array([w[3] for w in work])
+    js = [(c.point or 1) - 1 for c in cs]
+    sides = np.array([1 if c.limit == "upper" else -1 for c in cs])
+    W = np.array([ln.W[j] for ln, j in zip(lines, js, strict=True)])
+    L = np.array([(ln.upper if sd > 0 else ln.lower) - ln.g0[j]
+                  for ln, j, sd in zip(lines, js, sides, strict=True)])
+    wins = np.array([c.window for c in cs], float)
     # a run through the limit has no extremum: the bracket turns such an iterate into its
     # upper end (bisection) instead of a failure
-    half = max(BRACKET * d0, 4.0 * abs(d0 - float(c.size)))
-    sol = solve_grazing(line.hs, line.x0_of, line.dx0_dd, line.W[j], L, side, d0, win[0],
-                        win[1], p=line.hs.p, bracket=(d0 - half, d0 + half),
-                        options=replace(FLOW, max_steps=GRAZING_STEPS_DELAY if m.params.tau > 0
-                                        else GRAZING_STEPS))[0]
-    if not sol.converged:
-        return f"grazing not continued: {sol.message}"
-    if sol.singular:
-        return "grazing not continued: a contact at the singular gap 0"
-    shift = float(sol.t_star) - float(c.t_star)
-    return replace(
-        c, size=float(sol.size), t_star=float(sol.t_star), iterations=sol.iterations,
-        residual=float(sol.residual), window=(win[0] + shift, win[1] + shift),
-        dsize_dp=None, dsize_dlimit=None, derivative_available=True, converged=True,
-        growth=None, margin_below=None, evidence=None,
-        reason=(f"grazing continued from a neighbouring design (predicted "
-                f"{d0 * 1e3:.7g} mm, Newton {sol.iterations} steps): tangency at the "
-                f"{c.limit} gap limit at t* = {sol.t_star:.5g} s; checked by simulation at "
-                f"1 -+ {CHECK_STEP:g} of the size"))
+    half = np.maximum(BRACKET * d0, 4.0 * np.abs(d0 - np.array([float(c.size) for c in cs])))
+    base = np.array([ln.base for ln in lines])
+    dirn = np.array([ln.dirn for ln in lines])
+    nb = len(work)
+
+    def x0_of(d: np.ndarray) -> np.ndarray:
+        d = np.atleast_1d(np.asarray(d, float))  # (padded: the last run repeated)
+        k = np.minimum(np.arange(d.size), nb - 1)
+        return base[k] + d[:, None] * dirn[k]
+
+    def dx0_dd(d: np.ndarray) -> np.ndarray:
+        k = np.minimum(np.arange(np.atleast_1d(d).size), nb - 1)
+        return dirn[k].copy()
+
+    sols = solve_grazing(lines[0].hs, x0_of, dx0_dd, W, L, sides, d0, wins[:, 0],
+                         wins[:, 1], p=lines[0].hs.p, bracket=(d0 - half, d0 + half),
+                         options=replace(FLOW, max_steps=GRAZING_STEPS_DELAY
+                                         if m.params.tau > 0 else GRAZING_STEPS))
+    out: list[CriticalSize | str] = []
+    for c, sol, d_pred, win in zip(cs, sols, d0, wins, strict=True):
+        if not sol.converged:
+            out.append(f"grazing not continued: {sol.message}")
+            continue
+        if sol.singular:
+            out.append("grazing not continued: a contact at the singular gap 0")
+            continue
+        shift = float(sol.t_star) - float(c.t_star)
+        out.append(replace(
+            c, size=float(sol.size), t_star=float(sol.t_star), iterations=sol.iterations,
+            residual=float(sol.residual), window=(win[0] + shift, win[1] + shift),
+            dsize_dp=None, dsize_dlimit=None, derivative_available=True, converged=True,
+            growth=None, margin_below=None, evidence=None,
+            reason=(f"grazing continued from a neighbouring design (predicted "
+                    f"{d_pred * 1e3:.7g} mm, Newton {sol.iterations} steps): tangency at the "
+                    f"{c.limit} gap limit at t* = {sol.t_star:.5g} s; checked by simulation "
+                    f"at 1 -+ {CHECK_STEP:g} of the size")))
+    return out
 
 
 def _basin(m: MaglevModel, line: Any, c: CriticalSize, d0: float) -> CriticalSize | str:
@@ -287,10 +342,11 @@ def _basin(m: MaglevModel, line: Any, c: CriticalSize, d0: float) -> CriticalSiz
                 "the size"))
 
 
-def _check(m: MaglevModel, res: CriticalSize) -> Any:
-    """Two simulations of the limited model at 1 -+ CHECK_STEP of the size: the smaller
-    must return, the larger collide at the size's gap limit and point. Returns their
-    :class:`~maglev_match.analyses.simulation.CriticalDisturbance` or why not."""
+def _check(m: MaglevModel, sizes_: list[CriticalSize]) -> list[Any]:
+    """Two simulations of the limited model at 1 -+ CHECK_STEP of each size (all in one
+    batch): the smaller must return, the larger collide at the size's gap limit and point.
+    Per size, its :class:`~maglev_match.analyses.simulation.CriticalDisturbance` or why
+    not."""
     from maglev_match.analyses.simulation import CriticalDisturbance, Run
     from maglev_match.dynamics.integrate.simulate import (
         COLLISION,
@@ -299,40 +355,50 @@ def _check(m: MaglevModel, res: CriticalSize) -> Any:
         simulate_batch,
     )
 
-    dist = m.disturbance(res.direction)
-    d = float(res.size)
-    sizes = np.array([d * (1 - CHECK_STEP), d * (1 + CHECK_STEP)])
+    if not sizes_:
+        return []
     horizon = float(m.critical_search.as_kwargs()["t_max"])
-    system, x0, x_ref = m.system(limited=True), dist.x0_of(sizes), m.equilibrium()
+    system, x_ref = m.system(limited=True), m.equilibrium()
+    pairs = [np.array([float(r.size) * (1 - CHECK_STEP), float(r.size) * (1 + CHECK_STEP)])
+             for r in sizes_]
+    x0 = np.concatenate([m.disturbance(r.direction).x0_of(sz)
+                         for r, sz in zip(sizes_, pairs, strict=True)])
     if x0.shape[-1] != system.dim:
         x0, x_ref = system.lift(x0), system.lift(x_ref)
     b = simulate_batch(system, x0, horizon, event_fn=m.gap_events(), x_ref=x_ref,
                        options=SimulationOptions(stop_on_converged=True))
-    entry = 2 * ((res.point or 1) - 1) + (1 if res.limit == "upper" else 0)
-    code = [int(v) for v in b.outcome_code]
-    if code[0] != CONVERGED:
-        what = ("collided at " + ("the upper" if int(b.event_index[0]) % 2 else "the lower")
-                + f" gap limit at {float(b.event_time[0]):.4g} s" if code[0] == COLLISION
-                else f"stayed undecided within {horizon:g} s")
-        return (f"the check run just below the continued size {d * 1e3:.7g} mm {what}: "
-                "another contact or set decides here")
-    if code[1] != COLLISION or int(b.event_index[1]) != entry:
-        return (f"the check run just above the continued size {d * 1e3:.7g} mm did not "
-                f"collide at the {res.limit} gap limit of point {res.point or 1}: the "
-                "condition no longer separates return from collision here")
-    runs = tuple(Run(size=float(s), outcome=o, time=t,
-                     margins=tuple(float(v) for v in b.min_event_value[k]),
-                     event=int(b.event_index[k]) if o == "collision" else -1)
-                 for k, (s, o, t) in enumerate(((sizes[0], "return",
-                                                 float(b.converged_time[0])),
-                                                (sizes[1], "collision",
-                                                 float(b.event_time[1])))))
-    return CriticalDisturbance(
-        direction=res.direction, largest_return=float(sizes[0]),
-        smallest_collision=float(sizes[1]), critical=float(sizes.mean()), status="bracketed",
-        gap_range=float(dist.gap_range), tol=float(sizes[1] - sizes[0]), runs=2,
-        unresolved=0, unresolved_sizes=(), horizon=horizon, rounds=1,
-        collision_time=float(b.event_time[1]), nonmonotone=False, samples=runs)
+    out: list[Any] = []
+    for i, (res, sizes) in enumerate(zip(sizes_, pairs, strict=True)):
+        lo, hi = 2 * i, 2 * i + 1
+        d = float(res.size)
+        entry = 2 * ((res.point or 1) - 1) + (1 if res.limit == "upper" else 0)
+        code = [int(b.outcome_code[lo]), int(b.outcome_code[hi])]
+        if code[0] != CONVERGED:
+            what = ("collided at " + ("the upper" if int(b.event_index[lo]) % 2
+                                      else "the lower")
+                    + f" gap limit at {float(b.event_time[lo]):.4g} s" if code[0] == COLLISION
+                    else f"stayed undecided within {horizon:g} s")
+            out.append(f"the check run just below the continued size {d * 1e3:.7g} mm {what}: "
+                       "another contact or set decides here")
+            continue
+        if code[1] != COLLISION or int(b.event_index[hi]) != entry:
+            out.append(f"the check run just above the continued size {d * 1e3:.7g} mm did "
+                       f"not collide at the {res.limit} gap limit of point {res.point or 1}: "
+                       "the condition no longer separates return from collision here")
+            continue
+        runs = tuple(Run(size=float(s), outcome=o, time=t,
+                         margins=tuple(float(v) for v in b.min_event_value[k]),
+                         event=int(b.event_index[k]) if o == "collision" else -1)
+                     for k, s, o, t in ((lo, sizes[0], "return", float(b.converged_time[lo])),
+                                        (hi, sizes[1], "collision", float(b.event_time[hi]))))
+        out.append(CriticalDisturbance(
+            direction=res.direction, largest_return=float(sizes[0]),
+            smallest_collision=float(sizes[1]), critical=float(sizes.mean()),
+            status="bracketed", gap_range=float(m.disturbance(res.direction).gap_range),
+            tol=float(sizes[1] - sizes[0]), runs=2, unresolved=0, unresolved_sizes=(),
+            horizon=horizon, rounds=1, collision_time=float(b.event_time[hi]),
+            nonmonotone=False, samples=runs))
+    return out
 
 
 def follow_critical(params_list: Sequence[Params | MaglevModel], direction: int, *,

@@ -353,14 +353,14 @@ def matching_index(
         index's to ~1e-8 relative (the point-wise branch ends on another adapted mesh).
         Where the rules do not hold, the full search runs.
     """
-    from threadpoolctl import threadpool_limits
+    from maglev_match.core.threads import blas_threads
 
     say = stage if stage is not None else (lambda text: None)
     m = maglev_model(params, model)
     say(f"the paper's index of {m.info.short}: equilibrium, Hopf point, cycle branch ...")
     params = m.params
     system = m.system()
-    with threadpool_limits(m.blas_threads):
+    with blas_threads(m.blas_threads):
         res = None if near is None else _paper_near(m, system, near, stability_result)
         res = res if res is not None else index_of_system(
             system, system.p, w0=m.w0, h_max=params.gap_max - params.c0,
@@ -417,18 +417,21 @@ def matching_index(
 def _continued(m: MaglevModel, near: MatchingIndex) -> dict[int, tuple[Any, Any, str]]:
     """The critical sizes of ``near`` continued to the model ``m``, per direction:
     (check search, size, '') where the continuation holds, (None, None, why) where not."""
-    from maglev_match.analyses.continued import CriticalStart, continue_critical
+    from maglev_match.analyses.continued import CriticalStart, continue_criticals
 
     out: dict[int, tuple[Any, Any, str]] = {}
     at = np.asarray(m.param_vector(), float)
+    todo = []
     for d, c in ((-1, near.critical_up), (1, near.critical_down)):
         if c is None or not c.solved or c.at is None or c.window is None:
             continue
         if c.model != m.name or np.shape(c.at) != at.shape:
             out[d] = (None, None, f"the neighbour is of model {c.model}")
             continue
-        size, check, why = continue_critical(m, CriticalStart(np.asarray(c.at), c),
-                                             model=m.name)
+        todo.append((d, CriticalStart(np.asarray(c.at), c)))
+    # both directions at once: one batched corrector and one batch of check runs
+    done = continue_criticals(m, [s for _, s in todo], model=m.name)
+    for (d, _), (size, check, why) in zip(todo, done, strict=True):
         out[d] = ((check, replace(size, at=at), "") if size is not None
                   else (None, None, why.reason))
     return out

@@ -283,11 +283,11 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     h_simulation between its two directions) the one-sided derivatives are given
     (``dchi_left``, ``dchi_right``).
     """
-    from threadpoolctl import threadpool_limits
+    from maglev_match.core.threads import blas_threads
 
     m = maglev_model(params, model or (index.model if index is not None else "unit"))
     # small dense blocks: BLAS threads only contend (as in matching_index)
-    with threadpool_limits(m.blas_threads):
+    with blas_threads(m.blas_threads):
         return _index_sensitivity(m, index, boundaries, simulate)
 
 
