@@ -69,11 +69,13 @@ def test_index_gives_the_practical_margin_of_a_supercritical_delay(capsys, tmp_p
     `index` gives that fold as the practical margin (issue 32's edge: it read out
     'supercritical' alone), and it is the LPC of an independent `cycles` run along tau on
     a finer mesh (80 intervals against 40)."""
-    code, out, err = run(capsys, "index", "--set", "tau=0.001", "--no-simulation", "--json",
-                         "--out", str(tmp_path))
+    # one run: the text on the terminal, the JSON in the file it writes (the same answer)
+    code, text, err = run(capsys, "index", "--set", "tau=0.001", "--no-simulation",
+                          "--out", str(tmp_path))
     assert code == 0, err
-    pr = json.loads(out)["critical_delay"]["practical"]
-    cd_value = json.loads(out)["critical_delay"]["value"]
+    saved = json.loads((tmp_path / "index_unit.json").read_text())
+    pr = saved["critical_delay"]["practical"]
+    cd_value = saved["critical_delay"]["value"]
     assert pr["basis"] == "fold" and pr["value"] == pr["fold"]
     assert 1.01 < pr["value"] / cd_value < 1.02
     code, out, err = run(capsys, "cycles", "--param", "tau", "--to", "0.0016",
@@ -81,9 +83,7 @@ def test_index_gives_the_practical_margin_of_a_supercritical_delay(capsys, tmp_p
     assert code == 0, err
     lpc = [sp for sp in json.loads(out)["special_points"] if sp["type"] == "LPC"]
     assert len(lpc) == 1 and lpc[0]["tau"] == pytest.approx(pr["value"], rel=1e-6)
-    code, out, err = run(capsys, "index", "--set", "tau=0.001", "--no-simulation",
-                         "--out", str(tmp_path))
-    assert f"practical margin of the delay: tau = {pr['value'] * 1e3:.4g} ms" in out
+    assert f"practical margin of the delay: tau = {pr['value'] * 1e3:.4g} ms" in text
 
 
 @pytest.mark.parametrize("args, words", [

@@ -252,7 +252,18 @@ def test_delay_clamp_is_the_limited_discretised_field(soft):
         assert float(hs.guards(jnp.asarray(Xh), hs.p, np.ones(1))[0]) == pytest.approx(i0)
 
 
-def test_delay_grazing_is_solved_and_agrees_with_the_simulation(soft):
+@pytest.fixture(scope="module")
+def delay_down(soft):
+    """Model A at tau = 1 ms and the search of its critical disturbance, beam down (30
+    runs of the stiff discretised delay system: shared by the two tests below)."""
+    from maglev_match.analyses.simulation import critical_disturbance
+    from maglev_match.maglev.models import maglev_model
+
+    m = maglev_model(soft.replace(tau=1e-3), "unit")
+    return m, critical_disturbance(m, direction=1)
+
+
+def test_delay_grazing_is_solved_and_agrees_with_the_simulation(soft, delay_down):
     """At tau = 1 ms the critical disturbance (beam pressed down) is *solved* as a grazing
     contact on the delay system, not left at the bisection's midpoint: the size lies in the
     bracket of the search, and the limited discretised system's own runs at 1e-7 below it
@@ -260,12 +271,10 @@ def test_delay_grazing_is_solved_and_agrees_with_the_simulation(soft):
     computations agree to ~3e-10 m); d size / d tau equals the central difference (measured
     -0.5671720634 both ways, 1e-9 apart)."""
     from maglev_match.analyses.critical import Mechanism, critical_from_bisection
-    from maglev_match.analyses.simulation import critical_disturbance
     from maglev_match.dynamics.integrate.simulate import simulate_batch
     from maglev_match.maglev.models import maglev_model
 
-    m = maglev_model(soft.replace(tau=1e-3), "unit")
-    cd = critical_disturbance(m, direction=1)
+    m, cd = delay_down
     res = critical_from_bisection(m, cd)
     assert res.mechanism == Mechanism.GRAZING and res.solved, res.reason
     lo, hi = res.bracket
@@ -288,7 +297,7 @@ def test_delay_grazing_is_solved_and_agrees_with_the_simulation(soft):
         (sizes[1] - sizes[0]) / (2 * h), rel=1e-6)
 
 
-def test_delay_grazing_is_continued_to_a_neighbouring_design(soft):
+def test_delay_grazing_is_continued_to_a_neighbouring_design(soft, delay_down):
     """The solved grazing size at tau = 1 ms continued to kD + 1 % (Newton from the
     neighbour's size, two check runs) equals the size solved from that design's own search
     (1e-12 relative)."""
@@ -299,8 +308,8 @@ def test_delay_grazing_is_continued_to_a_neighbouring_design(soft):
     from maglev_match.analyses.simulation import critical_disturbance
     from maglev_match.maglev.models import maglev_model
 
-    m0 = maglev_model(soft.replace(tau=1e-3), "unit")
-    c0 = critical_from_bisection(m0, critical_disturbance(m0, direction=1))
+    m0, cd0 = delay_down
+    c0 = critical_from_bisection(m0, cd0)
     c0 = replace(c0, at=np.asarray(m0.param_vector()))
     m1 = maglev_model(soft.replace(tau=1e-3, kD=soft.kD * 1.01), "unit")
     size, check, fallback = continue_critical(m1, CriticalStart(c0.at, c0), model="unit")
