@@ -17,7 +17,8 @@ ROOT = Path(maglev_match.__file__).parent
 # helpers, and the results protocol its branch and point results derive from (Plottable:
 # standard library only, it knows no model)
 NUMERICS_ALLOWED = {"maglev_match.core.aot", "maglev_match.core.jax_setup",
-                    "maglev_match.core.reprs", "maglev_match.core.results"}
+                    "maglev_match.core.reprs", "maglev_match.core.results",
+                    "maglev_match.core.threads"}
 
 
 def _modules() -> dict[str, Path]:
