@@ -298,10 +298,10 @@ def _curvature(hs: HybridSystem, x: np.ndarray, s: np.ndarray, p: np.ndarray,
                w: np.ndarray) -> float:
     """d^2 (w . x)/dt^2 = w . f_x f at (x, s) (one compiled kernel per vector field, so
     that it is not traced primitive by primitive at every call)."""
-    import jax.numpy as jnp
+    from maglev_match.core.jax_setup import kernel_arg
 
-    jf = _curvature_kernel(hs.rhs)(jnp.asarray(x, float), jnp.asarray(p, float),
-                                   jnp.asarray(s, float))
+    jf = _curvature_kernel(hs.rhs)(kernel_arg(x, float), kernel_arg(p, float),
+                                   kernel_arg(s, float))
     return float(np.asarray(w) @ np.asarray(jf))
 
 

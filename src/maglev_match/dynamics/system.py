@@ -33,6 +33,7 @@ import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64 on, compilation cache)
 from maglev_match.core.aot import cached_kernel
+from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.reprs import compact_repr
 
 Array = Any
@@ -309,20 +310,22 @@ class System:
     def derivatives(self) -> CompiledDerivatives:
         return compiled(self.rhs)
 
-    def _p(self, p: np.ndarray | None) -> jnp.ndarray:
-        return jnp.asarray(self.p if p is None else p, dtype=jnp.float64)
+    def _p(self, p: np.ndarray | None) -> Any:
+        # host data as it is (kernel_arg): the kernels' call moves it to the device on its
+        # fast path, without jnp.asarray's staging program
+        return kernel_arg(self.p if p is None else p, np.float64)
 
     def f(self, x: Array, p: np.ndarray | None = None) -> np.ndarray:
-        return np.asarray(self.derivatives.f(jnp.asarray(x, jnp.float64), self._p(p)))
+        return np.asarray(self.derivatives.f(kernel_arg(x, np.float64), self._p(p)))
 
     def jacobian(self, x: Array, p: np.ndarray | None = None) -> np.ndarray:
         """d f / d x at (x, p), exact (forward-mode autodiff)."""
-        return np.asarray(self.derivatives.jacobian(jnp.asarray(x, jnp.float64), self._p(p)))
+        return np.asarray(self.derivatives.jacobian(kernel_arg(x, np.float64), self._p(p)))
 
     def param_jacobian(self, x: Array, p: np.ndarray | None = None) -> np.ndarray:
         """d f / d p at (x, p): shape (dim, n_params)."""
         return np.asarray(
-            self.derivatives.param_jacobian(jnp.asarray(x, jnp.float64), self._p(p))
+            self.derivatives.param_jacobian(kernel_arg(x, np.float64), self._p(p))
         )
 
     def param_derivative(self, x: Array, p: np.ndarray | None, name: str) -> np.ndarray:
