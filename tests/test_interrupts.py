@@ -105,8 +105,8 @@ def _check_stopped(code: int, err: str, elapsed: float, resume: str | None) -> N
     pytest.param([*SPEED, "--workers", "1"], r"0/31 speeds done", "of 31 tiles",
                  id="speed"),
     pytest.param(DESIGN, r"coarse grid", None, id="design"),
-    pytest.param(MONTE_CARLO, r"sensitivities for the linearised spread", None,
-                 id="index-monte-carlo"),
+    # (the Monte Carlo index is interrupted during its work below; cold, it reached its own
+    # first compile only after the whole index had compiled: ~45 s of the suite)
 ])
 def test_ctrl_c_while_the_first_kernels_compile(tmp_path, args, trigger, resume):
     code, err, elapsed = _interrupt(args, trigger, tmp_path, cold=True)

