@@ -38,6 +38,15 @@ def toy(p1: float, p2: float, bracketed_below: float = -math.inf,
 BOX = ((-1.0, 1.0), (-1.0, 1.0))
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5])
+def test_max_points_counts_both_directions_and_the_start(n):
+    """--points N gives at most N points in all (start included); with room, exactly N."""
+    tr = trace_iso(toy, BOX, 5.0, fixed=1, value=0.0,
+                   settings=TraceSettings(max_points=n, ds=0.02))
+    assert len(tr.points) == n
+    assert tr.start == (n - 1) // 2  # backwards gets half, rounded down
+
+
 def test_toy_curve_follows_both_parts_and_locates_the_switches():
     tr = trace_iso(toy, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
     assert tr.start is not None and len(tr.points) > 10
@@ -440,7 +449,7 @@ def test_design_iso_curve_option_is_checked_before_the_search(paper_curve, tmp_p
     assert "a curve in (EI, kD), the design is in (EI)" in " ".join(err.getvalue().split())
 
 
-@pytest.mark.slow  # 6 vehicle indices (354 s wall at load 11.6 on 2 cores)
+@pytest.mark.slow  # vehicle indices (88 s with 3 points and a 3-point scan, quiet)
 
 def test_vehicle_paper_curve_is_the_closed_form_of_the_case_rule():
     # model B (the vehicle), the paper's chi alone (its headline needs the simulated part,
@@ -467,11 +476,11 @@ def test_vehicle_paper_curve_is_the_closed_form_of_the_case_rule():
     ei_star = brentq(lambda e: chi_rule(e) - 9.0, 1.5e10, 3e10, xtol=1e-3, rtol=1e-14)
     c = iso_chi_curve(base, ("EI", "kD"), {"EI": (1.5e10, 3e10), "kD": (120.0, 180.0)}, 9.0,
                       at=("kD", 150.0), model="vehicle", simulate=False,
-                      settings=TraceSettings(max_points=3, ds=0.2, scan=3))
-    assert c.model == "vehicle" and len(c.points) == 3 and c.ok
+                      settings=TraceSettings(max_points=2, ds=0.2, scan=2))
+    assert c.model == "vehicle" and len(c.points) == 2 and c.ok
     for r in c.rows():
         assert r["paper_part"] == "rule" and r["gradient"] == "exact"
         assert abs(r["chi"] - 9.0) <= 1e-7 * 9.0
         assert r["EI"] == pytest.approx(ei_star, rel=1e-7)
     kd = [p.p2 for p in c.points]
-    assert kd == sorted(kd) and kd[-1] - kd[0] > 20.0
+    assert kd == sorted(kd) and kd[-1] - kd[0] > 10.0  # one step of 0.2 x 60

@@ -668,12 +668,16 @@ def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: fl
         why = "the gradient of chi could not be computed at the start" + tr._why(u0)
         tr.warnings.append(why)
         return done([first], 0, [], (why, why))
-    per = max(1, (settings.max_points - 1) // 2)
+    # the points after the start, both directions together: backwards gets half (rounded
+    # down), forwards the rest, so that max_points = 2 is the start and one point forwards
+    per = (settings.max_points - 1) // 2
     stage = stage or (lambda text: None)
     stage("following the curve forwards ...")
     fwd, sp_f, end_f = tr.branch(u0, g0, +1, settings.max_points - 1 - per, [first])
     if end_f == "the curve closed on its start":
         bwd, sp_b, end_b = [], [], "the curve closed on its start"
+    elif per == 0:
+        bwd, sp_b, end_b = [], [], "the number of points (0 in this direction) reached"
     else:
         stage("following the curve backwards ...")
         bwd, sp_b, end_b = tr.branch(u0, g0, -1, per, [first])
