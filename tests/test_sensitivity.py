@@ -231,3 +231,24 @@ def test_case_rule_boundary_from_the_branch_contact_with_the_gap_limit():
     above = matching_index(p.replace(sigma=1.01 * s_c), simulate=False)
     below = matching_index(p.replace(sigma=0.99 * s_c), simulate=False)
     assert above.case == "unstable_cycle" and below.case == "no_cycle_within_limits"
+
+
+def test_a_delay_is_refused_by_the_analysis_itself_naming_tau():
+    """Not only the API: the analysis refuses tau > 0 before any work (its beam-to-model
+    maps are of the delay-free models; it used to fail on a matrix size, 17 vs 18), and the
+    iso-chi curve, which calls it for its gradient, says why it falls back."""
+    from maglev_match.analyses.iso.maglev import MaglevChi
+    from maglev_match.analyses.iso.trace import Sample
+    from maglev_match.analyses.matching import MatchingIndex
+    from maglev_match.analyses.sensitivity import index_sensitivity as analysis
+    from maglev_match.core.params import ParameterError, load_preset
+
+    p = load_preset("turnout-soft").replace(tau=1e-3)
+    with pytest.raises(ParameterError) as e:
+        analysis(p, simulate=False)
+    assert e.value.field == "tau" and "delay-free models only" in e.value.rule
+    ev = MaglevChi(p, ("EI", "kD"), simulate=False)
+    idx = object.__new__(MatchingIndex)  # a converged index; the gradient reads no more
+    object.__setattr__(idx, "converged", True)
+    grad, why = ev.gradient(p.EI, p.kD, Sample(5.0, 5.0, state=idx))
+    assert grad == {} and "with a delay (tau > 0)" in why

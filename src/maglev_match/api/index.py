@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from maglev_match.api.inputs import resolve_params
 from maglev_match.api.progress import reported
-from maglev_match.core.params import ParameterError, Params
+from maglev_match.core.params import ParameterError, Params, refuse_delay
 from maglev_match.core.results import Plottable
 from maglev_match.maglev.catalog import model_info
 
@@ -135,15 +135,6 @@ def index_sensitivity(params: Params | str | None = None, *, model: str = "unit"
         stage("computing the index and its sensitivities ...")
     return _index_sensitivity(base, index, boundaries=boundaries,
                               model=model_info(model).name, simulate=simulate)
-
-
-def refuse_delay(params: Params, what: str) -> None:
-    """``what`` is computed for the delay-free models only: a parameter set with a delay
-    (tau > 0) is refused, naming tau, before any work."""
-    if params.tau > 0:
-        raise ParameterError("tau", params.tau, f"{what} are computed for the delay-free "
-                             "models only: set tau = 0 (the delay itself is studied with "
-                             "stability, hopf --param tau and index)")
 
 
 def scatter_rows(params: Params | str | None = None, *, model: str = "unit",

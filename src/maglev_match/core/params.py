@@ -27,6 +27,7 @@ from typing import Any
 __all__ = [
     "Params",
     "ParameterError",
+    "refuse_delay",
     "ParameterWarning",
     "RANGES",
     "PARAMETER_DOCS",
@@ -186,6 +187,15 @@ class ParameterError(ValueError):
             name = repr(name)[1:-1]
             rule = f"{rule} (the name contains invisible characters, shown escaped)"
         super().__init__(f"parameter '{name}' = {value!r}: {rule}")
+
+
+def refuse_delay(params: Params, what: str) -> None:
+    """``what`` is computed for the delay-free models only: a parameter set with a delay
+    (tau > 0) is refused, naming tau, before any work."""
+    if params.tau > 0:
+        raise ParameterError("tau", params.tau, f"{what} are computed for the delay-free "
+                             "models only: set tau = 0 (the delay itself is studied with "
+                             "stability, hopf --param tau and index)")
 
 
 @dataclass(frozen=True)

@@ -98,6 +98,9 @@ class MaglevChi:
         idx = sample.state
         if not isinstance(idx, MatchingIndex) or not idx.converged:
             return {}, "the index did not converge there"
+        if self.base.tau > 0:  # (index_sensitivity refuses a delay, naming tau)
+            return {}, ("with a delay (tau > 0) the index has no analytic derivative: the "
+                        "sensitivities are of the delay-free models")
         known = engineering_names(self.base, self.model)
         missing = [n for n in self.names if n not in known]
         if missing:

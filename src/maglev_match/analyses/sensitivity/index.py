@@ -49,7 +49,7 @@ from maglev_match.analyses.sensitivity.limits import (
 )
 from maglev_match.analyses.sensitivity.status import DerivativeStatus
 from maglev_match.core import jax_setup  # noqa: F401  (float64)
-from maglev_match.core.params import PARAMETER_DOCS, Params
+from maglev_match.core.params import PARAMETER_DOCS, Params, refuse_delay
 from maglev_match.core.reprs import compact_repr
 from maglev_match.core.results import Plottable
 from maglev_match.dynamics.equilibria import find_equilibrium
@@ -272,6 +272,9 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     simulate : when ``index`` is not given, compute it with the simulation (the headline is
         then the smaller of chi_paper and chi_simulation) or without (the paper's chi).
 
+    Raises :class:`~maglev_match.core.params.ParameterError` (naming tau) for a delay:
+    the sensitivities are of the delay-free models.
+
     The derivative is that of the headline ``index.chi``. chi_paper = h / w0 gives
     d chi_paper = (dh - chi_paper dw0) / w0 with dh = (dh/dp_model)(dp_model/dq) in the
     cycle case and dh = d(gap_max - c0) in case ``no_cycle_within_limits``; the vehicle's
@@ -285,6 +288,8 @@ def index_sensitivity(params: Params, index: MatchingIndex | None = None, *,
     """
     from maglev_match.core.threads import blas_threads
 
+    # the maps from the beam data to the model parameters are of the delay-free models
+    refuse_delay(params, "the sensitivities of the index")
     m = maglev_model(params, model or (index.model if index is not None else "unit"))
     # small dense blocks: BLAS threads only contend (as in matching_index)
     with blas_threads(m.blas_threads):
