@@ -307,7 +307,8 @@ def test_at_warns_when_an_explicit_omega1_overrides_the_span():
 
 def test_map_out_folder_gets_the_default_name(capsys, tmp_path):
     code, out, err = run(capsys, "map", "--x", "omega1=120:140:2", "--y", "sigma=3e-4:4e-4:2",
-                         "--workers", "0", "--out", str(tmp_path / "maps"), "--json")
+                         "--workers", "0", "--no-simulation", "--out", str(tmp_path / "maps"),
+                         "--json")
     assert code == 0
     doc = json.loads(out)
     assert doc["netcdf"] == str(tmp_path / "maps" / "map_omega1_sigma.nc")
