@@ -46,6 +46,7 @@ from maglev_match.analyses.critical import (
     disturbance_line,
     saddle_landing,
     solve_critical,
+    stack_lines,
 )
 from maglev_match.core.params import Params
 from maglev_match.core.reprs import compact_repr
@@ -252,19 +253,7 @@ def _grazing(m: MaglevModel, work: list[tuple[int, Any, CriticalSize, float]]
     # a run through the limit has no extremum: the bracket turns such an iterate into its
     # upper end (bisection) instead of a failure
     half = np.maximum(BRACKET * d0, 4.0 * np.abs(d0 - np.array([float(c.size) for c in cs])))
-    base = np.array([ln.base for ln in lines])
-    dirn = np.array([ln.dirn for ln in lines])
-    nb = len(work)
-
-    def x0_of(d: np.ndarray) -> np.ndarray:
-        d = np.atleast_1d(np.asarray(d, float))  # (padded: the last run repeated)
-        k = np.minimum(np.arange(d.size), nb - 1)
-        return base[k] + d[:, None] * dirn[k]
-
-    def dx0_dd(d: np.ndarray) -> np.ndarray:
-        k = np.minimum(np.arange(np.atleast_1d(d).size), nb - 1)
-        return dirn[k].copy()
-
+    x0_of, dx0_dd = stack_lines(lines)
     sols = solve_grazing(lines[0].hs, x0_of, dx0_dd, W, L, sides, d0, wins[:, 0],
                          wins[:, 1], p=lines[0].hs.p, bracket=(d0 - half, d0 + half),
                          options=replace(FLOW, max_steps=GRAZING_STEPS_DELAY
@@ -361,7 +350,8 @@ def _check(m: MaglevModel, sizes_: list[CriticalSize]) -> list[Any]:
     system, x_ref = m.system(limited=True), m.equilibrium()
     pairs = [np.array([float(r.size) * (1 - CHECK_STEP), float(r.size) * (1 + CHECK_STEP)])
              for r in sizes_]
-    x0 = np.concatenate([m.disturbance(r.direction).x0_of(sz)
+    lines = {d: m.disturbance(d) for d in {r.direction for r in sizes_}}
+    x0 = np.concatenate([lines[r.direction].x0_of(sz)
                          for r, sz in zip(sizes_, pairs, strict=True)])
     if x0.shape[-1] != system.dim:
         x0, x_ref = system.lift(x0), system.lift(x_ref)
@@ -394,7 +384,7 @@ def _check(m: MaglevModel, sizes_: list[CriticalSize]) -> list[Any]:
         out.append(CriticalDisturbance(
             direction=res.direction, largest_return=float(sizes[0]),
             smallest_collision=float(sizes[1]), critical=float(sizes.mean()),
-            status="bracketed", gap_range=float(m.disturbance(res.direction).gap_range),
+            status="bracketed", gap_range=float(lines[res.direction].gap_range),
             tol=float(sizes[1] - sizes[0]), runs=2, unresolved=0, unresolved_sizes=(),
             horizon=horizon, rounds=1, collision_time=float(b.event_time[hi]),
             nonmonotone=False, samples=runs))

@@ -43,7 +43,7 @@ the solved size, and falls back to the full search where a warm start fails.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from functools import cache
@@ -80,7 +80,7 @@ from maglev_match.maglev.models import maglev_model
 
 __all__ = ["Mechanism", "CriticalSize", "solve_critical", "solve_critical_batch",
            "critical_from_bisection", "critical_derivative", "MECHANISM_TEXT",
-           "GROWTH_BASIN", "disturbance_line", "saddle_landing", "FLOW"]
+           "GROWTH_BASIN", "disturbance_line", "stack_lines", "saddle_landing", "FLOW"]
 
 
 class Mechanism(StrEnum):
@@ -222,6 +222,26 @@ class _Line:
     def dx0_dd(self, d: np.ndarray) -> np.ndarray:
         d = np.atleast_1d(np.asarray(d, float))
         return np.broadcast_to(self.dirn, (d.size, self.dirn.size)).copy()
+
+
+def stack_lines(lines: Sequence[_Line]) -> tuple[Callable, Callable]:
+    """x0(d) and dx0/dd of several lines as one batch (one size per line, in order):
+    lane k is line k; lanes past the last (the padding to a compiled batch size)
+    repeat the last line, so a padded run is the last run again."""
+    base = np.array([ln.base for ln in lines])
+    dirn = np.array([ln.dirn for ln in lines])
+    last = len(lines) - 1
+
+    def x0_of(d: np.ndarray) -> np.ndarray:
+        d = np.atleast_1d(np.asarray(d, float))
+        k = np.minimum(np.arange(d.size), last)
+        return base[k] + d[:, None] * dirn[k]
+
+    def dx0_dd(d: np.ndarray) -> np.ndarray:
+        k = np.minimum(np.arange(np.atleast_1d(d).size), last)
+        return dirn[k].copy()
+
+    return x0_of, dx0_dd
 
 
 def disturbance_line(params: Params | MaglevModel, direction: int, model: str = "unit"
@@ -702,23 +722,10 @@ def solve_critical_batch(
         Lim = np.array([(ln.upper if sd > 0 else ln.lower) - ln.g0[j]
                         for ln, j, sd in zip(lines, js, sides, strict=True)])
         P = np.array([ln.hs.p for ln in lines])
-        base = np.array([ln.base for ln in lines])
-        dirn = np.array([ln.dirn for ln in lines])
+        x0_of, dx0_dd = stack_lines(lines)
         d0 = np.array([guesses[k].size for k in warm])
         ta = np.array([guesses[k].window[0] for k in warm])
         tm = np.array([guesses[k].window[1] for k in warm])
-
-        def x0_of(d):
-            m = min(len(d), len(warm))
-            out_ = np.repeat(base[-1:], len(d), axis=0)
-            out_[:m] = base[:m] + d[:m, None] * dirn[:m]
-            return out_
-
-        def dx0_dd(d):
-            out_ = np.repeat(dirn[-1:], len(d), axis=0)
-            out_[:len(warm)] = dirn
-            return out_
-
         sols = solve_grazing(lines[0].hs, x0_of, dx0_dd, W, Lim, sides, d0, ta, tm, p=P,
                              options=FLOW)
         ok = [s.converged for s in sols]
