@@ -38,14 +38,27 @@ def _same(a, b):
     assert a.seeds == b.seeds and np.array_equal(a.speeds, b.speeds)
 
 
-def test_runs_on_two_workers_equal_the_runs_here_bit_for_bit(params, here, tmp_path):
-    folder = tmp_path / "irregular"
+def test_runs_on_two_workers_equal_the_runs_here_bit_for_bit(params, here, tmp_path,
+                                                             monkeypatch):
+    """Through the API's sweep on 2 workers: the runs equal those computed here bit for
+    bit, and the sweep's two stages (the periodic responses, then the runs over the
+    irregular guideway) share one local cluster."""
+    from maglev_match import api
+    from maglev_match.core import jobs
+
+    started = []
+    real = jobs.local_cluster
+    monkeypatch.setattr(jobs, "local_cluster", lambda w: started.append(w) or real(w))
     seen = []
-    on_dask = irregular_sweep(params, "unit", SPEEDS, SPEC, spans=2, warmup=1, workers=2,
-                              checkpoint=folder, progress=lambda d, t: seen.append((d, t)))
+    sweep = api.speed_sweep(params, speeds=SPEEDS, critical=False, irregularity=SPEC,
+                            irregular_spans=2, workers=2, checkpoint=tmp_path / "sweep",
+                            runs_progress=lambda d, t: seen.append((d, t)))
+    assert started == [2]  # one cluster for both stages
+    on_dask = sweep.irregular
     _same(here, on_dask)
-    # one piece per (speed, seed), a progress call before the first and after each
-    assert len(list(folder.glob("tile_*.npz"))) == 4
+    # one piece per (speed, seed) in the sweep's folder, a progress call before the first
+    # and after each
+    assert len(list((tmp_path / "sweep" / "irregular").glob("tile_*.npz"))) == 4
     assert seen[0] == (0, 4) and seen[-1] == (4, 4) and len(seen) == 5
     # the read-outs are real: two seeds of a random profile differ, the linear route is there
     assert np.all(here.column("runs") == 2) and np.all(here.column("gap_rms_profile_se") > 0)

@@ -126,27 +126,33 @@ def speed_sweep(params: Params | str | None = None, *, model: str = "unit",
     if stage is not None:
         stage(f"{len(speeds)} speeds, model {model}, "
               f"{'with' if critical else 'without'} chi(v) and the entry disturbance ...")
-    sweep = _speed_sweep(p, model, list(speeds), opts,
-                         checkpoint=None if checkpoint is None else Path(checkpoint),
-                         resume=resume, scheduler=scheduler, workers=workers,
-                         progress=progress)
     if prof is None:
-        return sweep
+        return _speed_sweep(p, model, list(speeds), opts,
+                            checkpoint=None if checkpoint is None else Path(checkpoint),
+                            resume=resume, scheduler=scheduler, workers=workers,
+                            progress=progress)
     import dataclasses
 
     from maglev_match.analyses.speed.irregular import irregular_sweep
+    from maglev_match.core.jobs import shared_cluster
 
-    moving = [v for v in speeds if v > 0]
-    if stage is not None:
-        stage(f"{len(moving)} speeds over the irregular guideway ({prof.describe()}), "
-              f"{len(prof.seed_list)} run(s) of {irregular_spans} spans each per speed, "
-              f"{len(moving) * len(prof.seed_list)} runs ...")
-    irr = irregular_sweep(p, model, moving, prof, spans=irregular_spans,
-                          warmup=_warmup(irregular_spans),
-                          progress=progress if runs_progress is None else runs_progress,
-                          checkpoint=None if checkpoint is None
-                          else Path(checkpoint) / IRREGULAR_FOLDER,
-                          resume=resume, scheduler=scheduler, workers=workers)
+    # both stages on one cluster: its workers keep their compiled kernels in between
+    with shared_cluster(scheduler, workers) as address:
+        sweep = _speed_sweep(p, model, list(speeds), opts,
+                             checkpoint=None if checkpoint is None else Path(checkpoint),
+                             resume=resume, scheduler=address, workers=workers,
+                             progress=progress)
+        moving = [v for v in speeds if v > 0]
+        if stage is not None:
+            stage(f"{len(moving)} speeds over the irregular guideway ({prof.describe()}), "
+                  f"{len(prof.seed_list)} run(s) of {irregular_spans} spans each per speed, "
+                  f"{len(moving) * len(prof.seed_list)} runs ...")
+        irr = irregular_sweep(p, model, moving, prof, spans=irregular_spans,
+                              warmup=_warmup(irregular_spans),
+                              progress=progress if runs_progress is None else runs_progress,
+                              checkpoint=None if checkpoint is None
+                              else Path(checkpoint) / IRREGULAR_FOLDER,
+                              resume=resume, scheduler=address, workers=workers)
     return dataclasses.replace(sweep, irregular=irr)
 
 

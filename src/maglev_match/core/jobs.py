@@ -42,7 +42,8 @@ from maglev_match.core.interrupts import on_interrupt
 from maglev_match.core.params import ParameterError
 
 __all__ = ["Job", "run_job", "run_in_memory", "load_pieces", "check_workers", "TileCount",
-           "run_pieces_on_dask", "local_cluster", "workers_ignore_sigint", "dask_log_capture",
+           "run_pieces_on_dask", "local_cluster", "shared_cluster", "workers_ignore_sigint",
+           "dask_log_capture",
            "remove_checkpoint", "SINGLE_THREADED_ENV", "MALLOC_TRIM_THRESHOLD",
            "MALLOC_MMAP_THRESHOLD", "SCHEDULER_TIMEOUT", "DASK_LOGGERS"]
 
@@ -322,6 +323,38 @@ def local_cluster(workers: int | None) -> Any:
     }), workers_ignore_sigint():
         return LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
                             processes=True, dashboard_address=None, env=SINGLE_THREADED_ENV)
+
+
+@contextlib.contextmanager
+def shared_cluster(scheduler: str | None, workers: int | None) -> Iterator[str | None]:
+    """One Dask cluster for several jobs in a row (the stages of one computation): yields
+    the scheduler to pass to each :func:`run_job`. An existing ``scheduler`` is yielded as
+    it is and ``workers == 0`` (compute in this process) yields None; otherwise one local
+    cluster (:func:`local_cluster`) is started here, its address yielded, and it is closed
+    when the block ends. The workers then keep their imports and compiled kernels from one
+    stage to the next instead of a new cluster starting for each."""
+    check_workers(workers)
+    if scheduler is not None or workers == 0:
+        yield scheduler
+        return
+    # Dask's messages while the cluster starts and stops are dropped, as run_job drops
+    # those of its own clusters
+    with dask_log_capture(None):
+        cluster = local_cluster(workers)
+        try:
+            yield cluster.scheduler_address
+        except BaseException:  # Ctrl-C (or the job's MapStopped after one), an error
+            # the shutdown of stopped workers is expected, not news (theirs too)
+            _quiet_logging()
+            with contextlib.suppress(Exception):
+                from dask.distributed import Client
+
+                with Client(cluster) as client:
+                    client.run(_quiet_logging)
+            raise
+        finally:
+            with contextlib.suppress(Exception):
+                cluster.close(timeout=10)
 
 
 def run_pieces_on_dask(tasks: dict, save: Callable[[Any, Any], Any], scheduler: str | None,
