@@ -107,6 +107,27 @@ def test_lpc_curve_from_a_generalised_hopf_point_of_a_user_model(tmp_path, capsy
     assert code == 2 and "GH1 to GH1" in capsys.readouterr().err
 
 
+def test_a_curve_born_at_a_generalised_hopf_point_stops_at_the_physical_limits(
+        monkeypatch):
+    """From GH of a maglev model (alpha1: GH1 at omega1 = 136.9, kP = 3349 on the Hopf
+    curve in (omega1, kP)) the LPC curve gets the model's physical limits, as a curve
+    started from a branch's point does: it stops where its cycle reaches a gap limit (or
+    the current limit). It used to be continued without them."""
+    from maglev_match.dynamics import cycle_curves
+
+    seen = {}
+
+    def capture(*args, **kw):
+        seen.update(kw)
+        raise ValueError("captured")  # (the start is not continued here)
+
+    monkeypatch.setattr(cycle_curves, "lpc_from_generalised_hopf", capture)
+    with pytest.raises(ValueError, match="no fold of cycles found near GH1: captured"):
+        api.cycle_curve("alpha1", "LPC", "omega1", "kP", label="GH1", stage=False)
+    limits = seen.get("limits")
+    assert limits is not None and "cycle_limit_margins" in limits.__qualname__
+
+
 def test_restart_from_a_saved_branch(tmp_path, capsys):
     model = tmp_path / "bautin.py"
     model.write_text(BAUTIN_FILE)

@@ -246,7 +246,7 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
             raise ParameterError("label", label, "a generalised Hopf point starts an LPC "
                                  "curve (--kind LPC)")
         return _from_gh(params, x, y, label, model, at, bnds, start, stop, ntst, ncol,
-                        max_steps, marks, config, say, overrides, t0)
+                        max_steps, marks, config, say, overrides, t0, ignore_current)
     else:
         from maglev_match.api.cycles import cycle_study
 
@@ -277,11 +277,7 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
         lo, hi = sorted((0.5 * y0, 2.0 * y0)) if y0 != 0 else (-1.0, 1.0)
         bnds[y] = (lo, hi)
     say(f"continuing the {kind} curve in ({x}, {y}) from {start_label} ...")
-    limits = None
-    if not is_user and prm is not None:  # the curve stops where its cycle reaches a limit
-        from maglev_match.maglev.limits import cycle_limit_margins
-
-        limits = cycle_limit_margins(prm, include_current=not ignore_current)
+    limits = _limits_of(is_user, prm, ignore_current)
     curve = _cycle_curve(system, orbit, kind, (x, y), ranges=bnds, direction=0,
                          max_steps=max_steps, marks=tuple(float(m) for m in marks),
                          limits=limits)
@@ -292,8 +288,18 @@ def cycle_curve(params: Params | str | None = None, kind: str = "LPC", x: str = 
                            is_user=is_user, params=prm)
 
 
+def _limits_of(is_user: bool, prm, ignore_current: bool):
+    """The physical limits a maglev model's curve stops at (the gap limits, and the
+    current limit unless ``ignore_current``); None for a user model."""
+    if is_user or prm is None:
+        return None
+    from maglev_match.maglev.limits import cycle_limit_margins
+
+    return cycle_limit_margins(prm, include_current=not ignore_current)
+
+
 def _from_gh(params, x, y, label, model, at, bnds, start, stop, ntst, ncol, max_steps,
-             marks, config, say, overrides, t0) -> CycleCurveStudy:
+             marks, config, say, overrides, t0, ignore_current=False) -> CycleCurveStudy:
     """The LPC curve born at the generalised Hopf point ``label`` (GH1, GH2, ... in the
     order of the Hopf curves of the plane): the Hopf curve in (x, y) (as `hopf-curve`
     computes it; x within --from/--to, y within its --range, else that command's default
@@ -330,6 +336,8 @@ def _from_gh(params, x, y, label, model, at, bnds, start, stop, ntst, ncol, max_
     step = 0.01 * (hi - lo) if hi > lo else 0.01
     bnds = dict(bnds)
     bnds.setdefault(y, (lo, hi))
+    # the curve stops where its cycle reaches a physical limit, as from a branch's point
+    limits = _limits_of(studied.is_user, studied.params, ignore_current)
     last: Exception | None = None
     say(f"branch switching at {label} ({x} = {sp.values[0]:.8g}, {y} = {sp.values[1]:.8g}) "
         "...")
@@ -344,7 +352,7 @@ def _from_gh(params, x, y, label, model, at, bnds, start, stop, ntst, ncol, max_
                 system, near.x, pg, sp.frequency, (x, y), offset=offset, l2=sp.l2,
                 ntst=40 if ntst is None else ntst, ncol=4 if ncol is None else ncol,
                 ranges=ranges, direction=0, max_steps=max_steps,
-                marks=tuple(float(m) for m in marks),
+                marks=tuple(float(m) for m in marks), limits=limits,
                 scales=(0.05 * (stop - start) if start is not None and stop is not None
                         and stop != start else None, abs(step) * 5.0))
             break
