@@ -8,16 +8,18 @@ to the baseline in the same process; and the linear route's rms (the unit), in m
 first call of each (compilation) is left out of the medians. Prints the machine load
 (``os.getloadavg``) before and after.
 
-``--sweep W [W ...]``: instead, the issue's target, the unit's 31-speed sweep (0 to 150
-km/h by 5; the 30 speeds above 0 get the runs) over one random profile ('low', one seed,
-400 waves) with the linear rms, runs of 20 spans: ``irregular_sweep`` with ``workers=W``
-(0: in this process; W > 0: a local Dask cluster of W workers, started inside the timing),
-each in a fresh Python process, so compilation (with the kernels on disk as they are) and,
-on Dask, the cluster's start are part of it. Prints wall time and the CPU time of that
-process and its children (the Dask workers), with the load before and after.
+``--sweep W [W ...] [--model vehicle]``: instead, the issue's target, the 31-speed sweep
+of the unit (or the vehicle) (0 to 150 km/h by 5; the 30 speeds above 0 get the runs) over
+one random profile ('low', one seed, 400 waves) with the linear rms, runs of 20 spans:
+``irregular_sweep`` with ``workers=W`` (0: in this process; W > 0: a local Dask cluster of W
+workers, started inside the timing), each in a fresh Python process, so compilation (with
+the kernels on disk as they are) and, on Dask, the cluster's start are part of it. Prints
+wall time and the CPU time of that process and its children (the Dask workers), with the
+load before and after.
 
     .venv/bin/python bench/bench_irregular.py [--skip-vehicle] [--repeat N]
     .venv/bin/python bench/bench_irregular.py --sweep 0 2
+    .venv/bin/python bench/bench_irregular.py --sweep 2 --model vehicle
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ def median_cpu(fn, repeat: int) -> float:
 SWEEP_PROFILE = "random:class=low"
 
 
-def sweep_child(workers: int) -> None:
+def sweep_child(workers: int, model: str = "unit") -> None:
     """One sweep of the target in this (fresh) process; prints the per-speed seconds."""
     import numpy as np
 
@@ -55,7 +57,7 @@ def sweep_child(workers: int) -> None:
     p = load_preset("turnout-soft")
     speeds = np.arange(5, 151, 5) * KMH
     # (workers=0 is not passed: the in-process sweep of before issue 33 took no workers)
-    ir = irregular_sweep(p, "unit", speeds, SWEEP_PROFILE, spans=20,
+    ir = irregular_sweep(p, model, speeds, SWEEP_PROFILE, spans=20,
                          **({"workers": workers} if workers else {}))
     lin = ir.column("gap_rms_linear")
     print(f"  {ir.speeds.size} speeds, runs' seconds per speed: median "
@@ -64,7 +66,7 @@ def sweep_child(workers: int) -> None:
           f"{int(np.isfinite(lin).sum())} speeds", flush=True)
 
 
-def sweep(workers_list: list[int]) -> None:
+def sweep(workers_list: list[int], model: str = "unit") -> None:
     import resource
     import subprocess
     import time
@@ -76,20 +78,27 @@ def sweep(workers_list: list[int]) -> None:
     for w in workers_list:
         load0 = os.getloadavg()
         c0, t0 = children_cpu(), time.perf_counter()
-        subprocess.run([sys.executable, __file__, "--sweep-child", str(w)], check=True)
+        subprocess.run([sys.executable, __file__, "--sweep-child", str(w), "--model", model],
+                       check=True)
         wall, c = time.perf_counter() - t0, children_cpu() - c0
-        print(f"workers {w}: 31-speed sweep over '{SWEEP_PROFILE}' (1 seed, 400 waves), "
+        print(f"{model}, workers {w}: 31-speed sweep over '{SWEEP_PROFILE}' (1 seed, 400 waves), "
               f"20 spans, with the linear rms: {wall:.1f} s wall, {c:.1f} s CPU (the "
               f"process and its workers); load before {load0[0]:.2f}, after "
               f"{os.getloadavg()[0]:.2f}", flush=True)
 
 
 def main() -> None:
+    model = sys.argv[sys.argv.index("--model") + 1] if "--model" in sys.argv else "unit"
     if "--sweep-child" in sys.argv:
-        sweep_child(int(sys.argv[sys.argv.index("--sweep-child") + 1]))
+        sweep_child(int(sys.argv[sys.argv.index("--sweep-child") + 1]), model)
         return
     if "--sweep" in sys.argv:
-        sweep([int(a) for a in sys.argv[sys.argv.index("--sweep") + 1:]] or [0, 2])
+        workers = []
+        for a in sys.argv[sys.argv.index("--sweep") + 1:]:
+            if a.startswith("--"):
+                break
+            workers.append(int(a))
+        sweep(workers or [0, 2], model)
         return
     repeat = int(sys.argv[sys.argv.index("--repeat") + 1]) if "--repeat" in sys.argv else 3
     models = ["unit"] if "--skip-vehicle" in sys.argv else ["unit", "vehicle"]
