@@ -414,6 +414,42 @@ def test_dask_messages_go_to_the_log_not_the_terminal(tmp_path):
                    for h in logging.getLogger("distributed").handlers)
 
 
+def test_dask_exceptions_python_can_only_report_go_to_the_log(tmp_path, monkeypatch):
+    """An exception raised where Python can only report it (sys.unraisablehook: "Exception
+    ignored in ...") inside Dask's code goes to the log, not the terminal, while the
+    capture runs (seen in the suite: distributed's GC diagnosis asserting in the middle of
+    a speed sweep); one of any other code still reaches the previous hook."""
+    import gc
+    import sys
+    from types import SimpleNamespace
+
+    import distributed.gc
+
+    from maglev_match.core.jobs import dask_log_capture
+
+    reported = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda args: reported.append(args.object))
+
+    class Other:
+        def __del__(self):
+            raise AssertionError("of this package")
+
+    dask_callback = distributed.gc.GCDiagnosis()._gc_callback  # a bound method of Dask's
+    log = tmp_path / "map.log"
+    with dask_log_capture(log):
+        sys.unraisablehook(SimpleNamespace(exc_type=AssertionError, exc_value=AssertionError(),
+                                           exc_traceback=None, err_msg=None,
+                                           object=dask_callback))
+        Other()
+        gc.collect()
+    assert len(reported) == 1 and type(reported[0]).__name__ == "function"
+    assert "exception ignored in" in log.read_text() and "GCDiagnosis" in log.read_text()
+    # after the block: the previous hook again, Dask's included
+    sys.unraisablehook(SimpleNamespace(exc_type=ValueError, exc_value=ValueError(),
+                                       exc_traceback=None, err_msg=None, object=dask_callback))
+    assert len(reported) == 2
+
+
 def test_map_command_removes_its_tiles_after_success_unless_kept(tmp_path, capsys):
     from maglev_match.cli import main
 
