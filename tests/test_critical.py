@@ -245,3 +245,22 @@ def test_near_hopf_beam_up_is_decided_by_a_basin_boundary():
     b = simulate_batch(m.system(limited=True), x0, 30.0, event_fn=m.gap_events())
     assert list(b.outcome) == ["collision", "collision"]
     assert b.event_time[1] > b.event_time[0] + 1.0
+
+
+def test_grazing_is_solved_where_the_bracket_midpoint_run_is_pulled_into_the_magnet():
+    """Turnout-soft with EI = 2.3e10, kD = 128.5 (on the iso-chi curve chi = 5's way): the
+    run at the bracket's midpoint beam down goes through gap 0, so a solve windowed on it
+    looked at an earlier gap minimum 4.2 mm short of the limit and failed ("Newton did not
+    converge"). Windowed on the largest returning run, the tangency is solved inside the
+    bracket, and runs 1e-6 below and above it return and collide."""
+    P = load_preset("turnout-soft").replace(EI=2.3e10, kD=128.5)
+    cd = critical_disturbance(P, direction=1)
+    r = critical_from_bisection(P, cd)
+    assert r.mechanism == Mechanism.GRAZING and r.converged, r.reason
+    lo, hi = r.bracket
+    assert lo <= r.size <= hi and r.limit == "lower"
+    m = maglev_model(P)
+    x0 = np.zeros((2, 9))
+    x0[:, 4] = r.size * np.array([1 - 1e-6, 1 + 1e-6])
+    b = simulate_batch(m.system(limited=True), x0, 0.5, event_fn=m.gap_events())
+    assert b.outcome[0] != "collision" and b.outcome[1] == "collision"

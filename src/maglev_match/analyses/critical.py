@@ -426,10 +426,20 @@ def _solve_grazing_direction(m: MaglevModel, cd: Any, bisect: CriticalSize, *,
         return _with_reason(bisect, f"{what}; grazing not solved: the run has no extremum of "
                             "the gap before the collision")
     slack = BRACKET_SLACK * hi + 1e-12
+    box = (lo - 10 * slack - 0.5 * (hi - lo), hi + 10 * slack + 0.5 * (hi - lo))
     sol = solve_grazing(line.hs, line.x0_of, line.dx0_dd, w, L, side, d_mid, win[0], win[1],
-                        p=p, bracket=(lo - 10 * slack - 0.5 * (hi - lo),
-                                      hi + 10 * slack + 0.5 * (hi - lo)),
-                        options=FLOW)[0]
+                        p=p, bracket=box, options=FLOW)[0]
+    if not sol.converged:
+        # the run at the bracket's midpoint may itself be pulled through the limit (into
+        # the magnet at gap 0, say), so that its window surrounds an earlier extremum far
+        # from the limit; the largest returning run has its extremum at the contact
+        win_lo = _window(line, w, side, lo, t_coll, p)
+        if win_lo is not None and win_lo != win:
+            retry = solve_grazing(line.hs, line.x0_of, line.dx0_dd, w, L, side, lo,
+                                  win_lo[0], win_lo[1], p=p, bracket=box,
+                                  options=FLOW)[0]
+            if retry.converged:
+                sol, win = retry, win_lo
     if not sol.converged:
         return _with_reason(bisect, f"{what}; grazing not solved: {sol.message}")
     if not (lo - slack <= sol.size <= hi + slack):
