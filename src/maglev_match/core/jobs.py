@@ -345,13 +345,12 @@ def shared_cluster(scheduler: str | None, workers: int | None) -> Iterator[str |
         try:
             yield cluster.scheduler_address
         except BaseException:  # Ctrl-C (or the job's MapStopped after one), an error
-            # the shutdown of stopped workers is expected, not news (theirs too)
-            _quiet_logging()
+            _quiet_logging()  # before a client connects (and when none can)
             with contextlib.suppress(Exception):
                 from dask.distributed import Client
 
                 with Client(cluster) as client:
-                    client.run(_quiet_logging)
+                    _quiet_cluster(client)
             raise
         finally:
             with contextlib.suppress(Exception):
@@ -400,10 +399,7 @@ def run_pieces_on_dask(tasks: dict, save: Callable[[Any, Any], Any], scheduler: 
                 progress(count.done, count.total)
     except KeyboardInterrupt:
         # stop quietly: the shutdown of interrupted workers is expected, not news
-        _quiet_logging()
-        if cluster is not None and client is not None:  # the local workers (our stderr)
-            with contextlib.suppress(Exception):
-                client.run(_quiet_logging)
+        _quiet_cluster(client if cluster is not None else None)  # local workers: our stderr
         if cluster is None and client is not None:  # an existing scheduler: drop our tasks
             with contextlib.suppress(Exception):
                 client.cancel(list(futures))
@@ -517,6 +513,16 @@ def remove_checkpoint(folder: Path, prefix: str = TILE_PREFIX) -> bool:
     except OSError:
         return False
     return True
+
+
+def _quiet_cluster(client: Any) -> None:
+    """After a Ctrl-C or an error: the logging of this process and (``client`` not None) of
+    the workers of our own local cluster, whose messages reach our terminal, silenced, since
+    the shutdown of stopped workers is expected, not news."""
+    _quiet_logging()
+    if client is not None:
+        with contextlib.suppress(Exception):
+            client.run(_quiet_logging)
 
 
 def _quiet_logging() -> None:
