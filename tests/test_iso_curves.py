@@ -158,6 +158,48 @@ def test_toy_gradient_falls_back_to_a_difference_only_where_the_part_is_brackete
     assert fallbacks >= 2 and sum(p.gradient == "exact" for p in tr.points) > 10
 
 
+def test_the_corrector_gives_up_when_it_moves_away_from_the_root_twice():
+    """On a line without a root (F = chi - 5 >= 1 along p1, its smallest value off the
+    line's start), the corrector stops after two steps that each move further from the root,
+    instead of spending all of max_iter (12) iterations; where F has a root, it finds it."""
+    from maglev_match.analyses.iso.trace import _Tracer
+
+    def bowl(p1, p2):  # chi = 6 + (p1 - 0.3)^2 + p2^2: never 5; its slope misleads Newton
+        c = 6.0 + (p1 - 0.3) ** 2 + p2 ** 2
+        return Sample(c, c)
+
+    tr = _Tracer(bowl, BOX, 5.0, TraceSettings(), None)
+    u0 = np.array([0.5, 0.5])
+    _, f, its = tr.line_solve(u0, np.array([1.0, 0.0]), 0.8)
+    assert f >= 1.0 and its <= 4 and tr.evaluations <= 5
+    tr = _Tracer(toy, BOX, 5.0, TraceSettings(), None)  # with a root: solved
+    u, f, _ = tr.line_solve(np.array([0.75, 0.7]), np.array([0.0, 1.0]), 16.0)
+    assert tr.converged(f)
+
+
+def test_maglev_evaluator_warm_starts_from_the_nearest_design(monkeypatch):
+    """Each index continues from the nearest design evaluated so far (the backward
+    direction of a curve starts next to the first point, far from the forward end)."""
+    from types import SimpleNamespace
+
+    import maglev_match.analyses.iso.maglev as mod
+    from maglev_match.analyses.iso import MaglevChi
+    from maglev_match.api.inputs import resolve_params
+
+    seen = []
+
+    def fake_index(p, *, model, simulate, near=None):
+        seen.append(None if near is None else near.at)
+        return SimpleNamespace(at=(p.EI, p.kD), critical_up=object())
+
+    monkeypatch.setattr(mod, "matching_index", fake_index)
+    monkeypatch.setattr(mod, "sample_of", lambda idx: Sample(5.0, 5.0))
+    ev = MaglevChi(resolve_params("turnout-soft"), ("EI", "kD"))
+    for v in ((2.0e10, 150.0), (3.0e10, 200.0), (2.02e10, 151.0), (2.9e10, 199.0)):
+        ev(*v)
+    assert seen == [None, (2.0e10, 150.0), (2.0e10, 150.0), (3.0e10, 200.0)]
+
+
 def test_maglev_gradient_equals_a_central_difference_of_chi():
     # the tracer's gradient on model A: the analytic sensitivities of the deciding part,
     # against a central difference of independent index evaluations (no warm start), where

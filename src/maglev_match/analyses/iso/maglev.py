@@ -1,7 +1,7 @@
 """The headline index of a maglev model as the evaluator of an iso-chi curve: one
 :func:`~maglev_match.analyses.matching.matching_index` per (p1, p2), warm-started from the
-previous evaluation (``near=``: its solved critical disturbances are continued instead of
-searched again), read into a :class:`~maglev_match.analyses.iso.trace.Sample`; and the
+nearest design evaluated so far (``near=``: its solved critical disturbances are continued
+instead of searched again), read into a :class:`~maglev_match.analyses.iso.trace.Sample`; and the
 exact gradient of each part there (:meth:`MaglevChi.gradient`), from the index's analytic
 sensitivities (:func:`~maglev_match.analyses.sensitivity.index_sensitivity`: the paper
 part through the cycle's parameter derivative, the simulated part through the implicit
@@ -55,13 +55,24 @@ def sample_of(idx: MatchingIndex) -> Sample:
 class MaglevChi:
     """Callable (p1, p2) -> :class:`Sample` of the headline index of ``model`` at ``base``
     with ``names`` set to (p1, p2); ``simulate`` False: the paper's chi only. Each call
-    continues the simulated part from the previous call's index (``warm``)."""
+    continues the simulated part from the index of the nearest design evaluated so far
+    (``warm``; nearest in the largest relative change of the two parameters): the tracer
+    jumps (the backward direction starts at the first point, the corrector probes both
+    sides of the curve), so the previous call is not always the closest."""
 
     def __init__(self, base: Params, names: tuple[str, str], *, model: str = "unit",
                  simulate: bool = True, warm: bool = True) -> None:
         self.base, self.names, self.model = base, names, model
         self.simulate, self.warm = simulate, warm
-        self.last: MatchingIndex | None = None
+        self.done: list[tuple[float, float, MatchingIndex]] = []  # (p1, p2, its index)
+
+    def nearest(self, v1: float, v2: float) -> MatchingIndex | None:
+        """The index of the evaluated design nearest (v1, v2), None before the first."""
+        def distance(item: tuple[float, float, MatchingIndex]) -> float:
+            return max(abs(item[0] - v1) / max(abs(v1), 1e-300),
+                       abs(item[1] - v2) / max(abs(v2), 1e-300))
+
+        return min(self.done, key=distance)[2] if self.done else None
 
     def __call__(self, v1: float, v2: float) -> Sample:
         try:
@@ -69,7 +80,7 @@ class MaglevChi:
         except ParameterError as exc:
             return Sample(float("nan"), float("nan"), reason=f"not a valid parameter set: "
                           f"{exc}")
-        near = self.last if (self.warm and self.simulate) else None
+        near = self.nearest(v1, v2) if (self.warm and self.simulate) else None
         try:
             idx = matching_index(p, model=self.model, simulate=self.simulate,
                                  **({} if near is None else {"near": near}))
@@ -78,7 +89,7 @@ class MaglevChi:
             return Sample(float("nan"), float("nan"), reason=f"the index failed: {exc}")
         smp = sample_of(idx)
         if math.isfinite(smp.chi) and idx.critical_up is not None:
-            self.last = idx
+            self.done.append((float(v1), float(v2), idx))
         return smp
 
     def gradient(self, v1: float, v2: float, sample: Sample

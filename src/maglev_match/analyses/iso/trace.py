@@ -7,11 +7,12 @@ u_i = (p_i - lo_i) / (hi_i - lo_i), so that a step means the same fraction of ei
 With F(u) = chi(u) - target and g its gradient, the tangent t is g turned by 90 degrees;
 the predictor steps ds along t and the corrector solves F = 0 on the line through the
 predicted point along the normal g (Newton with the gradient's slope, then secant steps),
-to |F| <= tol * target. Steps grow after easy corrections (at most 2 iterations) and halve
-after a failed one or a turn of the tangent by more than about 37 degrees; below the
-smallest step the curve ends with its reason and a warning. Both directions are followed
-from the start; a curve that leaves the ranges ends on their edge (the last point solved on
-the edge line).
+to |F| <= tol * target; a corrector whose iterates move further from the root twice in a
+row without a sign change gives up (no root near the prediction on that line). Steps grow
+after easy corrections (at most 2 iterations) and halve after a failed one or a turn of the
+tangent by more than about 37 degrees; below the smallest step the curve ends with its
+reason and a warning. Both directions are followed from the start; a curve that leaves the
+ranges ends on their edge (the last point solved on the edge line).
 
 The gradient is the exact one of the deciding part where the evaluator gives it (a
 ``gradient(p1, p2, sample)`` method returning each part's gradient, e.g. the index's
@@ -243,11 +244,13 @@ class _Tracer:
         s = -f0 / slope
         moved = 0  # the end replaced last (-1 lo, +1 hi), for Illinois
         inexact = 0  # iterates whose deciding part is only a bracket (a step function)
+        away = 0  # secant steps in a row that moved away from the root (|F| grew)
         for it in range(1, self.s.max_iter + 1):
             u = u0 + s * d
             f = self.F(u)
             if not math.isfinite(f):
                 return best[0], float("nan"), it
+            away = away + 1 if abs(f) > abs(prev[1]) else 0
             if abs(f) < abs(best[1]):
                 best = (u, f)
             if self.converged(f):
@@ -263,6 +266,10 @@ class _Tracer:
                 if lo is not None and moved == 1:
                     lo = (lo[0], lo[1] / 2)
                 hi, moved = (s, f), 1
+            if away >= 2 and (lo is None or hi is None):
+                # twice further from the root without a sign change: no root along this
+                # line near the prediction (a shorter step is the driver's to try)
+                return best[0], best[1], it
             if lo is not None and hi is not None:  # bracketed: Illinois
                 s_new = (lo[0] * hi[1] - hi[0] * lo[1]) / (hi[1] - lo[1])
             else:  # secant from the last two iterates
