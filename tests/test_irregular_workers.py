@@ -113,8 +113,9 @@ def _response_compiled_per_speed(params, model, v, kappa):
     pb = jnp.asarray(mv.moving_param_vector(params, kind, v=float(v), active=(0.0, 0.0)))
     x0 = jnp.asarray(mv.rigid_equilibrium(params, kind))
 
-    def pv(a, kap, phi):
-        return jnp.concatenate([pb, jnp.zeros(7), jnp.stack([a, kap, phi])])
+    def pv(a, kap, phi):  # one wave: its entries a cos(phi), kappa, a sin(phi)
+        return jnp.concatenate([pb, jnp.zeros(7),
+                                jnp.stack([a * jnp.cos(phi), kap, a * jnp.sin(phi)])])
 
     A = np.asarray(jax.jacfwd(lambda x: rhs(x, pv(0.0, 1.0, 0.0)))(x0))[:nv, :nv]
     C = np.asarray(jax.jacfwd(lambda x: gap(x, pv(0.0, 1.0, 0.0)))(x0))[:, :nv]

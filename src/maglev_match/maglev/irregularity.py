@@ -68,7 +68,9 @@ PROFILE_NAMES = ("x_origin", "zA0", "zA1", "zA2", "zB0", "zB1", "zB2")
 
 
 def profile_names(waves: int) -> tuple[str, ...]:
-    return PROFILE_NAMES + tuple(f"wave_{q}_{k + 1}" for q in ("amp", "kappa", "phase")
+    """The names of the profile's entries of the parameter vector: :data:`PROFILE_NAMES`,
+    then per wave a_k cos(phi_k), kappa_k and a_k sin(phi_k)."""
+    return PROFILE_NAMES + tuple(f"wave_{q}_{k + 1}" for q in ("acos", "kappa", "asin")
                                  for k in range(waves))
 
 
@@ -159,10 +161,13 @@ class Irregularity:
 
     def vector(self, passage: int, spans: int, L: float, seed: int) -> np.ndarray:
         """The profile entries of the parameter vector during passage ``passage`` (1-based:
-        slot A is span passage - 1, slot B span passage)."""
+        slot A is span passage - 1, slot B span passage): x_origin, the two slots'
+        polynomials, then a_k cos(phi_k), kappa_k, a_k sin(phi_k) (the phases enter as
+        these products, so that the vector field needs no sine or cosine of them)."""
         amp, kap, ph = self.wave_vectors(seed)
         return np.concatenate([[(passage - 2) * L], self.span_poly(passage - 1, spans, L),
-                               self.span_poly(passage, spans, L), amp, kap, ph])
+                               self.span_poly(passage, spans, L), amp * np.cos(ph), kap,
+                               amp * np.sin(ph)])
 
     def zero_vector(self) -> np.ndarray:
         w = self.n_waves
@@ -358,6 +363,39 @@ def _poly_value(c, x):
     return c[0] + c[1] * x + c[2] * x**2
 
 
+#: up to this many waves the spectral sum is evaluated term by term; above, blocked
+#: (:func:`_wave_sum`)
+DIRECT_WAVES = 16
+
+
+def _wave_sum(x, ca, kap, sa):
+    """(sum_k a_k cos(kappa_k x + phi_k), sum_k a_k sin(kappa_k x + phi_k)) at the
+    positions x (n,), from ca = a cos(phi), sa = a sin(phi) and equally spaced wavenumbers
+    kappa_k = kappa_0 + k d (the random profile's band midpoints; one wave for the
+    sinusoid). Above :data:`DIRECT_WAVES` waves the sum is blocked: with k = m B + j
+    (B about sqrt(N)), exp(i kappa_k x) = exp(i (kappa_0 + m B d) x) exp(i j d x), so the
+    N terms need the sines and cosines of B + M angles instead of N (the same sum, rounded
+    differently: each angle is still computed directly, not by repeated multiplication)."""
+    n_w = kap.shape[0]
+    if n_w <= DIRECT_WAVES:
+        ang = kap[None, :] * x[:, None]
+        c, s = jnp.cos(ang), jnp.sin(ang)
+        return c @ ca - s @ sa, s @ ca + c @ sa
+    B = math.isqrt(n_w - 1) + 1
+    M = -(-n_w // B)
+    pad = M * B - n_w
+    d = (kap[-1] - kap[0]) / (n_w - 1)
+    cr = jnp.pad(ca, (0, pad)).reshape(M, B)
+    ci = jnp.pad(sa, (0, pad)).reshape(M, B)
+    aj = (d * x)[:, None] * jnp.arange(B)[None, :]  # (n, B)
+    am = x[:, None] * (kap[0] + (B * d) * jnp.arange(M))[None, :]  # (n, M)
+    ejr, eji = jnp.cos(aj), jnp.sin(aj)
+    emr, emi = jnp.cos(am), jnp.sin(am)
+    sr = ejr @ cr.T - eji @ ci.T  # (n, M): sum over j of c_mj exp(i j d x)
+    si = ejr @ ci.T + eji @ cr.T
+    return (jnp.sum(emr * sr - emi * si, axis=1), jnp.sum(emr * si + emi * sr, axis=1))
+
+
 def _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool):
     v, x_front = p_kin[0], p_kin[1]
     n_loads = lay_front.shape[0]
@@ -365,18 +403,20 @@ def _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool
     rb = p_kin[4 + n_loads:4 + 2 * n_loads]
     x0 = p_prof[0]
     cA, cB = p_prof[1:4], p_prof[4:7]
-    amp = p_prof[7:7 + waves]
+    ca = p_prof[7:7 + waves]
     kap = p_prof[7 + waves:7 + 2 * waves]
-    ph = p_prof[7 + 2 * waves:7 + 3 * waves]
+    sa = p_prof[7 + 2 * waves:7 + 3 * waves]
     xf = x_front + v * t + lay_front  # local to slot A
     if point:
-        spec = jnp.cos(kap[None, :] * (x0 + xf)[:, None] + ph[None, :]) @ amp
+        spec = _wave_sum(x0 + xf, ca, kap, sa)[0]
         piece = jnp.where(fb > 0.5, _poly_value(cB, xf - L), _poly_value(cA, xf))
         return spec + piece
     xr = xf - lay_length
-    sf = jnp.sin(kap[None, :] * (x0 + xf)[:, None] + ph[None, :])
-    sr = jnp.sin(kap[None, :] * (x0 + xr)[:, None] + ph[None, :])
-    spec = ((sf - sr) / kap[None, :]) @ amp / lay_length
+    # the mean over the footprint: sum_k a_k (sin(kappa_k xf + phi_k) - sin(kappa_k xr +
+    # phi_k)) / kappa_k / lay_length
+    n = xf.shape[0]
+    both = _wave_sum(jnp.concatenate([x0 + xf, x0 + xr]), ca / kap, kap, sa / kap)[1]
+    spec = (both[:n] - both[n:]) / lay_length
     a_a, b_a = xr, jnp.where(fb > 0.5, L, xf)
     a_b, b_b = jnp.where(rb > 0.5, xr - L, 0.0), xf - L
     ia = jnp.where(rb > 0.5, 0.0, _poly_integral(cA, a_a, b_a))

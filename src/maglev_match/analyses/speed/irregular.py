@@ -168,8 +168,9 @@ def _linearisation(kind: MovingModel, n_modes: int):
 
     @jax.jit
     def forcing(pb, x0, kap):
-        def pv(a, phi):
-            return jnp.concatenate([pb, jnp.zeros(7), jnp.stack([a, kap, phi])])
+        def pv(a, phi):  # one wave a cos(kap x + phi): its entries a cos(phi), kap, a sin(phi)
+            return jnp.concatenate([pb, jnp.zeros(7),
+                                    jnp.stack([a * jnp.cos(phi), kap, a * jnp.sin(phi)])])
 
         def d(phi):
             fa = jax.jacfwd(lambda a: rhs(x0, pv(a, phi)))(0.0)[:nv]
