@@ -345,12 +345,7 @@ def shared_cluster(scheduler: str | None, workers: int | None) -> Iterator[str |
         try:
             yield cluster.scheduler_address
         except BaseException:  # Ctrl-C (or the job's MapStopped after one), an error
-            _quiet_logging()  # before a client connects (and when none can)
-            with contextlib.suppress(Exception):
-                from dask.distributed import Client
-
-                with Client(cluster) as client:
-                    _quiet_cluster(client)
+            _quiet_cluster(cluster=cluster)
             raise
         finally:
             with contextlib.suppress(Exception):
@@ -399,7 +394,7 @@ def run_pieces_on_dask(tasks: dict, save: Callable[[Any, Any], Any], scheduler: 
                 progress(count.done, count.total)
     except KeyboardInterrupt:
         # stop quietly: the shutdown of interrupted workers is expected, not news
-        _quiet_cluster(client if cluster is not None else None)  # local workers: our stderr
+        _quiet_cluster(client if cluster is not None else None)  # (local workers only)
         if cluster is None and client is not None:  # an existing scheduler: drop our tasks
             with contextlib.suppress(Exception):
                 client.cancel(list(futures))
@@ -515,14 +510,22 @@ def remove_checkpoint(folder: Path, prefix: str = TILE_PREFIX) -> bool:
     return True
 
 
-def _quiet_cluster(client: Any) -> None:
-    """After a Ctrl-C or an error: the logging of this process and (``client`` not None) of
-    the workers of our own local cluster, whose messages reach our terminal, silenced, since
-    the shutdown of stopped workers is expected, not news."""
+def _quiet_cluster(client: Any = None, cluster: Any = None) -> None:
+    """After a Ctrl-C or an error: the logging of this process silenced, then that of the
+    workers of our own local cluster, whose messages reach our terminal (through ``client``,
+    or a client connected to ``cluster`` for the purpose), since the shutdown of stopped
+    workers is expected, not news. This process first: connecting a client may log."""
     _quiet_logging()
-    if client is not None:
-        with contextlib.suppress(Exception):
+    if client is None and cluster is None:
+        return
+    with contextlib.suppress(Exception):
+        if client is not None:
             client.run(_quiet_logging)
+        else:
+            from dask.distributed import Client
+
+            with Client(cluster) as own:
+                own.run(_quiet_logging)
 
 
 def _quiet_logging() -> None:

@@ -70,7 +70,7 @@ PROFILE_NAMES = ("x_origin", "zA0", "zA1", "zA2", "zB0", "zB1", "zB2")
 def profile_names(waves: int) -> tuple[str, ...]:
     """The names of the profile's entries of the parameter vector: :data:`PROFILE_NAMES`,
     then per wave a_k cos(phi_k), kappa_k and a_k sin(phi_k)."""
-    return PROFILE_NAMES + tuple(f"wave_{q}_{k + 1}" for q in ("acos", "kappa", "asin")
+    return PROFILE_NAMES + tuple(f"wave_{q}_{k + 1}" for q in ("a_cos", "kappa", "a_sin")
                                  for k in range(waves))
 
 
