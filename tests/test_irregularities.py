@@ -108,6 +108,46 @@ def test_blocked_spectral_sum_equals_the_sum_term_by_term(waves):
     assert np.max(np.abs(np.asarray(s) - np.sin(ang) @ amp)) < 1e-12 * rms
 
 
+@pytest.mark.parametrize("waves", [1, 17, 400])
+@pytest.mark.parametrize("point", [True, False])
+def test_profile_rate_is_the_derivative_of_the_profile(waves, point):
+    """The rate of the profile under the loads (the spectral part in closed form from the
+    same sines and cosines) equals the forward-mode derivative of the profile itself, for
+    point loads (model B) and footprint means (the unit), over a passage with a
+    pre-camber in the span pieces."""
+    import jax
+    import jax.numpy as jnp
+
+    from maglev_match.maglev.irregularity import profile_under
+
+    prof = parse_irregularity("sine:wavelength=7.3,amplitude=0.002" if waves == 1
+                              else f"random:class=high,waves={waves}")
+    camber = parse_irregularity("camber:amplitude=0.003")
+    L, v = 25.0, 30.0
+    pp = prof.vector(3, 6, L, 5)
+    pp[1:7] = camber.vector(3, 6, L, 5)[1:7]  # the span pieces of a pre-camber
+    n = 6 if point else 1
+    front = jnp.asarray(np.linspace(0.0, 12.0, n) if point else [0.0])
+    length = jnp.zeros(6) if point else jnp.asarray([2.4])
+    for t in (0.05, 0.31, 0.77):
+        pk = jnp.asarray(np.concatenate([[v, 1.3, 1.0, 1.0],
+                                         (np.asarray(front) + 1.3 + v * t > L) * 1.0,
+                                         (np.asarray(front) + 1.3 + v * t - (0 if point
+                                                                             else 2.4) > L)
+                                         * 1.0]))
+
+        def z(tt, pk=pk):
+            return profile_under(tt, pk, jnp.asarray(pp), front, length, L, prof.n_waves,
+                                 point)[0]
+
+        value, rate = profile_under(jnp.asarray(t), pk, jnp.asarray(pp), front, length, L,
+                                    prof.n_waves, point)
+        _, forward = jax.jvp(z, (jnp.asarray(t),), (jnp.asarray(1.0),))
+        scale = float(np.max(np.abs(np.asarray(forward)))) + 1e-30
+        assert np.max(np.abs(np.asarray(rate) - np.asarray(forward))) < 1e-10 * scale
+        assert np.all(np.isfinite(np.asarray(value)))
+
+
 def test_zero_amplitude_reproduces_the_smooth_run_exactly(soft):
     v = 80 * KMH
     smooth = simulate_over_spans(soft, "unit", v, 3, overlay=False)

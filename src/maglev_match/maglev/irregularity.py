@@ -375,28 +375,44 @@ def _wave_sum(x, ca, kap, sa):
     sinusoid). Above :data:`DIRECT_WAVES` waves the sum is blocked: with k = m B + j
     (B about sqrt(N)), exp(i kappa_k x) = exp(i (kappa_0 + m B d) x) exp(i j d x), so the
     N terms need the sines and cosines of B + M angles instead of N (the same sum, rounded
-    differently: each angle is still computed directly, not by repeated multiplication)."""
+    differently: each angle is still computed directly, not by repeated multiplication).
+    ``ca`` and ``sa`` may hold several sets of coefficients (S, N): then (S, n) each, the
+    sines and cosines shared by the sets."""
+    one = ca.ndim == 1
+    ca, sa = jnp.atleast_2d(ca), jnp.atleast_2d(sa)
     n_w = kap.shape[0]
     if n_w <= DIRECT_WAVES:
         ang = kap[None, :] * x[:, None]
-        c, s = jnp.cos(ang), jnp.sin(ang)
-        return c @ ca - s @ sa, s @ ca + c @ sa
+        c, s = jnp.cos(ang)[None], jnp.sin(ang)[None]  # (1, n, N)
+        cs, ss = ca[:, None, :], sa[:, None, :]
+        re, im = jnp.sum(c * cs - s * ss, axis=2), jnp.sum(s * cs + c * ss, axis=2)
+        return (re[0], im[0]) if one else (re, im)
     B = math.isqrt(n_w - 1) + 1
     M = -(-n_w // B)
     pad = M * B - n_w
     d = (kap[-1] - kap[0]) / (n_w - 1)
-    cr = jnp.pad(ca, (0, pad)).reshape(M, B)
-    ci = jnp.pad(sa, (0, pad)).reshape(M, B)
+    S, n = ca.shape[0], x.shape[0]
+    cr = jnp.pad(ca, ((0, 0), (0, pad))).reshape(S * M, B)
+    ci = jnp.pad(sa, ((0, 0), (0, pad))).reshape(S * M, B)
     aj = (d * x)[:, None] * jnp.arange(B)[None, :]  # (n, B)
     am = x[:, None] * (kap[0] + (B * d) * jnp.arange(M))[None, :]  # (n, M)
-    ejr, eji = jnp.cos(aj), jnp.sin(aj)
-    emr, emi = jnp.cos(am), jnp.sin(am)
-    sr = ejr @ cr.T - eji @ ci.T  # (n, M): sum over j of c_mj exp(i j d x)
-    si = ejr @ ci.T + eji @ cr.T
-    return (jnp.sum(emr * sr - emi * si, axis=1), jnp.sum(emr * si + emi * sr, axis=1))
+    # sum over j of c_smj exp(i j d x), real and imaginary parts, as one matrix product
+    # (n, 2B) @ (2B, 2SM): one call instead of one per part and set
+    e = jnp.concatenate([jnp.cos(aj), jnp.sin(aj)], axis=1)
+    C = jnp.concatenate([jnp.concatenate([cr, ci], axis=0),
+                         jnp.concatenate([-ci, cr], axis=0)], axis=1)
+    sm = jnp.dot(e, C.T).reshape(n, 2, S, M)
+    sr, si = sm[:, 0], sm[:, 1]  # (n, S, M)
+    emr, emi = jnp.cos(am)[:, None, :], jnp.sin(am)[:, None, :]
+    re = jnp.sum(emr * sr - emi * si, axis=2).T
+    im = jnp.sum(emr * si + emi * sr, axis=2).T
+    return (re[0], im[0]) if one else (re, im)
 
 
 def _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool):
+    """(z_r, dz_r/dt) under each load: the spectral sum's rate in closed form from the same
+    sines and cosines (d/dt exp(i kappa x) = i kappa v exp(i kappa x)), the span pieces'
+    rate by forward differentiation."""
     v, x_front = p_kin[0], p_kin[1]
     n_loads = lay_front.shape[0]
     fb = p_kin[4:4 + n_loads]
@@ -406,29 +422,44 @@ def _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool
     ca = p_prof[7:7 + waves]
     kap = p_prof[7 + waves:7 + 2 * waves]
     sa = p_prof[7 + 2 * waves:7 + 3 * waves]
-    xf = x_front + v * t + lay_front  # local to slot A
+
+    def front(tt):
+        return x_front + v * tt + lay_front  # local to slot A
+
+    xf = front(t)
     if point:
-        spec = _wave_sum(x0 + xf, ca, kap, sa)[0]
-        piece = jnp.where(fb > 0.5, _poly_value(cB, xf - L), _poly_value(cA, xf))
-        return spec + piece
-    xr = xf - lay_length
+        # z = Re sum c e^{i kappa x}; dz/dt = -v Im sum kappa c e^{i kappa x}
+        re, im = _wave_sum(x0 + xf, jnp.stack([ca, kap * ca]), kap, jnp.stack([sa, kap * sa]))
+
+        def piece(tt):
+            x = front(tt)
+            return jnp.where(fb > 0.5, _poly_value(cB, x - L), _poly_value(cA, x))
+
+        pz, pzd = jax.jvp(piece, (t,), (jnp.ones_like(t),))
+        return re[0] + pz, -v * im[1] + pzd
     # the mean over the footprint: sum_k a_k (sin(kappa_k xf + phi_k) - sin(kappa_k xr +
-    # phi_k)) / kappa_k / lay_length
+    # phi_k)) / kappa_k / lay_length; its rate v sum_k a_k (cos(kappa_k xf + phi_k) -
+    # cos(kappa_k xr + phi_k)) / lay_length
     n = xf.shape[0]
-    both = _wave_sum(jnp.concatenate([x0 + xf, x0 + xr]), ca / kap, kap, sa / kap)[1]
-    spec = (both[:n] - both[n:]) / lay_length
-    a_a, b_a = xr, jnp.where(fb > 0.5, L, xf)
-    a_b, b_b = jnp.where(rb > 0.5, xr - L, 0.0), xf - L
-    ia = jnp.where(rb > 0.5, 0.0, _poly_integral(cA, a_a, b_a))
-    ib = jnp.where(fb > 0.5, _poly_integral(cB, a_b, b_b), 0.0)
-    return spec + (ia + ib) / lay_length
+    re, im = _wave_sum(jnp.concatenate([x0 + xf, x0 + xf - lay_length]),
+                       jnp.stack([ca / kap, ca]), kap, jnp.stack([sa / kap, sa]))
+    spec = (im[0, :n] - im[0, n:]) / lay_length
+    spec_rate = v * (re[1, :n] - re[1, n:]) / lay_length
+
+    def piece(tt):
+        xf = front(tt)
+        xr = xf - lay_length
+        a_a, b_a = xr, jnp.where(fb > 0.5, L, xf)
+        a_b, b_b = jnp.where(rb > 0.5, xr - L, 0.0), xf - L
+        ia = jnp.where(rb > 0.5, 0.0, _poly_integral(cA, a_a, b_a))
+        ib = jnp.where(fb > 0.5, _poly_integral(cB, a_b, b_b), 0.0)
+        return (ia + ib) / lay_length
+
+    pz, pzd = jax.jvp(piece, (t,), (jnp.ones_like(t),))
+    return spec + pz, spec_rate + pzd
 
 
 def profile_under(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool):
     """(z_r, dz_r/dt) (n_loads,) under each load at passage time t: the profile at each
     point load, or its mean over each spread load's footprint."""
-
-    def z(tt):
-        return _profile(tt, p_kin, p_prof, lay_front, lay_length, L, waves, point)
-
-    return jax.jvp(z, (t,), (jnp.ones_like(t),))
+    return _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves, point)
