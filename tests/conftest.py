@@ -46,3 +46,21 @@ def _drop_compiled_kernels() -> None:
 def pytest_runtest_teardown(item, nextitem):
     if "jax" in __import__("sys").modules and _map_count() > MAP_BUDGET:
         _drop_compiled_kernels()
+
+
+# ---------------------------------------------------------------------------------------
+# Longest files first. pytest-xdist (--dist loadfile) hands whole files to the two workers
+# in collection order; a file of minutes handed out last keeps one core busy while the other
+# idles. Listing the longest files first (longest-processing-time-first scheduling) keeps
+# the two workers' ends close. Only the order changes: the other files keep theirs, every
+# test runs. The list is by the measured durations of a full run (--durations=0), longest
+# first; a file missing from it only runs later.
+LONGEST_FILES = ("test_iso_curves.py", "test_speed_delay.py", "test_irregularities.py",
+                 "test_sensitivity_vehicle.py", "test_maps.py", "test_recorded_outputs.py",
+                 "test_explore_browser.py", "test_matching.py", "test_delay_maglev.py",
+                 "test_interrupts.py", "test_readme.py", "test_cycle_curve_command.py")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {name: i for i, name in enumerate(LONGEST_FILES)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable
