@@ -146,6 +146,36 @@ def test_the_index_at_a_neighbouring_design_equals_the_pointwise_index(soft):
     assert b.h_simulation_up == matching_index(soft.replace(omega1=114.0)).h_simulation_up
 
 
+def test_a_chain_of_neighbouring_indices_predicts_by_the_secant(soft):
+    """Along a chain of indices (each ``near=`` the one before), a size continued from a
+    neighbour remembers that neighbour, and the next index predicts by the secant through
+    the two (the continued size has no derivative): its prediction is closer than the
+    neighbour's size, its Newton needs no more steps in either direction (one fewer where
+    the size moves most), and the sizes equal the ones continued from the neighbour alone
+    to 1e-12 relative."""
+    from dataclasses import replace
+
+    from maglev_match.api import matching_index
+
+    d0, d1, d2 = (soft.replace(EI=soft.EI * f) for f in (1.0, 1.01, 1.02))
+    r1 = matching_index(d1, near=matching_index(d0))
+    r2 = matching_index(d2, near=r1)
+    # the same step from r1 with its memory of r0 removed: the neighbour's size as start
+    plain = replace(r1, critical_up=replace(r1.critical_up, previous=None),
+                    critical_down=replace(r1.critical_down, previous=None))
+    r2_plain = matching_index(d2, near=plain)
+    fewer = 0
+    for k in ("critical_up", "critical_down"):
+        c, c_plain, c1 = getattr(r2, k), getattr(r2_plain, k), getattr(r1, k)
+        assert c.previous is not None and c.previous[1] == c1.size
+        assert c.size == pytest.approx(c_plain.size, rel=1e-12, abs=0)
+        predicted = float(c.reason.split("predicted ")[1].split(" mm")[0]) * 1e-3
+        assert abs(predicted - c.size) < 0.1 * abs(c1.size - c.size)
+        assert c.iterations <= c_plain.iterations
+        fewer += c.iterations < c_plain.iterations
+    assert fewer >= 1
+
+
 @pytest.mark.slow
 def test_a_basin_boundary_is_continued(soft):
     """Beam up near the Hopf point (omega1 117 -> 118): the saddle cycle of the clamped

@@ -157,9 +157,11 @@ def _predict(start: CriticalStart, p: np.ndarray) -> float:
         dp = start.p - prev.p
         nn = float(dp @ dp)
         if nn > 0:
-            # the secant along the previous step, projected on the new step
+            # the secant along the previous step, projected on the new step (only as far
+            # as a few previous steps: beyond, the neighbour's size is the safer start)
             t = float((p - start.p) @ dp) / nn
-            return d + t * (d - float(prev.critical.size))
+            if abs(t) <= 4.0:
+                return d + t * (d - float(prev.critical.size))
     return d
 
 
@@ -201,6 +203,8 @@ def continue_criticals(params: Params | MaglevModel, starts: Sequence[CriticalSt
         else:
             d0 = _predict(start, p)
             gap_range = float(m.disturbance(c.direction).gap_range)
+            if not (0.0 < d0 < gap_range) and start.previous is not None:
+                d0 = _predict(CriticalStart(start.p, c), p)  # without the secant
             if not (0.0 < d0 < gap_range):
                 why = f"the predicted size {d0 * 1e3:.6g} mm leaves the gap range"
         if why is not None:

@@ -179,6 +179,9 @@ class CriticalSize:
     orbit: Any = field(default=None, repr=False, compare=False)
     landing: dict[str, Any] | None = field(default=None, repr=False, compare=False)
     at: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: a size continued from a neighbour: that neighbour's (parameter vector, size), for the
+    #: secant predictor of the next design (not part of the answer)
+    previous: tuple[np.ndarray, float] | None = field(default=None, repr=False, compare=False)
 
     @property
     def solved(self) -> bool:

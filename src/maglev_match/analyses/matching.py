@@ -428,12 +428,17 @@ def _continued(m: MaglevModel, near: MatchingIndex) -> dict[int, tuple[Any, Any,
         if c.model != m.name or np.shape(c.at) != at.shape:
             out[d] = (None, None, f"the neighbour is of model {c.model}")
             continue
-        todo.append((d, CriticalStart(np.asarray(c.at), c)))
+        # a neighbour that was itself continued remembers its own neighbour: the secant
+        # through the two predicts the size here (one Newton step fewer than from the
+        # neighbour's size alone)
+        prev = (None if c.previous is None or c.size is None else
+                CriticalStart(np.asarray(c.previous[0]), replace(c, size=c.previous[1])))
+        todo.append((d, CriticalStart(np.asarray(c.at), c, prev)))
     # both directions at once: one batched corrector and one batch of check runs
     done = continue_criticals(m, [s for _, s in todo], model=m.name)
-    for (d, _), (size, check, why) in zip(todo, done, strict=True):
-        out[d] = ((check, replace(size, at=at), "") if size is not None
-                  else (None, None, why.reason))
+    for (d, start), (size, check, why) in zip(todo, done, strict=True):
+        out[d] = ((check, replace(size, at=at, previous=(start.p, float(start.critical.size))),
+                   "") if size is not None else (None, None, why.reason))
     return out
 
 
