@@ -101,8 +101,9 @@ def test_blocked_spectral_sum_equals_the_sum_term_by_term(waves):
     amp, kap, ph = prof.wave_vectors(7)
     x = np.linspace(-30.0, 700.0, 1501)
     ang = np.multiply.outer(x, kap) + ph
-    c, s = _wave_sum(jnp.asarray(x), jnp.asarray(amp * np.cos(ph)), jnp.asarray(kap),
-                     jnp.asarray(amp * np.sin(ph)))
+    c, s = _wave_sum(jnp.asarray(x), jnp.asarray(amp * np.cos(ph))[None], jnp.asarray(kap),
+                     jnp.asarray(amp * np.sin(ph))[None])  # one set of coefficients
+    c, s = c[0], s[0]
     rms = math.sqrt(float(np.sum(amp ** 2)) / 2)
     assert np.max(np.abs(np.asarray(c) - np.cos(ang) @ amp)) < 1e-12 * rms
     assert np.max(np.abs(np.asarray(s) - np.sin(ang) @ amp)) < 1e-12 * rms

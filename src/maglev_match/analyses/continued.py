@@ -204,7 +204,7 @@ def continue_criticals(params: Params | MaglevModel, starts: Sequence[CriticalSt
             d0 = _predict(start, p)
             gap_range = float(m.disturbance(c.direction).gap_range)
             if not (0.0 < d0 < gap_range) and start.previous is not None:
-                d0 = _predict(CriticalStart(start.p, c), p)  # without the secant
+                d0 = _predict(replace(start, previous=None), p)  # without the secant
             if not (0.0 < d0 < gap_range):
                 why = f"the predicted size {d0 * 1e3:.6g} mm leaves the gap range"
         if why is not None:

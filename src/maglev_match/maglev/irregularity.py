@@ -376,17 +376,14 @@ def _wave_sum(x, ca, kap, sa):
     (B about sqrt(N)), exp(i kappa_k x) = exp(i (kappa_0 + m B d) x) exp(i j d x), so the
     N terms need the sines and cosines of B + M angles instead of N (the same sum, rounded
     differently: each angle is still computed directly, not by repeated multiplication).
-    ``ca`` and ``sa`` may hold several sets of coefficients (S, N): then (S, n) each, the
-    sines and cosines shared by the sets."""
-    one = ca.ndim == 1
-    ca, sa = jnp.atleast_2d(ca), jnp.atleast_2d(sa)
+    ``ca`` and ``sa`` hold S sets of coefficients (S, N) (the profile and its rate, say);
+    the sums are (S, n) each, the sines and cosines shared by the sets."""
     n_w = kap.shape[0]
     if n_w <= DIRECT_WAVES:
         ang = kap[None, :] * x[:, None]
         c, s = jnp.cos(ang)[None], jnp.sin(ang)[None]  # (1, n, N)
         cs, ss = ca[:, None, :], sa[:, None, :]
-        re, im = jnp.sum(c * cs - s * ss, axis=2), jnp.sum(s * cs + c * ss, axis=2)
-        return (re[0], im[0]) if one else (re, im)
+        return jnp.sum(c * cs - s * ss, axis=2), jnp.sum(s * cs + c * ss, axis=2)
     B = math.isqrt(n_w - 1) + 1
     M = -(-n_w // B)
     pad = M * B - n_w
@@ -404,15 +401,14 @@ def _wave_sum(x, ca, kap, sa):
     sm = jnp.dot(e, C.T).reshape(n, 2, S, M)
     sr, si = sm[:, 0], sm[:, 1]  # (n, S, M)
     emr, emi = jnp.cos(am)[:, None, :], jnp.sin(am)[:, None, :]
-    re = jnp.sum(emr * sr - emi * si, axis=2).T
-    im = jnp.sum(emr * si + emi * sr, axis=2).T
-    return (re[0], im[0]) if one else (re, im)
+    return jnp.sum(emr * sr - emi * si, axis=2).T, jnp.sum(emr * si + emi * sr, axis=2).T
 
 
-def _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool):
-    """(z_r, dz_r/dt) under each load: the spectral sum's rate in closed form from the same
-    sines and cosines (d/dt exp(i kappa x) = i kappa v exp(i kappa x)), the span pieces'
-    rate by forward differentiation."""
+def profile_under(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool):
+    """(z_r, dz_r/dt) (n_loads,) under each load at passage time t: the profile at each
+    point load, or its mean over each spread load's footprint. The spectral sum's rate
+    comes in closed form from the same sines and cosines (d/dt exp(i kappa x) =
+    i kappa v exp(i kappa x)), the span pieces' rate by forward differentiation."""
     v, x_front = p_kin[0], p_kin[1]
     n_loads = lay_front.shape[0]
     fb = p_kin[4:4 + n_loads]
@@ -458,8 +454,3 @@ def _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool
     pz, pzd = jax.jvp(piece, (t,), (jnp.ones_like(t),))
     return spec + pz, spec_rate + pzd
 
-
-def profile_under(t, p_kin, p_prof, lay_front, lay_length, L, waves: int, point: bool):
-    """(z_r, dz_r/dt) (n_loads,) under each load at passage time t: the profile at each
-    point load, or its mean over each spread load's footprint."""
-    return _profile(t, p_kin, p_prof, lay_front, lay_length, L, waves, point)
