@@ -200,13 +200,24 @@ def _candidates_on_grid(A0, As, taus, k, omegas: np.ndarray) -> list[np.ndarray]
     every index); none when a^T M^{-1} e_r = 0 or M is singular. Otherwise the QZ
     eigenvalues of the pencil (scipy.linalg.eigvals) per frequency."""
     Ak = As[k]
-    rows = np.flatnonzero(np.any(Ak != 0, axis=1))
-    if rows.size != 1:
+    z = _single_candidates(A0, As, taus, k, omegas)
+    if z is None:
         out = []
         for w in omegas:
             z = scipy.linalg.eigvals(_rest_matrix(A0, As, taus, k, w), Ak.astype(complex))
             out.append(z[np.isfinite(z)])
         return out
+    return [z[i:i + 1] if np.isfinite(z[i]) else z[:0] for i in range(omegas.size)]
+
+
+def _single_candidates(A0, As, taus, k, omegas: np.ndarray) -> np.ndarray | None:
+    """The one finite candidate z of every frequency of ``omegas`` as one array (nan where
+    there is none) when A_k has one nonzero row (:func:`_candidates_on_grid`); None when
+    it has several."""
+    Ak = As[k]
+    rows = np.flatnonzero(np.any(Ak != 0, axis=1))
+    if rows.size != 1:
+        return None
     r, a = int(rows[0]), Ak[rows[0]]
     n = A0.shape[0]
     M = 1j * omegas[:, None, None] * np.eye(n) - A0
@@ -226,8 +237,7 @@ def _candidates_on_grid(A0, As, taus, k, omegas: np.ndarray) -> list[np.ndarray]
                 except np.linalg.LinAlgError:  # i omega is a root without delay: no z
                     s[i] = 0.0
         z = 1.0 / s
-    return [z[i:i + 1] if np.isfinite(z[i]) and s[i] != 0 else np.zeros(0, complex)
-            for i in range(omegas.size)]
+    return np.where(np.isfinite(z) & (s != 0), z, np.nan + 0j)
 
 
 def _refine_crossing(A0, As, taus, k, omega, tau, v, tol=1e-14, max_iter=40):
@@ -314,6 +324,12 @@ def _intervals_to_search(zs: list[np.ndarray]) -> np.ndarray:
     single = np.array([z.size == 1 for z in zs])
     la = np.array([math.log(abs(z[0])) if z.size == 1 and np.isfinite(z[0]) and z[0] != 0
                    else math.nan for z in zs])
+    return _same_side_skipped(single, la)
+
+
+def _same_side_skipped(single: np.ndarray, la: np.ndarray) -> np.ndarray:
+    """:func:`_intervals_to_search` from whether each frequency has one candidate and its
+    log|z| (nan where it has none or it is not finite)."""
     both = single[:-1] & single[1:] & np.isfinite(la[:-1]) & np.isfinite(la[1:])
     same_side = both & (la[:-1] * la[1:] > 0.0)
     return np.flatnonzero(~same_side)
@@ -363,9 +379,19 @@ def delay_crossings(dde: DelayDifferentialSystem, delay: str, x: np.ndarray | No
         return []
     grid = np.geomspace(w_max * 1e-8, w_max, n_grid)
     with _one_thread():
-        zs = _candidates_on_grid(A0, As, taus, k, grid)
+        z1 = _single_candidates(A0, As, taus, k, grid)
+        if z1 is None:
+            zs = _candidates_on_grid(A0, As, taus, k, grid)
+            search = _intervals_to_search(zs)
+        else:  # one candidate per frequency: the grid's tests as array operations
+            ok = np.isfinite(z1) & (z1 != 0)
+            with np.errstate(all="ignore"):
+                la = np.where(ok, np.log(np.abs(z1)), np.nan)
+            search = _same_side_skipped(np.isfinite(z1), la)
+            zs = {int(i): z1[i:i + 1] if np.isfinite(z1[i]) else z1[:0]
+                  for i in np.union1d(search, search + 1)}
         brackets = []
-        for i in _intervals_to_search(zs):
+        for i in search:
             brackets += _crossing_brackets(A0, As, taus, k, grid[i], grid[i + 1], zs[i],
                                            zs[i + 1], depth=0)
     starts = []
