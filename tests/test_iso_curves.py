@@ -98,6 +98,44 @@ def test_toy_curve_that_cannot_start_says_why():
     assert "no sign change" in tr.warnings[0] and "chi from" in tr.warnings[0]
 
 
+class _Quadratic:
+    """chi = 5 + (p1 - a)(p1 - b), the same along p2: chi = 5 at p1 = a and p1 = b;
+    ``seen`` the p1 values evaluated, in order."""
+
+    def __init__(self, a: float, b: float) -> None:
+        self.a, self.b, self.seen = a, b, []
+
+    def __call__(self, p1: float, p2: float) -> Sample:
+        self.seen.append(p1)
+        return Sample(5.0 + (p1 - self.a) * (p1 - self.b), 10.0)
+
+
+@pytest.mark.parametrize("a, b, fewest, most", [
+    (0.1, -0.9, 2, 3),  # a root next to the middle: the middle and one or two neighbours
+    (-0.9, 0.95, 7, 7),  # roots near both ends: the whole scan
+    (-0.9, 5.0, 6, 7),  # one root near an end: the far end only if its pair ties
+])
+def test_the_start_scans_from_the_middle_until_the_nearest_sign_change_is_known(
+        a, b, fewest, most):
+    # the full scan's rule (7 points over p1 in [-1, 1], the sign change whose midpoint
+    # is nearest the middle) applied to the same function, against the scan from the
+    # middle outwards: the same root, and only the grid points nearest the middle
+    grid = np.linspace(-1.0, 1.0, 7)
+    f = [(x - a) * (x - b) for x in grid]
+    pairs = [j for j in range(6) if (f[j] > 0) != (f[j + 1] > 0)]
+    j = min(pairs, key=lambda j: abs(0.5 - 0.5 * ((grid[j] + 1) / 2 + (grid[j + 1] + 1) / 2)))
+    root = a if grid[j] <= a <= grid[j + 1] else b
+    ev = _Quadratic(a, b)
+    tr = trace_iso(ev, BOX, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=1))
+    (pt,) = tr.points
+    assert pt.p1 == pytest.approx(root, abs=1e-6)
+    on_grid = [x for x in ev.seen if np.min(np.abs(grid - x)) < 1e-12]
+    n = len(on_grid)
+    assert fewest <= n <= most and ev.seen[:n] == on_grid  # the scan, then regula falsi
+    middle_out = sorted(grid, key=abs)
+    assert sorted(np.abs(on_grid)) == pytest.approx(np.abs(middle_out[:n]))
+
+
 class ToyWithGradient:
     """:func:`toy` with the exact gradient of both parts (the tracer uses it instead of a
     forward difference); ``calls`` counts the evaluations."""

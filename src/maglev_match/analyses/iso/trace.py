@@ -312,8 +312,9 @@ class _Tracer:
     def start(self, fixed: int, value: float, scan: int | None = None
               ) -> tuple[np.ndarray | None, str]:
         """Solve chi = target along the free parameter with parameter ``fixed`` at
-        ``value`` (its range fraction): a scan of ``scan`` points, then regula falsi on
-        the sign change nearest the middle of the range."""
+        ``value`` (its range fraction): a scan of up to ``scan`` points (from the middle
+        outwards, until the sign change nearest the middle of the range is known), then
+        regula falsi on that sign change."""
         free = 1 - fixed
         scan = max(2, int(scan or self.s.scan))
         grid = np.linspace(0.0, 1.0, scan)
@@ -322,18 +323,36 @@ class _Tracer:
             u = np.zeros(2)
             u[fixed], u[free] = value, c
             us.append(u)
-        self.say(f"start: chi along the free parameter at {scan} points ...")
-        fs = [self.F(u) for u in us]
-        pairs = [k for k in range(scan - 1)
-                 if math.isfinite(fs[k]) and math.isfinite(fs[k + 1])
-                 and (fs[k] > 0) != (fs[k + 1] > 0)]
+        self.say(f"start: chi along the free parameter at up to {scan} points ...")
+
+        def key(j: int) -> tuple[float, int]:  # the pair nearest the middle, then the first
+            return abs(0.5 - 0.5 * (grid[j] + grid[j + 1])), j
+
+        def changes(j: int) -> bool:
+            a, b = fs[j], fs[j + 1]
+            return (a is not None and b is not None and math.isfinite(a)
+                    and math.isfinite(b) and (a > 0) != (b > 0))
+
+        # from the middle outwards, stopping once the sign change nearest the middle is
+        # known (every pair nearer the middle evaluated): the pair the whole scan would
+        # choose, without evaluating the ends of the range far from the curve
+        fs: list[float | None] = [None] * scan
+        pairs: list[int] = []
+        for i in sorted(range(scan), key=lambda i: (abs(grid[i] - 0.5), i)):
+            fs[i] = self.F(us[i])
+            pairs = [j for j in range(scan - 1) if changes(j)]
+            if pairs:
+                best = key(min(pairs, key=key))
+                if all(fs[j] is not None and fs[j + 1] is not None
+                       for j in range(scan - 1) if key(j) < best):
+                    break
         if not pairs:
-            finite = [f + self.target for f in fs if math.isfinite(f)]
+            finite = [f + self.target for f in fs if f is not None and math.isfinite(f)]
             span = (f"chi from {min(finite):.4g} to {max(finite):.4g}" if finite
                     else "chi could not be computed at any of them")
             return None, (f"no sign change of chi - {self.target:g} along the free "
                           f"parameter's range ({scan} points; {span})")
-        k = min(pairs, key=lambda j: abs(0.5 - 0.5 * (grid[j] + grid[j + 1])))
+        k = min(pairs, key=key)
         theta, f, ok = self.bracket_solve(us[k], us[k + 1], fs[k], fs[k + 1], self.F,
                                           self.s.tol * self.target)
         u = us[k] + theta * (us[k + 1] - us[k])
