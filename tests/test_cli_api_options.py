@@ -31,7 +31,7 @@ COMMANDS = {
     "cycles": (["cycles.CYCLES_OPTIONS", "cycles.HOPF_SEARCH_OPTIONS"],
                ["cycle_study"]),
     "cycle-curve": (["cycle_curve.CYCLE_CURVE_OPTIONS"], ["cycle_curve"]),
-    "iso-curve": (["iso_curve.ISO_CURVE_OPTIONS"], ["iso_curve"]),
+    "iso-curve": (["iso_curve.ISO_CURVE_OPTIONS"], ["iso_curve", "restart_iso_curve"]),
     "simulate": (["simulate.SIMULATE_OPTIONS"], ["simulate", "simulate_over_spans"]),
     "speed": (["speed.SPEED_OPTIONS"], ["speed_sweep", "speed_map"]),
     "index": (["index.INDEX_OPTIONS", "design.SCATTER_OPTIONS"],

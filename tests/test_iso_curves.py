@@ -77,6 +77,35 @@ def test_toy_curve_follows_both_parts_and_locates_the_switches():
     assert abs(changes[0].p2 - 0.8) <= step / 16
 
 
+def test_a_curve_continued_beyond_its_ends_is_the_whole_curve():
+    # followed in p2 in [-0.5, 0.5] (both directions end on that range, before either
+    # switch), then continued from its saved points in p2 in [-1, 1]: the saved points
+    # stay as they are, the new ones lie on the closed-form curve, go on away from the
+    # saved ones (p2 monotone along the whole curve), and the switches beyond the old ends
+    # are located as in one go
+    from maglev_match.analyses.iso.trace import extend_iso
+
+    small = ((-1.0, 1.0), (-0.5, 0.5))
+    part = trace_iso(toy, small, 5.0, fixed=1, value=0.0, settings=TraceSettings(max_points=40))
+    assert all("end of the p2 range" in e for e in part.ends) and not part.specials
+    whole = extend_iso(toy, BOX, 5.0, part.points, part.start, part.ends,
+                       settings=TraceSettings(max_points=40))
+    n_back = whole.start - part.start
+    assert n_back > 0 and whole.points[n_back:n_back + len(part.points)] == part.points
+    p2 = [pt.p2 for pt in whole.points]
+    assert all(b > a for a, b in zip(p2, p2[1:], strict=False))
+    assert p2[0] == pytest.approx(-1.0) and p2[-1] == pytest.approx(1.0)
+    for pt in whole.points:
+        assert pt.status == "solved" and abs(pt.sample.chi - 5.0) <= 1e-7 * 5.0 + 1e-15
+    assert [pt.branch for pt in whole.points[:n_back]] == [-1] * n_back
+    assert "end of the p2 range" in whole.ends[0] and "end of the p2 range" in whole.ends[1]
+    switches = [s for s in whole.specials if s.kind == "basis switch"]
+    assert [s.located for s in switches] == [True, True]
+    for s, sign in zip(switches, (-1, 1), strict=True):
+        assert (s.p1, s.p2) == pytest.approx((SWITCH[0], sign * SWITCH[1]), abs=1e-7)
+    assert whole.points[-1].sample.mechanism == "grazing"  # (beyond p2 = 0.8)
+
+
 def test_toy_curve_says_where_the_deciding_part_is_only_bracketed():
     # below p2 = -0.85 the simulated part is a bracket (a step function): the corrector
     # cannot converge on it; the curve ends there, says why, and marks that point
@@ -394,6 +423,28 @@ def test_the_docs_example_runs_as_written_and_prints_its_table(tmp_path, monkeyp
     assert {p.name for p in folder.iterdir()} >= {
         "iso_chi_unit_EI_kD.csv", "iso_chi_unit_EI_kD_special_points.csv",
         "iso_chi_unit_EI_kD.nc", "iso_chi_unit_EI_kD.png", "iso_chi_unit_EI_kD.svg"}
+    # the restart of the page, as written: the saved rows unchanged, two new points beyond
+    # each end, each of which gives the target when the index is computed there afresh
+    import xarray as xr
+
+    from maglev_match import api
+
+    again = next(ln for ln in page.splitlines()
+                 if ln.startswith("maglev-match iso-curve --restart"))
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        assert main(shlex.split(again)[1:]) == 0, err.getvalue()
+    with xr.open_dataset(folder / "iso_chi_unit_EI_kD.nc") as old, \
+            xr.open_dataset(tmp_path / "longer" / "iso_chi_unit_EI_kD.nc") as new:
+        assert new.sizes["point"] == old.sizes["point"] + 4
+        assert int(new.attrs["start_point"]) == int(old.attrs["start_point"]) + 2
+        for name in ("EI", "kD", "chi", "status"):
+            assert list(new[name].values[2:-2]) == list(old[name].values)
+        kd = new["kD"].values
+        assert np.all(np.diff(kd) > 0)  # on along the curve, away from the saved points
+        for i in (0, 1, -2, -1):
+            idx = api.matching_index("turnout-soft", simulate=False, stage=False,
+                                     EI=float(new["EI"].values[i]), kD=float(kd[i]))
+            assert abs(idx.chi - 9.0) <= 1e-7 * 9.0, (i, idx.chi)
 
 
 def _fake_map(x, y, chi):
@@ -449,6 +500,65 @@ def test_map_iso_options_are_checked_before_the_map(tmp_path, paper_curve):
         iso_overlay(5.0, path, ["EI", "kD"])
     with pytest.raises(ParameterError, match="--iso"):
         iso_overlay(float("nan"), None, ["EI", "kD"])
+
+
+def test_a_saved_curve_reads_back_as_it_was_written(tmp_path, paper_curve):
+    from maglev_match.analyses.iso import read_iso_curve
+
+    path = tmp_path / "c.nc"
+    paper_curve.to_xarray().to_netcdf(path)
+    import json
+
+    back = read_iso_curve(path)
+    for rows in ("rows", "special_rows"):  # (as text: NaN == NaN there)
+        assert json.dumps(getattr(back, rows)()) == json.dumps(getattr(paper_curve, rows)())
+    assert (back.target, back.names, back.model, back.simulate, back.ranges, back.ends,
+            back.warnings, back.tolerance) == (
+        paper_curve.target, paper_curve.names, paper_curve.model, paper_curve.simulate,
+        paper_curve.ranges, paper_curve.ends, paper_curve.warnings, paper_curve.tolerance)
+    # the parameter set as given: EI and kD still derive omega1 and sigma (a set read
+    # from the resolved values would hold them fixed, and chi would not move with EI)
+    assert back.base == paper_curve.base and "omega1" not in back.base.explicit
+
+
+@pytest.mark.parametrize("args, where, text", [
+    (["chi=9"], "TARGET", "leave TARGET out"),
+    (["--model", "vehicle"], "--model", "the saved curve at its own"),
+    (["--params", "EI,L"], "--params", "the saved curve at its own"),
+    (["--range", "kD=149:151"], "--range", "must contain the saved curve"),
+    (["--points", "0"], "points", "must be a whole number >= 1"),
+])
+def test_restart_options_that_do_not_apply_are_refused(tmp_path, paper_curve, capsys,
+                                                       args, where, text):
+    from maglev_match.cli import main
+
+    path = tmp_path / "c.nc"
+    paper_curve.to_xarray().to_netcdf(path)
+    code = main(["iso-curve", "--restart", str(path), *args, "--out", str(tmp_path / "o")])
+    err = " ".join(capsys.readouterr().err.split())
+    assert code == 2 and where in err and text in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_restart_files_that_are_not_a_curve_are_refused(tmp_path, paper_curve, capsys):
+    import xarray as xr
+
+    from maglev_match.cli import main
+
+    ds = paper_curve.to_xarray()
+    other = xr.Dataset({"x": ("i", np.zeros(2))}, attrs={"title": "maglev-match cycles"})
+    old = ds.copy()
+    del old.attrs["base_inputs"]
+    csv = tmp_path / "c.csv"
+    csv.write_text("EI,kD\n1,2\n")
+    cases = {"not a netCDF file": csv, "is not an iso-chi curve file": tmp_path / "o.nc",
+             "compute the curve again": tmp_path / "old.nc", "no such file": tmp_path / "x.nc"}
+    other.to_netcdf(tmp_path / "o.nc")
+    old.to_netcdf(tmp_path / "old.nc")
+    for text, path in cases.items():
+        code = main(["iso-curve", "--restart", str(path)])
+        err = " ".join(capsys.readouterr().err.split())
+        assert code == 2 and "--restart" in err and text in err, (text, err)
 
 
 def test_the_curve_crosses_the_design_kd_at_the_design_ei():

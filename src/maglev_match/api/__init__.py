@@ -53,7 +53,7 @@ _NAMES: dict[str, str] = {
     "design_map": "maps", "map_warnings": "maps", "remove_tiles": "maps",
     "speed_sweep": "speed", "speed_map": "speed", "ride_reading": "speed",
     "show_progress": "progress",
-    "iso_curve": "iso", "iso_inputs": "iso",
+    "iso_curve": "iso", "iso_inputs": "iso", "restart_iso_curve": "iso",
 }
 
 __all__ = [
@@ -98,6 +98,7 @@ __all__ = [
     "show_progress",
     "iso_curve",
     "iso_inputs",
+    "restart_iso_curve",
     "MODELS",
     "RestartFileError",
     "RestartLabelError",

@@ -16,7 +16,7 @@ from maglev_match.maglev.catalog import model_info
 if TYPE_CHECKING:  # pragma: no cover
     from maglev_match.analyses.iso import IsoChiCurve
 
-__all__ = ["iso_curve", "iso_inputs"]
+__all__ = ["iso_curve", "iso_inputs", "restart_iso_curve"]
 
 #: a parameter without a range is followed from its base value / this factor to x this
 DEFAULT_FACTOR = 2.0
@@ -198,7 +198,19 @@ def iso_curve(params: Params | str | None = None, target: float = 5.0, *,
         See [`IsoChiCurve`][maglev_match.analyses.iso.curve.IsoChiCurve]: ``rows()``,
         ``special_rows()``, ``to_xarray()``, ``.plot()``.
     """
-    from maglev_match.analyses.iso import TraceSettings, iso_chi_curve
+    from maglev_match.analyses.iso import iso_chi_curve
+
+    settings = _settings(points, step, tol)
+    base, pair, box, start = iso_inputs(params, target, names=names, ranges=ranges, at=at,
+                                        model=model, config=config, **overrides)
+    return iso_chi_curve(base, pair, box, float(target), at=start,
+                         model=model_info(model).name, simulate=simulate,
+                         settings=settings, stage=stage)
+
+
+def _settings(points: Any, step: Any, tol: Any) -> Any:
+    """The tracer's settings from the options, checked (naming the option)."""
+    from maglev_match.analyses.iso import TraceSettings
 
     if isinstance(points, bool) or not isinstance(points, int) or points < 1:
         raise ParameterError("points", points, "must be a whole number >= 1 (1: the start "
@@ -207,10 +219,62 @@ def iso_curve(params: Params | str | None = None, target: float = 5.0, *,
         raise ParameterError("step", step, "must be a fraction of the ranges in (0, 0.5]")
     if not (math.isfinite(tol) and 1e-12 <= tol <= 1e-3):
         raise ParameterError("tol", tol, "must lie in [1e-12, 1e-3]")
-    base, pair, box, start = iso_inputs(params, target, names=names, ranges=ranges, at=at,
-                                        model=model, config=config, **overrides)
-    settings = TraceSettings(tol=tol, ds=step, ds_max=max(0.2, step), max_points=points,
-                             ds_min=min(2e-3, step / 4))
-    return iso_chi_curve(base, pair, box, float(target), at=start,
-                         model=model_info(model).name, simulate=simulate,
-                         settings=settings, stage=stage)
+    return TraceSettings(tol=tol, ds=step, ds_max=max(0.2, step), max_points=points,
+                         ds_min=min(2e-3, step / 4))
+
+
+@reported("iso-curve", units=False)
+def restart_iso_curve(source: Any, *, ranges: Mapping[str, tuple[float, float]] | None = None,
+                      points: int = 30, step: float = 0.05, tol: float | None = None,
+                      stage: Callable[[str], None] | None = None) -> IsoChiCurve:
+    """An iso-chi curve saved by `iso-curve --out` continued beyond both of its ends
+    (`maglev-match iso-curve --restart FILE`).
+
+    The saved file gives the base parameter set, the model, the target, the two
+    parameters, whether chi is the headline or the paper's, the ranges and the tolerance;
+    each end is evaluated again (one index from scratch per end) and followed on, away
+    from its neighbour, by the same continuation as :func:`iso_curve`. The saved points
+    and special points are kept unchanged; the new ones are added before and after them.
+    A last point that did not converge is dropped and its direction goes on from the
+    point before it; a curve that closed on its start is not continued.
+
+    Parameters
+    ----------
+    source : str, Path or xarray.Dataset
+        The netCDF file written by `iso-curve --out` (or the dataset of
+        ``IsoChiCurve.to_xarray()``).
+    ranges : mapping, optional
+        ``{name: (low, high)}`` for either parameter: the new ranges (each must contain
+        the saved curve); a direction that ended on the saved range goes on in a wider
+        one. Default: the saved ranges.
+    points : int
+        At most this many new points (both ends together: backwards gets half, rounded
+        down).
+    step : float
+        The first step from each end, as a fraction of the ranges.
+    tol : float, optional
+        Default: the saved curve's tolerance.
+    stage : callable, optional
+        Called with a line of text as each stage starts.
+
+    Returns
+    -------
+    IsoChiCurve
+        The whole curve; ``evaluations`` counts the saved and the new evaluations.
+    """
+    from maglev_match.analyses.iso import continue_iso_curve, read_iso_curve
+
+    curve = read_iso_curve(source)
+    settings = _settings(points, step, curve.tolerance if tol is None else tol)
+    box = dict(zip(curve.names, curve.ranges, strict=True))
+    if ranges:
+        new = _ranges(curve.base, curve.names, ranges)  # (checked as iso_curve's)
+        for n in ranges:
+            lo, hi = new[n]
+            vals = [pt.p1 if n == curve.names[0] else pt.p2 for pt in curve.points]
+            if vals and (min(vals) < lo or max(vals) > hi):
+                raise ParameterError("ranges", f"{n}={lo:g}:{hi:g}", "must contain the "
+                                     f"saved curve ({n} from {min(vals):g} to "
+                                     f"{max(vals):g})")
+            box[n] = (lo, hi)
+    return continue_iso_curve(curve, box, settings=settings, stage=stage)

@@ -37,7 +37,12 @@ from maglev_match.core.params import ParameterError
 ISO_CURVE_OPTIONS = {"target": "TARGET", "names": "--params", "ranges": "--range",
                      "at": "--at", "model": "--model", "simulate": "--no-simulation",
                      "points": "--points", "step": "--step", "tol": "--tol",
-                     "config": "--config"}
+                     "config": "--config", "source": "--restart"}
+
+#: what a restart takes from its saved curve (python name -> option as typed)
+SAVED_BY_THE_CURVE = {"params_": "--params", "at": "--at", "no_simulation": "--no-simulation",
+                      "preset": "--preset", "config": "--config", "set_": "--set",
+                      "model": "--model"}
 
 
 def parse_target(text: str) -> float:
@@ -99,9 +104,10 @@ def iso_overlay(iso: float | None, iso_curve: Path | None, names: list[str],
 
 @app.command("iso-curve")
 def iso_curve_command(
-    target: Annotated[str, typer.Argument(
+    target: Annotated[str | None, typer.Argument(
         help="The level followed, chi=VALUE (e.g. chi=5): the headline chi, or with "
-        "--no-simulation the paper's chi.", metavar="chi=VALUE")],
+        "--no-simulation the paper's chi (with --restart: the saved curve's).",
+        metavar="chi=VALUE", show_default=False)] = None,
     params_: Annotated[str, typer.Option(
         "--params", help="The curve's two parameters P1,P2, e.g. EI,kD (beam data L, EI, "
         "mbar derive omega1 and sigma).")] = "EI,kD",
@@ -120,7 +126,12 @@ def iso_curve_command(
     step: Annotated[float, typer.Option(
         "--step", help="The first step as a fraction of the ranges.")] = 0.05,
     tol: Annotated[float, typer.Option(
-        "--tol", help="|chi - target| <= tol * target at every solved point.")] = 1e-7,
+        "--tol", help="|chi - target| <= tol * target at every solved point (with "
+        "--restart: default the saved curve's).")] = 1e-7,
+    restart: Annotated[Path | None, typer.Option(
+        "--restart", help="Continue the curve saved in this netCDF file (written by "
+        "iso-curve --out) beyond both of its ends, at its parameter set, model, target and "
+        "part; --points new points, --range may widen its ranges.")] = None,
     preset: PresetOpt = DEFAULT_PRESET_NAME,
     config: ConfigOpt = None,
     set_: SetOpt = None,
@@ -133,19 +144,37 @@ def iso_curve_command(
     two parameters, with the deciding part and the status of each point; writes CSV,
     netCDF and a figure."""
     check_output_path(out)
-    value = parse_target(target)
-    if str(model).endswith(".py"):
-        raise UserError(f"--model {model}: iso-chi curves are computed for the maglev "
-                        "models unit and vehicle (a user model has no index)")
-    names = [p.strip() for p in params_.split(",")]
     ranges = _ranges(range_)
-    params, overrides = model_inputs(model, preset, config, set_)
     from maglev_match import api
 
-    with progress_report("iso-curve") as prog, api_options(ISO_CURVE_OPTIONS):
-        curve = api.iso_curve(params, value, names=names, ranges=ranges, at=at, model=model,
-                              simulate=not no_simulation, points=points, step=step, tol=tol,
-                              stage=prog.stage, **overrides)
+    if restart is not None:
+        from maglev_match.cli.common import given, refuse_given
+        from maglev_match.cli.restart import restart_error_context
+
+        refuse_given(SAVED_BY_THE_CURVE, "a restart continues the saved curve at its own "
+                     "parameter set, model, parameters and part; leave this out")
+        if target is not None:
+            raise UserError(f"TARGET {target}: a restart follows the saved curve's level; "
+                            "leave TARGET out with --restart")
+        with progress_report("iso-curve") as prog, api_options(ISO_CURVE_OPTIONS), \
+                restart_error_context():
+            curve = api.restart_iso_curve(restart, ranges=ranges, points=points, step=step,
+                                          tol=tol if given("tol") else None,
+                                          stage=prog.stage)
+    else:
+        if target is None:
+            raise UserError("TARGET: give the level to follow, chi=VALUE (e.g. chi=5), or "
+                            "--restart FILE to continue a saved curve")
+        value = parse_target(target)
+        if str(model).endswith(".py"):
+            raise UserError(f"--model {model}: iso-chi curves are computed for the maglev "
+                            "models unit and vehicle (a user model has no index)")
+        names = [p.strip() for p in params_.split(",")]
+        params, overrides = model_inputs(model, preset, config, set_)
+        with progress_report("iso-curve") as prog, api_options(ISO_CURVE_OPTIONS):
+            curve = api.iso_curve(params, value, names=names, ranges=ranges, at=at,
+                                  model=model, simulate=not no_simulation, points=points,
+                                  step=step, tol=tol, stage=prog.stage, **overrides)
     files: list[Path] = []
     if out is not None or not json_out:
         files = write_outputs(curve, out)

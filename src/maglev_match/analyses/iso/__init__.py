@@ -15,8 +15,10 @@ from __future__ import annotations
 from maglev_match.analyses.iso.curve import (
     POINT_STATUSES,
     IsoChiCurve,
+    continue_iso_curve,
     finite_target,
     iso_chi_curve,
+    read_iso_curve,
 )
 from maglev_match.analyses.iso.maglev import MaglevChi, sample_of
 from maglev_match.analyses.iso.trace import (
@@ -25,9 +27,11 @@ from maglev_match.analyses.iso.trace import (
     Sample,
     Traced,
     TraceSettings,
+    extend_iso,
     trace_iso,
 )
 
-__all__ = ["IsoChiCurve", "iso_chi_curve", "finite_target", "POINT_STATUSES", "MaglevChi",
+__all__ = ["IsoChiCurve", "iso_chi_curve", "continue_iso_curve", "read_iso_curve",
+           "finite_target", "POINT_STATUSES", "MaglevChi",
            "sample_of", "IsoPoint", "IsoSpecial", "Sample", "TraceSettings", "Traced",
-           "trace_iso"]
+           "trace_iso", "extend_iso"]

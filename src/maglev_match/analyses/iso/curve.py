@@ -6,8 +6,9 @@ simulated part's mechanism as special points. The continuation itself is
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -18,14 +19,20 @@ from maglev_match.analyses.iso.trace import (
     DEFAULT_SETTINGS,
     IsoPoint,
     IsoSpecial,
+    Sample,
     TraceSettings,
+    extend_iso,
     trace_iso,
 )
 from maglev_match.core.params import Params
 from maglev_match.core.reprs import compact_repr
 from maglev_match.core.results import Plottable
 
-__all__ = ["IsoChiCurve", "iso_chi_curve", "POINT_STATUSES"]
+__all__ = ["IsoChiCurve", "iso_chi_curve", "continue_iso_curve", "read_iso_curve",
+           "POINT_STATUSES"]
+
+#: the title of an iso-chi curve file (its attribute ``title`` starts with it)
+TITLE = "maglev-match iso-chi curve"
 
 #: the status of a curve point, and what it means
 POINT_STATUSES = {
@@ -194,7 +201,7 @@ class IsoChiCurve(Plottable):
             "point": "point number along the curve", "special": "special point number"}
         ds = xr.Dataset(data, coords={"point": np.arange(len(rows)),
                                       "special": np.arange(len(sp))}, attrs={
-            "title": f"maglev-match iso-chi curve chi = {self.target:g} in ({a}, {b})",
+            "title": f"{TITLE} chi = {self.target:g} in ({a}, {b})",
             "target": self.target, "curve_params": f"{a},{b}", "model": self.model,
             "simulate": int(self.simulate), "start_point": -1 if self.start is None
             else int(self.start), "end_backwards": self.ends[0],
@@ -203,6 +210,8 @@ class IsoChiCurve(Plottable):
             "range_" + b: json.dumps(list(self.ranges[1])),
             "warnings": json.dumps(list(self.warnings)),
             "evaluations": self.evaluations})
+        if self.base is not None:  # the values as given (a restart derives the rest again)
+            ds.attrs["base_inputs"] = json.dumps(_plain_inputs(self.base))
         return annotate(ds, self.base, units=units, long_names=longs)
 
 
@@ -222,21 +231,135 @@ def iso_chi_curve(base: Params, names: tuple[str, str],
     evaluate = MaglevChi(base, names, model=model, simulate=simulate)
     traced = trace_iso(evaluate, box, target, fixed=fixed, value=float(at[1]),
                        settings=settings, stage=stage)
-    warnings = list(traced.warnings)
-    brack = sum(p.status == "bracketed" for p in traced.points)
-    if brack:
-        warnings.append(f"{brack} point(s) of the curve rest on a simulated part that is "
-                        "only bracketed (status 'bracketed'): chi there is known to the "
-                        "bisection's tolerance only")
-    for s in traced.specials:
-        if not s.located:
-            warnings.append(f"a {s.kind} ({s.before} -> {s.after}) near {names[0]} = "
-                            f"{s.p1:.6g}, {names[1]} = {s.p2:.6g}: {s.message}")
+    warnings = list(traced.warnings) + _summary(traced.points, traced.specials, names)
     units = tuple(PARAMETER_DOCS.get(n, ("1",))[0] for n in names)
     return IsoChiCurve(float(target), names, units, model, simulate, box,  # type: ignore[arg-type]
                        traced.points, traced.start, traced.specials, traced.ends,
                        tuple(warnings), traced.evaluations, traced.cpu_seconds,
                        settings.tol, base)
+
+
+_BRACKETED = "point(s) of the curve rest on a simulated part that is only bracketed"
+
+
+def _plain_inputs(params: Params) -> dict[str, Any]:
+    """The values a parameter set was given (derived ones left out unless set), as plain
+    JSON numbers."""
+    return {k: (v.item() if isinstance(v, np.generic) else v)
+            for k, v in params.as_input_dict().items()}
+
+
+def _summary(points: Sequence[IsoPoint], specials: Sequence[IsoSpecial],
+             names: tuple[str, str]) -> list[str]:
+    """The warnings a whole curve carries: its bracketed points, its special points that
+    were not located."""
+    out = []
+    brack = sum(p.status == "bracketed" for p in points)
+    if brack:
+        out.append(f"{brack} {_BRACKETED} (status 'bracketed'): chi there is known to the "
+                   "bisection's tolerance only")
+    for s in specials:
+        if not s.located:
+            out.append(f"a {s.kind} ({s.before} -> {s.after}) near {names[0]} = "
+                       f"{s.p1:.6g}, {names[1]} = {s.p2:.6g}: {s.message}")
+    return out
+
+
+def continue_iso_curve(curve: IsoChiCurve,
+                       ranges: Mapping[str, tuple[float, float]] | None = None, *,
+                       settings: TraceSettings = DEFAULT_SETTINGS,
+                       stage: Callable[[str], None] | None = None) -> IsoChiCurve:
+    """``curve`` (computed here or read from its file by :func:`read_iso_curve`) continued
+    beyond both of its ends (:func:`~maglev_match.analyses.iso.trace.extend_iso`) at its
+    base parameter set, model, target and part (headline or paper), inside ``ranges``
+    (default the curve's own; wider ones let a direction that ended on them go on), with
+    ``settings.max_points`` new points. The saved points and special points are kept as
+    they are; the ends, the counts and the warnings are those of the whole curve (the
+    saved curve's warnings about how its ends ended are replaced by the new ones)."""
+    if curve.base is None:
+        raise ValueError("the curve has no base parameter set to continue at")
+    box = (curve.ranges if ranges is None else
+           tuple(tuple(map(float, ranges[n])) for n in curve.names))
+    evaluate = MaglevChi(curve.base, curve.names, model=curve.model, simulate=curve.simulate)
+    traced = extend_iso(evaluate, box, curve.target, curve.points, curve.start, curve.ends,
+                        specials=curve.specials, settings=settings, stage=stage)
+    summary = [w for w in curve.warnings if w.startswith("the curve ended ")
+               or _BRACKETED in w or w.startswith(("a basis switch", "a mechanism change"))]
+    warnings = [w for w in curve.warnings if w not in summary] + list(traced.warnings) + \
+        _summary(traced.points, traced.specials, curve.names)
+    return dataclasses.replace(
+        curve, ranges=box, points=traced.points, start=traced.start,
+        specials=traced.specials, ends=traced.ends, warnings=tuple(warnings),
+        evaluations=curve.evaluations + traced.evaluations,
+        cpu_seconds=curve.cpu_seconds + traced.cpu_seconds)
+
+
+def read_iso_curve(source: Any) -> IsoChiCurve:
+    """The iso-chi curve saved by ``iso-curve --out`` (a netCDF path or its xarray
+    Dataset): its points (their evaluations' numbers and labels; not the indices
+    themselves), special points, ends, warnings, target, parameters, ranges, model, part
+    and base parameter set. A file that is not such a curve is a
+    :class:`~maglev_match.analyses.restart.files.RestartFileError` naming what is wrong."""
+    import json
+
+    from maglev_match.analyses.restart.files import RestartFileError, open_saved
+    from maglev_match.core.params import FIELD_NAMES, ParameterError, make_params
+
+    ds, where = open_saved(source)
+    if not str(ds.attrs.get("title", "")).startswith(TITLE):
+        raise RestartFileError(where, "is not an iso-chi curve file (the netCDF file "
+                               "written by `maglev-match iso-curve --out`)")
+    if "base_inputs" not in ds.attrs:
+        raise RestartFileError(where, "does not hold the parameter set as given (attribute "
+                               "base_inputs; a file written before restarts of iso-chi "
+                               "curves): compute the curve again")
+    try:
+        a, b = str(ds.attrs["curve_params"]).split(",")
+        ranges = (tuple(json.loads(ds.attrs["range_" + a])),
+                  tuple(json.loads(ds.attrs["range_" + b])))
+        params = make_params({k: v for k, v in json.loads(ds.attrs["base_inputs"]).items()
+                              if k in FIELD_NAMES})
+
+        def num(key: str, i: int) -> float:
+            return float(ds[key].values[i])
+
+        def text(key: str, i: int) -> str:
+            return str(ds[key].values[i])
+
+        def opt(v: float) -> float | None:
+            return None if math.isnan(v) else v
+
+        start = int(ds.attrs["start_point"])
+        points = []
+        for i in range(ds.sizes["point"]):
+            smp = Sample(num("chi", i), num("chi_paper", i), opt(num("chi_simulation", i)),
+                         text("basis", i), text("mechanism", i) or None,
+                         text("direction", i) or None, text("paper_part", i),
+                         text("simulation_part", i))
+            points.append(IsoPoint(num(a, i), num(b, i), smp, num("residual", i),
+                                   int(ds["iterations"].values[i]), text("status", i),
+                                   (i > start) - (i < start), text("gradient", i)))
+        specials = []
+        for i in range(ds.sizes.get("special", 0)):
+            smp = Sample(float("nan"), num("special_chi_paper", i),
+                         opt(num("special_chi_simulation", i)))
+            located = bool(int(ds["special_located"].values[i]))
+            specials.append(IsoSpecial(text("special_kind", i), num(f"special_{a}", i),
+                                       num(f"special_{b}", i), text("special_before", i),
+                                       text("special_after", i), smp, located,
+                                       float("nan"), "" if located else "not located"))
+        curve = IsoChiCurve(
+            float(ds.attrs["target"]), (a, b),
+            (str(ds[a].attrs.get("units", "1")), str(ds[b].attrs.get("units", "1"))),
+            str(ds.attrs["model"]), bool(int(ds.attrs["simulate"])), ranges,  # type: ignore[arg-type]
+            tuple(points), None if start < 0 else start, tuple(specials),
+            (str(ds.attrs["end_backwards"]), str(ds.attrs["end_forwards"])),
+            tuple(json.loads(ds.attrs["warnings"])), int(ds.attrs["evaluations"]), 0.0,
+            float(ds.attrs["tolerance"]), params)
+    except (KeyError, ValueError, TypeError, IndexError, ParameterError) as exc:
+        raise RestartFileError(where, "is not a complete iso-chi curve file: "
+                               f"{' '.join(str(exc).split())[:160]}") from None
+    return curve
 
 
 def finite_target(target: Any) -> bool:

@@ -54,7 +54,10 @@ from maglev_match.dynamics.continuation import (
 )
 
 __all__ = ["Sample", "IsoPoint", "IsoSpecial", "TraceSettings", "DEFAULT_SETTINGS", "Traced",
-           "trace_iso"]
+           "trace_iso", "extend_iso"]
+
+#: why a direction ended when the curve came back to its start (not continued by a restart)
+CLOSED = "the curve closed on its start"
 
 
 @dataclass(frozen=True)
@@ -373,16 +376,23 @@ class _Tracer:
 
     # -- the curve -------------------------------------------------------------------
     def branch(self, u0: np.ndarray, g0: np.ndarray, sign: int, n_max: int,
-               first: list[IsoPoint]) -> tuple[list[IsoPoint], list[IsoSpecial], str]:
+               first: list[IsoPoint], label: int | None = None,
+               home: np.ndarray | None = None
+               ) -> tuple[list[IsoPoint], list[IsoSpecial], str]:
         """One direction of the curve from the start, by the package's continuation driver
         (:func:`~maglev_match.dynamics.continuation.continuation`) on the scalar equation
         F(u) = 0 (:class:`_LevelSet`): its predictor, bordered corrector (solved here on the
         line normal to the tangent), tangent and step control. Returns the points (without
-        the start), the special points between neighbours and why the direction ended."""
+        the start), the special points between neighbours and why the direction ended.
+        ``sign`` orients the tangent (g turned by +-90 degrees); ``label`` marks the points
+        (default ``sign``; a restarted end keeps its direction's label); ``home`` the start
+        a forwards direction may close on (default ``u0``)."""
+        label = sign if label is None else label
         t0 = sign * np.array([-g0[1], g0[0]]) / np.linalg.norm(g0)
         if self._step(u0, t0, self.s.ds) is None:  # on the edge, pointing out of the box
             return [], [], "reached the edge of the ranges"
-        problem = _LevelSet(self, u0, g0, sign)
+        problem = _LevelSet(self, u0 if home is None else home, g0, label)
+        problem.anchor = u0
         res = continuation(problem, u0, t0, problem.options(n_max),
                            first=problem.correction(u0, g0, None, 0))
         pts: list[IsoPoint] = []
@@ -391,7 +401,7 @@ class _Tracer:
             p1, p2 = self.params(bp.u)
             smp = self.sample(bp.u)
             pts.append(IsoPoint(p1, p2, smp, self.F(bp.u), bp.correction.iterations,
-                                "solved" if smp.exact else "bracketed", sign,
+                                "solved" if smp.exact else "bracketed", label,
                                 self.grad_how.get((p1, p2), "")))
             grads.append(bp.correction.data)
         specials: list[IsoSpecial] = []
@@ -403,7 +413,8 @@ class _Tracer:
             new, f, its, ok = problem.failed
             if math.isfinite(f):
                 p1, p2 = self.params(new)
-                pts.append(IsoPoint(p1, p2, self.sample(new), f, its, "not converged", sign))
+                pts.append(IsoPoint(p1, p2, self.sample(new), f, its, "not converged",
+                                    label))
             return pts, specials, self._fail_reason(new, f, ok)
         return pts, specials, f"the number of points ({n_max} in this direction) reached"
 
@@ -644,7 +655,7 @@ class _LevelSet:
             self.ended = f"reached the end of the {('p1', 'p2')[self.edge]} range"
         elif (self.sign > 0 and self.steps > 2
               and np.linalg.norm(point.u - self.u0) < 0.75 * self.s_last):
-            self.ended = "the curve closed on its start"
+            self.ended = CLOSED
         return self.ended or None
 
 
@@ -700,8 +711,8 @@ def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: fl
     stage = stage or (lambda text: None)
     stage("following the curve forwards ...")
     fwd, sp_f, end_f = tr.branch(u0, g0, +1, settings.max_points - 1 - per, [first])
-    if end_f == "the curve closed on its start":
-        bwd, sp_b, end_b = [], [], "the curve closed on its start"
+    if end_f == CLOSED:
+        bwd, sp_b, end_b = [], [], CLOSED
     elif per == 0:
         bwd, sp_b, end_b = [], [], "the number of points (0 in this direction) reached"
     else:
@@ -713,3 +724,77 @@ def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: fl
     points = list(reversed(bwd)) + [first] + fwd
     return done(points, len(bwd), list(reversed(sp_b)) + sp_f, (end_b, end_f))
 
+
+
+def extend_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: float,
+               points: Sequence[IsoPoint], start: int | None, ends: tuple[str, str], *,
+               specials: Sequence[IsoSpecial] = (),
+               settings: TraceSettings = DEFAULT_SETTINGS,
+               stage: Callable[[str], None] | None = None) -> Traced:
+    """A curve of :func:`trace_iso` (``points`` in order, ``start`` the start's position,
+    ``ends`` why each direction ended) continued beyond both of its ends, inside ``box``
+    (which may be wider than the one it was followed in), with ``settings.max_points``
+    new points in all (backwards half of them, rounded down, as :func:`trace_iso` shares
+    them). Each end is evaluated again (a new evaluation: the saved curve keeps no state)
+    and the direction goes on away from its neighbour; a last point that did not converge
+    is dropped and its direction goes on from the point before it. A curve that closed on
+    its start is not continued. Returns the whole curve (the saved points and ``specials``
+    unchanged, with the special points between the new ones) and the new ends;
+    ``evaluations`` counts the new evaluations only."""
+    cpu = time.process_time()
+    tr = _Tracer(evaluate, box, target, settings, stage)
+    say = stage or (lambda text: None)
+    pts = list(points)
+    if start is None or not pts:
+        raise ValueError("a curve without points (it did not start) cannot be continued")
+    home = (np.array([pts[start].p1, pts[start].p2]) - tr.lo) / tr.width
+    # a last point that did not converge is where its direction failed: go on from before it
+    while len(pts) > 1 and pts[-1].status == "not converged" and len(pts) - 1 > start:
+        pts.pop()
+    while len(pts) > 1 and pts[0].status == "not converged" and start > 0:
+        pts.pop(0)
+        start -= 1
+    n_new = max(int(settings.max_points), 0)
+    per = n_new // 2
+    new_ends = list(ends)
+    added: dict[int, tuple[list[IsoPoint], list[IsoSpecial]]] = {-1: ([], []), 1: ([], [])}
+    for side, budget in ((1, n_new - per), (-1, per)):
+        if budget <= 0 or CLOSED in ends:
+            continue
+        end = pts[-1] if side > 0 else pts[0]
+        inner = (pts[-2] if side > 0 else pts[1]) if len(pts) > 1 else None
+        u = (np.array([end.p1, end.p2]) - tr.lo) / tr.width
+        if np.any(u < -1e-9) or np.any(u > 1 + 1e-9):
+            new_ends[(side + 1) // 2] = "the saved end lies outside the ranges given"
+            continue
+        u = np.clip(u, 0.0, 1.0)
+        say(f"following the curve {'forwards' if side > 0 else 'backwards'} from its "
+            "saved end ...")
+        f = tr.F(u)
+        g = tr.gradient(u, f) if math.isfinite(f) else None
+        if g is None:
+            why = "the gradient of chi could not be computed at the saved end" + tr._why(u)
+            tr.warnings.append(why)
+            new_ends[(side + 1) // 2] = why
+            continue
+        turn = np.array([-g[1], g[0]])
+        if inner is not None:
+            back = (np.array([inner.p1, inner.p2]) - tr.lo) / tr.width
+            orient = 1 if turn @ (u - back) >= 0 else -1
+        else:  # the start alone: the two directions of trace_iso
+            orient = side
+        first = dataclasses.replace(end, sample=tr.sample(u))
+        more, specials, why = tr.branch(u, g, orient, budget, [first], label=side,
+                                        home=home)
+        added[side] = (more, specials)
+        new_ends[(side + 1) // 2] = why
+        if "did not converge" in why or "turns faster" in why or "left the ranges" in why:
+            tr.warnings.append(f"the curve ended {'forwards' if side > 0 else 'backwards'}: "
+                               f"{why}")
+    bwd, sp_b = added[-1]
+    fwd, sp_f = added[1]
+    out = list(reversed(bwd)) + pts + fwd
+    return Traced(tuple(out), start + len(bwd),
+                  tuple(list(reversed(sp_b)) + list(specials) + sp_f),
+                  (new_ends[0], new_ends[1]), tuple(tr.warnings), tr.evaluations,
+                  time.process_time() - cpu)
