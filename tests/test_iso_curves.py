@@ -561,6 +561,34 @@ def test_restart_files_that_are_not_a_curve_are_refused(tmp_path, paper_curve, c
         assert code == 2 and "--restart" in err and text in err, (text, err)
 
 
+def test_a_delayed_controller_moves_the_curve_and_its_point_gives_the_target_again():
+    # the outer loop delayed by tau = 0.5 ms (the discretised delay system is the engine's
+    # ODE): the curve's start at kD = 150, solved along EI, is where `index` with the same
+    # delay gives chi = 9 again, and it is not the delay-free curve's EI (1.90027e10, the
+    # documented example): the delay moves the curve. The index has no analytic derivative
+    # with a delay: a step takes differences (the start alone takes none)
+    from maglev_match import api
+    from maglev_match.analyses.iso import iso_chi_curve
+    from maglev_match.api.inputs import resolve_params
+
+    base = resolve_params("turnout-soft", tau=5e-4)
+    c = iso_chi_curve(base, ("EI", "kD"), {"EI": (1.8e10, 1.95e10), "kD": (140.0, 160.0)},
+                      9.0, at=("kD", 150.0), simulate=False,
+                      settings=TraceSettings(max_points=1, scan=2))
+    (pt,) = c.points
+    assert pt.status == "solved" and pt.p2 == 150.0
+    assert abs(pt.p1 / 1.90027e10 - 1.0) > 0.01
+    idx = api.matching_index("turnout-soft", simulate=False, stage=False, tau=5e-4,
+                             EI=pt.p1, kD=150.0)
+    assert abs(idx.chi - 9.0) <= 1e-7 * 9.0, idx.chi
+    assert pt.sample.basis == "paper" and pt.sample.paper_status == "cycle"
+    from maglev_match.analyses.iso import MaglevChi
+
+    parts, why = MaglevChi(base, ("EI", "kD"), simulate=False).gradient(pt.p1, pt.p2,
+                                                                          pt.sample)
+    assert parts == {} and "with a delay" in why  # a step takes differences, and says so
+
+
 def test_the_curve_crosses_the_design_kd_at_the_design_ei():
     # independent methods: `design` (SLSQP on exact gradients, the cheapest EI with the
     # headline chi >= 5 at the base kD = 150) and the curve's point at kD = 150 (chi = 5
