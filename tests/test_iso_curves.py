@@ -104,6 +104,11 @@ def test_a_curve_continued_beyond_its_ends_is_the_whole_curve():
     for s, sign in zip(switches, (-1, 1), strict=True):
         assert (s.p1, s.p2) == pytest.approx((SWITCH[0], sign * SWITCH[1]), abs=1e-7)
     assert whole.points[-1].sample.mechanism == "grazing"  # (beyond p2 = 0.8)
+    # continued again, both ends on the box: nothing to add, the saved special points kept
+    again = extend_iso(toy, BOX, 5.0, whole.points, whole.start, whole.ends,
+                       specials=whole.specials, settings=TraceSettings(max_points=4))
+    assert again.points == whole.points and again.specials == whole.specials
+    assert again.ends == ("reached the edge of the ranges",) * 2
 
 
 def test_toy_curve_says_where_the_deciding_part_is_only_bracketed():

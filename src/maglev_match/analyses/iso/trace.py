@@ -784,9 +784,8 @@ def extend_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: f
         else:  # the start alone: the two directions of trace_iso
             orient = side
         first = dataclasses.replace(end, sample=tr.sample(u))
-        more, specials, why = tr.branch(u, g, orient, budget, [first], label=side,
-                                        home=home)
-        added[side] = (more, specials)
+        more, found, why = tr.branch(u, g, orient, budget, [first], label=side, home=home)
+        added[side] = (more, found)
         new_ends[(side + 1) // 2] = why
         if "did not converge" in why or "turns faster" in why or "left the ranges" in why:
             tr.warnings.append(f"the curve ended {'forwards' if side > 0 else 'backwards'}: "
