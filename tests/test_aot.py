@@ -60,7 +60,7 @@ def _kernels_and_args():
     x = rng.normal(scale=1e-3, size=N)
     G = hopf.hopf_defining_kernels(unit.unit_rhs, (15,))[0].fn
     z = np.concatenate([x, rng.normal(size=2 * N), [120.0, P_A[15]]])
-    form3 = normal_forms.real_forms(unit.unit_rhs)[3].fn
+    form3 = normal_forms.real_forms(unit.unit_rhs)[3].kernel.fn
     us = [rng.normal(size=(5, N)) for _ in range(3)]
     kern = collocation.collocation_kernel(unit.unit_rhs, 4).fn
     Ui = rng.normal(scale=1e-3, size=(8, 5, N))
@@ -100,7 +100,7 @@ def test_compiled_code_is_released_near_the_mapping_limit(aot_cache, monkeypatch
     monkeypatch.setattr(aot, "MAP_CHECK_EVERY", 1)
     if aot._map_limit() == 0:
         pytest.skip("no vm.max_map_count here (not Linux)")
-    form2 = normal_forms.real_forms(unit.unit_rhs)[2].fn
+    form2 = normal_forms.real_forms(unit.unit_rhs)[2].kernel.fn
     kf = _fresh(form2, unit.unit_rhs, 2, name="normal_forms.form")
     kf(np.zeros(N), P_A, np.ones((3, N)), np.ones((3, N)))  # a new signature: the check
     assert aot.STATS.released == 1
@@ -124,7 +124,7 @@ def test_new_parameter_value_reuses_the_exported_kernel(aot_cache):
     assert aot.STATS.exported == 1 and aot.STATS.loaded == 1
     assert len(list(aot_cache.glob("*.jaxexport"))) == 1
     # a new shape is a new signature: a second file
-    form2 = normal_forms.real_forms(unit.unit_rhs)[2].fn
+    form2 = normal_forms.real_forms(unit.unit_rhs)[2].kernel.fn
     kf = _fresh(form2, unit.unit_rhs, 2, name="normal_forms.form")
     x = np.zeros(N)
     kf(x, p, np.ones((3, N)), np.ones((3, N)))

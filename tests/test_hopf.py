@@ -303,3 +303,32 @@ def test_hopf_curve_reports_a_generalised_hopf_point_at_its_start():
     assert gh[0].values[1] == 0.0 and abs(gh[0].values[0]) < 1e-12
     assert gh[0].l2 == pytest.approx(-2.0, rel=1e-8)
     assert gh[0].located == "solved"
+
+
+def test_a_form_padded_to_its_batch_is_the_form_of_the_directions_given():
+    # the forms of the Lyapunov coefficients pad their directions to a multiple of the
+    # order's batch (one compiled kernel per order): the rows given are the form at those
+    # directions (against the bilinear form's closed form for a quadratic field), and any
+    # number of directions up to the batch uses the one kernel signature
+    from maglev_match.dynamics.normal_forms import FORM_BATCH, real_forms
+
+    A = np.array([[0.3, -1.2, 0.5], [0.7, 0.1, -0.4], [-0.2, 0.9, 0.6]])
+
+    def rhs(x, p):  # f(x) = p0 (x . A x) e0 + p1 x1 x2 e2: B(u, v) in closed form
+        return jnp.array([p[0] * (x @ A @ x), 0.0 * x[1], p[1] * x[1] * x[2]])
+
+    p = np.array([1.5, -2.0])
+    x = np.array([0.1, 0.2, -0.3])
+    F2 = real_forms(rhs)[2]
+    rng = np.random.default_rng(3)
+    for n in (1, 3, 6, FORM_BATCH[2], FORM_BATCH[2] + 2):
+        u, v = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+        got = F2(x, p, u, v)
+        want = np.stack([[p[0] * (ui @ (A + A.T) @ vi), 0.0,
+                          p[1] * (ui[1] * vi[2] + ui[2] * vi[1])]
+                         for ui, vi in zip(u, v, strict=True)])
+        assert got.shape == (n, 3)
+        np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-15)
+    # (a local field has no stable identity: its kernel is a plain jit, which counts the
+    # signatures it compiled) 1 to 8 directions: one; 10: a second
+    assert F2.kernel._cache_size() == 2

@@ -50,16 +50,40 @@ def _real_form(rhs, order: int):
     return form
 
 
+#: the directions of every call of a form of order k are padded (with zeros) to a multiple
+#: of FORM_BATCH[k]: one compiled kernel per order instead of one per batch size (the
+#: Lyapunov coefficients call them with 1 to 32 directions; every kernel costs ~30 ms to
+#: load in a new process)
+FORM_BATCH = {2: 8, 3: 8, 4: 16, 5: 32}
+
+
+class _PaddedForm:
+    """A batched real form called with its directions padded to a multiple of ``size``;
+    returns the rows of the directions given (a NumPy array)."""
+
+    def __init__(self, kernel: Callable, size: int) -> None:
+        self.kernel, self.size = kernel, size
+
+    def __call__(self, x, p, *us):
+        us = [np.asarray(u, np.float64) for u in us]
+        n = us[0].shape[0]
+        pad = -n % self.size
+        if pad:
+            us = [np.concatenate([u, np.zeros((pad,) + u.shape[1:])]) for u in us]
+        return np.asarray(self.kernel(x, p, *us))[:n]
+
+
 @cache
 def real_forms(rhs) -> dict[int, Callable]:
-    """Jitted real multilinear forms of orders 2..5 for ``rhs``, vmapped over batches of
-    directions (one trace each; complex directions are expanded outside, which keeps the
-    compile time small even at order 5)."""
+    """Real multilinear forms of orders 2..5 for ``rhs``, jitted and vmapped over batches
+    of directions (one trace each; complex directions are expanded outside, which keeps
+    the compile time small even at order 5), each batch padded to a multiple of
+    :data:`FORM_BATCH`."""
     out = {}
     for k in (2, 3, 4, 5):
         axes = (None, None) + (0,) * k
-        out[k] = cached_kernel(jax.vmap(_real_form(rhs, k), in_axes=axes), rhs, k,
-                               name="normal_forms.form")
+        out[k] = _PaddedForm(cached_kernel(jax.vmap(_real_form(rhs, k), in_axes=axes), rhs,
+                                           k, name="normal_forms.form"), FORM_BATCH[k])
     return out
 
 
