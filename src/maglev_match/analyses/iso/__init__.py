@@ -1,6 +1,8 @@
 """Iso-chi design curves: the level set headline chi(p1, p2) = target continued in two
 parameters (`maglev-match iso-curve`).
 
+* :mod:`~maglev_match.analyses.iso.records`: the records (an evaluation, a point, a special
+  point, the traced curve);
 * :mod:`~maglev_match.analyses.iso.trace`: the continuation for any evaluator of chi and
   its two parts (pseudo-arclength predictor, corrector along the gradient, step control,
   the start, the switches of the deciding part and the mechanism changes located);

@@ -17,6 +17,7 @@ import numpy as np
 from maglev_match.analyses.iso.maglev import MaglevChi
 from maglev_match.analyses.iso.trace import (
     DEFAULT_SETTINGS,
+    ENDED,
     IsoPoint,
     IsoSpecial,
     Sample,
@@ -283,9 +284,11 @@ def continue_iso_curve(curve: IsoChiCurve,
     evaluate = MaglevChi(curve.base, curve.names, model=curve.model, simulate=curve.simulate)
     traced = extend_iso(evaluate, box, curve.target, curve.points, curve.start, curve.ends,
                         specials=curve.specials, settings=settings, stage=stage)
-    summary = [w for w in curve.warnings if w.startswith("the curve ended ")
-               or _BRACKETED in w or w.startswith(("a basis switch", "a mechanism change"))]
-    warnings = [w for w in curve.warnings if w not in summary] + list(traced.warnings) + \
+    def of_the_whole(w: str) -> bool:  # said again below, for the whole curve
+        return (w.startswith((ENDED, "a basis switch", "a mechanism change"))
+                or _BRACKETED in w)
+
+    warnings = [w for w in curve.warnings if not of_the_whole(w)] + list(traced.warnings) + \
         _summary(traced.points, traced.specials, curve.names)
     return dataclasses.replace(
         curve, ranges=box, points=traced.points, start=traced.start,

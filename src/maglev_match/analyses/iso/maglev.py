@@ -1,7 +1,7 @@
 """The headline index of a maglev model as the evaluator of an iso-chi curve: one
 :func:`~maglev_match.analyses.matching.matching_index` per (p1, p2), warm-started from the
 nearest design evaluated so far (``near=``: its solved critical disturbances are continued
-instead of searched again), read into a :class:`~maglev_match.analyses.iso.trace.Sample`; and the
+instead of searched again), read into a :class:`~maglev_match.analyses.iso.records.Sample`; and the
 exact gradient of each part there (:meth:`MaglevChi.gradient`), from the index's analytic
 sensitivities (:func:`~maglev_match.analyses.sensitivity.index_sensitivity`: the paper
 part through the cycle's parameter derivative, the simulated part through the implicit
@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from maglev_match.analyses.iso.trace import Sample
+from maglev_match.analyses.iso.records import Sample
 from maglev_match.analyses.matching import Case, MatchingIndex, matching_index
 from maglev_match.core.params import ParameterError, Params
 

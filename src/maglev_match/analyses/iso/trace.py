@@ -42,10 +42,10 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
+from maglev_match.analyses.iso.records import IsoPoint, IsoSpecial, Sample, Traced
 from maglev_match.dynamics.continuation import (
     ContinuationOptions,
     Correction,
@@ -58,78 +58,8 @@ __all__ = ["Sample", "IsoPoint", "IsoSpecial", "TraceSettings", "DEFAULT_SETTING
 
 #: why a direction ended when the curve came back to its start (not continued by a restart)
 CLOSED = "the curve closed on its start"
-
-
-@dataclass(frozen=True)
-class Sample:
-    """One evaluation of the headline index at (p1, p2).
-
-    ``chi`` the headline (NaN: not computed, ``reason`` says why), ``chi_paper`` and
-    ``chi_simulation`` its parts (None: not simulated or inconclusive), ``basis`` the
-    deciding part ("paper" or "simulation"), ``mechanism`` and ``direction`` what decided
-    the simulated part and in which direction, ``paper_status`` ("cycle": the unstable
-    cycle solved, "rule": no cycle within the limits, h = gap range; "unstable": h = 0;
-    "failed") and ``simulation_status`` ("solved", "bracketed": only the bisection's
-    bracket, "inconclusive", "skipped", "off"). ``state`` is the evaluator's own record (the
-    full index), not compared."""
-
-    chi: float
-    chi_paper: float
-    chi_simulation: float | None = None
-    basis: str = "paper"
-    mechanism: str | None = None
-    direction: str | None = None
-    paper_status: str = "cycle"
-    simulation_status: str = "off"
-    reason: str = ""
-    state: Any = None
-
-    @property
-    def exact(self) -> bool:
-        """True when the deciding part is a solved number (not a bracket's midpoint)."""
-        if not math.isfinite(self.chi):
-            return False
-        if self.basis == "simulation":
-            return self.simulation_status == "solved"
-        return self.paper_status in ("cycle", "rule", "unstable")
-
-
-@dataclass(frozen=True)
-class IsoPoint:
-    """A point of the curve: the two parameter values, the evaluation there, the
-    corrector's residual chi - target and iterations, and ``status``: "solved" (the
-    deciding part solved, |chi - target| <= tol target), "bracketed" (the corrector
-    converged but the deciding simulated part is only a bisection bracket), or "not
-    converged" (the last iterate of a failed corrector, where the curve ends)."""
-
-    p1: float
-    p2: float
-    sample: Sample
-    residual: float
-    iterations: int
-    status: str
-    branch: int = 0  # 0 the start, +1 / -1 the direction followed
-    # how the gradient of chi there was obtained: "exact" (the deciding part's analytic
-    # derivative) or "difference: <why not exact>" ('' where none was computed)
-    gradient: str = ""
-
-
-@dataclass(frozen=True)
-class IsoSpecial:
-    """A special point between two neighbouring curve points: ``kind`` "basis switch"
-    (the deciding part changes; chi_paper = chi_simulation = target there) or "mechanism
-    change"; ``before``/``after`` the labels on either side, ``located`` whether the
-    location converged, ``residual`` chi_paper - chi_simulation there (switch)."""
-
-    kind: str
-    p1: float
-    p2: float
-    before: str
-    after: str
-    sample: Sample
-    located: bool
-    residual: float
-    message: str = ""
+#: how the warning of a direction that ended on a failure begins
+ENDED = "the curve ended"
 
 
 @dataclass(frozen=True)
@@ -391,8 +321,7 @@ class _Tracer:
         t0 = sign * np.array([-g0[1], g0[0]]) / np.linalg.norm(g0)
         if self._step(u0, t0, self.s.ds) is None:  # on the edge, pointing out of the box
             return [], [], "reached the edge of the ranges"
-        problem = _LevelSet(self, u0 if home is None else home, g0, label)
-        problem.anchor = u0
+        problem = _LevelSet(self, u0, g0, label, home)
         res = continuation(problem, u0, t0, problem.options(n_max),
                            first=problem.correction(u0, g0, None, 0))
         pts: list[IsoPoint] = []
@@ -435,6 +364,11 @@ class _Tracer:
         if edge is not None and limit < 1e-9:
             return None
         return limit, edge
+
+    def note_end(self, name: str, why: str) -> None:
+        """A warning for the direction ``name`` when it ended on a failure (``why``)."""
+        if "did not converge" in why or "turns faster" in why or "left the ranges" in why:
+            self.warnings.append(f"{ENDED} {name}: {why}")
 
     def _fail_reason(self, u: np.ndarray, f: float, in_range: bool) -> str:
         p1, p2 = self.params(u)
@@ -566,8 +500,10 @@ class _LevelSet:
     edge, and where the deciding part switches (a corner of the level set of a
     minimum)."""
 
-    def __init__(self, tr: _Tracer, u0: np.ndarray, g0: np.ndarray, sign: int) -> None:
-        self.tr, self.u0, self.sign = tr, u0, sign
+    def __init__(self, tr: _Tracer, u0: np.ndarray, g0: np.ndarray, sign: int,
+                 home: np.ndarray | None = None) -> None:
+        self.tr, self.sign = tr, sign
+        self.u0 = u0 if home is None else home  # the start the curve may close on
         self.weights = np.ones(2)
         self.anchor, self.anchor_gradient = u0, g0  # the last accepted point, its gradient
         self.edge: int | None = None  # the box edge the last correction was solved on
@@ -659,21 +595,6 @@ class _LevelSet:
         return self.ended or None
 
 
-@dataclass(frozen=True)
-class Traced:
-    """What :func:`trace_iso` returns: the points in order along the curve, the start's
-    position among them, the special points, each direction's end, the warnings and the
-    counts."""
-
-    points: tuple[IsoPoint, ...]
-    start: int | None
-    specials: tuple[IsoSpecial, ...]
-    ends: tuple[str, str]
-    warnings: tuple[str, ...]
-    evaluations: int
-    cpu_seconds: float
-
-
 def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: float, *,
               fixed: int, value: float, settings: TraceSettings = DEFAULT_SETTINGS,
               stage: Callable[[str], None] | None = None) -> Traced:
@@ -719,8 +640,7 @@ def trace_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: fl
         stage("following the curve backwards ...")
         bwd, sp_b, end_b = tr.branch(u0, g0, -1, per, [first])
     for end, name in ((end_f, "forwards"), (end_b, "backwards")):
-        if "did not converge" in end or "turns faster" in end or "left the ranges" in end:
-            tr.warnings.append(f"the curve ended {name}: {end}")
+        tr.note_end(name, end)
     points = list(reversed(bwd)) + [first] + fwd
     return done(points, len(bwd), list(reversed(sp_b)) + sp_f, (end_b, end_f))
 
@@ -743,7 +663,6 @@ def extend_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: f
     ``evaluations`` counts the new evaluations only."""
     cpu = time.process_time()
     tr = _Tracer(evaluate, box, target, settings, stage)
-    say = stage or (lambda text: None)
     pts = list(points)
     if start is None or not pts:
         raise ValueError("a curve without points (it did not start) cannot be continued")
@@ -768,8 +687,8 @@ def extend_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: f
             new_ends[(side + 1) // 2] = "the saved end lies outside the ranges given"
             continue
         u = np.clip(u, 0.0, 1.0)
-        say(f"following the curve {'forwards' if side > 0 else 'backwards'} from its "
-            "saved end ...")
+        tr.say(f"following the curve {'forwards' if side > 0 else 'backwards'} from its "
+               "saved end ...")
         f = tr.F(u)
         g = tr.gradient(u, f) if math.isfinite(f) else None
         if g is None:
@@ -787,9 +706,7 @@ def extend_iso(evaluate: Evaluate, box: Sequence[tuple[float, float]], target: f
         more, found, why = tr.branch(u, g, orient, budget, [first], label=side, home=home)
         added[side] = (more, found)
         new_ends[(side + 1) // 2] = why
-        if "did not converge" in why or "turns faster" in why or "left the ranges" in why:
-            tr.warnings.append(f"the curve ended {'forwards' if side > 0 else 'backwards'}: "
-                               f"{why}")
+        tr.note_end("forwards" if side > 0 else "backwards", why)
     bwd, sp_b = added[-1]
     fwd, sp_f = added[1]
     out = list(reversed(bwd)) + pts + fwd
