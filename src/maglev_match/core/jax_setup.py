@@ -21,7 +21,8 @@ JAX (and, through it, NumPy's BLAS) is loaded, unless the caller imported them e
   2026-11-25 on the 2-core test machine). So, unless ``MAGLEV_MATCH_THREADS`` says
   otherwise, the thread pools are set to one thread (``OMP_NUM_THREADS``,
   ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS``, ``XLA_FLAGS``; values the user set are
-  kept). ``MAGLEV_MATCH_THREADS=auto`` leaves the thread pools to the libraries;
+  kept; the pools of a BLAS that NumPy loaded before this module are limited to one
+  thread the same way). ``MAGLEV_MATCH_THREADS=auto`` leaves the thread pools to the libraries;
   ``MAGLEV_MATCH_THREADS=1`` also pins the process to the core it started on, which halves a
   model-B simulation on a quiet machine but is NOT the default: a pinned process cannot move
   to the free core when the machine is busy (an empty-cache ``index`` took 62.6 s pinned
@@ -76,8 +77,21 @@ def _configure_threads() -> None:
     mode = os.environ.get("MAGLEV_MATCH_THREADS", "").strip().lower()
     if mode == "auto":
         return
+    chosen = [name for name in _THREAD_ENV if name in os.environ]
     for name in _THREAD_ENV:
         os.environ.setdefault(name, "1")
+    if not chosen and "numpy" in sys.modules:
+        # NumPy came first (a notebook, a test module): its BLAS started its thread pool
+        # before the variables above were set, one thread per core. Two such processes on
+        # two cores (a test run with two workers, two Dask workers of a map) then run four
+        # BLAS threads that wait on each other: the suite took ~20 % more CPU. Limit the
+        # pools already loaded as the variables would have.
+        try:
+            from threadpoolctl import threadpool_limits
+
+            threadpool_limits(limits=1)
+        except Exception:  # noqa: BLE001  (a library threadpoolctl cannot handle: left as is)
+            pass
     flags = os.environ.get("XLA_FLAGS", "")
     if "intra_op_parallelism_threads" not in flags and "multi_thread_eigen" not in flags:
         os.environ["XLA_FLAGS"] = (flags + " " + _XLA_SINGLE).strip()
