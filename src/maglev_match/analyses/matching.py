@@ -360,28 +360,70 @@ def matching_index(
     say(f"the paper's index of {m.info.short}: equilibrium, Hopf point, cycle branch ...")
     params = m.params
     system = m.system()
-    with blas_threads(m.blas_threads):
-        res = None if near is None else _paper_near(m, system, near, stability_result)
-        res = res if res is not None else index_of_system(
-            system, system.p, w0=m.w0, h_max=params.gap_max - params.c0,
-            search=m.hopf_search(),
-            limits=m.cycle_limits(include_current=False),
-            stability_result=stability_result,
-            omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
-            newton=m.cycle_newton,
-        )
-    if m.params.tau > 0:
-        say("the critical delay of the controller ...")
-    res = replace(res, model=m.name, critical_delay=critical_delay_info(m))
-    if not simulate:
-        return replace(res, headline=headline_text(res))
-    if not res.stable:
-        res = replace(res, simulation={"status": "skipped",
-                                       "reason": "the equilibrium is unstable"})
-        return replace(res, headline=headline_text(res))
+    beside = None
+    if simulate and _beside_allowed(m):
+        # the simulated part does not need the paper's: it runs beside it, in a second
+        # thread, once the equilibrium is known to be stable (core/beside.py)
+        from maglev_match.core.beside import Beside
+
+        stability_result = stability_result or stability(system, system.p)
+        if stability_result.stable:
+            beside = Beside(_simulated_part, m, near, simulation_kwargs or {}, solve, say)
+    try:
+        with blas_threads(m.blas_threads):
+            res = None if near is None else _paper_near(m, system, near, stability_result)
+            res = res if res is not None else index_of_system(
+                system, system.p, w0=m.w0, h_max=params.gap_max - params.c0,
+                search=m.hopf_search(),
+                limits=m.cycle_limits(include_current=False),
+                stability_result=stability_result,
+                omega1=float(params.omega1), sigma=float(params.sigma),  # type: ignore[arg-type]
+                newton=m.cycle_newton,
+            )
+        if m.params.tau > 0:
+            say("the critical delay of the controller ...")
+        res = replace(res, model=m.name, critical_delay=critical_delay_info(m))
+        if not simulate:
+            return replace(res, headline=headline_text(res))
+        if not res.stable:
+            res = replace(res, simulation={"status": "skipped",
+                                           "reason": "the equilibrium is unstable"})
+            return replace(res, headline=headline_text(res))
+        up, down, solved, cont = (
+            beside.result() if beside is not None
+            else _simulated_part(m, near, simulation_kwargs or {}, solve, say))
+    except BaseException:
+        if beside is not None:  # an error or a Ctrl-C here: the thread stops first
+            beside.stop()
+        raise
+    out = with_simulation(res, up, down, labels=m.info.disturbance_labels, rule=SIM_RULE,
+                          solved=solved)
+    if near is None or not solve:
+        return out
+    info = dict(out.simulation)
+    for d, key in ((-1, "up"), (1, "down")):
+        how = cont.get(d, (None, None, "the neighbour's size was not solved"))
+        info[key] = {**info[key], "continuation": (
+            {"continued": True} if how[1] is not None
+            else {"continued": False, "reason": how[2]})}
+    return replace(out, simulation=info)
+
+
+def _beside_allowed(m: MaglevModel) -> bool:
+    """May the simulated part run beside the paper's (:mod:`maglev_match.core.beside`)?
+    Where the model's code may run in a second thread and the process has two cores."""
+    from maglev_match.core.beside import two_cores
+
+    return m.parts_beside and two_cores()
+
+
+def _simulated_part(m: MaglevModel, near: MatchingIndex | None, kw: dict[str, Any],
+                    solve: bool, say: Callable[[str], None]) -> tuple[Any, Any, Any, dict]:
+    """The index's simulated part: the critical disturbance of both directions (continued
+    from ``near`` where it holds, else bracketed) and, with ``solve``, the solved critical
+    condition of each; returns (up, down, solved, continuation per direction)."""
     from maglev_match.analyses.simulation import critical_disturbance
 
-    kw = simulation_kwargs or {}
     cont = _continued(m, near) if solve and near is not None else {}
     up, c_up, _ = cont.get(-1, (None, None, ""))
     down, c_down, _ = cont.get(1, (None, None, ""))
@@ -401,17 +443,7 @@ def matching_index(
             # the saddle cycle of a basin boundary is the same set for both directions
             c_down = replace(critical_from_bisection(m, down, orbit_hint=c_up.orbit), at=at)
         solved = (c_up, c_down)
-    out = with_simulation(res, up, down, labels=m.info.disturbance_labels, rule=SIM_RULE,
-                          solved=solved)
-    if near is None or not solve:
-        return out
-    info = dict(out.simulation)
-    for d, key in ((-1, "up"), (1, "down")):
-        how = cont.get(d, (None, None, "the neighbour's size was not solved"))
-        info[key] = {**info[key], "continuation": (
-            {"continued": True} if how[1] is not None
-            else {"continued": False, "reason": how[2]})}
-    return replace(out, simulation=info)
+    return up, down, solved, cont
 
 
 def _continued(m: MaglevModel, near: MatchingIndex) -> dict[int, tuple[Any, Any, str]]:

@@ -129,6 +129,11 @@ class MaglevModel(abc.ABC):
     blas_threads: ClassVar[int | None] = None
     #: the named initial states of its simulations
     initial_states: ClassVar[tuple[str, ...]] = ("equilibrium",)
+    #: may the index's simulated part run in a second thread beside the paper's part
+    #: (:mod:`maglev_match.core.beside`)? Only for models whose code is safe there: a user
+    #: model file's code runs under process-wide guards (maglev/user.py), so it stays in one
+    #: thread
+    parts_beside: ClassVar[bool] = False
 
     def __init__(self, params: Params) -> None:
         if not isinstance(params, Params):

@@ -37,6 +37,7 @@ class UnitModel(MaglevModel):
                                      max_rounds=12)
     cycle_newton = "full"
     blas_threads = None
+    parts_beside = True
 
     @property
     def param_names(self) -> tuple[str, ...]:
@@ -146,6 +147,7 @@ class VehicleModel(MaglevModel):
     # cores there (the Floquet condensation: 1.5 s per cycle with OpenBLAS's threads on
     # the 2-core machine under load, 0.05 s single-threaded; measured)
     blas_threads = 1
+    parts_beside = True
     initial_states = ("equilibrium", "pressed")
 
     @property

@@ -36,6 +36,7 @@ import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64)
 from maglev_match.core.aot import cached_kernel
+from maglev_match.core.beside import stop_point
 from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.hybrid.system import HybridSystem, identity_project
@@ -488,6 +489,7 @@ def hybrid_flow(
         n_pad = SAVE_BUCKET * (-(-n_req // SAVE_BUCKET)) - n_req
         if n_pad:  # padded with the end time (not reached by the loop's saving)
             ts = np.concatenate([ts, np.repeat(t1[:, None], n_pad, axis=1)], axis=1)
+    stop_point()  # a part run beside another stops here when asked (core/beside.py)
     kern = _flow_kernel(hs.rhs, hs.guards, hs.project or identity_project,
                         hs.domain or _whole_space, int(k), int(ts.shape[1]),
                         int(opts.max_switches))

@@ -59,6 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from maglev_match.core import jax_setup  # noqa: F401  (float64 on)
+from maglev_match.core.beside import stop_point
 from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.reprs import compact_repr
 from maglev_match.dynamics.integrate.kernel import (
@@ -280,6 +281,7 @@ def _save_times(t_end: float, n_save: int, t_save: Array | None) -> np.ndarray:
 
 def _run(system: System, x0, p, t_end, *, event_fn, x_ref, options, n_save, t_save,
          batch_x, batch_p):
+    stop_point()  # a part run beside another stops here when asked (core/beside.py)
     opts = options or SimulationOptions()
     if opts.solver not in SOLVERS:
         raise ValueError(f"unknown solver '{opts.solver}'; choose from {', '.join(SOLVERS)}")
