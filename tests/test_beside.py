@@ -13,7 +13,7 @@ import threading
 
 import pytest
 
-from maglev_match.analyses import matching
+from maglev_match.analyses import continued, matching
 from maglev_match.core import beside as beside_mod
 from maglev_match.core.beside import Beside, Stopped, stop_point
 from maglev_match.core.params import load_preset
@@ -66,7 +66,7 @@ def test_index_beside_equals_the_index_one_after_the_other(monkeypatch):
     assert started == []
     monkeypatch.setattr(matching, "_beside_allowed", lambda m: True)
     both = matching.matching_index(params).as_json()
-    assert started == ["_simulated_part"]
+    assert started == ["simulated_part"]
     assert json.dumps(both, sort_keys=True) == json.dumps(one_after, sort_keys=True)
     assert both["simulation"]["up"]["critical"]["converged"]
     assert both["simulation"]["down"]["critical"]["converged"]
@@ -95,7 +95,7 @@ def test_an_error_in_the_paper_part_stops_the_simulated_part_first(monkeypatch, 
 
     monkeypatch.setattr(simulate, "stop_point", marking_stop_point)
     ended = []
-    real_part = matching._simulated_part
+    real_part = continued.simulated_part
 
     def recording_part(*args):
         try:
@@ -108,7 +108,7 @@ def test_an_error_in_the_paper_part_stops_the_simulated_part_first(monkeypatch, 
         assert in_kernels.wait(300), "the simulated part never started a kernel"
         raise error
 
-    monkeypatch.setattr(matching, "_simulated_part", recording_part)
+    monkeypatch.setattr(continued, "simulated_part", recording_part)
     monkeypatch.setattr(matching, "index_of_system", failing_paper)
     monkeypatch.setattr(matching, "_beside_allowed", lambda m: True)
     with pytest.raises(type(error)):

@@ -14,11 +14,12 @@ import maglev_match
 
 ROOT = Path(maglev_match.__file__).parent
 # what the numerics layer may import from the package besides itself: the compilation
-# helpers, and the results protocol its branch and point results derive from (Plottable:
-# standard library only, it knows no model)
+# helpers, the thread limits and the stop point of work run beside other work, and the
+# results protocol its branch and point results derive from (Plottable: standard library
+# only, it knows no model)
 NUMERICS_ALLOWED = {"maglev_match.core.aot", "maglev_match.core.jax_setup",
                     "maglev_match.core.reprs", "maglev_match.core.results",
-                    "maglev_match.core.threads"}
+                    "maglev_match.core.threads", "maglev_match.core.beside"}
 
 
 def _modules() -> dict[str, Path]:

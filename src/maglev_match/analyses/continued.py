@@ -32,7 +32,7 @@ tolerance (relative 1e-12), so they agree to far better than 1e-9 m.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -43,6 +43,7 @@ from maglev_match.analyses.critical import (
     CriticalSize,
     Mechanism,
     critical_derivative,
+    critical_from_bisection,
     disturbance_line,
     saddle_landing,
     solve_critical,
@@ -56,7 +57,8 @@ from maglev_match.maglev.models import maglev_model
 __all__ = ["CriticalStart", "Fallback", "MechanismChange", "FollowedCritical",
            "continue_critical", "continue_criticals", "follow_critical", "follow_grid",
            "describe", "CHECK_STEP",
-           "BRACKET", "continue_cycle", "CYCLE_STEP", "CYCLE_CHANGE"]
+           "BRACKET", "continue_cycle", "CYCLE_STEP", "CYCLE_CHANGE", "simulated_part",
+           "continued_from"]
 
 #: the relative offset of the two check runs below and above a continued size
 CHECK_STEP = 1e-4
@@ -528,3 +530,60 @@ def continue_cycle(system: Any, p: np.ndarray, cycle: Any, hopf_param: str,
     if limits is not None and min(limits(system, pt.orbit).values()) <= 0:
         return "the continued cycle reaches a limit"
     return pt, hp
+
+
+def simulated_part(m: MaglevModel, near: Any, kw: dict[str, Any], solve: bool,
+                   say: Callable[[str], None]) -> tuple[Any, Any, Any, dict]:
+    """The index's simulated part: the critical disturbance of both directions (continued
+    from ``near`` where it holds, else bracketed) and, with ``solve``, the solved critical
+    condition of each; returns (up, down, solved, continuation per direction). ``near``:
+    a :class:`~maglev_match.analyses.matching.MatchingIndex` or None. It needs nothing of
+    the index's paper part, so the index may run it beside that part
+    (:mod:`maglev_match.core.beside`)."""
+    from maglev_match.analyses.simulation import critical_disturbance
+
+    cont = continued_from(m, near) if solve and near is not None else {}
+    up, c_up, _ = cont.get(-1, (None, None, ""))
+    down, c_down, _ = cont.get(1, (None, None, ""))
+    if up is None or down is None:
+        say("the critical disturbance: bracketing both directions with simulations ...")
+    up = up if up is not None else critical_disturbance(m, direction=-1, **kw)
+    down = down if down is not None else critical_disturbance(m, direction=1, **kw)
+    solved = None
+    if solve:
+        say("the critical disturbance: solving the grazing or basin-boundary condition ...")
+        at = np.asarray(m.param_vector(), float)
+        if c_up is None:
+            c_up = replace(critical_from_bisection(m, up), at=at)
+        if c_down is None:
+            # the saddle cycle of a basin boundary is the same set for both directions
+            c_down = replace(critical_from_bisection(m, down, orbit_hint=c_up.orbit), at=at)
+        solved = (c_up, c_down)
+    return up, down, solved, cont
+
+
+def continued_from(m: MaglevModel, near: Any) -> dict[int, tuple[Any, Any, str]]:
+    """The critical sizes of ``near`` continued to the model ``m``, per direction:
+    (check search, size, '') where the continuation holds, (None, None, why) where not.
+    ``near``: a :class:`~maglev_match.analyses.matching.MatchingIndex`."""
+    out: dict[int, tuple[Any, Any, str]] = {}
+    at = np.asarray(m.param_vector(), float)
+    todo = []
+    for d, c in ((-1, near.critical_up), (1, near.critical_down)):
+        if c is None or not c.solved or c.at is None or c.window is None:
+            continue
+        if c.model != m.name or np.shape(c.at) != at.shape:
+            out[d] = (None, None, f"the neighbour is of model {c.model}")
+            continue
+        # a neighbour that was itself continued remembers its own neighbour: the secant
+        # through the two predicts the size here (one Newton step fewer than from the
+        # neighbour's size alone)
+        prev = (None if c.previous is None or c.size is None else
+                CriticalStart(np.asarray(c.previous[0]), replace(c, size=c.previous[1])))
+        todo.append((d, CriticalStart(np.asarray(c.at), c, prev)))
+    # both directions at once: one batched corrector and one batch of check runs
+    done = continue_criticals(m, [s for _, s in todo], model=m.name)
+    for (d, start), (size, check, why) in zip(todo, done, strict=True):
+        out[d] = ((check, replace(size, at=at, previous=(start.p, float(start.critical.size))),
+                   "") if size is not None else (None, None, why.reason))
+    return out

@@ -360,6 +360,8 @@ def matching_index(
     say(f"the paper's index of {m.info.short}: equilibrium, Hopf point, cycle branch ...")
     params = m.params
     system = m.system()
+    from maglev_match.analyses.continued import simulated_part
+
     beside = None
     if simulate and _beside_allowed(m):
         # the simulated part does not need the paper's: it runs beside it, in a second
@@ -368,7 +370,7 @@ def matching_index(
 
         stability_result = stability_result or stability(system, system.p)
         if stability_result.stable:
-            beside = Beside(_simulated_part, m, near, simulation_kwargs or {}, solve, say)
+            beside = Beside(simulated_part, m, near, simulation_kwargs or {}, solve, say)
     try:
         with blas_threads(m.blas_threads):
             res = None if near is None else _paper_near(m, system, near, stability_result)
@@ -391,7 +393,7 @@ def matching_index(
             return replace(res, headline=headline_text(res))
         up, down, solved, cont = (
             beside.result() if beside is not None
-            else _simulated_part(m, near, simulation_kwargs or {}, solve, say))
+            else simulated_part(m, near, simulation_kwargs or {}, solve, say))
     except BaseException:
         if beside is not None:  # an error or a Ctrl-C here: the thread stops first
             beside.stop()
@@ -415,63 +417,6 @@ def _beside_allowed(m: MaglevModel) -> bool:
     from maglev_match.core.beside import two_cores
 
     return m.parts_beside and two_cores()
-
-
-def _simulated_part(m: MaglevModel, near: MatchingIndex | None, kw: dict[str, Any],
-                    solve: bool, say: Callable[[str], None]) -> tuple[Any, Any, Any, dict]:
-    """The index's simulated part: the critical disturbance of both directions (continued
-    from ``near`` where it holds, else bracketed) and, with ``solve``, the solved critical
-    condition of each; returns (up, down, solved, continuation per direction)."""
-    from maglev_match.analyses.simulation import critical_disturbance
-
-    cont = _continued(m, near) if solve and near is not None else {}
-    up, c_up, _ = cont.get(-1, (None, None, ""))
-    down, c_down, _ = cont.get(1, (None, None, ""))
-    if up is None or down is None:
-        say("the critical disturbance: bracketing both directions with simulations ...")
-    up = up if up is not None else critical_disturbance(m, direction=-1, **kw)
-    down = down if down is not None else critical_disturbance(m, direction=1, **kw)
-    solved = None
-    if solve:
-        from maglev_match.analyses.critical import critical_from_bisection
-
-        say("the critical disturbance: solving the grazing or basin-boundary condition ...")
-        at = np.asarray(m.param_vector(), float)
-        if c_up is None:
-            c_up = replace(critical_from_bisection(m, up), at=at)
-        if c_down is None:
-            # the saddle cycle of a basin boundary is the same set for both directions
-            c_down = replace(critical_from_bisection(m, down, orbit_hint=c_up.orbit), at=at)
-        solved = (c_up, c_down)
-    return up, down, solved, cont
-
-
-def _continued(m: MaglevModel, near: MatchingIndex) -> dict[int, tuple[Any, Any, str]]:
-    """The critical sizes of ``near`` continued to the model ``m``, per direction:
-    (check search, size, '') where the continuation holds, (None, None, why) where not."""
-    from maglev_match.analyses.continued import CriticalStart, continue_criticals
-
-    out: dict[int, tuple[Any, Any, str]] = {}
-    at = np.asarray(m.param_vector(), float)
-    todo = []
-    for d, c in ((-1, near.critical_up), (1, near.critical_down)):
-        if c is None or not c.solved or c.at is None or c.window is None:
-            continue
-        if c.model != m.name or np.shape(c.at) != at.shape:
-            out[d] = (None, None, f"the neighbour is of model {c.model}")
-            continue
-        # a neighbour that was itself continued remembers its own neighbour: the secant
-        # through the two predicts the size here (one Newton step fewer than from the
-        # neighbour's size alone)
-        prev = (None if c.previous is None or c.size is None else
-                CriticalStart(np.asarray(c.previous[0]), replace(c, size=c.previous[1])))
-        todo.append((d, CriticalStart(np.asarray(c.at), c, prev)))
-    # both directions at once: one batched corrector and one batch of check runs
-    done = continue_criticals(m, [s for _, s in todo], model=m.name)
-    for (d, start), (size, check, why) in zip(todo, done, strict=True):
-        out[d] = ((check, replace(size, at=at, previous=(start.p, float(start.critical.size))),
-                   "") if size is not None else (None, None, why.reason))
-    return out
 
 
 SIM_RULE = ("limits on: the coil current is clamped at zero (force from max(i, 0), di/dt held "

@@ -22,7 +22,10 @@ JAX (and, through it, NumPy's BLAS) is loaded, unless the caller imported them e
   otherwise, the thread pools are set to one thread (``OMP_NUM_THREADS``,
   ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS``, ``XLA_FLAGS``; values the user set are
   kept; the pools of a BLAS that NumPy loaded before this module are limited to one
-  thread the same way). ``MAGLEV_MATCH_THREADS=auto`` leaves the thread pools to the libraries;
+  thread the same way). The two cores of a small machine are used by running independent
+  parts of one computation in two threads instead (the index's paper and simulated parts,
+  :mod:`maglev_match.core.beside`), or by the worker processes of a map.
+  ``MAGLEV_MATCH_THREADS=auto`` leaves the thread pools to the libraries;
   ``MAGLEV_MATCH_THREADS=1`` also pins the process to the core it started on, which halves a
   model-B simulation on a quiet machine but is NOT the default: a pinned process cannot move
   to the free core when the machine is busy (an empty-cache ``index`` took 62.6 s pinned
