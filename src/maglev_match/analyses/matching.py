@@ -388,6 +388,8 @@ def matching_index(
         if not simulate:
             return replace(res, headline=headline_text(res))
         if not res.stable:
+            if beside is not None:  # (started only for a stable equilibrium)
+                beside.stop()
             res = replace(res, simulation={"status": "skipped",
                                            "reason": "the equilibrium is unstable"})
             return replace(res, headline=headline_text(res))
