@@ -60,10 +60,15 @@ def _base(server) -> str:
     return f"http://127.0.0.1:{server.port}/"
 
 
+# Every predicate below reads its element with ?. : right after page.goto() the page may
+# not have built it yet, and a predicate that throws ends the wait at once instead of
+# waiting (seen once in CI: "Cannot read properties of null (reading 'textContent')").
+
+
 def _settled(page) -> str:
     """Wait until the index shown is that of the page's latest release; its text."""
     page.wait_for_function(
-        "() => document.getElementById('status').textContent === 'up to date'",
+        "() => document.getElementById('status')?.textContent === 'up to date'",
         timeout=WAIT)
     return page.locator("#chi").inner_text()
 
@@ -103,10 +108,10 @@ def test_a_released_slider_gives_the_index_there_and_the_url_round_trips(server,
     # back: the earlier state and its index; forward: the new one again
     page.go_back()
     page.wait_for_function(f"() => location.href === {first_url!r}", timeout=WAIT)
-    page.wait_for_function(f"() => document.getElementById('chi').textContent === "
+    page.wait_for_function(f"() => document.getElementById('chi')?.textContent === "
                            f"{first!r}", timeout=WAIT)
     page.go_forward()
-    page.wait_for_function(f"() => document.getElementById('chi').textContent === "
+    page.wait_for_function(f"() => document.getElementById('chi')?.textContent === "
                            f"{second!r}", timeout=WAIT)
     # reload: the same state from the URL alone
     page.reload()
@@ -119,19 +124,19 @@ def test_cancel_stops_a_background_job(server, page):
     # the curve the release started is drawn first (so that the job cancelled below is
     # the one started here); the new job may wait behind the map tile, then runs
     page.wait_for_function("() => ['done', 'error'].includes(document.getElementById("
-                           "'job-status').dataset.status)", timeout=WAIT)
+                           "'job-status')?.dataset.status)", timeout=WAIT)
     page.locator("#job-start").click()
-    page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
+    page.wait_for_function("() => document.getElementById('job-status')?.dataset.status === "
                            "'running'", timeout=WAIT)
     page.locator("#job-cancel").click()
-    page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
+    page.wait_for_function("() => document.getElementById('job-status')?.dataset.status === "
                            "'cancelled'", timeout=WAIT)
     # the process that ran it has ended (a job waiting behind it starts a fresh one)
     job = server.jobs.job(page.evaluate("() => JOBS.hopf_curve.job.id"))
     assert job.status == "cancelled" and not job.process.is_alive()
     # the next job runs to its end and draws the curve
     page.locator("#job-start").click()
-    page.wait_for_function("() => document.getElementById('job-status').dataset.status === "
+    page.wait_for_function("() => document.getElementById('job-status')?.dataset.status === "
                            "'done'", timeout=WAIT)
 
 
@@ -143,20 +148,22 @@ def test_a_bad_value_shows_the_message_and_changes_nothing(server, page):
     field.fill("-5")
     field.press("Enter")
     field.blur()
-    page.wait_for_function("() => document.getElementById('err-kD').textContent !== ''",
+    page.wait_for_function("() => (document.getElementById('err-kD')?.textContent ?? '') "
+                           "!== ''",
                            timeout=WAIT)
     assert page.locator("#err-kD").inner_text() == "parameter 'kD' = -5.0: must be >= 0"
     assert page.url == url and page.locator("#chi").inner_text() == chi
     # a bad value in the URL: refused the same way, nothing computed
     page.goto(_base(server) + "?preset=turnout-soft&EI=inf")
-    page.wait_for_function("() => document.getElementById('err-EI').textContent !== ''",
+    page.wait_for_function("() => (document.getElementById('err-EI')?.textContent ?? '') "
+                           "!== ''",
                            timeout=WAIT)
     assert "must be a finite number" in page.locator("#err-EI").inner_text()
     assert page.locator("#chi").inner_text() == "–"
 
 
 def _job_done(page, prefix: str) -> None:
-    page.wait_for_function(f"() => document.getElementById('{prefix}-status').dataset.status "
+    page.wait_for_function(f"() => document.getElementById('{prefix}-status')?.dataset.status "
                            "=== 'done'", timeout=WAIT)
 
 
@@ -186,7 +193,7 @@ def test_a_moving_slider_shows_chi_interpolated_from_the_map_tile(server, page):
                                        equal_nan=True)
     # EI moves (omega1 with it): chi interpolated, marked so, between the tile's values
     _move(page, "EI", 530)
-    page.wait_for_function("() => document.getElementById('chi-mark').textContent"
+    page.wait_for_function("() => document.getElementById('chi-mark')?.textContent"
                            ".includes('interpolated')", timeout=WAIT)
     assert page.locator("#chi-interp").get_attribute("data-state") == "interpolated"
     assert "interpolated" in page.locator("#chi-interp").inner_text()
@@ -200,7 +207,7 @@ def test_a_moving_slider_shows_chi_interpolated_from_the_map_tile(server, page):
     page.locator("#slider-EI").dispatch_event("change")
     _settled(page)
     _move(page, "kD", 300)
-    page.wait_for_function("() => document.getElementById('chi-interp').textContent"
+    page.wait_for_function("() => document.getElementById('chi-interp')?.textContent"
                            ".startsWith('no tile here')", timeout=WAIT)
     assert page.locator("#chi-interp").get_attribute("data-state") == "none"
 
@@ -218,7 +225,8 @@ def test_the_speed_sweep_shows_chi_at_speed_beside_the_standstill_headline(serve
     field = page.locator("#field-v")
     field.fill("-3")
     field.press("Enter")
-    page.wait_for_function("() => document.getElementById('err-v').textContent !== ''",
+    page.wait_for_function("() => (document.getElementById('err-v')?.textContent ?? '') "
+                           "!== ''",
                            timeout=WAIT)
     assert page.locator("#err-v").inner_text() == ("parameter 'v' = -3.0: must be 0 "
                                                    "(standstill) or from 3 to 900 km/h")
