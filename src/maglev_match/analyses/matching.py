@@ -360,8 +360,8 @@ def matching_index(
     say(f"the paper's index of {m.info.short}: equilibrium, Hopf point, cycle branch ...")
     params = m.params
     system = m.system()
-    from maglev_match.analyses.continued import simulated_part
-
+    if simulate:  # (not imported by a paper-only index: a map row's, --no-simulation)
+        from maglev_match.analyses.continued import simulated_part
     beside = None
     if simulate and _beside_allowed(m):
         # the simulated part does not need the paper's: it runs beside it, in a second
