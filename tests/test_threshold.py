@@ -95,3 +95,70 @@ def test_options_check_themselves():
         ThresholdOptions(chunk=0)
     with pytest.raises(ValueError, match="top_fraction"):
         ThresholdOptions(top_fraction=1.5)
+
+
+# A grazing threshold: the damped oscillator x'' + 2 z x' + x = 0 from x = 0, x' = d
+# peaks once at x_max = d exp(-z t_p), t_p = atan(w_d / z) / w_d (w_d = sqrt(1 - z^2)),
+# so a run collides with the limit x = L exactly when d > L exp(z t_p); its closest
+# approach to the limit, L - x_max, is linear in d.
+Z, LIMIT = 0.3, 0.5
+
+
+def _osc(x, p):
+    return jnp.stack([x[1], -x[0] - 2.0 * p[0] * x[1]])
+
+
+def _osc_events(x, p):
+    return jnp.reshape(p[1] - x[0], (1,))
+
+
+OSC = System(rhs=_osc, p=np.array([Z, LIMIT]), param_names=("z", "L"),
+             state_names=("x", "v"), state_scale=np.ones(2), name="grazing")
+
+
+def _kick(idx, sizes):
+    x = np.zeros((len(idx), 2))
+    x[:, 1] = sizes
+    return x
+
+
+def test_the_margin_secant_settles_a_grazing_threshold_in_one_round():
+    wd = np.sqrt(1 - Z**2)
+    exact = LIMIT * np.exp(Z * np.arctan(wd / Z) / wd)
+    # guesses 25 tolerances off (both sides) with a spread that covers them
+    g = np.array([exact + 25 * TOL, exact - 25 * TOL])
+    n = len(g)
+
+    def run(secant_rounds):
+        return bracket_thresholds(
+            OSC, np.tile([Z, LIMIT], (n, 1)), _kick, np.full(n, 1.0), guesses=g,
+            spreads=np.full(n, 30 * TOL), events=_osc_events, x_ref=np.zeros(2),
+            options=dataclasses.replace(OPTS, secant_rounds=secant_rounds))
+
+    with_secant, without = run(2), run(0)
+    for res in (with_secant, without):
+        assert all(s == ThresholdStatus.BRACKETED for s in res.status)
+        assert np.all(res.largest_return < exact) and np.all(exact < res.smallest_collision)
+        assert np.all(res.smallest_collision - res.largest_return <= TOL * (1 + 1e-6))
+    # a guess below: the first round's returns put the threshold within tol/2 (the
+    # margin is linear in the size), and one more round of two runs settles the line; a
+    # guess above has one return only, so its bracket is cut once before the secant
+    assert with_secant.runs[1] == 6
+    assert np.all(without.runs > with_secant.runs)
+    assert with_secant.rounds < without.rounds
+
+
+def test_the_secant_stays_out_of_a_basin_boundary():
+    # the closed-form system above: the returning runs' closest approach to the limit
+    # 2c is 2c - d, whose zero (2c) lies beyond the bracket: the plan's own rules decide,
+    # and the line is bracketed as without the secant
+    c = np.array([0.42])
+    g = np.array([0.42 - 40 * TOL])
+    res = [bracket_thresholds(SYSTEM, np.column_stack([[3.0], c]), _x0, np.ones(1),
+                              guesses=g, spreads=np.array([30 * TOL]), events=_events,
+                              x_ref=np.zeros(2),
+                              options=dataclasses.replace(OPTS, secant_rounds=k))
+           for k in (0, 2)]
+    assert res[0].runs[0] == res[1].runs[0]
+    assert res[0].largest_return[0] == res[1].largest_return[0]
+    assert res[0].smallest_collision[0] == res[1].smallest_collision[0]
