@@ -210,11 +210,11 @@ class MapSpec:
         return [(a, min(a + r, self.y.count)) for a in range(0, self.y.count, r)]
 
 
-# runs per batched kernel call. Most calls of a map's rows are far from full (a tile of
-# 4 rows: 604 runs in ~300 calls), and a wider chunk pays for the lanes of the runs that
-# finished early while its slowest run goes on: a headline tile (bench_index's rows
-# 8-11) took 11.3 s CPU with 32, 10.4 s with 16, 13.4 s with 64 and 16.3 s with 128,
-# the same sizes to the last bit
+# runs per batched kernel call. Most calls of a map's rows are far from full (a 20-point
+# tile of 4 rows: 715 runs in ~300 calls), and a wider chunk pays for the lanes of the
+# runs that finished early while its slowest run goes on: that tile took 11.3 s CPU with
+# 32, 10.4 s with 16, 13.4 s with 64 and 16.3 s with 128, the same sizes to the last bit
+# (a 100-point row fills its chunks: there 16 and 32 are within the run-to-run spread)
 SIM_CHUNK = 16
 _SETTINGS: list = []
 

@@ -12,10 +12,7 @@ larger ones collide. This module brackets d*_k for every line by batched simulat
   between the two inner sizes, two runs settle the line. A miss widens: sizes d, 2d, 3d
   beyond the last size of the same outcome, d = tol at first and 4 times larger each
   round (small misses, the common case, are bracketed to ``tol`` at once); a bracket wider
-  than ``tol`` is cut into equal parts, at most ``warm_sizes + 1`` per round. Before
-  either, a line with two returning runs tries the pair -+ tol/2 around the secant of
-  their closest approach to the gap limit (:func:`_secant_sizes`: the threshold of a
-  grazing contact to second order; up to ``secant_rounds`` rounds).
+  than ``tol`` is cut into equal parts, at most ``warm_sizes + 1`` per round.
 * **Cold lines** (no guess) follow the point-wise bisection of
   :func:`maglev_match.analyses.simulation.critical_disturbance_of_system`: ``cold_sizes`` sizes
   spread
@@ -93,8 +90,6 @@ class ThresholdOptions:
     max_unresolved : a line with this many unresolved runs is given up (``open``): its
         sizes near the threshold linger beyond the longest horizon, and every further
         run there costs that horizon.
-    secant_rounds : rounds per warm line planned around the margin secant's prediction
-        (:func:`_secant_sizes`; 0: never).
     """
 
     tol: float = 1e-5
@@ -109,7 +104,6 @@ class ThresholdOptions:
     slice_steps: int = 400
     first_slice_steps: int = 100
     max_unresolved: int = 2
-    secant_rounds: int = 2
 
     def __post_init__(self) -> None:
         for name, value in (("tol", self.tol), ("t_max", self.t_max),
@@ -124,8 +118,7 @@ class ThresholdOptions:
                                 ("chunk", self.chunk, 1),
                                 ("slice_steps", self.slice_steps, 1),
                                 ("first_slice_steps", self.first_slice_steps, 1),
-                                ("max_unresolved", self.max_unresolved, 1),
-                                ("secant_rounds", self.secant_rounds, 0)):
+                                ("max_unresolved", self.max_unresolved, 1)):
             if isinstance(value, bool) or not isinstance(value, int) or value < lo:
                 raise ValueError(f"ThresholdOptions.{name} = {value!r}: must be a whole "
                                  f"number >= {lo}")
@@ -179,11 +172,7 @@ class _Line:
     guess: float  # NaN: a cold line
     spread: float
     seen: dict[float, tuple[int, float]] = field(default_factory=dict)  # size -> (code, t)
-    # size -> the run's smallest value of each event entry; size -> the entry that fired
-    margins: dict[float, np.ndarray] = field(default_factory=dict)
-    entry: dict[float, int] = field(default_factory=dict)
     step: float = float("nan")  # expansion step of a warm line
-    secant_rounds: int = 0  # rounds planned by the margin secant (:func:`_secant`)
     runs: int = 0
     unresolved: int = 0
     steps: int = 0
@@ -236,9 +225,6 @@ def _plan(line: _Line, first: bool, opts: ThresholdOptions) -> list[float]:
             sizes = [g - w, *sizes, g + w]
         line.step = tol
         sizes = [min(max(s, tol), line.top) for s in sizes]
-    elif secant := _secant_sizes(line, lo, hi, opts):
-        line.secant_rounds += 1
-        sizes = secant
     elif lo is not None and hi is not None:
         need = math.ceil((hi - lo) / tol - 1e-9)  # parts that reach tol in one round
         cap = (opts.cold_sizes if cold else opts.warm_sizes) + 1
@@ -260,49 +246,6 @@ def _plan(line: _Line, first: bool, opts: ThresholdOptions) -> list[float]:
         return []  # every run so far unresolved
     new = sorted({float(s) for s in sizes if s > 0 and float(s) not in line.seen})
     return new
-
-
-def _secant_sizes(line: _Line, lo: float | None, hi: float | None,
-                  opts: ThresholdOptions) -> list[float] | None:
-    """The sizes -+ tol/2 around where the two largest returning sizes below the
-    bracket put the threshold of a grazing contact (those inside the bracket and the
-    range; the top of the range too when the prediction lies beyond it): the secant of
-    their closest approach to the gap limit that decides (the entry the smallest
-    collision fired on; without a collision, the entry nearest its limit), extrapolated
-    to zero. None where it does not apply: a cold line, no two
-    returns with margins decreasing towards the threshold, a prediction outside the
-    bracket (a basin boundary: the runs turn back before the limit), or
-    ``opts.secant_rounds`` rounds already planned so.
-
-    The closest approach of a returning run is a smooth function of the size while the
-    same extremum decides (the envelope of the gap over time), so near a grazing
-    threshold the secant is second-order accurate and a pair of runs at -+ tol/2 around
-    it usually settles the line. A wrong prediction only costs its runs: they still
-    narrow the bracket, and the plan's other rules go on from there."""
-    if not math.isfinite(line.guess) or line.secant_rounds >= opts.secant_rounds:
-        return None
-    if lo is None or (hi is not None and hi - lo <= 2 * opts.tol):
-        return None
-    rets = sorted(d for d, (c, _) in line.seen.items()
-                  if c == CONVERGED and (hi is None or d < hi) and d in line.margins)
-    if len(rets) < 2:
-        return None
-    d1, d2 = rets[-2], rets[-1]
-    j = line.entry.get(hi, -1) if hi is not None else -1
-    if j < 0:
-        j = int(np.argmin(line.margins[d2]))
-    m1, m2 = float(line.margins[d1][j]), float(line.margins[d2][j])
-    if not (m1 > m2 > 0):
-        return None
-    pred = d2 + m2 * (d2 - d1) / (m1 - m2)
-    if not math.isfinite(pred) or pred <= lo or (hi is not None and pred >= hi):
-        return None
-    tol = opts.tol
-    sizes = [s for s in (pred - tol / 2, pred + tol / 2)
-             if s > lo and (hi is None or s < hi) and s <= line.top]
-    if hi is None and pred + tol / 2 > line.top and lo < line.top:
-        sizes.append(line.top)
-    return sizes or None
 
 
 def bracket_thresholds(
@@ -379,19 +322,16 @@ def bracket_thresholds(
         # (returns take longer: they must settle), then by the lines' cost keys
         below = np.array([s < lines[k].guess for k, s in zip(idx, sizes, strict=True)])
         order = np.lexsort((-key[idx], ~below))
-        codes, times, steps, margins, entries = _run_lanes(
-            system, P, x0_of, idx[order], sizes[order], events, x_ref, opts, sim, stats)
-        for k, s, c, t, n_steps, g, j in zip(idx[order], sizes[order], codes, times, steps,
-                                             margins, entries, strict=True):
+        codes, times, steps = _run_lanes(system, P, x0_of, idx[order], sizes[order], events,
+                                         x_ref, opts, sim, stats)
+        for k, s, c, t, n_steps in zip(idx[order], sizes[order], codes, times, steps,
+                                       strict=True):
             line = lines[k]
             line.runs += 1
             line.steps += int(n_steps)
             if c == _UNRESOLVED:
                 line.unresolved += 1
             line.seen[float(s)] = (int(c), float(t))
-            if g.size:
-                line.margins[float(s)] = g
-            line.entry[float(s)] = int(j)
         for line in lines:
             if line.done is None:
                 line.done = _status(line, opts.tol)
@@ -428,11 +368,10 @@ def bracket_thresholds(
 
 
 def _run_lanes(system, P, x0_of, idx, sizes, events, x_ref, opts, sim, stats
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Outcome code (COLLISION, CONVERGED or _UNRESOLVED), time (collision or
-    convergence, s, from the start of the run), integration steps, the smallest value of
-    each event entry over the whole run (shape (lanes, entries)) and the entry that fired
-    (-1: none) of every lane, in the given order.
+    convergence, s, from the start of the run) and integration steps of every lane, in
+    the given order.
 
     The runs advance in slices: a kernel call integrates a chunk of runs for at most
     ``opts.slice_time`` seconds and at most ``opts.slice_steps`` steps each (a run whose
@@ -450,8 +389,6 @@ def _run_lanes(system, P, x0_of, idx, sizes, events, x_ref, opts, sim, stats
     codes = np.full(m, _UNRESOLVED)
     times = np.full(m, np.nan)
     used = np.zeros(m, dtype=int)
-    gmin = None
-    entry = np.full(m, -1)
     total = float(opts.t_max) * 2.0 ** opts.max_extend
     elapsed = np.zeros(m)
     todo = np.arange(m)
@@ -467,13 +404,9 @@ def _run_lanes(system, P, x0_of, idx, sizes, events, x_ref, opts, sim, stats
         for a in range(0, todo.size, opts.chunk):
             lanes = todo[a:a + opts.chunk]
             horizon = min(float(opts.slice_time), float(np.min(total - elapsed[lanes])))
-            c, t, x_end, t_end, steps, g, j = _integrate(
-                system, x0[lanes], p[lanes], horizon, events, x_ref, opts.chunk, sim, stats)
+            c, t, x_end, t_end, steps = _integrate(system, x0[lanes], p[lanes], horizon,
+                                                   events, x_ref, opts.chunk, sim, stats)
             used[lanes] += steps
-            if gmin is None:
-                gmin = np.full((m, g.shape[1]), np.inf)
-            gmin[lanes] = np.minimum(gmin[lanes], g)
-            entry[lanes] = np.where(c == COLLISION, j, entry[lanes])
             hit = c == COLLISION
             conv = c == CONVERGED
             codes[lanes[hit]] = COLLISION
@@ -490,9 +423,7 @@ def _run_lanes(system, P, x0_of, idx, sizes, events, x_ref, opts, sim, stats
             codes[lanes[~(hit | conv | going)]] = _UNRESOLVED
             elapsed[lanes[~going]] = np.inf  # decided or given up
         todo = todo[elapsed[todo] < total * (1 - 1e-12)]
-    if gmin is None:
-        gmin = np.zeros((m, 0))
-    return codes, times, used, gmin, entry
+    return codes, times, used
 
 
 def _integrate(system, x0, p, horizon, events, x_ref, chunk, sim, stats):
@@ -504,8 +435,6 @@ def _integrate(system, x0, p, horizon, events, x_ref, chunk, sim, stats):
     x_end = np.empty_like(x0)
     t_end = np.empty(m)
     steps = np.empty(m, dtype=int)
-    gmin = None
-    entry = np.full(m, -1)
     small = max(1, chunk // 4)
     # full chunks, then the remainder: in a small kernel call (a second compiled shape)
     # when it fits, rather than in a chunk of mostly padding (a call's cost per step is
@@ -531,12 +460,7 @@ def _integrate(system, x0, p, horizon, events, x_ref, chunk, sim, stats):
         x_end[a:b] = res.final_state[:k]
         t_end[a:b] = res.final_time[:k]
         steps[a:b] = res.steps[:k]
-        g = np.asarray(res.min_event_value)[:k]
-        if gmin is None:
-            gmin = np.empty((m, g.shape[1] if g.ndim == 2 else 0))
-        gmin[a:b] = g.reshape(k, -1)
-        entry[a:b] = res.event_index[:k]
         stats["calls"] += 1
         stats["lane_steps"] += int(width * np.max(res.steps))
         stats["run_steps"] += int(np.sum(res.steps[:k]))
-    return code, t, x_end, t_end, steps, gmin, entry
+    return code, t, x_end, t_end, steps
