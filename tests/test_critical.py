@@ -264,3 +264,27 @@ def test_grazing_is_solved_where_the_bracket_midpoint_run_is_pulled_into_the_mag
     x0[:, 4] = r.size * np.array([1 - 1e-6, 1 + 1e-6])
     b = simulate_batch(m.system(limited=True), x0, 0.5, event_fn=m.gap_events())
     assert b.outcome[0] != "collision" and b.outcome[1] == "collision"
+
+
+def test_a_later_contact_that_collides_first_is_the_one_solved():
+    """Turnout-soft with omega1 = 116.0606, sigma = 3.9091e-4 (a point of a 100 x 100 map),
+    beam up: the bracket's smallest colliding run hits the lower limit at t = 0.178 s, and
+    that contact's grazing condition solves at 5.3181 mm, inside the bracket; but from
+    5.3126 mm up every run collides one gap extremum later (t = 0.228 s). The run just below
+    the first solved size collides, so the size is solved again from the narrowed bracket:
+    the later contact, and runs just below and above it return and collide (the first
+    solve's size was 5.6 um too large, and the index quoted it as solved)."""
+    P = load_preset("turnout-soft").replace(omega1=116.06060606060606,
+                                            sigma=3.9090909090909085e-4)
+    cd = critical_disturbance(P, direction=-1)
+    r = critical_from_bisection(P, cd)
+    assert r.mechanism == Mechanism.GRAZING and r.converged, r.reason
+    assert "another contact decides first" in r.reason
+    assert cd.largest_return <= r.size <= cd.smallest_collision
+    assert r.t_star > 0.2 and r.limit == "lower"
+    m = maglev_model(P)
+    x0 = np.zeros((3, 9))
+    x0[:, 4] = -r.size * np.array([1 - 1e-6, 1 + 1e-6, (r.size + 5e-6) / r.size])
+    b = simulate_batch(m.system(limited=True), x0, 20.0, event_fn=m.gap_events(),
+                       x_ref=m.equilibrium(), options=SimulationOptions(stop_on_converged=True))
+    assert list(b.outcome) == ["converged", "collision", "collision"]

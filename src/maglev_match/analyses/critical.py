@@ -1,10 +1,9 @@
 """The critical disturbance of the maglev models, solved: what decides h_simulation in each
 direction, the size to solver accuracy, and its derivative by every parameter.
 
-The simulated critical disturbance (:func:`maglev_match.analyses.simulation.critical_disturbance`)
-is
-first bracketed by batched simulations with the limits on. The bracket's runs are then read
-as evidence of what separates return from collision along the disturbance line:
+The simulated critical disturbance (:func:`~maglev_match.analyses.simulation.critical_disturbance`)
+is first bracketed by batched simulations with the limits on. The bracket's runs are then
+read as evidence of what separates return from collision along the disturbance line:
 
 * **grazing** (:attr:`Mechanism.GRAZING`): the runs on both sides stay together up to the
   collision, which comes at the same finite time on the colliding side (collision times
@@ -23,12 +22,13 @@ as evidence of what separates return from collision along the disturbance line:
   solved so that the run lands on the cycle's local stable manifold
   (:func:`maglev_match.dynamics.escape.solve_basin_boundary`).
 
-A solved size must lie in the bisection's bracket (to the simulator's accuracy); otherwise,
-or when the solve fails, the bisection's midpoint stays (:attr:`Mechanism.BISECTION`) and the
-result says why and that no derivative is available there. Directions in which every size
-returned, or even the smallest collided, are :attr:`Mechanism.ALL_RETURN` /
-:attr:`Mechanism.ALL_COLLIDE`; a search that did not bracket is
-:attr:`Mechanism.UNRESOLVED`.
+A solved size must lie in the bisection's bracket (to the simulator's accuracy) and a run
+just below it must not collide (:mod:`maglev_match.analyses.confirmed`: else it is solved
+again from the narrowed bracket); otherwise, or when the solve fails, the bisection's
+midpoint stays (:attr:`Mechanism.BISECTION`) and the result says why and that no derivative
+is available there. Directions in which every size returned, or even the smallest
+collided, are :attr:`Mechanism.ALL_RETURN` / :attr:`Mechanism.ALL_COLLIDE`; a search that
+did not bracket is :attr:`Mechanism.UNRESOLVED`.
 
 Derivatives: at a solved grazing size, the implicit function theorem on the grazing
 condition gives dd_c/dp for every model parameter and dd_c/dL for the gap limit touched
@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from functools import cache
 from typing import Any
@@ -53,6 +53,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from maglev_match.analyses.confirmed import confirmed
 from maglev_match.core.jax_setup import kernel_arg
 from maglev_match.core.params import ParameterError, Params
 from maglev_match.core.reprs import compact_repr
@@ -338,9 +339,13 @@ def critical_from_bisection(params: Params | MaglevModel, cd: Any, *, model: str
     :data:`GROWTH_BASIN`) to a basin boundary. The indicated condition is solved first, the
     other tried when it fails and the evidence is mixed. ``orbit_hint``: a saddle cycle of
     the clamped system already computed at these parameters (the other direction's)."""
-    from dataclasses import replace
-
     m = maglev_model(params, model)
+    return confirmed(m, cd, lambda c: _from_bisection(m, c, derivative, orbit_hint),
+                     Mechanism.BISECTION)
+
+
+def _from_bisection(m: MaglevModel, cd: Any, derivative: bool, orbit_hint: Any
+                    ) -> CriticalSize:
     model = m.name
     direction = int(cd.direction)
     simple = _simple(cd, direction, model)
@@ -383,8 +388,6 @@ def critical_from_bisection(params: Params | MaglevModel, cd: Any, *, model: str
 
 
 def _with_reason(res: CriticalSize, reason: str) -> CriticalSize:
-    from dataclasses import replace
-
     return replace(res, reason=reason)
 
 
@@ -407,8 +410,6 @@ def _window(line: _Line, w: np.ndarray, side: int, d: float, t_coll: float, p: n
 
 def _solve_grazing_direction(m: MaglevModel, cd: Any, bisect: CriticalSize, *,
                              derivative: bool) -> CriticalSize:
-    from dataclasses import replace
-
     line = disturbance_line(m, bisect.direction)
     p = line.hs.p
     j = (bisect.point or 1) - 1
@@ -530,8 +531,6 @@ def saddle_landing(line: _Line, orbit: HybridOrbit) -> tuple[dict[str, Any], dic
 def _solve_basin_direction(m: MaglevModel, cd: Any, bisect: CriticalSize, *,
                            derivative: bool, orbit_hint: HybridOrbit | None = None
                            ) -> CriticalSize:
-    from dataclasses import replace
-
     line = disturbance_line(m, bisect.direction)
     p = line.hs.p
     sc = np.asarray(line.hs.state_scale, float)
@@ -612,8 +611,6 @@ def critical_derivative(params: Params | MaglevModel, res: CriticalSize) -> Crit
     """``res`` with dsize/dp (model parameters) and dsize/dlimit filled in (a solved
     grazing size; other mechanisms are returned unchanged, without a derivative).
     ``params``: the parameter set of ``res`` (its model is ``res.model``) or the model."""
-    from dataclasses import replace
-
     m = maglev_model(params, res.model)
 
     if res.mechanism == Mechanism.BASIN_BOUNDARY and res.landing is not None:
@@ -717,8 +714,6 @@ def solve_critical_batch(
     -------
     One :class:`CriticalSize` per point, in order.
     """
-    from dataclasses import replace
-
     n_pts = len(params_list)
     guesses = list(guesses) if guesses is not None else [None] * n_pts
     if len(guesses) != n_pts:
