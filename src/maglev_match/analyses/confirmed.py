@@ -13,7 +13,9 @@ its grazing condition solved at 5.3181 mm; but every size from 5.3126 mm collide
 lower limit at t = 0.228 s, one gap extremum later, and the critical size is 5.3124 mm.
 
 So every solved size is checked with one run of the limited model at
-(1 - :data:`CHECK_BELOW`) of it. It must not collide. If it does, that run is the new
+(1 - :data:`CHECK_BELOW`) of it. It must not collide (within 20 times the contact time, at
+least 2 s, for a grazing contact; within the search's first horizon for a basin
+boundary). If it does, that run is the new
 smallest collision: the bracket narrows to it, the size is classified and solved again
 from the new bracket (the contact that run hit), and checked again, at most
 :data:`CONFIRM_ROUNDS` times; after that the bisection's midpoint stands, unsolved, and the
@@ -42,7 +44,8 @@ def run_below(m: MaglevModel, res: Any) -> Any:
     """The check run of a solved size ``res`` (a
     :class:`~maglev_match.analyses.critical.CriticalSize`): one simulation of the limited
     model from the disturbance of size ``res.size * (1 - CHECK_BELOW)`` in its direction,
-    on the critical search's horizon, as a :class:`~maglev_match.analyses.simulation.Run`."""
+    as a :class:`~maglev_match.analyses.simulation.Run` ('undecided' if it neither
+    collided nor settled within its horizon)."""
     from maglev_match.analyses.simulation import Run
     from maglev_match.dynamics.integrate.simulate import (
         COLLISION,
@@ -51,7 +54,12 @@ def run_below(m: MaglevModel, res: Any) -> Any:
         simulate_batch,
     )
 
+    # a contact of the same kind comes within a few gap extrema of the solved one: 20 times
+    # its time (at least 2 s) suffices for a grazing contact; a basin boundary's runs
+    # linger near the saddle cycle, so they get the search's whole first horizon
     horizon = float(m.critical_search.as_kwargs()["t_max"])
+    if str(res.mechanism) == "grazing" and res.t_star is not None:
+        horizon = min(horizon, max(2.0, 20.0 * float(res.t_star)))
     system, x_ref = m.system(limited=True), m.equilibrium()
     size = float(res.size) * (1.0 - CHECK_BELOW)
     x0 = m.disturbance(res.direction).x0_of(np.array([size]))
