@@ -288,3 +288,47 @@ def test_a_later_contact_that_collides_first_is_the_one_solved():
     b = simulate_batch(m.system(limited=True), x0, 20.0, event_fn=m.gap_events(),
                        x_ref=m.equilibrium(), options=SimulationOptions(stop_on_converged=True))
     assert list(b.outcome) == ["converged", "collision", "collision"]
+
+
+def test_a_size_that_no_solve_confirms_falls_back_to_the_narrowed_bracket(monkeypatch):
+    """The confirmation loop on its own (analyses/confirmed.py): every check run just below
+    a solved size collides, so the bracket narrows to each one in turn, the size is solved
+    again each time (3 solves after the first), and then the narrowed bracket's midpoint
+    stands, unsolved and without a derivative; a check run that returns keeps the size."""
+    import dataclasses
+
+    import maglev_match.analyses.confirmed as confirmed_mod
+    from maglev_match.analyses.critical import CriticalSize
+    from maglev_match.analyses.simulation import CriticalDisturbance, Run
+
+    cd = CriticalDisturbance(
+        direction=-1, largest_return=1.0e-3, smallest_collision=1.01e-3, critical=1.005e-3,
+        status="bracketed", gap_range=1e-2, tol=1e-5, runs=2, unresolved=0,
+        unresolved_sizes=(), horizon=20.0, rounds=1, collision_time=0.1, nonmonotone=False,
+        samples=(Run(1.0e-3, "return", 5.0, (1e-4, 1e-4)),
+                 Run(1.01e-3, "collision", 0.1, (0.0, 1e-4), 0)))
+    seen = []
+
+    def solve(c):  # always "solves" at 90 % of the way up the current bracket
+        seen.append((c.largest_return, c.smallest_collision))
+        lo, hi = c.largest_return, c.smallest_collision
+        return CriticalSize(-1, lo + 0.9 * (hi - lo), Mechanism.GRAZING, True, "solved",
+                            bracket=(lo, hi), t_star=0.1, derivative_available=True)
+
+    def collides(m, res):
+        return Run(res.size * (1 - 1e-4), "collision", 0.2, (0.0, 1e-4), 0)
+
+    monkeypatch.setattr(confirmed_mod, "run_below", collides)
+    res = confirmed_mod.confirmed(None, cd, solve, Mechanism.BISECTION)
+    assert len(seen) == 1 + confirmed_mod.CONFIRM_ROUNDS
+    his = [hi for _, hi in seen]
+    assert all(b < a for a, b in zip(his, his[1:], strict=False))  # the bracket narrows
+    assert res.mechanism == Mechanism.BISECTION and not res.derivative_available
+    assert res.size == pytest.approx(0.5 * (1.0e-3 + his[-1]), rel=1e-12)  # its midpoint
+    assert "not confirmed" in res.reason
+
+    monkeypatch.setattr(confirmed_mod, "run_below", lambda m, r: dataclasses.replace(
+        collides(m, r), outcome="return", event=-1))
+    seen.clear()
+    kept = confirmed_mod.confirmed(None, cd, solve, Mechanism.BISECTION)
+    assert len(seen) == 1 and kept.mechanism == Mechanism.GRAZING and kept.reason == "solved"

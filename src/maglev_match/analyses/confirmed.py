@@ -10,16 +10,15 @@ collide.
 Found on a map of the soft turnout (omega1 = 116.061 rad/s, sigma = 3.909e-4 1/kg, beam
 up): the bracket's smallest collision (5.3193 mm) hit the lower limit at t = 0.178 s, and
 its grazing condition solved at 5.3181 mm; but every size from 5.3126 mm collides at the
-lower limit at t = 0.228 s, one gap extremum later, and the critical size is 5.3124 mm.
+lower limit at t = 0.228 s, one gap extremum later, and the critical size is 5.3123 mm.
 
 So every solved size is checked with one run of the limited model at
 (1 - :data:`CHECK_BELOW`) of it. It must not collide (within 20 times the contact time, at
 least 2 s, for a grazing contact; within the search's first horizon for a basin
-boundary). If it does, that run is the new
-smallest collision: the bracket narrows to it, the size is classified and solved again
-from the new bracket (the contact that run hit), and checked again, at most
-:data:`CONFIRM_ROUNDS` times; after that the bisection's midpoint stands, unsolved, and the
-result says why.
+boundary). If it does, that run is the new smallest collision: the bracket narrows to it,
+the size is classified and solved again from the new bracket (the contact that run hit),
+and checked again, at most :data:`CONFIRM_ROUNDS` times; after that the narrowed bracket's
+midpoint stands, unsolved, and the result says why.
 """
 
 from __future__ import annotations
@@ -98,10 +97,11 @@ def confirmed(m: MaglevModel, cd: Any, solve: Callable[[Any], Any], unsolved: An
         res = solve(cd)
     else:
         if res.solved and res.size is not None and run_below(m, res).outcome == "collision":
-            notes.append(f"still not confirmed after {CONFIRM_ROUNDS} solves: the bracket's "
-                         "midpoint stands")
-            res = replace(res, size=cd.critical, mechanism=unsolved,
-                          derivative_available=False, dsize_dp=None, dsize_dlimit=None)
+            notes.append(f"the solved size {res.size * 1e3:.7g} mm was not confirmed either "
+                         f"after {CONFIRM_ROUNDS} solves: the bracket's midpoint stands, "
+                         "without a derivative")
+            return replace(res, size=cd.critical, mechanism=unsolved, reason="; ".join(notes),
+                           derivative_available=False, dsize_dp=None, dsize_dlimit=None)
     if notes:
         res = replace(res, reason="; ".join(notes) + "; then " + res.reason)
     return res
