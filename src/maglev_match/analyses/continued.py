@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from maglev_match.analyses.confirmed import CHECK_BELOW
 from maglev_match.analyses.critical import (
     FLOW,
     CriticalSize,
@@ -60,8 +61,9 @@ __all__ = ["CriticalStart", "Fallback", "MechanismChange", "FollowedCritical",
            "BRACKET", "continue_cycle", "CYCLE_STEP", "CYCLE_CHANGE", "simulated_part",
            "continued_from"]
 
-#: the relative offset of the two check runs below and above a continued size
-CHECK_STEP = 1e-4
+#: the relative offset of the two check runs below and above a continued size (the same
+#: step as the check run below a point-wise solved size)
+CHECK_STEP = CHECK_BELOW
 #: the corrector looks for the size within this fraction of the prediction (or four
 #: times the predicted step, if larger)
 BRACKET = 0.02
